@@ -1,0 +1,298 @@
+"""Numpy forward kinematics of a Model: segment poses, model points, their Jacobians, the
+ellipsoid constraint g, its Jacobian G and velocity term eta (paper Eq. 1-3), and the inverse map
+from segment rotations / angular velocities / accelerations back to joint coordinates.
+
+This is the single truth of the model's geometry: the Exudyn system is checked against it.
+Every function accepts a leading batch of frames: q has shape (..., m).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from exubio.errors import ModelError
+from exubio.types import JointKind, Model
+
+
+def _skew(a: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+def axis_rotation(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) about a fixed unit ``axis`` by ``angle`` (...) (Rodrigues)."""
+    k = _skew(axis)
+    k2 = k @ k
+    s = np.sin(angle)[..., None, None]
+    c = np.cos(angle)[..., None, None]
+    return np.eye(3) + s * k + (1.0 - c) * k2
+
+
+@dataclass(frozen=True)
+class PointSet:
+    """Model points to evaluate: the segment index and the local position (m) of each."""
+
+    segment_index: np.ndarray  # (k,) int
+    local_m: np.ndarray  # (k, 3)
+    names: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Frames:
+    """Everything forward kinematics computes for q (batch dims ... in front).
+
+    R: (..., n_seg, 3, 3) segment orientations, p: (..., n_seg, 3) segment origins,
+    axes: (..., m, 3) world rotation axis of each coordinate, pivots: (..., m, 3) the joint centre
+    each coordinate rotates about.
+    """
+
+    R: np.ndarray
+    p: np.ndarray
+    axes: np.ndarray
+    pivots: np.ndarray
+
+
+class Kinematics:
+    """Compiled kinematic structure of a Model (a tree rooted at the fixed first segment)."""
+
+    def __init__(self, model: Model):
+        self.model = model
+        self.n_segments = len(model.segments)
+        self.n_coordinates = model.n_coordinates
+        names = model.segment_names
+        self.parent_index = np.array([-1 if s.parent is None else names.index(s.parent) for s in model.segments])
+        self._joint_coords: list[np.ndarray] = []  # coordinate indices of each segment's joint
+        self._axis_skews: list[list[tuple[np.ndarray, np.ndarray]]] = []
+        self.coordinate_segment = np.zeros(self.n_coordinates, dtype=int)
+        start = 0
+        for i, seg in enumerate(model.segments):
+            if seg.joint is None:
+                self._joint_coords.append(np.zeros(0, dtype=int))
+                self._axis_skews.append([])
+                continue
+            k = seg.joint.kind.n_coordinates
+            idx = np.arange(start, start + k)
+            self._joint_coords.append(idx)
+            self.coordinate_segment[idx] = i
+            skews = []
+            for a in seg.joint.axes:
+                sk = _skew(a)
+                skews.append((sk, sk @ sk))
+            self._axis_skews.append(skews)
+            if seg.joint.kind in (JointKind.SPHERICAL, JointKind.CARDAN):
+                ax = seg.joint.axes
+                for u in range(len(ax)):
+                    for v in range(u + 1, len(ax)):
+                        if abs(ax[u] @ ax[v]) > 1e-9:
+                            raise ModelError(
+                                f"{model.source}: joint '{seg.joint.name}' must have mutually orthogonal axes "
+                                f"(axes {u} and {v} are not)"
+                            )
+            start += k
+        # affects[s, j]: coordinate j moves segment s (j belongs to s or to one of its ancestors).
+        self.affects = np.zeros((self.n_segments, self.n_coordinates), dtype=bool)
+        for s in range(self.n_segments):
+            a = s
+            while a >= 0:
+                self.affects[s, self._joint_coords[a]] = True
+                a = self.parent_index[a]
+        # precedes[j, k]: coordinate k comes before j on the chain from the root to j.
+        self.precedes = np.zeros((self.n_coordinates, self.n_coordinates), dtype=bool)
+        for j in range(self.n_coordinates):
+            s = self.coordinate_segment[j]
+            self.precedes[j] = self.affects[s] & (np.arange(self.n_coordinates) < j)
+            own = self._joint_coords[s]
+            self.precedes[j, own[own >= j]] = False
+        ell = model.ellipsoid
+        self.contacts = self.point_set([(seg, pt) for seg, pt in ell.contact_points])
+        self.a_diag = ell.a_diag
+        self.centre = np.asarray(ell.centre_m, dtype=float)
+
+    # ---------------------------------------------------------------- points
+    def point_set(self, items, /) -> PointSet:
+        """PointSet from (segment name, point name or local position (3,) in m) pairs."""
+        seg_idx, local, names = [], [], []
+        for seg_name, point in items:
+            seg = self.model.segment(seg_name)
+            seg_idx.append(self.model.segment_index(seg_name))
+            if isinstance(point, str):
+                if point not in seg.points:
+                    raise ModelError(f"{self.model.source}: segment '{seg_name}' has no point '{point}'; it has {sorted(seg.points)}")
+                local.append(seg.points[point])
+                names.append(point)
+            else:
+                local.append(np.asarray(point, dtype=float))
+                names.append(f"{seg_name}_point{len(names)}")
+        return PointSet(np.array(seg_idx, dtype=int), np.array(local, dtype=float).reshape(-1, 3), tuple(names))
+
+    # ---------------------------------------------------------------- forward
+    def frames(self, q: np.ndarray) -> Frames:
+        """Forward kinematics for q (..., m)."""
+        q = np.asarray(q, dtype=float)
+        batch = q.shape[:-1]
+        R = np.empty(batch + (self.n_segments, 3, 3))
+        p = np.empty(batch + (self.n_segments, 3))
+        axes = np.empty(batch + (self.n_coordinates, 3))
+        pivots = np.empty(batch + (self.n_coordinates, 3))
+        eye = np.eye(3)
+        for i, seg in enumerate(self.model.segments):
+            par = self.parent_index[i]
+            if par < 0:
+                R[..., i, :, :] = eye
+                p[..., i, :] = 0.0
+                continue
+            Rp = R[..., par, :, :]
+            pos = p[..., par, :] + Rp @ seg.joint.centre_m
+            Rc = Rp
+            for (sk, sk2), j, a in zip(self._axis_skews[i], self._joint_coords[i], seg.joint.axes):
+                axes[..., j, :] = Rc @ a
+                pivots[..., j, :] = pos
+                qj = q[..., j][..., None, None]
+                Rc = Rc @ (eye + np.sin(qj) * sk + (1.0 - np.cos(qj)) * sk2)
+            R[..., i, :, :] = Rc
+            p[..., i, :] = pos
+        return Frames(R, p, axes, pivots)
+
+    def poses(self, q: np.ndarray):
+        """(R (..., n_seg, 3, 3), p (..., n_seg, 3)) for q (..., m)."""
+        fr = self.frames(q)
+        return fr.R, fr.p
+
+    def points(self, q: np.ndarray, points: PointSet, *, frames: Frames | None = None) -> np.ndarray:
+        """Global positions (..., k, 3) of the model points."""
+        fr = self.frames(q) if frames is None else frames
+        Rs = fr.R[..., points.segment_index, :, :]
+        return np.einsum("...kij,kj->...ki", Rs, points.local_m) + fr.p[..., points.segment_index, :]
+
+    def point_jacobian(self, q: np.ndarray, points: PointSet, *, frames: Frames | None = None,
+                       positions: np.ndarray | None = None) -> np.ndarray:
+        """d r_k / d q: (..., k, 3, m). Column j is w_j x (r_k - c_j) where coordinate j moves r_k."""
+        fr = self.frames(q) if frames is None else frames
+        r = self.points(q, points, frames=fr) if positions is None else positions
+        diff = r[..., :, None, :] - fr.pivots[..., None, :, :]  # (..., k, m, 3)
+        cols = np.cross(fr.axes[..., None, :, :], diff)  # (..., k, m, 3)
+        cols = cols * self.affects[points.segment_index][..., :, None]
+        return np.swapaxes(cols, -1, -2)
+
+    def point_bias_acceleration(self, q: np.ndarray, qd: np.ndarray, points: PointSet) -> np.ndarray:
+        """(dJ/dt) q̇ of each point: its acceleration when q̈ = 0, (..., k, 3)."""
+        fr = self.frames(q)
+        r = self.points(q, points, frames=fr)
+        J = self.point_jacobian(q, points, frames=fr, positions=r)
+        qd = np.asarray(qd, dtype=float)
+        rd = np.einsum("...kim,...m->...ki", J, qd)
+        wq = fr.axes * qd[..., None]  # (..., m, 3)
+        omega = np.einsum("jk,...kc->...jc", self.precedes.astype(float), wq)  # frame rate of axis j
+        wdot = np.cross(omega, fr.axes)
+        cdot = np.cross(omega, fr.pivots) - np.einsum(
+            "jk,...kc->...jc", self.precedes.astype(float), np.cross(wq, fr.pivots))
+        diff = r[..., :, None, :] - fr.pivots[..., None, :, :]
+        term = np.cross(wdot[..., None, :, :], diff) + np.cross(fr.axes[..., None, :, :], rd[..., :, None, :] - cdot[..., None, :, :])
+        mask = self.affects[points.segment_index] * qd[..., None, :]
+        return np.einsum("...km,...kmc->...kc", mask, term)
+
+    # ---------------------------------------------------------------- constraints
+    def g(self, q: np.ndarray) -> np.ndarray:
+        """Ellipsoid constraints g_j = e_j^T A e_j - 1 (..., 2) (paper Eq. 1)."""
+        e = self.points(q, self.contacts) - self.centre
+        return np.einsum("...kc,c->...k", e * e, self.a_diag) - 1.0
+
+    def G(self, q: np.ndarray) -> np.ndarray:
+        """Constraint Jacobian G_j = 2 e_j^T A J_Pj (..., 2, m) (paper Eq. 2)."""
+        fr = self.frames(q)
+        r = self.points(q, self.contacts, frames=fr)
+        J = self.point_jacobian(q, self.contacts, frames=fr, positions=r)
+        return 2.0 * np.einsum("...kc,...kcm->...km", (r - self.centre) * self.a_diag, J)
+
+    def eta(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """Velocity term of the constraint acceleration: g̈ = G q̈ + eta (..., 2) (paper Eq. 3)."""
+        fr = self.frames(q)
+        r = self.points(q, self.contacts, frames=fr)
+        J = self.point_jacobian(q, self.contacts, frames=fr, positions=r)
+        v = np.einsum("...kcm,...m->...kc", J, np.asarray(qd, dtype=float))
+        bias = self.point_bias_acceleration(q, qd, self.contacts)
+        e = r - self.centre
+        return 2.0 * np.einsum("...kc,c->...k", v * v + e * bias, self.a_diag)
+
+    # ---------------------------------------------------------------- inverse maps
+    def joint_frames(self) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
+        """(segment index, parent index, coordinate indices, axes) of every joint."""
+        out = []
+        for i, seg in enumerate(self.model.segments):
+            if seg.joint is not None:
+                out.append((i, int(self.parent_index[i]), self._joint_coords[i], seg.joint.axes))
+        return out
+
+    def coordinates_from_rotations(self, R: np.ndarray, *, q_previous: np.ndarray | None = None) -> np.ndarray:
+        """Joint coordinates (..., m) from segment orientations R (..., n_seg, 3, 3).
+
+        Spherical joints decompose in their own axis sequence; where the middle angle comes within
+        1e-6 rad of +-90 deg the split between first and last angle is undetermined: the first
+        angle then keeps ``q_previous`` (or 0). Revolute joints take the rotation about their axis.
+        """
+        R = np.asarray(R, dtype=float)
+        q = np.zeros(R.shape[:-3] + (self.n_coordinates,))
+        for s, par, idx, axes in self.joint_frames():
+            Rrel = np.swapaxes(R[..., par, :, :], -1, -2) @ R[..., s, :, :]
+            if len(idx) == 1:
+                a = axes[0]
+                vee = np.stack([Rrel[..., 2, 1] - Rrel[..., 1, 2], Rrel[..., 0, 2] - Rrel[..., 2, 0],
+                                Rrel[..., 1, 0] - Rrel[..., 0, 1]], axis=-1)
+                sin = 0.5 * vee @ a
+                # cos from the part of R orthogonal to the axis: trace of (I - aa^T) R (I - aa^T) = 2 cos
+                P = np.eye(3) - np.outer(a, a)
+                cos = 0.5 * np.einsum("ij,...jk,ki->...", P, Rrel, P)
+                q[..., idx[0]] = np.arctan2(sin, cos)
+                continue
+            B = np.column_stack([axes[0], axes[1], np.cross(axes[0], axes[1])])
+            Rs = B.T @ Rrel @ B  # = Rx(q1) Ry(q2) [Rz(sign * q3)]
+            if len(idx) == 3:
+                sign = float(np.sign(axes[2] @ B[:, 2]))
+                q2 = np.arctan2(Rs[..., 0, 2], np.hypot(Rs[..., 0, 0], Rs[..., 0, 1]))
+                q1 = np.arctan2(-Rs[..., 1, 2], Rs[..., 2, 2])
+                q3 = np.arctan2(-Rs[..., 0, 1], Rs[..., 0, 0])
+                lock = np.cos(q2) < 1e-6
+                if np.any(lock):
+                    # Rx(q1) Ry(+-90) Rz(q3): only q1 +- q3 is defined; keep q1 and solve q3.
+                    prev = np.zeros_like(q1) if q_previous is None else np.broadcast_to(q_previous[..., idx[0]], q1.shape)
+                    q1 = np.where(lock, prev, q1)
+                    # R[1,0] = cos q1 sin q3 + sin q1 sin q2 cos q3 ; R[1,1] = cos q1 cos q3 - sin q1 sin q2 sin q3
+                    s2 = np.sign(Rs[..., 0, 2])
+                    phi = np.arctan2(Rs[..., 1, 0], Rs[..., 1, 1])  # = q3 + s2*q1 at lock
+                    q3 = np.where(lock, phi - s2 * q1, q3)
+                q[..., idx[0]], q[..., idx[1]], q[..., idx[2]] = q1, q2, sign * q3
+            else:  # cardan: Rx(q1) Ry(q2)
+                q[..., idx[0]] = np.arctan2(-Rs[..., 1, 2], Rs[..., 2, 2])
+                q[..., idx[1]] = np.arctan2(Rs[..., 0, 2], Rs[..., 0, 0])
+        return q
+
+    def coordinate_rates(self, q: np.ndarray, omega: np.ndarray, alpha: np.ndarray | None = None):
+        """q̇ (and q̈) from segment angular velocities omega and accelerations alpha (..., n_seg, 3),
+        global frame, at coordinates q (..., m). Solves, per joint, the relative angular velocity
+        W q̇_joint = omega_child - omega_parent (least squares for k < 3 coordinates)."""
+        fr = self.frames(q)
+        omega = np.asarray(omega, dtype=float)
+        qd = np.zeros(q.shape)
+        qdd = np.zeros(q.shape) if alpha is not None else None
+        for s, par, idx, _ in self.joint_frames():
+            W = np.swapaxes(fr.axes[..., idx, :], -1, -2)  # (..., 3, k)
+            WtW_inv = np.linalg.inv(np.swapaxes(W, -1, -2) @ W)
+            pinv = WtW_inv @ np.swapaxes(W, -1, -2)  # (..., k, 3)
+            dw = omega[..., s, :] - omega[..., par, :]
+            qd_j = np.einsum("...kc,...c->...k", pinv, dw)
+            qd[..., idx] = qd_j
+            if alpha is not None:
+                # alpha_rel = sum_j w_j q̈_j + sum_j (Omega_j x w_j) q̇_j, Omega_j = frame rate of axis j
+                Om = np.repeat(omega[..., par, None, :], len(idx), axis=-2).copy()
+                for n in range(1, len(idx)):
+                    Om[..., n, :] = Om[..., n - 1, :] + fr.axes[..., idx[n - 1], :] * qd_j[..., n - 1, None]
+                bias = np.einsum("...kc,...k->...c", np.cross(Om, fr.axes[..., idx, :]), qd_j)
+                da = np.asarray(alpha)[..., s, :] - np.asarray(alpha)[..., par, :] - bias
+                qdd[..., idx] = np.einsum("...kc,...c->...k", pinv, da)
+        return (qd, qdd) if alpha is not None else qd
+
+    def segment_angular_velocities(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """Global angular velocity of each segment (..., n_seg, 3)."""
+        fr = self.frames(q)
+        wq = fr.axes * np.asarray(qd, dtype=float)[..., None]
+        return np.einsum("sm,...mc->...sc", self.affects.astype(float), wq)

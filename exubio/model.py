@@ -1,0 +1,223 @@
+"""Model YAML -> Model: segments, joints, inertia from anthropometric tables, the thorax ellipsoid.
+
+The file format is documented at the top of ``models/upper_extremity.yaml``. Positions in the file
+are millimetres in the ISB thorax frame, in the model's reference posture (all coordinates zero);
+here they become metres, local to each segment (segment frames sit at their origin point and are
+parallel to the thorax frame in the reference posture).
+"""
+from __future__ import annotations
+
+import difflib
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+import yaml
+
+from exubio.errors import ModelError
+from exubio.types import Ellipsoid, Joint, JointKind, Model, Segment
+
+SCHEMA_VERSION = 1
+DEFAULT_MODEL = Path(__file__).resolve().parent.parent / "models" / "upper_extremity.yaml"
+
+_TOP_KEYS = {"schema_version", "name", "side", "body_mass_kg", "segments", "ellipsoid", "calibration"}
+_SEGMENT_KEYS = {"name", "parent", "origin", "joint", "inertia", "points_mm"}
+_JOINT_KEYS = {"name", "type", "coordinates"}
+_COORD_KEYS = {"name", "axis"}
+_INERTIA_KEYS = {
+    "mass_fraction",
+    "com_between",
+    "com_fraction",
+    "principal_kgm2_per_kg",
+    "radius_of_gyration_fraction",
+    "axial_radius_of_gyration_fraction",
+    "long_axis",
+}
+_ELLIPSOID_KEYS = {"centre_mm", "radii_mm", "contact_points"}
+_NAMED_AXES = {
+    "+X": (1.0, 0.0, 0.0), "-X": (-1.0, 0.0, 0.0),
+    "+Y": (0.0, 1.0, 0.0), "-Y": (0.0, -1.0, 0.0),
+    "+Z": (0.0, 0.0, 1.0), "-Z": (0.0, 0.0, -1.0),
+}  # fmt: skip
+
+
+def check_keys(mapping: Any, allowed: set[str], where: str, *, error: type[Exception], required: set[str] = frozenset()) -> None:
+    """Raise ``error`` naming ``where`` when ``mapping`` is not a mapping, has an unknown key
+    (with the valid keys and a close match) or lacks a required one."""
+    if not isinstance(mapping, Mapping):
+        raise error(f"{where}: expected a mapping, got {type(mapping).__name__}")
+    for key in mapping:
+        if key not in allowed:
+            close = difflib.get_close_matches(str(key), sorted(allowed), n=1)
+            hint = f" (did you mean '{close[0]}'?)" if close else ""
+            raise error(f"{where}: unknown key '{key}'{hint}; valid keys are {sorted(allowed)}")
+    missing = sorted(required - set(mapping))
+    if missing:
+        raise error(f"{where}: missing required key(s) {missing}")
+
+
+def read_yaml_mapping(path: str | Path, /, *, error: type[Exception], what: str) -> dict:
+    """Read a YAML file that must hold a mapping; errors name the file."""
+    path = Path(path)
+    if not path.is_file():
+        raise error(f"{path}: {what} file not found")
+    try:
+        with path.open("r", encoding="utf-8") as fh:
+            data = yaml.safe_load(fh)
+    except yaml.YAMLError as exc:
+        raise error(f"{path}: not valid YAML ({exc})") from None
+    if not isinstance(data, dict):
+        raise error(f"{path}: expected a YAML mapping at the top level, got {type(data).__name__}")
+    return data
+
+
+def _vec3(value: Any, where: str) -> np.ndarray:
+    arr = np.asarray(value, dtype=float) if isinstance(value, (list, tuple)) else None
+    if arr is None or arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise ModelError(f"{where}: expected three finite numbers, got {value!r}")
+    return arr
+
+
+def load_model(path: str | Path = DEFAULT_MODEL, /, *, body_mass_kg: float | None = None) -> Model:
+    """Read a model YAML. ``body_mass_kg`` overrides the file's body mass (inertia scales)."""
+    path = Path(path)
+    data = read_yaml_mapping(path, error=ModelError, what="model")
+    src = str(path)
+    check_keys(data, _TOP_KEYS, src, error=ModelError, required={"schema_version", "segments", "ellipsoid"})
+    if data["schema_version"] != SCHEMA_VERSION:
+        raise ModelError(f"{src}: schema_version {data['schema_version']!r} is not supported (expected {SCHEMA_VERSION})")
+    mass = float(body_mass_kg if body_mass_kg is not None else data.get("body_mass_kg", 75.0))
+    if not mass > 0:
+        raise ModelError(f"{src}: body mass must be > 0 kg, got {mass}")
+
+    raw_segments = data["segments"]
+    if not isinstance(raw_segments, list) or not raw_segments:
+        raise ModelError(f"{src}: 'segments' must be a non-empty list")
+
+    # Global reference-posture positions of every named point, per segment (m).
+    global_points: dict[str, dict[str, np.ndarray]] = {}
+    for i, raw in enumerate(raw_segments):
+        where = f"{src}: segments[{i}]"
+        check_keys(raw, _SEGMENT_KEYS, where, error=ModelError, required={"name"})
+        pts = raw.get("points_mm", {}) or {}
+        if not isinstance(pts, Mapping):
+            raise ModelError(f"{where}.points_mm: expected a mapping of name -> [x, y, z]")
+        global_points[raw["name"]] = {k: _vec3(v, f"{where}.points_mm.{k}") / 1000.0 for k, v in pts.items()}
+
+    def find_point(name: str, where: str, prefer: str | None = None) -> np.ndarray:
+        if prefer is not None and name in global_points.get(prefer, {}):
+            return global_points[prefer][name]
+        for pts in global_points.values():
+            if name in pts:
+                return pts[name]
+        known = sorted({p for pts in global_points.values() for p in pts})
+        raise ModelError(f"{where}: unknown point '{name}'; known points are {known}")
+
+    segments: list[Segment] = []
+    origins: dict[str, np.ndarray] = {}
+    for i, raw in enumerate(raw_segments):
+        name = raw["name"]
+        where = f"{src}: segment '{name}'"
+        parent = raw.get("parent")
+        if parent is None:
+            origin = np.zeros(3)
+            joint = None
+            if i != 0:
+                raise ModelError(f"{where}: only the first segment (the fixed thorax) may have no parent")
+        else:
+            if parent not in origins:
+                raise ModelError(f"{where}: parent '{parent}' must be defined before it; defined: {sorted(origins)}")
+            if "origin" not in raw or "joint" not in raw:
+                raise ModelError(f"{where}: a moving segment needs 'origin' and 'joint'")
+            origin = find_point(raw["origin"], f"{where}.origin", prefer=name)
+            joint = _parse_joint(raw["joint"], f"{where}.joint", centre=origin - origins[parent], find_point=find_point)
+        origins[name] = origin
+        local_points = {k: v - origin for k, v in global_points[name].items()}
+        m, com, inertia = _parse_inertia(raw.get("inertia"), f"{where}.inertia", mass, origin, find_point)
+        segments.append(Segment(name=name, parent=parent, joint=joint, mass_kg=m, com_m=com,
+                                inertia_kgm2=inertia, points=local_points))
+
+    ell = data["ellipsoid"]
+    check_keys(ell, _ELLIPSOID_KEYS, f"{src}: ellipsoid", error=ModelError, required=_ELLIPSOID_KEYS)
+    contacts = []
+    for j, cp in enumerate(ell["contact_points"]):
+        if not (isinstance(cp, (list, tuple)) and len(cp) == 2):
+            raise ModelError(f"{src}: ellipsoid.contact_points[{j}]: expected [segment, point], got {cp!r}")
+        seg_name, pt_name = str(cp[0]), str(cp[1])
+        seg = next((s for s in segments if s.name == seg_name), None)
+        if seg is None:
+            raise ModelError(f"{src}: ellipsoid.contact_points[{j}]: unknown segment '{seg_name}'; valid: {[s.name for s in segments]}")
+        if pt_name not in seg.points:
+            raise ModelError(f"{src}: ellipsoid.contact_points[{j}]: segment '{seg_name}' has no point '{pt_name}'; it has {sorted(seg.points)}")
+        contacts.append((seg_name, pt_name))
+    radii = _vec3(ell["radii_mm"], f"{src}: ellipsoid.radii_mm") / 1000.0
+    if np.any(radii <= 0):
+        raise ModelError(f"{src}: ellipsoid.radii_mm must be > 0, got {ell['radii_mm']}")
+    ellipsoid = Ellipsoid(centre_m=_vec3(ell["centre_mm"], f"{src}: ellipsoid.centre_mm") / 1000.0,
+                          radii_m=radii, contact_points=tuple(contacts))
+    metadata = {"side": data.get("side", "right"), "calibration": data.get("calibration")}
+    return Model(name=str(data.get("name", path.stem)), segments=tuple(segments), ellipsoid=ellipsoid,
+                 body_mass_kg=mass, source=src, metadata=metadata)
+
+
+def _parse_axis(value: Any, where: str, find_point) -> np.ndarray:
+    if isinstance(value, str):
+        if value not in _NAMED_AXES:
+            raise ModelError(f"{where}: unknown axis '{value}'; use one of {sorted(_NAMED_AXES)}, [x, y, z] or {{from: P, to: Q}}")
+        return np.array(_NAMED_AXES[value])
+    if isinstance(value, Mapping):
+        check_keys(value, {"from", "to"}, where, error=ModelError, required={"from", "to"})
+        vec = find_point(value["to"], where) - find_point(value["from"], where)
+    else:
+        vec = _vec3(value, where)
+    norm = np.linalg.norm(vec)
+    if norm < 1e-9:
+        raise ModelError(f"{where}: axis has zero length")
+    return vec / norm
+
+
+def _parse_joint(raw: Any, where: str, *, centre: np.ndarray, find_point) -> Joint:
+    check_keys(raw, _JOINT_KEYS, where, error=ModelError, required=_JOINT_KEYS)
+    try:
+        kind = JointKind(raw["type"])
+    except ValueError:
+        raise ModelError(f"{where}.type: unknown joint type '{raw['type']}'; valid: {[k.value for k in JointKind]}") from None
+    coords = raw["coordinates"]
+    if not isinstance(coords, list) or len(coords) != kind.n_coordinates:
+        raise ModelError(f"{where}.coordinates: a {kind.value} joint needs {kind.n_coordinates} coordinates, got {coords!r}")
+    names, axes = [], []
+    for k, c in enumerate(coords):
+        check_keys(c, _COORD_KEYS, f"{where}.coordinates[{k}]", error=ModelError, required=_COORD_KEYS)
+        names.append(str(c["name"]))
+        axes.append(_parse_axis(c["axis"], f"{where}.coordinates[{k}].axis", find_point))
+    axes_arr = np.array(axes)
+    for a in range(len(axes_arr) - 1):
+        if abs(axes_arr[a] @ axes_arr[a + 1]) > 0.999:
+            raise ModelError(f"{where}: consecutive axes {a} and {a + 1} are parallel; the sequence would be singular")
+    return Joint(name=str(raw["name"]), kind=kind, coordinates=tuple(names), axes=axes_arr, centre_m=centre)
+
+
+def _parse_inertia(raw: Any, where: str, body_mass: float, origin: np.ndarray, find_point):
+    """Mass (kg), local centre of mass (m) and inertia about it (kg m^2) from table fractions."""
+    if raw is None:
+        return 0.0, np.zeros(3), np.zeros((3, 3))
+    check_keys(raw, _INERTIA_KEYS, where, error=ModelError, required={"mass_fraction", "com_between", "com_fraction"})
+    mass = float(raw["mass_fraction"]) * body_mass
+    a_name, b_name = raw["com_between"]
+    a, b = find_point(a_name, where), find_point(b_name, where)
+    com_global = a + float(raw["com_fraction"]) * (b - a)
+    if "principal_kgm2_per_kg" in raw:
+        inertia = np.diag(_vec3(raw["principal_kgm2_per_kg"], f"{where}.principal_kgm2_per_kg")) * mass
+    else:
+        for key in ("radius_of_gyration_fraction", "axial_radius_of_gyration_fraction", "long_axis"):
+            if key not in raw:
+                raise ModelError(f"{where}: needs 'principal_kgm2_per_kg' or '{key}'")
+        p, d = (find_point(n, where) for n in raw["long_axis"])
+        length = float(np.linalg.norm(d - p))
+        u = (d - p) / length
+        k_t = float(raw["radius_of_gyration_fraction"]) * length
+        k_a = float(raw["axial_radius_of_gyration_fraction"]) * length
+        inertia = mass * (k_t**2 * (np.eye(3) - np.outer(u, u)) + k_a**2 * np.outer(u, u))
+    if mass <= 0:
+        raise ModelError(f"{where}: mass must be > 0")
+    return mass, com_global - origin, inertia

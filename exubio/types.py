@@ -1,0 +1,347 @@
+"""The data that travels between exubio's layers, as frozen dataclasses.
+
+Conventions everywhere: numpy float64, time first, SI units (m, s, rad, kg), NaN marks a
+missing marker sample (never 0). Inputs are not mutated. Millimetres and degrees appear only in
+files and labels, never inside these objects.
+"""
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any, Mapping
+
+import numpy as np
+
+from exubio.errors import InputError, ModelError
+
+
+# --------------------------------------------------------------------------------------------
+# Marker trajectories
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Trajectories:
+    """Marker trajectories of one trial.
+
+    labels:      marker labels, prefixes such as ``Subject:`` already stripped.
+    positions_m: (n_frames, n_markers, 3) positions in metres; NaN where a sample is missing.
+    rate_hz:     sampling rate.
+    time_s:      (n_frames,) sample times in seconds (first sample at 0 unless the file says).
+    source:      the file it came from ("" for data made in memory).
+    ignored_labels: labels present in the file but dropped (unlabelled ``*12`` markers, ...).
+    units_in_file: the length unit the file declared ("mm", "m", ...).
+    """
+
+    labels: tuple[str, ...]
+    positions_m: np.ndarray
+    rate_hz: float
+    time_s: np.ndarray
+    source: str = ""
+    ignored_labels: tuple[str, ...] = ()
+    units_in_file: str = "m"
+
+    def __post_init__(self) -> None:
+        pos = np.asarray(self.positions_m, dtype=float)
+        if pos.ndim != 3 or pos.shape[2] != 3:
+            raise InputError(
+                f"{self.source or 'trajectories'}: positions must have shape (n_frames, n_markers, 3), "
+                f"got {pos.shape}"
+            )
+        if pos.shape[1] != len(self.labels):
+            raise InputError(
+                f"{self.source or 'trajectories'}: {len(self.labels)} labels for {pos.shape[1]} markers"
+            )
+        if len(set(self.labels)) != len(self.labels):
+            dup = sorted({lab for lab in self.labels if self.labels.count(lab) > 1})
+            raise InputError(f"{self.source or 'trajectories'}: duplicate marker labels {dup}")
+        time = np.asarray(self.time_s, dtype=float)
+        if time.shape != (pos.shape[0],):
+            raise InputError(
+                f"{self.source or 'trajectories'}: time has shape {time.shape}, expected ({pos.shape[0]},)"
+            )
+        if not self.rate_hz > 0:
+            raise InputError(f"{self.source or 'trajectories'}: sampling rate must be > 0, got {self.rate_hz}")
+        object.__setattr__(self, "labels", tuple(self.labels))
+        object.__setattr__(self, "positions_m", pos)
+        object.__setattr__(self, "time_s", time)
+        object.__setattr__(self, "ignored_labels", tuple(self.ignored_labels))
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.positions_m.shape[0])
+
+    @property
+    def n_markers(self) -> int:
+        return int(self.positions_m.shape[1])
+
+    def index(self, label: str) -> int:
+        """Column of ``label``; an InputError naming the file and the known labels otherwise."""
+        try:
+            return self.labels.index(label)
+        except ValueError:
+            raise InputError(
+                f"{self.source or 'trajectories'}: no marker '{label}'; the trial has {list(self.labels)}"
+            ) from None
+
+    def marker(self, label: str) -> np.ndarray:
+        """(n_frames, 3) trajectory of one marker, in metres."""
+        return self.positions_m[:, self.index(label), :]
+
+
+# --------------------------------------------------------------------------------------------
+# Model
+# --------------------------------------------------------------------------------------------
+class JointKind(str, enum.Enum):
+    SPHERICAL = "spherical"  # three rotations about intersecting axes (an intrinsic sequence)
+    REVOLUTE = "revolute"  # one rotation
+    CARDAN = "cardan"  # two rotations about intersecting axes (universal joint)
+
+    @property
+    def n_coordinates(self) -> int:
+        return {"spherical": 3, "revolute": 1, "cardan": 2}[self.value]
+
+
+@dataclass(frozen=True)
+class Joint:
+    """The joint between a segment and its parent.
+
+    centre_m: the joint centre in the parent's frame (m).
+    axes:     (k, 3) unit rotation axes of the intrinsic sequence q_1, q_2, ... Each axis is
+              expressed in the parent frame at q = 0, where parent and child frames coincide.
+    coordinates: the names of the k joint coordinates, in sequence order.
+    """
+
+    name: str
+    kind: JointKind
+    coordinates: tuple[str, ...]
+    axes: np.ndarray
+    centre_m: np.ndarray
+
+
+@dataclass(frozen=True)
+class Segment:
+    """A rigid segment. Its frame is at its joint centre and parallel to the thorax frame in the
+    model's reference posture (all coordinates zero).
+
+    mass_kg, com_m (local), inertia_kgm2 (3x3 about the centre of mass, local axes).
+    points: named local positions (m) of anatomical landmarks and default model points.
+    """
+
+    name: str
+    parent: str | None
+    joint: Joint | None
+    mass_kg: float
+    com_m: np.ndarray
+    inertia_kgm2: np.ndarray
+    points: Mapping[str, np.ndarray]
+
+
+@dataclass(frozen=True)
+class Ellipsoid:
+    """The thorax ellipsoid g = (r - centre)^T A (r - centre) - 1 with A = diag(1/radii^2).
+
+    contact_points: (segment, point name) of the two scapula points held on its surface.
+    """
+
+    centre_m: np.ndarray
+    radii_m: np.ndarray
+    contact_points: tuple[tuple[str, str], ...]
+
+    @property
+    def a_diag(self) -> np.ndarray:
+        return 1.0 / np.asarray(self.radii_m, dtype=float) ** 2
+
+
+@dataclass(frozen=True)
+class Model:
+    """A kinematic tree of segments (thorax fixed first, parents before children) with the
+    scapulothoracic ellipsoid constraint."""
+
+    name: str
+    segments: tuple[Segment, ...]
+    ellipsoid: Ellipsoid
+    body_mass_kg: float
+    source: str = ""
+    metadata: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        names = [s.name for s in self.segments]
+        if len(set(names)) != len(names):
+            raise ModelError(f"{self.source or self.name}: duplicate segment names in {names}")
+        seen: set[str] = set()
+        for seg in self.segments:
+            if seg.parent is not None and seg.parent not in seen:
+                raise ModelError(
+                    f"{self.source or self.name}: segment '{seg.name}' names parent '{seg.parent}', "
+                    f"which must be defined before it; defined so far: {sorted(seen)}"
+                )
+            seen.add(seg.name)
+        object.__setattr__(self, "metadata", MappingProxyType(dict(self.metadata)))
+
+    @property
+    def segment_names(self) -> tuple[str, ...]:
+        return tuple(s.name for s in self.segments)
+
+    @property
+    def coordinate_names(self) -> tuple[str, ...]:
+        out: list[str] = []
+        for seg in self.segments:
+            if seg.joint is not None:
+                out.extend(seg.joint.coordinates)
+        return tuple(out)
+
+    @property
+    def n_coordinates(self) -> int:
+        return len(self.coordinate_names)
+
+    def segment(self, name: str) -> Segment:
+        for seg in self.segments:
+            if seg.name == name:
+                return seg
+        raise ModelError(
+            f"{self.source or self.name}: no segment '{name}'; valid segments are {list(self.segment_names)}"
+        )
+
+    def segment_index(self, name: str) -> int:
+        return self.segment_names.index(self.segment(name).name)
+
+
+# --------------------------------------------------------------------------------------------
+# Protocol
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class MarkerSpec:
+    """One protocol marker: the trial label(s) it is found under, the segment it sits on, its
+    local position on that segment (m) and its spring-damper constants (the LS weight is the
+    spring constant relative to the protocol default)."""
+
+    name: str
+    segment: str
+    local_position_m: np.ndarray
+    aliases: tuple[str, ...] = ()
+    stiffness_n_per_m: float = 1500.0
+    damping_ns_per_m: float = 300.0
+    optional: bool = False
+
+
+@dataclass(frozen=True)
+class ThoraxFrameSpec:
+    """How the ISB thorax frame is built from thorax landmarks, or ``None`` labels when the data
+    are already expressed in a thorax-fixed frame (identity)."""
+
+    ij: str | None = None
+    px: str | None = None
+    c7: str | None = None
+    t8: str | None = None
+
+    @property
+    def is_identity(self) -> bool:
+        return self.ij is None
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """A marker set: tracked markers, the thorax frame landmarks and the filter settings."""
+
+    name: str
+    markers: tuple[MarkerSpec, ...]
+    thorax_frame: ThoraxFrameSpec
+    cutoff_hz: float | None = 2.0
+    filter_order: int = 2
+    default_stiffness_n_per_m: float = 1500.0
+    default_damping_ns_per_m: float = 300.0
+    source: str = ""
+
+    @property
+    def marker_names(self) -> tuple[str, ...]:
+        return tuple(m.name for m in self.markers)
+
+    @property
+    def weights(self) -> np.ndarray:
+        """LS weight per marker: its spring constant relative to the protocol default."""
+        return np.array([m.stiffness_n_per_m for m in self.markers]) / self.default_stiffness_n_per_m
+
+
+# --------------------------------------------------------------------------------------------
+# Preprocessed input and results
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Gap:
+    """A run of missing samples of one marker: frames [start, stop)."""
+
+    marker: str
+    start: int
+    stop: int
+
+    @property
+    def n_frames(self) -> int:
+        return self.stop - self.start
+
+
+@dataclass(frozen=True)
+class MarkerTargets:
+    """Protocol markers in the thorax frame, filtered, with spline derivatives, ready for a method.
+
+    positions_m, velocities_m_s, accelerations_m_s2: (n_frames, n_markers, 3), NaN in gaps.
+    marker_names: protocol marker names, in protocol order.
+    """
+
+    time_s: np.ndarray
+    marker_names: tuple[str, ...]
+    positions_m: np.ndarray
+    velocities_m_s: np.ndarray
+    accelerations_m_s2: np.ndarray
+    gaps: tuple[Gap, ...] = ()
+    source: str = ""
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.positions_m.shape[0])
+
+    @property
+    def present(self) -> np.ndarray:
+        """(n_frames, n_markers) True where the marker was measured."""
+        return ~np.isnan(self.positions_m).any(axis=2)
+
+
+class FrameStatus(enum.IntEnum):
+    CONVERGED = 0
+    NOT_CONVERGED = 1
+    TOO_FEW_MARKERS = 2
+
+
+@dataclass(frozen=True)
+class Reconstruction:
+    """Joint kinematics of one trial by one method.
+
+    q_rad, qd_rad_s, qdd_rad_s2: (n_frames, n_coordinates).
+    model_points_m: (n_frames, n_markers, 3) model points R_i at the reconstructed q.
+    measured_m:     (n_frames, n_markers, 3) the targets the method tracked (NaN in gaps).
+    residuals_m:    (n_frames, n_markers) |R_i - M_i|, NaN where the marker was missing.
+    constraint:     (n_frames, 2) ellipsoid constraint g (dimensionless).
+    constraint_velocity: (n_frames, 2) G q̇ (1/s).
+    status:         (n_frames,) FrameStatus values.
+    timings_s:      named wall times (build, initial, solve, ... total).
+    info:           method-specific figures (iterations, mean spring deflection, ...).
+    """
+
+    method: str
+    time_s: np.ndarray
+    coordinate_names: tuple[str, ...]
+    q_rad: np.ndarray
+    qd_rad_s: np.ndarray
+    qdd_rad_s2: np.ndarray
+    marker_names: tuple[str, ...]
+    model_points_m: np.ndarray
+    measured_m: np.ndarray
+    residuals_m: np.ndarray
+    constraint: np.ndarray
+    constraint_velocity: np.ndarray
+    status: np.ndarray
+    timings_s: Mapping[str, float] = field(default_factory=dict)
+    info: Mapping[str, Any] = field(default_factory=dict)
+    gaps: tuple[Gap, ...] = ()
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.q_rad.shape[0])
