@@ -1,0 +1,394 @@
+"""Write (and read back) reconstruction results: angle CSV, OpenSim .mot, .npz archive, JSON.
+
+Every file is written atomically: the content goes to a temporary file in the target folder,
+which then replaces the target with ``os.replace``. An interrupted or failing writer therefore
+never leaves a half-written result, and an existing result is never truncated before the new one
+is complete. ``atomic_write`` is public so that other writers (C3D, TRC, figures) can use it.
+
+Angles are radians in memory and degrees in the CSV and .mot files (labelled: the .mot header says
+``inDegrees=yes``; the CSV holds degrees in every coordinate column, time in seconds).
+"""
+from __future__ import annotations
+
+import io
+import json
+import logging
+import math
+import os
+import secrets
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+from exubio.errors import InputError
+from exubio.types import Gap, Reconstruction
+
+logger = logging.getLogger(__name__)
+
+_ANGLE_FORMAT = "%.6f"  # degrees: 1e-6 deg printed resolution
+_TIME_FORMAT = "%.6f"  # seconds
+
+
+# --------------------------------------------------------------------------------------------
+# Atomic writing and the output folder
+# --------------------------------------------------------------------------------------------
+def atomic_write(
+    path: str | os.PathLike, writer: Callable[[Path], Any], /, *, temp_suffix: str | None = None
+) -> Path:
+    """Write ``path`` atomically: ``writer(tmp_path)`` writes the whole file at ``tmp_path`` (a
+    fresh, empty, hidden file in the same folder), which then replaces ``path``. If ``writer``
+    raises, the temporary file is removed, ``path`` is left as it was and the exception propagates.
+
+    ``tmp_path`` ends with ``temp_suffix`` (default: the suffix of ``path``), for writers that
+    choose the format from the name (matplotlib) or append their own suffix (ezc3d wants ".c3d").
+
+    OS errors (missing folder, no permission, disk full) become InputError naming ``path``.
+    Returns ``path`` as a Path.
+    """
+    target = Path(path)
+    folder = target.parent
+    if not folder.is_dir():
+        raise InputError(f"{target}: cannot write, the folder '{folder}' does not exist")
+    suffix = target.suffix if temp_suffix is None else temp_suffix
+    tmp = folder / f".{target.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp{suffix}"
+    try:
+        with open(tmp, "xb"):  # created empty, with the usual umask-based permissions
+            pass
+        writer(tmp)
+        _fsync(tmp)
+        os.replace(tmp, target)
+    except OSError as exc:
+        _remove_quietly(tmp)
+        raise InputError(f"{target}: cannot write ({exc})") from exc
+    except BaseException:
+        _remove_quietly(tmp)
+        raise
+    logger.debug("wrote %s", target)
+    return target
+
+
+def _fsync(path: Path) -> None:
+    with open(path, "rb") as fh:
+        os.fsync(fh.fileno())
+
+
+def _remove_quietly(path: Path) -> None:
+    try:
+        path.unlink()
+    except FileNotFoundError:
+        pass
+    except OSError as exc:  # pragma: no cover - e.g. permission lost meanwhile
+        logger.warning("could not remove temporary file %s: %s", path, exc)
+
+
+def _write_text(path: str | os.PathLike, text: str) -> Path:
+    def writer(tmp: Path) -> None:
+        with open(tmp, "w", encoding="utf-8", newline="") as fh:
+            fh.write(text)
+
+    return atomic_write(path, writer)
+
+
+def prepare_output_dir(out_dir: str | os.PathLike, stems: Sequence[str], /, *, overwrite: bool) -> Path:
+    """Create ``out_dir`` (with parents) and check that no result of this run exists there yet.
+
+    Each entry of ``stems`` is a file name in ``out_dir`` (``"summary.json"``) or a stem without
+    suffix (``"P01_ABD01_pf"``), which then stands for every file ``<stem>.<anything>``. When such a
+    file exists and ``overwrite`` is False, an InputError names it. With ``overwrite=True`` nothing
+    is deleted here: old files are replaced only by the writers' atomic renames.
+    """
+    folder = Path(out_dir)
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"{folder}: output folder expected, but this is an existing file")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{folder}: cannot create the output folder ({exc})") from exc
+    existing = _existing_targets(folder, stems)
+    if existing and not overwrite:
+        names = ", ".join(str(p) for p in existing)
+        raise InputError(
+            f"{existing[0]}: result file already exists (existing: {names}); pass --overwrite to "
+            f"replace the results or choose another output folder"
+        )
+    if existing:
+        logger.info("%d existing result file(s) in %s will be replaced", len(existing), folder)
+    return folder
+
+
+def _existing_targets(folder: Path, stems: Sequence[str]) -> list[Path]:
+    if isinstance(stems, str):
+        raise TypeError("stems must be a list of names, not a single string")
+    entries = sorted(p.name for p in folder.iterdir())
+    hits: list[Path] = []
+    for stem in stems:
+        for name in entries:
+            if name == stem or name.startswith(stem + "."):
+                hits.append(folder / name)
+    return sorted(set(hits))
+
+
+# --------------------------------------------------------------------------------------------
+# Angles: CSV and OpenSim .mot
+# --------------------------------------------------------------------------------------------
+def _check_angles(path: Path, time_s: np.ndarray, names: Sequence[str], q_rad: np.ndarray) -> tuple:
+    time = np.asarray(time_s, dtype=float)
+    q = np.asarray(q_rad, dtype=float)
+    names = tuple(str(n) for n in names)
+    if time.ndim != 1:
+        raise InputError(f"{path}: time must be 1-D, got shape {time.shape}")
+    if q.shape != (time.shape[0], len(names)):
+        raise InputError(
+            f"{path}: angles have shape {q.shape}, expected (n_frames, n_coordinates) = "
+            f"({time.shape[0]}, {len(names)})"
+        )
+    if len(set(names)) != len(names):
+        raise InputError(f"{path}: duplicate coordinate names in {list(names)}")
+    for name in names:
+        if not name or name != name.strip() or any(c in name for c in ",\t\r\n\""):
+            raise InputError(
+                f"{path}: coordinate name {name!r} cannot be a column header "
+                f"(expected a non-empty name without commas, tabs, quotes or surrounding spaces)"
+            )
+    return time, names, q
+
+
+def _table_text(time: np.ndarray, q_deg: np.ndarray, sep: str) -> str:
+    if time.shape[0] == 0:
+        return ""
+    buf = io.StringIO()
+    fmt = [_TIME_FORMAT] + [_ANGLE_FORMAT] * q_deg.shape[1]
+    np.savetxt(buf, np.column_stack([time, q_deg]), fmt=fmt, delimiter=sep)
+    return buf.getvalue()
+
+
+def write_angles_csv(
+    path: str | os.PathLike, time_s: np.ndarray, coordinate_names: Sequence[str], q_rad: np.ndarray, /
+) -> Path:
+    """Plain CSV: header ``time_s,<coordinate names as in the model>``, then one row per frame,
+    time in seconds and angles in DEGREES, ``%.6f``. NaN is written ``nan``."""
+    path = Path(path)
+    time, names, q = _check_angles(path, time_s, coordinate_names, q_rad)
+    text = ",".join(("time_s",) + names) + "\n" + _table_text(time, np.degrees(q), ",")
+    return _write_text(path, text)
+
+
+def read_angles_csv(path: str | os.PathLike, /) -> tuple[np.ndarray, tuple[str, ...], np.ndarray]:
+    """Read a file of ``write_angles_csv``: (time_s, coordinate names, q in radians)."""
+    path = Path(path)
+    lines = _read_lines(path)
+    if not lines or lines[0].split(",")[0].strip() != "time_s":
+        raise InputError(f"{path}: line 1: expected a header starting with 'time_s', got {lines[:1]}")
+    header = lines[0].split(",")
+    names = tuple(h.strip() for h in header[1:])
+    rows = [_parse_row(path, i + 2, line.split(","), len(header)) for i, line in enumerate(lines[1:]) if line.strip()]
+    table = np.array(rows, dtype=float).reshape(len(rows), len(header))
+    return table[:, 0].copy(), names, np.radians(table[:, 1:])
+
+
+def write_mot(
+    path: str | os.PathLike,
+    time_s: np.ndarray,
+    coordinate_names: Sequence[str],
+    q_rad: np.ndarray,
+    /,
+    *,
+    name: str = "exubio",
+) -> Path:
+    """OpenSim motion file (.mot, storage version 1): angles in degrees (``inDegrees=yes``),
+    tab-separated, ``time`` then the coordinates."""
+    path = Path(path)
+    time, names, q = _check_angles(path, time_s, coordinate_names, q_rad)
+    if "\n" in name or "\r" in name:
+        raise InputError(f"{path}: .mot name must be a single line, got {name!r}")
+    header = (
+        f"{name}\nversion=1\nnRows={time.shape[0]}\nnColumns={len(names) + 1}\n"
+        f"inDegrees=yes\nendheader\n" + "\t".join(("time",) + names) + "\n"
+    )
+    return _write_text(path, header + _table_text(time, np.degrees(q), "\t"))
+
+
+def read_mot(path: str | os.PathLike, /) -> tuple[np.ndarray, tuple[str, ...], np.ndarray]:
+    """Read an OpenSim .mot/.sto of angles: (time_s, coordinate names, q in radians).
+    Honours ``inDegrees`` (yes: degrees converted to radians; no: radians kept)."""
+    path = Path(path)
+    lines = _read_lines(path)
+    header, body_start = _mot_header(path, lines)
+    if body_start >= len(lines):
+        raise InputError(f"{path}: no column line after 'endheader'")
+    columns = [c.strip() for c in lines[body_start].split("\t")]
+    if columns[0].lower() != "time":
+        raise InputError(f"{path}: line {body_start + 1}: expected first column 'time', got '{columns[0]}'")
+    rows = [
+        _parse_row(path, body_start + 2 + i, line.split("\t"), len(columns))
+        for i, line in enumerate(lines[body_start + 1 :])
+        if line.strip()
+    ]
+    table = np.array(rows, dtype=float).reshape(len(rows), len(columns))
+    _check_mot_counts(path, header, table.shape)
+    in_degrees = header.get("indegrees", "no").lower() == "yes"
+    q = np.radians(table[:, 1:]) if in_degrees else table[:, 1:]
+    return table[:, 0].copy(), tuple(columns[1:]), q
+
+
+def _mot_header(path: Path, lines: list[str]) -> tuple[dict[str, str], int]:
+    header: dict[str, str] = {}
+    for i, line in enumerate(lines):
+        text = line.strip()
+        if text.lower() == "endheader":
+            return header, i + 1
+        if "=" in text:
+            key, value = text.split("=", 1)
+            header[key.strip().lower()] = value.strip()
+    raise InputError(f"{path}: not a .mot file: no 'endheader' line in {len(lines)} lines")
+
+
+def _check_mot_counts(path: Path, header: Mapping[str, str], shape: tuple[int, int]) -> None:
+    for key, actual in (("nrows", shape[0]), ("ncolumns", shape[1])):
+        if key in header and header[key] != str(actual):
+            raise InputError(f"{path}: header says {key}={header[key]} but the table has {actual}")
+
+
+def _read_lines(path: Path) -> list[str]:
+    try:
+        with open(path, encoding="utf-8", newline="") as fh:
+            return fh.read().splitlines()
+    except FileNotFoundError:
+        raise InputError(f"{path}: file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: cannot read ({exc})") from exc
+
+
+def _parse_row(path: Path, line_no: int, cells: list[str], n_columns: int) -> list[float]:
+    if len(cells) != n_columns:
+        raise InputError(f"{path}: line {line_no}: {len(cells)} columns, expected {n_columns}")
+    try:
+        return [float(c) for c in cells]
+    except ValueError:
+        raise InputError(f"{path}: line {line_no}: non-numeric value in {cells}") from None
+
+
+# --------------------------------------------------------------------------------------------
+# Full results: .npz
+# --------------------------------------------------------------------------------------------
+_NPZ_ARRAYS = (
+    "time_s",
+    "q_rad",
+    "qd_rad_s",
+    "qdd_rad_s2",
+    "model_points_m",
+    "measured_m",
+    "residuals_m",
+    "constraint",
+    "constraint_velocity",
+    "status",
+)
+
+
+def write_npz(path: str | os.PathLike, reconstruction: Reconstruction, /, *, metadata: Mapping[str, Any]) -> Path:
+    """Every array of ``reconstruction`` (names as string arrays, gaps as three parallel arrays,
+    timings/info as JSON) plus ``metadata`` JSON-encoded in the string entry ``metadata_json``.
+    Uncompressed, loadable with ``np.load(path)`` (no pickle)."""
+    rec = reconstruction
+    arrays: dict[str, np.ndarray] = {key: np.asarray(getattr(rec, key)) for key in _NPZ_ARRAYS}
+    arrays.update(
+        method=np.array(rec.method),
+        coordinate_names=np.array(rec.coordinate_names, dtype=str),
+        marker_names=np.array(rec.marker_names, dtype=str),
+        gap_markers=np.array([g.marker for g in rec.gaps], dtype=str),
+        gap_start=np.array([g.start for g in rec.gaps], dtype=np.int64),
+        gap_stop=np.array([g.stop for g in rec.gaps], dtype=np.int64),
+        timings_json=np.array(_dumps(dict(rec.timings_s), strict=False)),
+        info_json=np.array(_dumps(dict(rec.info), strict=False)),
+        metadata_json=np.array(_dumps(dict(metadata), strict=False)),
+    )
+
+    def writer(tmp: Path) -> None:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **arrays)
+
+    return atomic_write(path, writer)
+
+
+def read_npz(path: str | os.PathLike, /) -> Reconstruction:
+    """The Reconstruction stored by ``write_npz`` (metadata: see ``read_npz_metadata``)."""
+    with _NpzReader(Path(path)) as data:
+        gaps = tuple(
+            Gap(str(m), int(a), int(b)) for m, a, b in zip(data["gap_markers"], data["gap_start"], data["gap_stop"])
+        )
+        return Reconstruction(
+            method=str(data["method"]),
+            coordinate_names=tuple(str(n) for n in data["coordinate_names"]),
+            marker_names=tuple(str(n) for n in data["marker_names"]),
+            timings_s=json.loads(str(data["timings_json"])),
+            info=json.loads(str(data["info_json"])),
+            gaps=gaps,
+            **{key: data[key] for key in _NPZ_ARRAYS},
+        )
+
+
+def read_npz_metadata(path: str | os.PathLike, /) -> dict[str, Any]:
+    """The ``metadata`` dict given to ``write_npz``."""
+    with _NpzReader(Path(path)) as data:
+        return json.loads(str(data["metadata_json"]))
+
+
+class _NpzReader:
+    """np.load with InputErrors naming the file and a missing key."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def __enter__(self) -> "_NpzReader":
+        try:
+            self.data = np.load(self.path, allow_pickle=False)
+        except FileNotFoundError:
+            raise InputError(f"{self.path}: file not found") from None
+        except (OSError, ValueError) as exc:
+            raise InputError(f"{self.path}: not a readable .npz file ({exc})") from exc
+        return self
+
+    def __getitem__(self, key: str) -> np.ndarray:
+        try:
+            return self.data[key]
+        except KeyError:
+            raise InputError(
+                f"{self.path}: no entry '{key}' (not an exubio result?); entries are {sorted(self.data.files)}"
+            ) from None
+
+    def __exit__(self, *exc: object) -> None:
+        self.data.close()
+
+
+# --------------------------------------------------------------------------------------------
+# JSON
+# --------------------------------------------------------------------------------------------
+def write_json(path: str | os.PathLike, data: Mapping[str, Any], /) -> Path:
+    """Strict JSON, indent 2: numpy scalars/arrays become numbers/lists, tuples lists, paths
+    strings, and NaN/inf become null."""
+    return _write_text(path, _dumps(data, strict=True, indent=2) + "\n")
+
+
+def _dumps(data: Any, *, strict: bool, indent: int | None = None) -> str:
+    """JSON text. strict: NaN/inf → null (valid JSON); otherwise kept (Python's NaN extension),
+    for exact round trips inside the .npz."""
+    return json.dumps(_jsonable(data, strict), indent=indent, allow_nan=not strict)
+
+
+def _jsonable(obj: Any, strict: bool) -> Any:
+    if isinstance(obj, Mapping):
+        return {str(k): _jsonable(v, strict) for k, v in obj.items()}
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist(), strict)
+    if isinstance(obj, (list, tuple, set, frozenset)):
+        return [_jsonable(v, strict) for v in obj]
+    if isinstance(obj, np.generic):
+        return _jsonable(obj.item(), strict)
+    if isinstance(obj, float):
+        return None if strict and not math.isfinite(obj) else obj
+    if isinstance(obj, os.PathLike):
+        return os.fspath(obj)
+    if isinstance(obj, (str, int, bool)) or obj is None:
+        return obj
+    raise TypeError(f"cannot write {type(obj).__name__} to JSON: {obj!r}")

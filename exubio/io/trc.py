@@ -1,0 +1,199 @@
+"""Read and write marker trajectories in OpenSim TRC files (tab-separated text).
+
+Layout (1-based line numbers)::
+
+    1  PathFileType  4  (X/Y/Z)  <name>
+    2  DataRate  CameraRate  NumFrames  NumMarkers  Units  OrigDataRate  OrigDataStartFrame  OrigNumFrames
+    3  <the values of line 2>
+    4  Frame#  Time  m1  <tab> <tab>  m2 ...
+    5  <tab> <tab>  X1  Y1  Z1  X2 ...
+       data rows (blank lines skipped): frame, time (s), x y z per marker in the Units of line 3;
+       an empty cell or NaN is a missing sample.
+
+Reading converts to metres and takes the sample times from the Time column. Writing prints
+positions with a resolution of 1e-9 m whatever the unit (mm: 6 decimals) and times with 10
+significant digits; missing samples become empty cells.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from exubio.errors import InputError
+from exubio.io.results import atomic_write
+from exubio.types import Trajectories
+
+logger = logging.getLogger(__name__)
+
+METRES_PER_UNIT = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
+_DECIMALS = {"mm": 6, "cm": 7, "m": 9}  # 1e-9 m printed resolution in every unit
+_HEADER_KEYS = ("DataRate", "CameraRate", "NumFrames", "NumMarkers", "Units",
+                "OrigDataRate", "OrigDataStartFrame", "OrigNumFrames")
+_FIRST_DATA_LINE = 6
+
+
+# --------------------------------------------------------------------------------------------
+# Reading
+# --------------------------------------------------------------------------------------------
+def read_trc(path: str | os.PathLike, /) -> Trajectories:
+    """Marker trajectories of a TRC file, in metres."""
+    path = Path(path)
+    lines = _read_lines(path)
+    header = _header(path, lines)
+    unit, rate, n_frames, n_markers = _header_values(path, header)
+    labels = _marker_labels(path, lines[3], n_markers)
+    time, coords = _data(path, lines, n_markers)
+    if time.shape[0] != n_frames:
+        raise InputError(f"{path}: line 3: NumFrames is {n_frames} but the file has {time.shape[0]} data rows")
+    return Trajectories(
+        labels=tuple(labels),
+        positions_m=coords.reshape(-1, n_markers, 3) * METRES_PER_UNIT[unit],
+        rate_hz=rate,
+        time_s=time,
+        source=str(path),
+        units_in_file=unit,
+    )
+
+
+def _read_lines(path: Path) -> list[str]:
+    if not path.exists():
+        raise InputError(f"{path}: file not found")
+    try:
+        text = path.read_text(encoding="utf-8", errors="strict")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: cannot read as a TRC text file ({exc})") from exc
+    lines = text.splitlines()
+    if len(lines) < 5:
+        raise InputError(f"{path}: not a TRC file: {len(lines)} lines, expected at least 5 header lines")
+    return lines
+
+
+def _cells(line: str) -> list[str]:
+    return [c.strip() for c in line.split("\t")]
+
+
+def _header(path: Path, lines: list[str]) -> dict[str, str]:
+    """The key/value pairs of lines 2-3, after checking line 1."""
+    if _cells(lines[0])[0] != "PathFileType":
+        raise InputError(f"{path}: line 1: expected 'PathFileType ...', got {lines[0][:60]!r}")
+    keys = [k for k in _cells(lines[1]) if k]
+    values = _cells(lines[2])
+    if len(values) < len(keys) or any(not v for v in values[: len(keys)]):
+        raise InputError(f"{path}: line 3: expected {len(keys)} values for {keys}, got {values}")
+    return dict(zip(keys, values))
+
+
+def _header_values(path: Path, header: dict[str, str]) -> tuple[str, float, int, int]:
+    for key in ("DataRate", "NumFrames", "NumMarkers", "Units"):
+        if key not in header:
+            raise InputError(f"{path}: line 2: no '{key}' column; found {list(header)}")
+    unit = header["Units"]
+    if unit.lower() not in METRES_PER_UNIT:
+        raise InputError(f"{path}: line 3: Units is '{unit}', expected one of {sorted(METRES_PER_UNIT)}")
+    try:
+        rate = float(header["DataRate"])
+        n_frames = int(header["NumFrames"])
+        n_markers = int(header["NumMarkers"])
+    except ValueError:
+        raise InputError(
+            f"{path}: line 3: DataRate/NumFrames/NumMarkers must be numbers, got "
+            f"{header['DataRate']!r}/{header['NumFrames']!r}/{header['NumMarkers']!r}"
+        ) from None
+    if not (rate > 0 and math.isfinite(rate)) or n_frames < 0 or n_markers < 0:
+        raise InputError(f"{path}: line 3: expected DataRate > 0, NumFrames >= 0, NumMarkers >= 0; got {header}")
+    return unit.lower(), rate, n_frames, n_markers
+
+
+def _marker_labels(path: Path, line: str, n_markers: int) -> list[str]:
+    cells = _cells(line)
+    if cells[:2] != ["Frame#", "Time"]:
+        raise InputError(f"{path}: line 4: expected 'Frame#<tab>Time<tab>labels...', got {line[:60]!r}")
+    labels = [c for c in cells[2:] if c]
+    if len(labels) != n_markers:
+        raise InputError(f"{path}: line 4: {len(labels)} marker labels, but line 3 says NumMarkers={n_markers}")
+    return labels
+
+
+def _data(path: Path, lines: list[str], n_markers: int) -> tuple[np.ndarray, np.ndarray]:
+    """Time column (n_frames,) and coordinates (n_frames, 3 n_markers) in file units."""
+    n_columns = 2 + 3 * n_markers
+    times: list[float] = []
+    rows: list[list[float]] = []
+    for line_no, line in enumerate(lines[_FIRST_DATA_LINE - 1 :], start=_FIRST_DATA_LINE):
+        if not line.strip():
+            continue
+        cells = _cells(line)
+        if len(cells) < n_columns or any(cells[n_columns:]):
+            n_found = len(cells) if len(cells) < n_columns else max(i + 1 for i, c in enumerate(cells) if c)
+            raise InputError(f"{path}: line {line_no}: {n_found} columns, expected {n_columns} (2 + 3 x {n_markers} markers)")
+        values = _floats(path, line_no, cells[1:n_columns])
+        if math.isnan(values[0]):
+            raise InputError(f"{path}: line {line_no}: the Time cell is empty")
+        times.append(values[0])
+        rows.append(values[1:])
+    return np.array(times, dtype=float), np.array(rows, dtype=float).reshape(len(rows), 3 * n_markers)
+
+
+def _floats(path: Path, line_no: int, cells: list[str]) -> list[float]:
+    try:
+        return [float(c) if c else math.nan for c in cells]
+    except ValueError:
+        bad = next(c for c in cells if c and not _is_float(c))
+        raise InputError(f"{path}: line {line_no}: '{bad}' is not a number") from None
+
+
+def _is_float(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+# --------------------------------------------------------------------------------------------
+# Writing
+# --------------------------------------------------------------------------------------------
+def write_trc(path: str | os.PathLike, trajectories: Trajectories, /, *, units: str = "mm") -> Path:
+    """Write an OpenSim TRC file atomically, positions in ``units`` (mm, cm or m)."""
+    path = Path(path)
+    if units not in METRES_PER_UNIT:
+        raise InputError(f"{path}: cannot write TRC in units '{units}', expected one of {sorted(METRES_PER_UNIT)}")
+    for label in trajectories.labels:
+        if not label or label != label.strip() or any(c in label for c in "\t\r\n"):
+            raise InputError(f"{path}: marker label {label!r} cannot be written to a TRC header")
+    text = _header_text(path.name, trajectories, units) + _rows_text(trajectories, units)
+
+    def writer(tmp: Path) -> None:
+        with open(tmp, "w", encoding="utf-8", newline="\n") as fh:
+            fh.write(text)
+
+    return atomic_write(path, writer)
+
+
+def _header_text(name: str, traj: Trajectories, units: str) -> str:
+    n, m, rate = traj.n_frames, traj.n_markers, f"{traj.rate_hz:g}"
+    values = (rate, rate, str(n), str(m), units, rate, "1", str(n))
+    labels = "".join(f"\t{label}\t\t" for label in traj.labels)
+    axes = "".join(f"\tX{i}\tY{i}\tZ{i}" for i in range(1, m + 1))
+    return (
+        f"PathFileType\t4\t(X/Y/Z)\t{name}\n"
+        + "\t".join(_HEADER_KEYS) + "\n"
+        + "\t".join(values) + "\n"
+        + f"Frame#\tTime{labels}\n"
+        + f"\t{axes}\n"
+        + "\n"
+    )
+
+
+def _rows_text(traj: Trajectories, units: str) -> str:
+    coords = traj.positions_m.reshape(traj.n_frames, -1) / METRES_PER_UNIT[units]
+    fmt = f"{{:.{_DECIMALS[units]}f}}"
+    lines = []
+    for i, (t, row) in enumerate(zip(traj.time_s, coords)):
+        cells = ["" if math.isnan(v) else fmt.format(v) for v in row.tolist()]
+        lines.append(f"{i + 1}\t{t:.10g}\t" + "\t".join(cells) + "\n")
+    return "".join(lines)

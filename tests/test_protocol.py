@@ -1,0 +1,364 @@
+"""Tests of exubio.protocol: loading and validating protocol YAML files, matching trial labels."""
+from __future__ import annotations
+
+import logging
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from exubio.errors import InputError, ProtocolError
+from exubio.protocol import LabelMatch, check_keys, load_protocol, read_yaml, resolve_labels
+from exubio.types import ThoraxFrameSpec
+
+REPO = Path(__file__).resolve().parents[1]
+SHIPPED = REPO / "protocols" / "upper_limb_21.yaml"
+SEGMENTS = ("thorax", "clavicle", "scapula", "humerus", "ulna", "radius", "hand")
+
+_POINT_NAMES = {
+    "thorax": ["MAN", "XYP", "C7", "T10"],
+    "clavicle": ["CLAV_SC", "CLAV_AC"],
+    "scapula": ["SCAP_Cor", "SCAP_AA", "SCAP_AC", "SCAP_IA", "SCAP_BACK", "SCAP_FRONT", "GH"],
+    "humerus": ["ARM", "DELT", "EPI_lat", "EPI_med"],
+    "ulna": ["ULNA", "ELB"],
+    "radius": ["RADIUS"],
+    "hand": ["MET2", "MET5", "SEML"],
+}
+# synthetic model points: distinct, recognisable positions (m)
+MODEL_POINTS = {
+    seg: {p: np.array([0.01 * i, 0.02 * k, -0.003 * i * k]) for k, p in enumerate(points, start=1)}
+    for i, (seg, points) in enumerate(_POINT_NAMES.items(), start=1)
+}
+C3D_LABELS_STATIC = (
+    "C7", "T10", "MAN", "XYP", "CLAV_SC", "CLAV_AC", "SCAP_BACK", "SCAP_IA", "SCAP_AA", "SCAP_AC",
+    "SCAP_FRONT", "SCAP_Cor", "ARM", "EPI_med", "EPI_lat", "DELT", "ULNA", "RADIUS", "SEML", "MET5",
+    "MET2",
+)
+
+MINIMAL = """\
+schema_version: 1
+name: mini
+thorax_frame: {ij: IJ, px: PX, c7: C7, t8: T8}
+markers:
+  ARM: {segment: humerus, local_position_mm: [10, -200, 30]}
+"""
+
+
+def write(tmp_path: Path, text: str, name: str = "p.yaml") -> Path:
+    path = tmp_path / name
+    path.write_text(textwrap.dedent(text), encoding="utf-8")
+    return path
+
+
+def load(path: Path, **kw):
+    kw.setdefault("segments", SEGMENTS)
+    kw.setdefault("model_points", MODEL_POINTS)
+    return load_protocol(path, **kw)
+
+
+# --------------------------------------------------------------------------------------------
+# The shipped protocol
+# --------------------------------------------------------------------------------------------
+def test_shipped_upper_limb_21():
+    prot = load(SHIPPED)
+    assert prot.name == "upper_limb_21"
+    assert prot.source == str(SHIPPED)
+    assert prot.thorax_frame == ThoraxFrameSpec(ij="MAN", px="XYP", c7="C7", t8="T10")
+    assert prot.cutoff_hz == 2.0 and prot.filter_order == 2
+    assert prot.default_stiffness_n_per_m == 1500.0 and prot.default_damping_ns_per_m == 300.0
+    required = [m for m in prot.markers if not m.optional]
+    assert len(required) == 17
+    assert [m.name for m in prot.markers if m.optional] == ["ELB"]
+    assert all(m.segment != "thorax" for m in prot.markers)
+    for m in prot.markers:
+        np.testing.assert_array_equal(m.local_position_m, MODEL_POINTS[m.segment][m.name])
+        assert m.local_position_m.dtype == np.float64
+    np.testing.assert_allclose(prot.weights, 1.0)
+    by_segment = {}
+    for m in prot.markers:
+        by_segment.setdefault(m.segment, []).append(m.name)
+    assert by_segment == {
+        "clavicle": ["CLAV_SC", "CLAV_AC"],
+        "scapula": ["SCAP_Cor", "SCAP_AA", "SCAP_AC", "SCAP_IA", "SCAP_BACK", "SCAP_FRONT"],
+        "humerus": ["ARM", "DELT", "EPI_lat", "EPI_med"],
+        "ulna": ["ULNA", "ELB"],
+        "radius": ["RADIUS"],
+        "hand": ["MET2", "MET5", "SEML"],
+    }
+
+
+def test_shipped_matches_static_trial_labels():
+    prot = load(SHIPPED)
+    match = resolve_labels(prot, C3D_LABELS_STATIC, source="static.c3d")
+    assert match.unused == ()
+    assert match.columns["ELB"] is None
+    assert match.thorax_columns == {"ij": 2, "px": 3, "c7": 0, "t8": 1}
+    assert {C3D_LABELS_STATIC[c] for n, c in match.columns.items() if c is not None} == set(
+        C3D_LABELS_STATIC[4:]
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# Format features
+# --------------------------------------------------------------------------------------------
+def test_minimal_defaults_and_mm_conversion(tmp_path):
+    prot = load(write(tmp_path, MINIMAL), model_points=None)
+    (arm,) = prot.markers
+    np.testing.assert_allclose(arm.local_position_m, [0.010, -0.200, 0.030])
+    assert arm.stiffness_n_per_m == 1500.0 and arm.damping_ns_per_m == 300.0 and not arm.optional
+    assert prot.cutoff_hz == 2.0 and prot.filter_order == 2
+
+
+def test_full_marker_keys_identity_frame_and_no_filter(tmp_path):
+    path = write(tmp_path, """\
+        schema_version: 1
+        name: full
+        description: every key
+        thorax_frame: identity
+        filter: none
+        defaults: {stiffness_n_per_m: 1000, damping_ns_per_m: 100}
+        markers:
+          IJ: {segment: thorax}
+          ARM: {segment: humerus, local_position_mm: [0, -100, 0], aliases: [RARM, R_ARM],
+                stiffness_n_per_m: 500, damping_ns_per_m: 0, optional: true}
+          EL: {segment: humerus, point: EPI_lat}
+        """)
+    prot = load(path)
+    assert prot.thorax_frame.is_identity
+    assert prot.cutoff_hz is None
+    assert prot.marker_names == ("ARM", "EL")  # thorax marker not tracked
+    arm, el = prot.markers
+    assert arm.aliases == ("RARM", "R_ARM") and arm.optional
+    assert arm.stiffness_n_per_m == 500.0 and arm.damping_ns_per_m == 0.0
+    assert el.stiffness_n_per_m == 1000.0 and el.damping_ns_per_m == 100.0
+    np.testing.assert_allclose(prot.weights, [0.5, 1.0])
+
+
+def test_name_defaults_to_file_stem(tmp_path):
+    prot = load(write(tmp_path, MINIMAL.replace("name: mini\n", ""), name="lab_set.yaml"))
+    assert prot.name == "lab_set"
+
+
+def test_filter_settings(tmp_path):
+    prot = load(write(tmp_path, MINIMAL + "filter: {cutoff_hz: 6, order: 4}\n"))
+    assert prot.cutoff_hz == 6.0 and prot.filter_order == 4
+
+
+# --------------------------------------------------------------------------------------------
+# Errors
+# --------------------------------------------------------------------------------------------
+def test_unknown_marker_key_names_path_file_and_suggestion(tmp_path):
+    path = write(tmp_path, MINIMAL.replace("[10, -200, 30]}", "[10, -200, 30], stifness_n_per_m: 3}"))
+    with pytest.raises(ProtocolError) as exc:
+        load(path)
+    msg = str(exc.value)
+    assert str(path) in msg
+    assert "markers.ARM.stifness_n_per_m" in msg
+    assert "did you mean 'stiffness_n_per_m'" in msg
+    assert "'local_position_mm'" in msg and "'optional'" in msg  # the valid keys are listed
+
+
+@pytest.mark.parametrize(
+    "extra, where",
+    [
+        ("colour: red\n", "colour"),
+        ("filter: {cutoff: 2}\n", "filter.cutoff"),
+        ("defaults: {stiffness: 2}\n", "defaults.stiffness"),
+    ],
+)
+def test_unknown_keys_at_every_level(tmp_path, extra, where):
+    with pytest.raises(ProtocolError, match=rf"unknown key '{where}'"):
+        load(write(tmp_path, MINIMAL + extra))
+
+
+def test_unknown_thorax_frame_key(tmp_path):
+    path = write(tmp_path, MINIMAL.replace("t8: T8}", "t8: T8, t10: T10}"))
+    with pytest.raises(ProtocolError, match=r"unknown key 'thorax_frame.t10'.*'ij', 'px', 'c7', 't8'"):
+        load(path)
+
+
+def test_unknown_segment_lists_valid_segments(tmp_path):
+    path = write(tmp_path, MINIMAL.replace("segment: humerus", "segment: humerous"))
+    with pytest.raises(ProtocolError) as exc:
+        load(path)
+    msg = str(exc.value)
+    assert "markers.ARM.segment" in msg and "'humerous'" in msg and "did you mean 'humerus'" in msg
+    assert all(s in msg for s in SEGMENTS)
+
+
+def test_unknown_point_lists_segment_points(tmp_path):
+    path = write(tmp_path, MINIMAL.replace("local_position_mm: [10, -200, 30]", "point: EPI_lateral"))
+    with pytest.raises(ProtocolError) as exc:
+        load(path)
+    msg = str(exc.value)
+    assert "markers.ARM.point" in msg and "'EPI_lateral'" in msg and "'humerus'" in msg
+    assert all(p in msg for p in _POINT_NAMES["humerus"])
+
+
+def test_point_without_model_points(tmp_path):
+    path = write(tmp_path, MINIMAL.replace("local_position_mm: [10, -200, 30]", "point: ARM"))
+    with pytest.raises(ProtocolError, match="no model points were given"):
+        load(path, model_points=None)
+
+
+@pytest.mark.parametrize(
+    "spec, fragment",
+    [
+        ("{segment: humerus}", "needs its position"),
+        ("{segment: humerus, point: ARM, local_position_mm: [1, 2, 3]}", "exactly one"),
+        ("{segment: humerus, local_position_mm: [1, 2]}", "list of 3 numbers"),
+        ("{segment: humerus, local_position_mm: [1, 2, x]}", "list of 3 numbers"),
+        ("{local_position_mm: [1, 2, 3]}", "segment is missing"),
+        ("{segment: humerus, point: ARM, stiffness_n_per_m: 0}", "stiffness_n_per_m is 0; expected a number > 0"),
+        ("{segment: humerus, point: ARM, stiffness_n_per_m: -5}", "expected a number > 0"),
+        ("{segment: humerus, point: ARM, damping_ns_per_m: -1}", "expected a number >= 0"),
+        ("{segment: humerus, point: ARM, stiffness_n_per_m: stiff}", "must be a finite number"),
+        ("{segment: humerus, point: ARM, optional: maybe}", "optional must be true or false"),
+        ("{segment: humerus, point: ARM, aliases: RARM}", "aliases must be a list"),
+        ("[humerus]", "must be a mapping"),
+    ],
+)
+def test_bad_marker_values(tmp_path, spec, fragment):
+    path = write(tmp_path, MINIMAL.replace("{segment: humerus, local_position_mm: [10, -200, 30]}", spec))
+    with pytest.raises(ProtocolError) as exc:
+        load(path)
+    assert fragment in str(exc.value)
+    assert str(path) in str(exc.value)
+    assert "markers.ARM" in str(exc.value)
+
+
+@pytest.mark.parametrize(
+    "replace, fragment",
+    [
+        (("schema_version: 1\n", ""), "missing key 'schema_version'"),
+        (("schema_version: 1", "schema_version: 2"), "schema_version is 2"),
+        (("schema_version: 1", "schema_version: '1'"), "schema_version is '1'"),
+        (("thorax_frame: {ij: IJ, px: PX, c7: C7, t8: T8}\n", ""), "missing key 'thorax_frame'"),
+        (("{ij: IJ, px: PX, c7: C7, t8: T8}", "{ij: IJ, px: PX, c7: C7}"), "thorax_frame.t8 is missing"),
+        (("{ij: IJ, px: PX, c7: C7, t8: T8}", "{ij: IJ, px: PX, c7: C7, t8: IJ}"), "four different labels"),
+        (("{ij: IJ, px: PX, c7: C7, t8: T8}", "isb"), "expected 'identity'"),
+        (("name: mini\n", "name: mini\nfilter: {cutoff_hz: 0}\n"), "filter.cutoff_hz is 0"),
+        (("name: mini\n", "name: mini\nfilter: {cutoff_hz: -2}\n"), "filter.cutoff_hz is -2"),
+        (("name: mini\n", "name: mini\nfilter: {order: 0}\n"), "filter.order"),
+        (("name: mini\n", "name: mini\nfilter: lowpass\n"), "filter must be"),
+        (("name: mini\n", "name: mini\ndefaults: {stiffness_n_per_m: 0}\n"), "defaults.stiffness_n_per_m"),
+        (("name: mini\n", "name: mini\ndefaults: {damping_ns_per_m: -1}\n"), "defaults.damping_ns_per_m"),
+    ],
+)
+def test_bad_top_level(tmp_path, replace, fragment):
+    path = write(tmp_path, MINIMAL.replace(*replace))
+    with pytest.raises(ProtocolError) as exc:
+        load(path)
+    assert fragment in str(exc.value)
+    assert str(path) in str(exc.value)
+
+
+def test_duplicate_aliases_across_markers(tmp_path):
+    path = write(tmp_path, MINIMAL + """\
+  ELBOW: {segment: humerus, local_position_mm: [0, 0, 0], aliases: [EL, RARM]}
+  WRIST: {segment: radius, local_position_mm: [0, 0, 0], aliases: [RARM]}
+""")
+    with pytest.raises(ProtocolError, match="'RARM' of marker 'WRIST' is already used by marker 'ELBOW'"):
+        load(path)
+
+
+def test_alias_equal_to_other_marker_name(tmp_path):
+    path = write(tmp_path, MINIMAL + "  ELBOW: {segment: humerus, local_position_mm: [0, 0, 0], aliases: [ARM]}\n")
+    with pytest.raises(ProtocolError, match="already used by marker 'ARM'"):
+        load(path)
+
+
+def test_duplicate_yaml_key_is_caught(tmp_path):
+    path = write(tmp_path, MINIMAL + "  ARM: {segment: humerus, local_position_mm: [0, 0, 0]}\n")
+    with pytest.raises(ProtocolError, match=r"key 'ARM' appears twice .*lines 5 and 6"):
+        load(path)
+
+
+def test_frame_landmark_must_not_be_tracked(tmp_path):
+    path = write(tmp_path, MINIMAL.replace("c7: C7", "c7: ARM"))
+    with pytest.raises(ProtocolError, match="thorax_frame.c7 is 'ARM'.*segment 'humerus'"):
+        load(path)
+
+
+def test_only_thorax_markers_is_an_error(tmp_path):
+    path = write(tmp_path, MINIMAL.replace("segment: humerus, local_position_mm: [10, -200, 30]", "segment: thorax"))
+    with pytest.raises(ProtocolError, match="no tracked marker"):
+        load(path)
+
+
+def test_missing_file(tmp_path):
+    path = tmp_path / "nope.yaml"
+    with pytest.raises(ProtocolError, match=rf"{path}: file not found"):
+        load(path)
+
+
+@pytest.mark.parametrize("text, fragment", [("a: [1, 2\n", "not valid YAML"), ("- 1\n- 2\n", "expected a mapping"),
+                                            ("", "expected a mapping")])
+def test_not_yaml_or_not_mapping(tmp_path, text, fragment):
+    path = write(tmp_path, text)
+    with pytest.raises(ProtocolError) as exc:
+        load(path)
+    assert str(path) in str(exc.value) and fragment in str(exc.value)
+
+
+def test_read_yaml_and_check_keys_take_the_error_class(tmp_path):
+    from exubio.errors import ModelError
+
+    with pytest.raises(ModelError, match="file not found"):
+        read_yaml(tmp_path / "m.yaml", error=ModelError)
+    with pytest.raises(ModelError, match=r"m.yaml: unknown key 'segments.arm.mas' \(did you mean 'mass'\?\)"):
+        check_keys({"mas": 1}, ("mass", "com"), where="segments.arm", source="m.yaml", error=ModelError)
+
+
+# --------------------------------------------------------------------------------------------
+# resolve_labels
+# --------------------------------------------------------------------------------------------
+ALIASES = """\
+schema_version: 1
+thorax_frame: {ij: IJ, px: PX, c7: C7, t8: T8}
+markers:
+  ARM: {segment: humerus, local_position_mm: [0, 0, 0], aliases: [RARM, R_ARM]}
+  ELB: {segment: ulna, local_position_mm: [0, 0, 0], optional: true}
+  HAND: {segment: hand, local_position_mm: [0, 0, 0]}
+"""
+
+
+def test_resolve_by_name_alias_optional_and_unused(tmp_path):
+    prot = load(write(tmp_path, ALIASES))
+    labels = ("C7", "R_ARM", "HAND", "IJ", "EXTRA", "PX", "T8", "*22")
+    match = resolve_labels(prot, labels, source="trial.c3d")
+    assert isinstance(match, LabelMatch)
+    assert match.columns == {"ARM": 1, "ELB": None, "HAND": 2}
+    assert list(match.columns) == list(prot.marker_names)
+    assert match.thorax_columns == {"ij": 3, "px": 5, "c7": 0, "t8": 6}
+    assert match.unused == ("EXTRA", "*22")
+
+
+def test_resolve_prefers_name_then_first_alias(tmp_path, caplog):
+    prot = load(write(tmp_path, ALIASES))
+    labels = ("R_ARM", "RARM", "HAND", "IJ", "PX", "C7", "T8")
+    with caplog.at_level(logging.WARNING, logger="exubio.protocol"):
+        match = resolve_labels(prot, labels)
+    assert match.columns["ARM"] == 1  # RARM comes before R_ARM in the aliases
+    assert match.unused == ("R_ARM",)
+    assert "also as 'R_ARM'" in caplog.text
+    assert resolve_labels(prot, ("ARM", "RARM", "HAND", "IJ", "PX", "C7", "T8")).columns["ARM"] == 0
+
+
+def test_resolve_missing_marker_names_it_file_and_labels(tmp_path):
+    prot = load(write(tmp_path, ALIASES))
+    labels = ("HAND", "IJ", "PX", "C7", "T8")
+    with pytest.raises(InputError) as exc:
+        resolve_labels(prot, labels, source="trial.c3d")
+    msg = str(exc.value)
+    assert msg.startswith("trial.c3d:")
+    assert "'ARM' (aliases ['RARM', 'R_ARM'])" in msg
+    assert "ELB" not in msg  # optional
+    assert str(list(labels)) in msg
+
+
+def test_resolve_missing_thorax_landmark(tmp_path):
+    prot = load(write(tmp_path, ALIASES))
+    with pytest.raises(InputError, match=r"'T8' \(thorax_frame.t8\)"):
+        resolve_labels(prot, ("ARM", "HAND", "IJ", "PX", "C7"), source="trial.c3d")
