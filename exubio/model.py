@@ -7,13 +7,13 @@ parallel to the thorax frame in the reference posture).
 """
 from __future__ import annotations
 
-import difflib
 from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
-import yaml
 
+from exubio.config import check_keys as _check_keys
+from exubio.config import read_yaml
 from exubio.errors import ModelError
 from exubio.types import Ellipsoid, Joint, JointKind, Model, Segment
 
@@ -42,33 +42,13 @@ _NAMED_AXES = {
 
 
 def check_keys(mapping: Any, allowed: set[str], where: str, *, error: type[Exception], required: set[str] = frozenset()) -> None:
-    """Raise ``error`` naming ``where`` when ``mapping`` is not a mapping, has an unknown key
-    (with the valid keys and a close match) or lacks a required one."""
+    """Unknown keys (see exubio.config.check_keys), plus: must be a mapping with the required keys."""
     if not isinstance(mapping, Mapping):
         raise error(f"{where}: expected a mapping, got {type(mapping).__name__}")
-    for key in mapping:
-        if key not in allowed:
-            close = difflib.get_close_matches(str(key), sorted(allowed), n=1)
-            hint = f" (did you mean '{close[0]}'?)" if close else ""
-            raise error(f"{where}: unknown key '{key}'{hint}; valid keys are {sorted(allowed)}")
+    _check_keys(mapping, sorted(allowed), where="", source=where, error=error)
     missing = sorted(required - set(mapping))
     if missing:
         raise error(f"{where}: missing required key(s) {missing}")
-
-
-def read_yaml_mapping(path: str | Path, /, *, error: type[Exception], what: str) -> dict:
-    """Read a YAML file that must hold a mapping; errors name the file."""
-    path = Path(path)
-    if not path.is_file():
-        raise error(f"{path}: {what} file not found")
-    try:
-        with path.open("r", encoding="utf-8") as fh:
-            data = yaml.safe_load(fh)
-    except yaml.YAMLError as exc:
-        raise error(f"{path}: not valid YAML ({exc})") from None
-    if not isinstance(data, dict):
-        raise error(f"{path}: expected a YAML mapping at the top level, got {type(data).__name__}")
-    return data
 
 
 def _vec3(value: Any, where: str) -> np.ndarray:
@@ -81,7 +61,7 @@ def _vec3(value: Any, where: str) -> np.ndarray:
 def load_model(path: str | Path = DEFAULT_MODEL, /, *, body_mass_kg: float | None = None) -> Model:
     """Read a model YAML. ``body_mass_kg`` overrides the file's body mass (inertia scales)."""
     path = Path(path)
-    data = read_yaml_mapping(path, error=ModelError, what="model")
+    data = read_yaml(path, error=ModelError)
     src = str(path)
     check_keys(data, _TOP_KEYS, src, error=ModelError, required={"schema_version", "segments", "ellipsoid"})
     if data["schema_version"] != SCHEMA_VERSION:

@@ -1,0 +1,564 @@
+"""The Exudyn multibody system of the potential-field method; the only module that imports exudyn.
+
+Redundant coordinates (measured ~20x faster than Exudyn's minimal-coordinate kinematic tree, see
+shared/notes/exudyn-pf-findings.md): every movable segment is an ``ObjectRigidBody`` on a
+``NodeRigidBodyEP`` (Euler parameters) whose reference configuration is the initial posture q0;
+the joints are native constraints (spherical: ``ObjectJointSpherical``; revolute about any axis:
+``ObjectJointRevoluteZ`` between two marker frames whose z axis is the joint axis; cardan:
+``ObjectJointGeneric`` with one constrained rotation, t_y0 . t_z1 = 0, which needs perpendicular
+axes). Each scapula contact point is held on the thorax ellipsoid through an auxiliary point
+node (spherical joint to the scapula point) and an ``ObjectConnectorCoordinateVector`` with a
+quadratic term, so g = (r - c)^T A (r - c) - 1 = 0 is an index-3 constraint without Python.
+
+Every measured marker pulls its segment-fixed model point through a linear spring-damper,
+f = c (r_R - r_M) + d (v_R - v_M): an ``ObjectConnectorCartesianSpringDamper`` from the ground
+origin to the model point with a *symbolic* force function (no Python inside Newton) that reads
+the marker's position and velocity from a symbolic 6-vector set once per time step by a
+pre-step function. A missing marker switches its spring off (``activeConnector``) for the gap.
+The equations of motion are integrated with Exudyn's implicit generalized-alpha solver (index 3,
+modified Newton). Segment poses, velocities and accelerations are read at the frame times.
+
+Outside this module nothing knows about Exudyn: inputs and outputs are numpy arrays (SI units,
+time first) and the frozen dataclasses below. Segment indices are those of ``Model.segments``
+(0 = thorax, fixed).
+"""
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Mapping
+
+import numpy as np
+
+import exudyn as exu
+import exudyn.itemInterface as eii
+from exudyn.advancedUtilities import CreateSymbolicUserFunction
+from exudyn.rigidBodyUtilities import RotationMatrix2EulerParameters
+
+from exubio.errors import ModelError
+from exubio.kinematics import Kinematics, PointSet
+from exubio.types import JointKind, Model
+
+log = logging.getLogger(__name__)
+
+GRAVITY_M_S2 = np.array([0.0, -9.81, 0.0])  # thorax frame: Y up
+_AUX_MASS_KG = 1e-3  # mass of each auxiliary ellipsoid point (numerically needed, physically negligible)
+_TIMER_FIELDS = (
+    "total", "factorization", "newtonIncrement", "integrationFormula", "ODE2RHS", "AERHS",
+    "totalJacobian", "massMatrix", "reactionForces", "python", "postNewton", "writeSolution", "overhead",
+)  # fmt: skip
+
+
+# --------------------------------------------------------------------------------------------
+# Data
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SpringSet:
+    """The model points tied to measured markers, one spring-damper each.
+
+    segment_index:     (k,) index into ``Model.segments`` (not 0: the thorax does not move).
+    local_m:           (k, 3) model-point positions in their segment's frame (m).
+    stiffness_n_per_m: (k,) spring constants c (N/m).
+    damping_ns_per_m:  (k,) damping constants d (N s/m).
+    """
+
+    segment_index: np.ndarray
+    local_m: np.ndarray
+    stiffness_n_per_m: np.ndarray
+    damping_ns_per_m: np.ndarray
+
+    def __post_init__(self) -> None:
+        idx = np.asarray(self.segment_index, dtype=int).reshape(-1)
+        k = idx.shape[0]
+        local = np.asarray(self.local_m, dtype=float)
+        if local.shape != (k, 3):
+            raise ValueError(f"SpringSet: local_m must have shape ({k}, 3), got {local.shape}")
+        c = np.broadcast_to(np.asarray(self.stiffness_n_per_m, dtype=float), (k,)).copy()
+        d = np.broadcast_to(np.asarray(self.damping_ns_per_m, dtype=float), (k,)).copy()
+        if np.any(~np.isfinite(c)) or np.any(c < 0) or np.any(~np.isfinite(d)) or np.any(d < 0):
+            raise ValueError("SpringSet: stiffness and damping must be finite and >= 0")
+        for name, value in (("segment_index", idx), ("local_m", local), ("stiffness_n_per_m", c), ("damping_ns_per_m", d)):
+            object.__setattr__(self, name, value)
+
+    @classmethod
+    def from_points(cls, points: PointSet, /, *, stiffness_n_per_m, damping_ns_per_m) -> "SpringSet":
+        """Springs on a kinematics PointSet; constants are scalars or (k,) arrays."""
+        return cls(points.segment_index, points.local_m, stiffness_n_per_m, damping_ns_per_m)
+
+    @property
+    def n_springs(self) -> int:
+        return int(self.segment_index.shape[0])
+
+
+@dataclass(frozen=True)
+class IntegratorOptions:
+    """Settings of Exudyn's generalized-alpha integration.
+
+    step_s: time step; None = one step per frame. frame_dt_s / step_s must be an integer (the
+        targets between frames are cubic Hermite interpolations of positions and velocities).
+    spectral_radius, newton_relative_tolerance, modified_newton_contractivity: the defaults
+        (0, 1e-5, 0.2) were the fastest measured and keep the accelerations nearly free of the
+        step-to-step oscillation that other settings leave in them (its size relative to max
+        |alpha| on fast synthetic motion: rho_inf 0.8 / 1e-5 / 0.5: 100 %; 0.5 / 1e-5 / 0.2: 7 %;
+        defaults: 1.4 %; 0 / 1e-6 / 0.2: 0.7 % for +20 % time). Positions do not change (< 1e-4 mm).
+    modified_newton: Jacobian kept over steps and rebuilt when the contraction of the Newton
+        residual is worse than ``modified_newton_contractivity`` (modified Newton measured 2-4x
+        faster *and* more accurate than full Newton here).
+    timing_breakdown: fill ``PFRun.solver_times_s`` with Exudyn's CPU timers (~5 % cost).
+    """
+
+    step_s: float | None = None
+    spectral_radius: float = 0.0
+    newton_relative_tolerance: float = 1e-5
+    newton_absolute_tolerance: float = 1e-10
+    modified_newton: bool = True
+    modified_newton_contractivity: float = 0.2
+    max_newton_iterations: int = 25
+    adaptive_step: bool = True
+    timing_breakdown: bool = True
+
+
+@dataclass(frozen=True)
+class PFRun:
+    """Segment motion at the input frame times (n frames, n_seg = all model segments incl. thorax).
+
+    rotations:   (n, n_seg, 3, 3) segment orientations R (local -> thorax frame).
+    origins_m:   (n, n_seg, 3) segment frame origins (joint centres).
+    velocities_m_s, accelerations_m_s2: (n, n_seg, 3) of the origins.
+    angular_velocities_rad_s, angular_accelerations_rad_s2: (n, n_seg, 3), thorax frame.
+    completed_frames: frames the solver reached (rows from here on are NaN if it stopped early).
+    success: the solver finished the whole trial; message: its error otherwise.
+    wall_time_s: the solve alone; solver_times_s: Exudyn's CPU-time breakdown (s).
+    newton_iterations, jacobian_updates, steps: solver statistics of the whole run.
+    """
+
+    time_s: np.ndarray
+    rotations: np.ndarray
+    origins_m: np.ndarray
+    velocities_m_s: np.ndarray
+    accelerations_m_s2: np.ndarray
+    angular_velocities_rad_s: np.ndarray
+    angular_accelerations_rad_s2: np.ndarray
+    completed_frames: int
+    success: bool
+    message: str
+    wall_time_s: float
+    solver_times_s: Mapping[str, float] = field(default_factory=dict)
+    newton_iterations: int = 0
+    jacobian_updates: int = 0
+    steps: int = 0
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.rotations.shape[0])
+
+
+# --------------------------------------------------------------------------------------------
+# Euler-parameter helpers (numpy, vectorised over leading axes)
+# --------------------------------------------------------------------------------------------
+def _ep_rotation(ep: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) of Euler parameters (..., 4) = [e0, e1, e2, e3] (normalised here)."""
+    ep = ep / np.linalg.norm(ep, axis=-1, keepdims=True)
+    e0, e1, e2, e3 = np.moveaxis(ep, -1, 0)
+    return np.stack([
+        np.stack([1 - 2 * (e2 * e2 + e3 * e3), 2 * (e1 * e2 - e0 * e3), 2 * (e1 * e3 + e0 * e2)], -1),
+        np.stack([2 * (e1 * e2 + e0 * e3), 1 - 2 * (e1 * e1 + e3 * e3), 2 * (e2 * e3 - e0 * e1)], -1),
+        np.stack([2 * (e1 * e3 - e0 * e2), 2 * (e2 * e3 + e0 * e1), 1 - 2 * (e1 * e1 + e2 * e2)], -1),
+    ], -2)  # fmt: skip
+
+
+def _ep_G(ep: np.ndarray) -> np.ndarray:
+    """G (..., 3, 4) with omega_global = G ep_t (and alpha_global = G ep_tt, since G_t ep_t = 0)."""
+    e0, e1, e2, e3 = np.moveaxis(ep, -1, 0)
+    return 2.0 * np.stack([
+        np.stack([-e1, e0, -e3, e2], -1),
+        np.stack([-e2, e3, e0, -e1], -1),
+        np.stack([-e3, -e2, e1, e0], -1),
+    ], -2)  # fmt: skip
+
+
+def _frame_with_z(axis: np.ndarray) -> np.ndarray:
+    """A rotation matrix whose third column is the unit vector ``axis``."""
+    a = np.asarray(axis, dtype=float)
+    a = a / np.linalg.norm(a)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = np.cross(helper, a)
+    x /= np.linalg.norm(x)
+    return np.column_stack([x, np.cross(a, x), a])
+
+
+def _hermite(p0, v0, p1, v1, s, dt):
+    """Cubic Hermite position and velocity at fraction s in [0, 1] of an interval dt."""
+    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
+    d00, d10, d01, d11 = 6 * s**2 - 6 * s, 3 * s**2 - 4 * s + 1, -6 * s**2 + 6 * s, 3 * s**2 - 2 * s
+    pos = h00 * p0 + h10 * dt * v0 + h01 * p1 + h11 * dt * v1
+    vel = (d00 * p0 + d01 * p1) / dt + d10 * v0 + d11 * v1
+    return pos, vel
+
+
+# --------------------------------------------------------------------------------------------
+# The system
+# --------------------------------------------------------------------------------------------
+class PFSystem:
+    """An Exudyn system of a Model with one spring-damper per model point of ``springs``.
+
+    The reference configuration of every body is the posture q0 (so a run starts exactly there,
+    with velocities from qd0); every ``run`` starts again from (q0, qd0).
+    """
+
+    def __init__(self, model: Model, springs: SpringSet, /, *, q0: np.ndarray, qd0: np.ndarray | None = None,
+                 gravity: bool = False, kinematics: Kinematics | None = None):
+        self.model = model
+        self.kin = kinematics if kinematics is not None else Kinematics(model)
+        self.springs = springs
+        n_seg = len(model.segments)
+        m = model.n_coordinates
+        q0 = np.asarray(q0, dtype=float)
+        qd0 = np.zeros(m) if qd0 is None else np.asarray(qd0, dtype=float)
+        if q0.shape != (m,) or qd0.shape != (m,):
+            raise ValueError(f"PFSystem: q0 and qd0 must have shape ({m},), got {q0.shape} and {qd0.shape}")
+        if springs.n_springs == 0:
+            raise ValueError("PFSystem: no springs")
+        bad = (springs.segment_index < 1) | (springs.segment_index >= n_seg)
+        if np.any(bad):
+            raise ModelError(
+                f"{model.source or model.name}: springs must sit on movable segments 1..{n_seg - 1} "
+                f"{list(model.segment_names[1:])}; got segment indices {springs.segment_index[bad].tolist()}"
+            )
+        if model.segments[0].joint is not None or model.segments[0].parent is not None:
+            raise ModelError(f"{model.source or model.name}: the first segment must be the fixed thorax")
+        self.q0, self.qd0 = q0.copy(), qd0.copy()
+
+        t_build = time.perf_counter()
+        self._sc = exu.SystemContainer()
+        mbs = self._mbs = self._sc.AddSystem()
+        R0, p0 = self.kin.poses(q0)
+        origins = PointSet(np.arange(n_seg), np.zeros((n_seg, 3)))
+        v0 = np.einsum("kcm,m->kc", self.kin.point_jacobian(q0, origins), qd0)
+        w0 = self.kin.segment_angular_velocities(q0, qd0)
+
+        self._ground = mbs.AddObject(eii.ObjectGround())
+        self._nodes: list = [None]  # per segment; thorax has none
+        self._bodies: list = [self._ground]
+        self._ep_ref = np.zeros((n_seg, 4))
+        self._p_ref = np.zeros((n_seg, 3))
+        for i, seg in enumerate(model.segments[1:], start=1):
+            ep = np.asarray(RotationMatrix2EulerParameters(R0[i]), dtype=float)
+            ep_t = 0.25 * _ep_G(ep).T @ w0[i]
+            self._ep_ref[i], self._p_ref[i] = ep, p0[i]
+            node = mbs.AddNode(eii.NodeRigidBodyEP(
+                referenceCoordinates=list(p0[i]) + list(ep), initialVelocities=list(v0[i]) + list(ep_t),
+                visualization=eii.VNodeRigidBodyEP(show=False)))
+            mass = float(seg.mass_kg)
+            com = np.asarray(seg.com_m, dtype=float)
+            inertia = np.asarray(seg.inertia_kgm2, dtype=float) + mass * (com @ com * np.eye(3) - np.outer(com, com))
+            body = mbs.AddObject(eii.ObjectRigidBody(
+                nodeNumber=node, mass=mass, centerOfMass=list(com),
+                inertia=[inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[1, 2], inertia[0, 2], inertia[0, 1]],
+                visualization=eii.VObjectRigidBody(show=False)))
+            if gravity:
+                mk = mbs.AddMarker(eii.MarkerBodyMass(bodyNumber=body))
+                mbs.AddLoad(eii.LoadMassProportional(markerNumber=mk, loadVector=list(GRAVITY_M_S2)))
+            self._nodes.append(node)
+            self._bodies.append(body)
+
+        names = model.segment_names
+        for i, seg in enumerate(model.segments[1:], start=1):
+            self._add_joint(seg, self._bodies[names.index(seg.parent)], self._bodies[i])
+
+        # ellipsoid: auxiliary point held to each contact point, g = (r - c)^T A (r - c) - 1 = 0
+        ell = model.ellipsoid
+        a = ell.a_diag
+        c = np.asarray(ell.centre_m, dtype=float)
+        contacts = self.kin.contacts
+        rc0 = self.kin.points(q0, contacts)
+        vc0 = np.einsum("kcm,m->kc", self.kin.point_jacobian(q0, contacts), qd0)
+        ground_node = mbs.AddNode(eii.NodePointGround())
+        ground_coords = mbs.AddMarker(eii.MarkerNodeCoordinates(nodeNumber=ground_node))
+        self._aux_nodes = []
+        for j in range(len(contacts.segment_index)):
+            node = mbs.AddNode(eii.NodePoint(referenceCoordinates=list(rc0[j]), initialVelocities=list(vc0[j]),
+                                             visualization=eii.VNodePoint(show=False)))
+            mbs.AddObject(eii.ObjectMassPoint(nodeNumber=node, mass=_AUX_MASS_KG, visualization=eii.VObjectMassPoint(show=False)))
+            on_body = mbs.AddMarker(eii.MarkerBodyPosition(bodyNumber=self._bodies[contacts.segment_index[j]],
+                                                           localPosition=list(contacts.local_m[j])))
+            on_node = mbs.AddMarker(eii.MarkerNodePosition(nodeNumber=node))
+            mbs.AddObject(eii.ObjectJointSpherical(markerNumbers=[on_body, on_node], visualization=eii.VObjectJointSpherical(show=False)))
+            coords = mbs.AddMarker(eii.MarkerNodeCoordinates(nodeNumber=node))
+            mbs.AddObject(eii.ObjectConnectorCoordinateVector(
+                markerNumbers=[ground_coords, coords], scalingMarker1=[list(-2.0 * a * c)],
+                quadraticTermMarker1=[list(a)], offset=[1.0 - float(c @ (a * c))]))
+            self._aux_nodes.append(node)
+
+        # springs: ground origin -> model point, force from a symbolic function of a 6-vector target
+        origin = mbs.AddMarker(eii.MarkerBodyPosition(bodyNumber=self._ground, localPosition=[0.0, 0.0, 0.0]))
+        self._targets = []  # symbolic Vector(6) per spring: target position, velocity
+        self._user_functions = []  # must stay alive as long as the system
+        self._spring_objects = []
+        self._point_markers = []
+        for k in range(springs.n_springs):
+            target = exu.symbolic.Vector(f"pf_target_{k}", [0.0] * 6)
+            uf = CreateSymbolicUserFunction(mbs, _spring_force(target), "springForceUserFunction",
+                                            itemTypeName="ObjectConnectorCartesianSpringDamper")
+            point = mbs.AddMarker(eii.MarkerBodyPosition(bodyNumber=self._bodies[springs.segment_index[k]],
+                                                         localPosition=list(springs.local_m[k])))
+            obj = mbs.AddObject(eii.ObjectConnectorCartesianSpringDamper(
+                markerNumbers=[origin, point], stiffness=[float(springs.stiffness_n_per_m[k])] * 3,
+                damping=[float(springs.damping_ns_per_m[k])] * 3, springForceUserFunction=uf,
+                visualization=eii.VObjectConnectorCartesianSpringDamper(show=False)))
+            self._targets.append(target)
+            self._user_functions.append(uf)
+            self._spring_objects.append(obj)
+            self._point_markers.append(point)
+        mbs.Assemble()
+        sd = mbs.systemData
+        self._ltg = [None] + [np.asarray(sd.GetNodeLTGODE2(n), dtype=int) for n in self._nodes[1:]]
+        self._aux_ltg = [np.asarray(sd.GetNodeLTGODE2(n), dtype=int) for n in self._aux_nodes]
+        self._n_ode2 = sd.ODE2Size()
+        self.build_time_s = time.perf_counter() - t_build
+
+    # ---------------------------------------------------------------- building blocks
+    def _add_joint(self, seg, parent_body, child_body) -> None:
+        mbs = self._mbs
+        joint = seg.joint
+        centre = [float(x) for x in joint.centre_m]
+        if joint.kind is JointKind.SPHERICAL:
+            m0 = mbs.AddMarker(eii.MarkerBodyPosition(bodyNumber=parent_body, localPosition=centre))
+            m1 = mbs.AddMarker(eii.MarkerBodyPosition(bodyNumber=child_body, localPosition=[0.0, 0.0, 0.0]))
+            mbs.AddObject(eii.ObjectJointSpherical(markerNumbers=[m0, m1], visualization=eii.VObjectJointSpherical(show=False)))
+        elif joint.kind is JointKind.REVOLUTE:
+            # parent and child frames coincide at q = 0, so the axis is the same local vector on both
+            J = _frame_with_z(joint.axes[0])
+            m0 = mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=parent_body, localHT=exu.HT(rotation=J, translation=centre)))
+            m1 = mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=child_body, localHT=exu.HT(rotation=J, translation=[0.0, 0.0, 0.0])))
+            mbs.AddObject(eii.ObjectJointRevoluteZ(markerNumbers=[m0, m1], visualization=eii.VObjectJointRevoluteZ(show=False)))
+        elif joint.kind is JointKind.CARDAN:
+            a1, a2 = (np.asarray(x, dtype=float) for x in joint.axes)
+            if abs(a1 @ a2) > 1e-9 * np.linalg.norm(a1) * np.linalg.norm(a2):
+                raise ModelError(f"{self.model.source or self.model.name}: cardan joint '{joint.name}' needs perpendicular axes")
+            # ObjectJointGeneric with only rotation x constrained imposes t_y0 . t_z1 = 0:
+            # y of the parent's joint frame = a1 (fixed in the parent), z of the child's = a2.
+            J0 = _frame_with_z(a1)[:, [1, 2, 0]]
+            J1 = _frame_with_z(a2)
+            m0 = mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=parent_body, localHT=exu.HT(rotation=J0, translation=centre)))
+            m1 = mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=child_body, localHT=exu.HT(rotation=J1, translation=[0.0, 0.0, 0.0])))
+            mbs.AddObject(eii.ObjectJointGeneric(markerNumbers=[m0, m1], constrainedAxes=[1, 1, 1, 1, 0, 0],
+                                                 visualization=eii.VObjectJointGeneric(show=False)))
+        else:  # pragma: no cover - JointKind is closed
+            raise ModelError(f"joint kind {joint.kind} is not supported by the Exudyn backend")
+
+    def _coordinates_for(self, q: np.ndarray) -> np.ndarray:
+        """The system's ODE2 coordinates (relative to the reference posture q0) for posture q."""
+        R, p = self.kin.poses(q)
+        x = np.zeros(self._n_ode2)
+        for i in range(1, len(self.model.segments)):
+            ep = np.asarray(RotationMatrix2EulerParameters(R[i]), dtype=float)
+            if ep @ self._ep_ref[i] < 0:
+                ep = -ep
+            x[self._ltg[i]] = np.concatenate([p[i] - self._p_ref[i], ep - self._ep_ref[i]])
+        rc = self.kin.points(q, self.kin.contacts)
+        rc0 = self.kin.points(self.q0, self.kin.contacts)
+        for j, ltg in enumerate(self._aux_ltg):
+            x[ltg] = rc[j] - rc0[j]
+        return x
+
+    # ---------------------------------------------------------------- queries
+    @property
+    def n_springs(self) -> int:
+        return self.springs.n_springs
+
+    def model_points(self, q: np.ndarray, /) -> np.ndarray:
+        """Exudyn's own positions (k, 3) of the spring model points with the bodies set to posture q.
+
+        Only the current configuration is touched; a later ``run`` still starts from q0.
+        """
+        q = np.asarray(q, dtype=float)
+        if q.shape != (self.model.n_coordinates,):
+            raise ValueError(f"model_points: q must have shape ({self.model.n_coordinates},), got {q.shape}")
+        self._mbs.systemData.SetODE2Coordinates(list(self._coordinates_for(q)), configuration=exu.ConfigurationType.Current)
+        return np.array([self._mbs.GetMarkerOutput(mk, exu.OutputVariableType.Position, configuration=exu.ConfigurationType.Current)
+                         for mk in self._point_markers])
+
+    # ---------------------------------------------------------------- run
+    def run(self, targets_pos: np.ndarray, targets_vel: np.ndarray, active: np.ndarray | None = None, /, *,
+            frame_dt_s: float, options: IntegratorOptions = IntegratorOptions()) -> PFRun:
+        """Integrate the PF system through the measured marker trajectories.
+
+        targets_pos, targets_vel: (n, k, 3) marker positions (m) and velocities (m/s) at the frame
+            times i * frame_dt_s; frame 0 is the initial state (q0, qd0). Values where ``active``
+            is False are ignored (NaN allowed there).
+        active: (n, k) bool, False where a marker is missing: its spring is switched off. A step
+            between two frames uses a spring only if it is active at both.
+        """
+        pos = np.asarray(targets_pos, dtype=float)
+        vel = np.asarray(targets_vel, dtype=float)
+        k = self.n_springs
+        if pos.ndim != 3 or pos.shape[1:] != (k, 3) or pos.shape[0] < 2:
+            raise ValueError(f"run: targets_pos must have shape (n >= 2, {k}, 3), got {pos.shape}")
+        if vel.shape != pos.shape:
+            raise ValueError(f"run: targets_vel must have shape {pos.shape}, got {vel.shape}")
+        n = pos.shape[0]
+        act = np.ones((n, k), dtype=bool) if active is None else np.asarray(active, dtype=bool)
+        if act.shape != (n, k):
+            raise ValueError(f"run: active must have shape ({n}, {k}), got {act.shape}")
+        finite = np.isfinite(pos).all(axis=2) & np.isfinite(vel).all(axis=2)
+        if np.any(act & ~finite):
+            f, j = np.argwhere(act & ~finite)[0]
+            raise ValueError(f"run: marker {j} is active but not finite at frame {f}; mark missing samples inactive")
+        if not frame_dt_s > 0:
+            raise ValueError(f"run: frame_dt_s must be > 0, got {frame_dt_s}")
+        step = frame_dt_s if options.step_s is None else float(options.step_s)
+        sub = int(round(frame_dt_s / step))
+        if sub < 1 or abs(sub * step - frame_dt_s) > 1e-9 * frame_dt_s:
+            raise ValueError(f"run: frame_dt_s / step_s must be a positive integer, got {frame_dt_s} / {step}")
+        pos = np.where(act[..., None], pos, 0.0)
+        vel = np.where(act[..., None], vel, 0.0)
+
+        # targets and spring states at every step time s * step, s = 0 .. (n - 1) * sub
+        n_steps = (n - 1) * sub
+        frame = np.arange(n_steps + 1) // sub
+        frac = (np.arange(n_steps + 1) % sub) / sub
+        nxt = np.minimum(frame + 1, n - 1)
+        sp, sv = _hermite(pos[frame], vel[frame], pos[nxt], vel[nxt], frac[:, None, None], frame_dt_s)
+        step_active = act[frame] & np.where(frac[:, None] > 0, act[nxt], True)
+        rows = np.concatenate([sp, sv], axis=2).tolist()  # (n_steps + 1, k, 6) nested lists: fast SetVector
+        changes = np.argwhere(step_active[1:] != step_active[:-1])
+        events: dict[int, list[tuple[int, bool]]] = {}
+        for s, j in changes:
+            events.setdefault(int(s) + 1, []).append((int(j), bool(step_active[s + 1, j])))
+
+        mbs = self._mbs
+        targets, springs = self._targets, self._spring_objects
+        for j in range(k):
+            targets[j].SetVector(rows[0][j])
+            mbs.SetObjectParameter(springs[j], "activeConnector", bool(step_active[0, j]))
+        applied = [0]
+
+        sd = mbs.systemData
+        X = np.full((n, self._n_ode2), np.nan)
+        Xt = np.full_like(X, np.nan)
+        Xtt = np.full_like(X, np.nan)
+        reached = [-1]
+
+        def pre_step(mbs, t):  # receives t_{n+1}: the end of the step about to be solved
+            x = t / step
+            s = int(x + 0.5)
+            while applied[0] < math.ceil(x - 1e-6):  # switch at the step that ends at or after t
+                applied[0] += 1
+                for j, on in events.get(applied[0], ()):
+                    mbs.SetObjectParameter(springs[j], "activeConnector", on)
+            if abs(x - s) < 1e-6:
+                row = rows[s]
+                for j in range(k):
+                    targets[j].SetVector(row[j])
+            else:  # a reduced step (adaptive step control): interpolate at t
+                i = min(int(t / frame_dt_s), n - 2)
+                p, v = _hermite(pos[i], vel[i], pos[i + 1], vel[i + 1], t / frame_dt_s - i, frame_dt_s)
+                for j in range(k):
+                    targets[j].SetVector(list(p[j]) + list(v[j]))
+            return True
+
+        rate = 1.0 / frame_dt_s
+        n_done = [0]  # accepted steps
+
+        def post_step(mbs, t):  # also called once at t = 0, after the initial accelerations
+            if t > 0.0:
+                n_done[0] += 1
+            x = t * rate
+            i = int(x + 0.5)
+            if abs(x - i) < 1e-6 and 0 <= i < n:
+                X[i], Xt[i], Xtt[i] = sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t(), sd.GetODE2Coordinates_tt()
+                reached[0] = i
+            return True
+
+        mbs.SetPreStepUserFunction(pre_step)
+        mbs.SetPostStepUserFunction(post_step)
+        settings = self._settings(n_steps, step, options)
+        solver = exu.MainSolverImplicitSecondOrder()
+        print_before = exu.config.printToConsole
+        exu.config.printToConsole = False  # Exudyn prints progress/warnings itself; we log instead
+        message = ""
+        t0 = time.perf_counter()
+        try:
+            success = bool(solver.SolveSystem(mbs, settings))
+            if not success:
+                message = solver.GetErrorString() or "solver did not finish"
+        except Exception as exc:  # Exudyn raises its own error types on divergence
+            success = False
+            message = f"{type(exc).__name__}: {exc}"
+        finally:
+            exu.config.printToConsole = print_before
+            mbs.SetPreStepUserFunction(0)
+            mbs.SetPostStepUserFunction(0)
+        wall = time.perf_counter() - t0
+        completed = reached[0] + 1
+        success = success and completed == n
+        if not success:
+            log.warning("PF integration stopped at frame %d of %d: %s", completed, n, message)
+
+        timer = solver.timer
+        times = {name: float(getattr(timer, name)) for name in _TIMER_FIELDS if hasattr(timer, name)} if options.timing_breakdown else {}
+        it = solver.it
+        return self._decode(
+            X, Xt, Xtt, frame_dt_s, completed=completed, success=success, message=message, wall=wall, times=times,
+            newton=int(it.newtonStepsCount), jacobians=int(it.newtonJacobiCount), steps=n_done[0])
+
+    def _settings(self, n_steps: int, step: float, options: IntegratorOptions):
+        s = exu.SimulationSettings()
+        ti = s.timeIntegration
+        ti.numberOfSteps = n_steps
+        ti.endTime = n_steps * step
+        ti.verboseMode = 0
+        ti.adaptiveStep = options.adaptive_step
+        ti.generalizedAlpha.spectralRadius = options.spectral_radius
+        ti.generalizedAlpha.useIndex2Constraints = False  # index 3 (index 2 stalls with the quadratic constraint)
+        ti.generalizedAlpha.computeInitialAccelerations = True
+        ti.newton.useModifiedNewton = options.modified_newton
+        ti.newton.modifiedNewtonContractivity = options.modified_newton_contractivity
+        ti.newton.relativeTolerance = options.newton_relative_tolerance
+        ti.newton.absoluteTolerance = options.newton_absolute_tolerance
+        ti.newton.maxIterations = options.max_newton_iterations
+        s.solution.file.write = False
+        s.solution.sensors.active = False
+        s.show.computationTime = options.timing_breakdown
+        s.show.globalTimers = False
+        s.show.statistics = False
+        return s
+
+    def _decode(self, X, Xt, Xtt, frame_dt_s, *, completed, success, message, wall, times, newton, jacobians, steps) -> PFRun:
+        n = X.shape[0]
+        n_seg = len(self.model.segments)
+        R = np.zeros((n, n_seg, 3, 3))
+        R[:, 0] = np.eye(3)
+        p, v, a, w, al = (np.zeros((n, n_seg, 3)) for _ in range(5))
+        for i in range(1, n_seg):
+            ltg = self._ltg[i]
+            x, xt, xtt = X[:, ltg], Xt[:, ltg], Xtt[:, ltg]
+            ep = x[:, 3:] + self._ep_ref[i]
+            G = _ep_G(ep / np.linalg.norm(ep, axis=-1, keepdims=True))
+            R[:, i] = _ep_rotation(ep)
+            p[:, i] = x[:, :3] + self._p_ref[i]
+            v[:, i], a[:, i] = xt[:, :3], xtt[:, :3]
+            w[:, i] = np.einsum("nij,nj->ni", G, xt[:, 3:])
+            al[:, i] = np.einsum("nij,nj->ni", G, xtt[:, 3:])
+        if completed < n:
+            for arr in (R, p, v, a, w, al):
+                arr[completed:] = np.nan
+        return PFRun(
+            time_s=np.arange(n) * frame_dt_s, rotations=R, origins_m=p, velocities_m_s=v, accelerations_m_s2=a,
+            angular_velocities_rad_s=w, angular_accelerations_rad_s2=al, completed_frames=int(completed),
+            success=bool(success), message=message, wall_time_s=float(wall), solver_times_s=times,
+            newton_iterations=newton, jacobian_updates=jacobians, steps=steps)
+
+
+def _spring_force(target):
+    """The symbolic spring-damper force c (r - r_M) + d (v - v_M); ``target`` = [r_M, v_M].
+
+    A closure without default arguments (Exudyn's symbolic conversion rejects those)."""
+
+    def spring_force(mbs, t, itemNumber, displacement, velocity, stiffness, damping, offset):
+        return [stiffness[i] * (displacement[i] - target[i]) + damping[i] * (velocity[i] - target[3 + i]) for i in range(3)]
+
+    return spring_force

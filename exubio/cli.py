@@ -1,0 +1,176 @@
+"""The ``exubio`` command: parse, call, print. Exit codes: 0 ok, 1 reconstruction failed,
+2 bad input. Results go to files, logs to stderr."""
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+from typing import Callable, Sequence
+
+from exubio.errors import ExubioError, InputError, ModelError, ProtocolError, ReconstructionError
+
+log = logging.getLogger("exubio")
+
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
+
+
+def _progress_factory(enabled: bool) -> Callable[[str, int], Callable[[int], None]] | None:
+    if not enabled:
+        return None
+    from tqdm import tqdm
+
+    def factory(label: str, total: int) -> Callable[[int], None]:
+        bar = tqdm(total=total, desc=f"{label} frames", unit="frame", file=sys.stderr, leave=False,
+                   mininterval=0.5)
+
+        def update(n: int) -> None:
+            bar.update(n)
+            if bar.n >= total:
+                bar.close()
+
+        return update
+
+    return factory
+
+
+def _methods(value: str) -> list[str]:
+    return ["pf", "ls"] if value == "both" else [value]
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    from exubio.model import load_model
+    from exubio.simulate import Motion, simulate_trial, write_simulated_trial
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".c3d":
+        raise InputError(f"--out {out}: expected a path ending in .c3d")
+    model = load_model(args.model) if args.model else load_model()
+    trial = simulate_trial(model, Motion.parse(args.motion), duration_s=args.duration, rate_hz=args.rate,
+                           noise_mm=args.noise_mm, sta_mm=args.sta_mm, seed=args.seed)
+    c3d, truth = write_simulated_trial(trial, out)
+    print(f"wrote {c3d} ({trial.trajectories.n_markers} markers, {trial.trajectories.n_frames} frames, "
+          f"{args.rate:g} Hz, noise {args.noise_mm:g} mm, soft-tissue artefact {args.sta_mm:g} mm)")
+    print(f"wrote {truth} (true joint angles, deg)")
+    return EXIT_OK
+
+
+def _print_result(recon, paths, summ) -> None:
+    r = summ["residual_mm"]
+    print(f"[{recon.method}] {summ['n_frames']} frames in {summ['wall_time_s']:.2f} s "
+          f"({summ['ms_per_frame']:.3f} ms/frame); residual mean {r['mean']:.2f} mm, SD {r['sd']:.2f} mm, "
+          f"max {r['max']:.2f} mm ({r['max_marker']}); max |g| {summ['constraint_max_abs']:.1e}")
+    not_conv = summ["frames"].get("not_converged", 0) + summ["frames"].get("too_few_markers", 0)
+    if not_conv:
+        print(f"[{recon.method}] WARNING: {not_conv} frames not converged or with too few markers "
+              f"(see status in {paths['npz'].name})")
+    if summ["gaps"]:
+        print(f"[{recon.method}] gaps: " + ", ".join(f"{g['marker']} {g['duration_s']:.2f} s at {g['start_s']:.2f} s"
+                                                   for g in summ["gaps"][:8])
+              + (" ..." if len(summ["gaps"]) > 8 else ""))
+    for key in ("csv", "mot", "npz", "summary"):
+        print(f"  {paths[key]}")
+
+
+def cmd_reconstruct(args: argparse.Namespace) -> int:
+    from exubio.pipeline import reconstruct_file
+
+    outputs = reconstruct_file(args.trial, args.out, methods=_methods(args.method), model_path=args.model,
+                               protocol_path=args.protocol, body_mass_kg=args.body_mass,
+                               overwrite=args.overwrite, progress_factory=_progress_factory(not args.quiet))
+    for recon, paths, summ in outputs:
+        _print_result(recon, paths, summ)
+    if len(outputs) == 2:
+        from exubio.pipeline import agreement_deg
+
+        agree = agreement_deg(outputs[0][0], outputs[1][0])
+        worst = max(agree, key=agree.get)
+        print(f"PF-LS agreement: max RMSE {agree[worst]:.3f} deg ({worst})")
+    return EXIT_OK
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from exubio.evaluate import rmse_deg
+    from exubio.io.results import read_angles_csv
+    from exubio.model import load_model
+    from exubio.pipeline import agreement_deg, reconstruct_file
+    from exubio.simulate import Motion, simulate_trial, write_simulated_trial
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    model = load_model()
+    print(f"1/2 simulating 10 s of arm abduction at 100 Hz with 1 mm noise -> {out}")
+    trial = simulate_trial(model, Motion.ABDUCTION, duration_s=10.0, rate_hz=100.0, noise_mm=1.0, seed=1)
+    c3d, truth_csv = write_simulated_trial(trial, out / "demo_abduction.c3d")
+    print("2/2 reconstructing it with the potential-field (pf) and least-squares (ls) methods")
+    outputs = reconstruct_file(c3d, out, methods=["pf", "ls"], model=model, overwrite=True,
+                               progress_factory=_progress_factory(not args.quiet))
+    _, names, q_true = read_angles_csv(truth_csv)
+    for recon, paths, summ in outputs:
+        _print_result(recon, paths, summ)
+        rmse = rmse_deg(recon.q_rad, q_true, names)
+        print(f"[{recon.method}] joint RMSE against the truth: mean {np.mean(list(rmse.values())):.2f} deg, "
+              f"max {max(rmse.values()):.2f} deg ({max(rmse, key=rmse.get)})")
+    agree = agreement_deg(outputs[0][0], outputs[1][0])
+    worst = max(agree, key=agree.get)
+    print(f"PF-LS agreement: max RMSE {agree[worst]:.3f} deg ({worst})")
+    print(f"results are in {out.resolve()}")
+    return EXIT_OK
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="exubio", description="Upper-extremity joint kinematics from skin markers "
+                                "(potential-field and least-squares methods on Exudyn).")
+    p.add_argument("-v", "--verbose", action="store_true", help="log details to stderr")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    s = sub.add_parser("simulate", help="write a synthetic trial (C3D) and its true joint angles (CSV)")
+    s.add_argument("--motion", required=True, choices=["abduction", "flexion", "sier"])
+    s.add_argument("--duration", type=float, default=10.0, help="seconds (default 10)")
+    s.add_argument("--rate", type=float, default=100.0, help="sampling rate, Hz (default 100)")
+    s.add_argument("--noise-mm", type=float, default=0.0, help="Gaussian measurement noise SD, mm")
+    s.add_argument("--sta-mm", type=float, default=0.0, help="soft-tissue artefact amplitude, mm")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--model", help="model YAML (default: the generic model)")
+    s.add_argument("--out", required=True, help="PATH.c3d; PATH.truth.csv is written beside it")
+    s.set_defaults(func=cmd_simulate)
+
+    r = sub.add_parser("reconstruct", help="joint angles from a C3D/TRC trial")
+    r.add_argument("trial", help="trial file (.c3d or .trc)")
+    r.add_argument("--protocol", help="protocol YAML (default: protocols/upper_limb_21.yaml)")
+    r.add_argument("--model", help="model YAML (default: models/upper_extremity.yaml)")
+    r.add_argument("--method", choices=["pf", "ls", "both"], default="pf")
+    r.add_argument("--body-mass", type=float, help="body mass, kg (scales segment inertia)")
+    r.add_argument("--out", required=True, help="output folder")
+    r.add_argument("--overwrite", action="store_true", help="replace earlier results in --out")
+    r.set_defaults(func=cmd_reconstruct)
+
+    d = sub.add_parser("demo", help="simulate an abduction trial, reconstruct it with PF and LS")
+    d.add_argument("--out", default="exubio_demo", help="output folder (default ./exubio_demo)")
+    d.set_defaults(func=cmd_demo)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, stream=sys.stderr,
+                        format="%(levelname)s %(name)s: %(message)s")
+    try:
+        return int(args.func(args))
+    except (InputError, ProtocolError, ModelError) as exc:
+        print(f"exubio: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except ReconstructionError as exc:
+        print(f"exubio: reconstruction failed: {exc}", file=sys.stderr)
+        return EXIT_FAILED
+    except ExubioError as exc:
+        print(f"exubio: error: {exc}", file=sys.stderr)
+        return EXIT_FAILED
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,84 @@
+"""YAML configuration files: the one place exubio parses YAML, and the unknown-key check every
+loader (protocols, models) applies."""
+from __future__ import annotations
+
+import difflib
+import os
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import yaml
+
+from exubio.errors import ExubioError, ProtocolError
+
+def read_yaml(path: str | os.PathLike[str], /, *, error: type[ExubioError] = ProtocolError) -> dict[str, Any]:
+    """Parse a YAML file whose top level must be a mapping.
+
+    Raises ``error`` naming the file when it is missing, unreadable, not valid YAML, has a
+    repeated key in a mapping (with its line), or is not a mapping at the top.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise error(f"{p}: file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise error(f"{p}: cannot read the file ({exc})") from None
+    try:
+        _check_duplicate_keys(yaml.compose(text, Loader=yaml.SafeLoader), p, error)
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise error(f"{p}: not valid YAML: {exc}") from None
+    if not isinstance(data, dict):
+        raise error(f"{p}: expected a mapping of keys at the top level, got {_kind(data)}")
+    return data
+
+
+def _check_duplicate_keys(node: yaml.Node | None, path: Path, error: type[ExubioError]) -> None:
+    """Repeated keys are silently merged by YAML loaders; a copy-pasted marker would vanish."""
+    if isinstance(node, yaml.MappingNode):
+        seen: dict[Any, int] = {}
+        for key_node, value_node in node.value:
+            if isinstance(key_node, yaml.ScalarNode):
+                line = key_node.start_mark.line + 1
+                if key_node.value in seen:
+                    raise error(
+                        f"{path}: key '{key_node.value}' appears twice in the same mapping "
+                        f"(lines {seen[key_node.value]} and {line}); each key must be unique"
+                    )
+                seen[key_node.value] = line
+            _check_duplicate_keys(value_node, path, error)
+    elif isinstance(node, yaml.SequenceNode):
+        for child in node.value:
+            _check_duplicate_keys(child, path, error)
+
+
+def check_keys(
+    mapping: Mapping[str, Any],
+    valid: Iterable[str],
+    /,
+    *,
+    where: str,
+    source: str,
+    error: type[ExubioError] = ProtocolError,
+) -> None:
+    """Raise ``error`` for the first key of ``mapping`` not in ``valid``: names the file, the key
+    with its dotted path (``where``), a close match if any and the valid keys."""
+    valid = tuple(valid)
+    for key in mapping:
+        if key not in valid:
+            path = f"{where}.{key}" if where else str(key)
+            hint = difflib.get_close_matches(str(key), valid, n=1)
+            did = f" (did you mean '{hint[0]}'?)" if hint else ""
+            raise error(
+                f"{source}: unknown key '{path}'{did}; valid keys"
+                f"{' of ' + where if where else ''} are {list(valid)}"
+            )
+
+
+def _kind(value: Any) -> str:
+    if value is None:
+        return "nothing (empty)"
+    return f"{type(value).__name__} {value!r}" if not isinstance(value, (dict, list)) else type(value).__name__
+
+

@@ -1,0 +1,160 @@
+"""One trial from file to results: read, preprocess, reconstruct with a method, write the outputs.
+
+The steps are plain functions so that scripts, the CLI and the validation report compose them:
+``load_inputs`` -> ``reconstruct`` -> ``write_outputs``.
+"""
+from __future__ import annotations
+
+import enum
+import logging
+import platform
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+import exubio
+from exubio.errors import InputError
+from exubio.evaluate import summary
+from exubio.io import results
+from exubio.io.trial import read_trial
+from exubio.model import DEFAULT_MODEL, load_model
+from exubio.preprocess import prepare_targets
+from exubio.protocol import load_protocol
+from exubio.types import MarkerTargets, Model, Protocol, Reconstruction, Trajectories
+
+log = logging.getLogger(__name__)
+
+DEFAULT_PROTOCOL = Path(__file__).resolve().parent.parent / "protocols" / "upper_limb_21.yaml"
+
+
+class Method(str, enum.Enum):
+    PF = "pf"  # potential field (Exudyn forward dynamics)
+    LS = "ls"  # constrained least squares per frame
+
+    @classmethod
+    def parse(cls, value: "str | Method") -> "Method":
+        try:
+            return cls(value)
+        except ValueError:
+            raise InputError(f"unknown method '{value}'; valid methods are {[m.value for m in cls]}") from None
+
+
+@dataclass(frozen=True)
+class TrialInputs:
+    trajectories: Trajectories
+    model: Model
+    protocol: Protocol
+    targets: MarkerTargets
+
+
+def load_model_and_protocol(*, model_path: str | Path | None = None, protocol_path: str | Path | None = None,
+                            body_mass_kg: float | None = None) -> tuple[Model, Protocol]:
+    model = load_model(model_path or DEFAULT_MODEL, body_mass_kg=body_mass_kg)
+    protocol = load_protocol(protocol_path or DEFAULT_PROTOCOL, segments=model.segment_names,
+                             model_points={s.name: dict(s.points) for s in model.segments})
+    return model, protocol
+
+
+def load_inputs(trial_path: str | Path, /, *, model_path: str | Path | None = None,
+                protocol_path: str | Path | None = None, body_mass_kg: float | None = None,
+                model: Model | None = None) -> TrialInputs:
+    """Read the trial, the model and the protocol, and prepare the marker targets."""
+    traj = read_trial(trial_path)
+    if model is None:
+        model, protocol = load_model_and_protocol(model_path=model_path, protocol_path=protocol_path,
+                                                  body_mass_kg=body_mass_kg)
+    else:
+        protocol = load_protocol(protocol_path or DEFAULT_PROTOCOL, segments=model.segment_names,
+                                 model_points={s.name: dict(s.points) for s in model.segments})
+    targets = prepare_targets(traj, protocol)
+    return TrialInputs(traj, model, protocol, targets)
+
+
+def reconstruct(model: Model, protocol: Protocol, targets: MarkerTargets, /, *, method: Method | str = Method.PF,
+                progress: Callable[[int], None] | None = None, **options: Any) -> Reconstruction:
+    """Run one method. ``options`` go to the method's options dataclass (e.g. step_s for PF)."""
+    method = Method.parse(method)
+    if method is Method.LS:
+        from exubio.methods.ls import LSOptions, reconstruct_ls
+
+        return reconstruct_ls(model, protocol, targets, options=LSOptions(**options), progress=progress)
+    from exubio.methods.pf import PFOptions, reconstruct_pf
+
+    return reconstruct_pf(model, protocol, targets, options=PFOptions(**options), progress=progress)
+
+
+def output_stem(trial_path: str | Path, method: Method | str) -> str:
+    return f"{Path(trial_path).stem}.{Method.parse(method).value}"
+
+
+def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
+                  metadata: dict[str, Any], summary_data: dict[str, Any]) -> dict[str, Path]:
+    """Write <stem>.csv, .mot, .npz and .summary.json into out_dir, each atomically."""
+    out = Path(out_dir)
+    paths = {
+        "csv": out / f"{stem}.csv",
+        "mot": out / f"{stem}.mot",
+        "npz": out / f"{stem}.npz",
+        "summary": out / f"{stem}.summary.json",
+    }
+    results.write_angles_csv(paths["csv"], recon.time_s, recon.coordinate_names, recon.q_rad)
+    results.write_mot(paths["mot"], recon.time_s, recon.coordinate_names, recon.q_rad, name=stem)
+    results.write_npz(paths["npz"], recon, metadata=metadata)
+    results.write_json(paths["summary"], summary_data)
+    return paths
+
+
+def run_metadata(inputs: TrialInputs, trial_path: str | Path, method: Method) -> dict[str, Any]:
+    return {
+        "exubio_version": exubio.__version__,
+        "python": platform.python_version(),
+        "trial": str(trial_path),
+        "model": inputs.model.source,
+        "model_name": inputs.model.name,
+        "body_mass_kg": inputs.model.body_mass_kg,
+        "protocol": inputs.protocol.source,
+        "protocol_name": inputs.protocol.name,
+        "method": method.value,
+        "units": {"angles_in_files": "deg", "positions_in_npz": "m", "time": "s"},
+        "ignored_labels": list(inputs.trajectories.ignored_labels),
+        "units_in_trial_file": inputs.trajectories.units_in_file,
+        "rate_hz": inputs.trajectories.rate_hz,
+    }
+
+
+def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods: list[Method | str],
+                     model_path: str | Path | None = None, protocol_path: str | Path | None = None,
+                     body_mass_kg: float | None = None, overwrite: bool = False, model: Model | None = None,
+                     progress_factory: Callable[[str, int], Callable[[int], None]] | None = None
+                     ) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
+    """Everything ``exubio reconstruct`` does for one trial; returns (reconstruction, paths, summary)
+    per method. Refuses (InputError) to replace earlier results unless ``overwrite``."""
+    methods = [Method.parse(m) for m in methods]
+    stems = [output_stem(trial_path, m) for m in methods]
+    results.prepare_output_dir(out_dir, stems, overwrite=overwrite)
+    inputs = load_inputs(trial_path, model_path=model_path, protocol_path=protocol_path,
+                         body_mass_kg=body_mass_kg, model=model)
+    out = []
+    for method, stem in zip(methods, stems):
+        progress = progress_factory(method.value, inputs.targets.n_frames) if progress_factory else None
+        recon = reconstruct(inputs.model, inputs.protocol, inputs.targets, method=method, progress=progress)
+        meta = run_metadata(inputs, trial_path, method)
+        summ = summary(recon, source=str(trial_path), extra={"unused_trial_labels": _unused(inputs)})
+        paths = write_outputs(recon, out_dir, stem, metadata=meta, summary_data=summ)
+        out.append((recon, paths, summ))
+    return out
+
+
+def _unused(inputs: TrialInputs) -> list[str]:
+    from exubio.protocol import resolve_labels
+
+    match = resolve_labels(inputs.protocol, inputs.trajectories.labels, source=inputs.trajectories.source)
+    return list(match.unused) + list(inputs.trajectories.ignored_labels)
+
+
+def agreement_deg(a: Reconstruction, b: Reconstruction, /) -> dict[str, float]:
+    """RMSE (deg) per coordinate between two reconstructions of the same trial."""
+    d = np.rad2deg(a.q_rad - b.q_rad)
+    return {n: float(v) for n, v in zip(a.coordinate_names, np.sqrt(np.mean(d**2, axis=0)))}
