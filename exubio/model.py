@@ -14,11 +14,12 @@ import numpy as np
 
 from exubio.config import check_keys as _check_keys
 from exubio.config import read_yaml
+from exubio.resources import shipped_file
 from exubio.errors import ModelError
 from exubio.types import Ellipsoid, Joint, JointKind, Model, Segment
 
 SCHEMA_VERSION = 1
-DEFAULT_MODEL = Path(__file__).resolve().parent.parent / "models" / "upper_extremity.yaml"
+DEFAULT_MODEL = shipped_file("exubio.models", "upper_extremity.yaml", "models")
 
 _TOP_KEYS = {"schema_version", "name", "side", "body_mass_kg", "segments", "ellipsoid", "calibration"}
 _SEGMENT_KEYS = {"name", "parent", "origin", "joint", "inertia", "points_mm"}

@@ -22,11 +22,12 @@ from exubio.io.trial import read_trial
 from exubio.model import DEFAULT_MODEL, load_model
 from exubio.preprocess import prepare_targets
 from exubio.protocol import load_protocol
+from exubio.resources import shipped_file
 from exubio.types import MarkerTargets, Model, Protocol, Reconstruction, Trajectories
 
 log = logging.getLogger(__name__)
 
-DEFAULT_PROTOCOL = Path(__file__).resolve().parent.parent / "protocols" / "upper_limb_21.yaml"
+DEFAULT_PROTOCOL = shipped_file("exubio.protocols", "upper_limb_21.yaml", "protocols")
 
 
 class Method(str, enum.Enum):

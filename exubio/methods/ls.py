@@ -27,6 +27,7 @@ from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Reconstruc
 
 log = logging.getLogger(__name__)
 
+RATES_REGULARISATION = 1e-10  # mu of the linear q̇/q̈ solves: only guards unobservable coordinates
 MIN_MARKERS = 5  # fewer markers than this in a frame: the 11-DOF pose is not determined
 
 
@@ -152,7 +153,7 @@ def reconstruct_ls(model: Model, protocol: Protocol, targets: MarkerTargets, /, 
                                           options=options, frame_dt=dt, progress=progress)
     t2 = time.perf_counter()
     qd, qdd = solve_rates(kin, points, q, targets.velocities_m_s, targets.accelerations_m_s2, weights,
-                          options.regularisation)
+                          RATES_REGULARISATION)
     t3 = time.perf_counter()
     n_present = targets.present.sum(axis=1)
     status = np.where(converged, FrameStatus.CONVERGED, FrameStatus.NOT_CONVERGED)

@@ -30,7 +30,7 @@ from exubio.backend.exudyn_system import IntegratorOptions, PFSystem, SpringSet
 from exubio.errors import ReconstructionError
 from exubio.kinematics import Kinematics
 from exubio.methods.common import assemble, tracked_points
-from exubio.methods.ls import LSOptions, solve_positions, solve_rates
+from exubio.methods.ls import RATES_REGULARISATION, LSOptions, solve_positions, solve_rates
 from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Reconstruction
 
 log = logging.getLogger(__name__)
@@ -60,7 +60,7 @@ def initial_state(kin: Kinematics, points, targets: MarkerTargets, stiffness: np
             f"{targets.source or 'trial'}: no static equilibrium at t = {targets.time_s[0]:.3f} s "
             f"(markers present: {int(present[0].sum())} of {present.shape[1]})")
     qd0, _ = solve_rates(kin, points, q0, targets.velocities_m_s[:1], targets.accelerations_m_s2[:1], weights,
-                         LSOptions().regularisation)
+                         RATES_REGULARISATION)
     return q0[0], qd0[0]
 
 

@@ -1,0 +1,102 @@
+"""The constrained least-squares method against known truths (simulated trials)."""
+import numpy as np
+import pytest
+
+from exubio.kinematics import Kinematics
+from exubio.methods.common import tracked_points
+from exubio.methods.ls import LSOptions, reconstruct_ls
+from exubio.pipeline import load_model_and_protocol
+from exubio.preprocess import prepare_targets
+from exubio.simulate import Motion, simulate_trial
+from exubio.types import MarkerTargets
+
+
+@pytest.fixture(scope="module")
+def model_protocol():
+    return load_model_and_protocol()
+
+
+def _exact_targets(model, protocol, trial):
+    """Targets straight from the true motion (no filter): the LS optimum is the truth itself."""
+    kin = Kinematics(model)
+    pts = tracked_points(kin, protocol)
+    pos = kin.points(trial.q_true, pts)
+    return MarkerTargets(trial.time_s, protocol.marker_names, pos, np.zeros_like(pos), np.zeros_like(pos))
+
+
+@pytest.mark.parametrize("motion", list(Motion))
+def test_noise_free_ls_recovers_the_truth(model_protocol, motion):
+    model, protocol = model_protocol
+    trial = simulate_trial(model, motion, duration_s=5.0, rate_hz=50.0)
+    recon = reconstruct_ls(model, protocol, _exact_targets(model, protocol, trial))
+    err = np.rad2deg(np.abs(recon.q_rad - trial.q_true))
+    rmse = np.sqrt((err**2).mean(axis=0))
+    assert rmse.max() < 0.05, dict(zip(model.coordinate_names, rmse.round(4)))
+    assert np.abs(recon.constraint).max() < 1e-9
+    assert (recon.status == 0).all()
+    assert np.nanmax(recon.residuals_m) < 1e-6
+
+
+def test_noise_free_ls_through_the_full_pipeline_from_the_lab_frame(model_protocol):
+    """Lab-frame markers -> ISB thorax frame -> 2 Hz filter -> LS: still close to the truth."""
+    model, protocol = model_protocol
+    trial = simulate_trial(model, Motion.ABDUCTION, duration_s=5.0, rate_hz=100.0)
+    recon = reconstruct_ls(model, protocol, prepare_targets(trial.trajectories, protocol))
+    rmse = np.sqrt(np.mean(np.rad2deg(recon.q_rad - trial.q_true) ** 2, axis=0))
+    assert rmse.max() < 0.5  # the only error left is the 2 Hz low-pass of a 5 s cycle
+    assert np.abs(recon.constraint).max() < 1e-9
+
+
+def test_noisy_ls_reaches_the_constrained_optimum(model_protocol):
+    """With 1.5 mm noise, no LS solution nearby has a lower weighted cost on the constraint
+    manifold, and the KKT conditions hold: J^T W e is in the span of G^T."""
+    model, protocol = model_protocol
+    trial = simulate_trial(model, Motion.FLEXION, duration_s=2.0, rate_hz=50.0)
+    targets = _exact_targets(model, protocol, trial)
+    rng = np.random.default_rng(3)
+    noisy = targets.positions_m + rng.normal(scale=1.5e-3, size=targets.positions_m.shape)
+    targets = MarkerTargets(targets.time_s, targets.marker_names, noisy, targets.velocities_m_s, targets.accelerations_m_s2)
+    recon = reconstruct_ls(model, protocol, targets, options=LSOptions(tol_rad=1e-11, max_iterations=200))
+    kin = Kinematics(model)
+    pts = tracked_points(kin, protocol)
+    w = protocol.weights
+    for f in range(0, targets.n_frames, 20):
+        q = recon.q_rad[f]
+        e = kin.points(q, pts) - noisy[f]
+        grad = np.einsum("kcm,kc->m", kin.point_jacobian(q, pts) * w[:, None, None], e)
+        G = kin.G(q)
+        lam, *_ = np.linalg.lstsq(G.T, -grad, rcond=None)
+        assert np.abs(grad + G.T @ lam).max() < 1e-9  # stationary on the manifold
+    # marker RMS at the noise floor: 3-D residual of 1.5 mm per axis, minus the fitted DOF
+    rms = np.sqrt(np.nanmean(recon.residuals_m**2)) * 1000
+    n_obs, n_dof = 3 * len(protocol.markers), 11
+    floor = 1.5 * np.sqrt(3 * (n_obs - n_dof) / n_obs)
+    assert abs(rms - floor) < 0.25 * floor, (rms, floor)
+
+
+def test_missing_marker_is_left_out_of_the_frame(model_protocol):
+    model, protocol = model_protocol
+    trial = simulate_trial(model, Motion.ABDUCTION, duration_s=2.0, rate_hz=50.0)
+    targets = _exact_targets(model, protocol, trial)
+    pos = targets.positions_m.copy()
+    pos[20:40, protocol.marker_names.index("ARM")] = np.nan
+    targets = MarkerTargets(targets.time_s, targets.marker_names, pos, targets.velocities_m_s, targets.accelerations_m_s2)
+    recon = reconstruct_ls(model, protocol, targets)
+    assert np.isnan(recon.residuals_m[20:40, protocol.marker_names.index("ARM")]).all()
+    assert np.abs(np.rad2deg(recon.q_rad - trial.q_true)).max() < 0.05
+
+
+def test_ls_velocities_and_accelerations_are_consistent(model_protocol):
+    """q̇ and q̈ from the linearised LS match the true ones when marker derivatives are exact."""
+    model, protocol = model_protocol
+    trial = simulate_trial(model, Motion.SIER, duration_s=2.0, rate_hz=100.0)
+    kin = Kinematics(model)
+    pts = tracked_points(kin, protocol)
+    pos = kin.points(trial.q_true, pts)
+    J = kin.point_jacobian(trial.q_true, pts)
+    vel = np.einsum("nkcm,nm->nkc", J, trial.qd_true)
+    acc = np.einsum("nkcm,nm->nkc", J, trial.qdd_true) + kin.point_bias_acceleration(trial.q_true, trial.qd_true, pts)
+    recon = reconstruct_ls(model, protocol, MarkerTargets(trial.time_s, protocol.marker_names, pos, vel, acc))
+    assert np.abs(recon.qd_rad_s - trial.qd_true).max() < 1e-6
+    assert np.abs(recon.qdd_rad_s2 - trial.qdd_true).max() < 1e-4
+    assert np.abs(recon.constraint_velocity).max() < 1e-9
