@@ -2,6 +2,7 @@
 constraint residuals, joint RMSE against a truth or another method. Pure numpy; no solver."""
 from __future__ import annotations
 
+import warnings
 from typing import Any, Sequence
 
 import numpy as np
@@ -17,7 +18,8 @@ def residual_statistics(recon: Reconstruction, /) -> dict[str, Any]:
     valid = ~np.isnan(res)
     if not valid.any():
         return {"mean": None, "sd": None, "max": None, "max_marker": None}
-    with np.errstate(all="ignore"):
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # an optional marker may be absent throughout
         per_frame_mean = np.nanmean(np.where(valid, res, np.nan), axis=1)
         per_frame_sd = np.nanstd(np.where(valid, res, np.nan), axis=1)
         per_marker_rmse = np.sqrt(np.nanmean(res**2, axis=0))
@@ -43,7 +45,8 @@ def residual_statistics(recon: Reconstruction, /) -> dict[str, Any]:
 def per_frame_residuals_mm(recon: Reconstruction, /) -> tuple[np.ndarray, np.ndarray]:
     """(mean, SD) over markers of the residual per frame, mm (Fig. 3)."""
     res = recon.residuals_m * 1000.0
-    with np.errstate(all="ignore"):
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
         return np.nanmean(res, axis=1), np.nanstd(res, axis=1)
 
 

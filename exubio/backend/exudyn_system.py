@@ -198,6 +198,49 @@ def _hermite(p0, v0, p1, v1, s, dt):
     return pos, vel
 
 
+def _quintic(x0, v0, a0, x1, v1, a1, s, h):
+    """Quintic Hermite position, velocity and acceleration at fraction s in [0, 1] of an interval h
+    from positions, velocities and accelerations at both ends (one polynomial: all three consistent)."""
+    s2, s3, s4, s5 = s * s, s**3, s**4, s**5
+    h0, h1, h2 = 1 - 10 * s3 + 15 * s4 - 6 * s5, s - 6 * s3 + 8 * s4 - 3 * s5, 0.5 * (s2 - 3 * s3 + 3 * s4 - s5)
+    h3, h4, h5 = 0.5 * (s3 - 2 * s4 + s5), -4 * s3 + 7 * s4 - 3 * s5, 10 * s3 - 15 * s4 + 6 * s5
+    d0, d1, d2 = -30 * s2 + 60 * s3 - 30 * s4, 1 - 18 * s2 + 32 * s3 - 15 * s4, 0.5 * (2 * s - 9 * s2 + 12 * s3 - 5 * s4)
+    d3, d4, d5 = 0.5 * (3 * s2 - 8 * s3 + 5 * s4), -12 * s2 + 28 * s3 - 15 * s4, 30 * s2 - 60 * s3 + 30 * s4
+    e0, e1, e2 = -60 * s + 180 * s2 - 120 * s3, -36 * s + 96 * s2 - 60 * s3, 0.5 * (2 - 18 * s + 36 * s2 - 20 * s3)
+    e3, e4, e5 = 0.5 * (6 * s - 24 * s2 + 20 * s3), -24 * s + 84 * s2 - 60 * s3, 60 * s - 180 * s2 + 120 * s3
+    x = h0 * x0 + h1 * h * v0 + h2 * h * h * a0 + h3 * h * h * a1 + h4 * h * v1 + h5 * x1
+    v = (d0 * x0 + d5 * x1) / h + d1 * v0 + d4 * v1 + (d2 * a0 + d3 * a1) * h
+    a = (e0 * x0 + e5 * x1) / (h * h) + (e1 * v0 + e4 * v1) / h + e2 * a0 + e3 * a1
+    return x, v, a
+
+
+def _frames_from_steps(t_steps: np.ndarray, states: list, n: int, frame_dt_s: float, n_ode2: int):
+    """System coordinates, velocities and accelerations at the frame times i * frame_dt_s from the
+    states of the accepted steps (times t_steps): taken where a step ends on a frame, quintic
+    Hermite interpolation inside a step otherwise. Frames after the last step are NaN.
+    Returns (X, Xt, Xtt, completed frames)."""
+    X, Xt, Xtt = (np.full((n, n_ode2), np.nan) for _ in range(3))
+    if len(states) == 0:
+        return X, Xt, Xtt, 0
+    S = np.asarray([st[0] for st in states]), np.asarray([st[1] for st in states]), np.asarray([st[2] for st in states])
+    tf = np.arange(n) * frame_dt_s
+    eps = 1e-6 * frame_dt_s
+    completed = int(np.searchsorted(tf, t_steps[-1] + eps, side="right"))
+    tf = tf[:completed]
+    b = np.minimum(np.searchsorted(t_steps, tf - eps, side="left"), len(t_steps) - 1)
+    on = np.abs(t_steps[b] - tf) <= eps
+    X[:completed][on], Xt[:completed][on], Xtt[:completed][on] = S[0][b[on]], S[1][b[on]], S[2][b[on]]
+    inside = np.flatnonzero(~on)
+    if inside.size:
+        bb = b[inside]
+        aa = bb - 1
+        h = (t_steps[bb] - t_steps[aa])[:, None]
+        s = (tf[inside][:, None] - t_steps[aa][:, None]) / h
+        x, v, a = _quintic(S[0][aa], S[1][aa], S[2][aa], S[0][bb], S[1][bb], S[2][bb], s, h)
+        X[inside], Xt[inside], Xtt[inside] = x, v, a
+    return X, Xt, Xtt, completed
+
+
 # --------------------------------------------------------------------------------------------
 # The system
 # --------------------------------------------------------------------------------------------
@@ -410,19 +453,38 @@ class PFSystem:
         if not frame_dt_s > 0:
             raise ValueError(f"run: frame_dt_s must be > 0, got {frame_dt_s}")
         step = frame_dt_s if options.step_s is None else float(options.step_s)
-        sub = int(round(frame_dt_s / step))
-        if sub < 1 or abs(sub * step - frame_dt_s) > 1e-9 * frame_dt_s:
-            raise ValueError(f"run: frame_dt_s / step_s must be a positive integer, got {frame_dt_s} / {step}")
+        if not step > 0:
+            raise ValueError(f"run: step_s must be > 0, got {step}")
+        if step < frame_dt_s * (1 - 1e-9):  # sub-steps: a whole number per frame
+            sub = int(round(frame_dt_s / step))
+            if abs(sub * step - frame_dt_s) > 1e-9 * frame_dt_s:
+                raise ValueError(f"run: frame_dt_s / step_s must be a positive integer when step_s < frame_dt_s, "
+                                 f"got {frame_dt_s} / {step}")
+            n_steps = (n - 1) * sub
+        else:  # steps over several frames: the largest uniform step <= step_s that ends on the last frame
+            n_steps = int(math.ceil((n - 1) * frame_dt_s / step - 1e-9))
+        step = (n - 1) * frame_dt_s / n_steps
+        ratio = step / frame_dt_s  # frames per step
         pos = np.where(act[..., None], pos, 0.0)
         vel = np.where(act[..., None], vel, 0.0)
 
-        # targets and spring states at every step time s * step, s = 0 .. (n - 1) * sub
-        n_steps = (n - 1) * sub
-        frame = np.arange(n_steps + 1) // sub
-        frac = (np.arange(n_steps + 1) % sub) / sub
-        nxt = np.minimum(frame + 1, n - 1)
-        sp, sv = _hermite(pos[frame], vel[frame], pos[nxt], vel[nxt], frac[:, None, None], frame_dt_s)
-        step_active = act[frame] & np.where(frac[:, None] > 0, act[nxt], True)
+        # targets at every step time s * step (frame position x = s * ratio), s = 0 .. n_steps:
+        # the frame values where a step ends on a frame, cubic Hermite interpolation otherwise
+        x_step = np.minimum(np.arange(n_steps + 1) * ratio, n - 1.0)
+
+        def targets_at(x):
+            x = np.asarray(x, dtype=float)
+            i = np.clip(np.floor(x + 1e-9).astype(int), 0, n - 2)
+            s = (x - i)[..., None, None]
+            return _hermite(pos[i], vel[i], pos[i + 1], vel[i + 1], s, frame_dt_s)
+
+        sp, sv = targets_at(x_step)
+        # a step uses a spring only if its marker is present in every frame the step touches
+        cmiss = np.vstack([np.zeros((1, k), dtype=int), np.cumsum(~act, axis=0)])
+        lo = np.clip(np.floor(np.maximum(x_step - ratio, 0.0) + 1e-9).astype(int), 0, n - 1)
+        hi = np.clip(np.ceil(x_step - 1e-9).astype(int), 0, n - 1)
+        lo[0] = hi[0] = 0
+        step_active = (cmiss[hi + 1] - cmiss[lo]) == 0
         rows = np.concatenate([sp, sv], axis=2).tolist()  # (n_steps + 1, k, 6) nested lists: fast SetVector
         changes = np.argwhere(step_active[1:] != step_active[:-1])
         events: dict[int, list[tuple[int, bool]]] = {}
@@ -437,10 +499,8 @@ class PFSystem:
         applied = [0]
 
         sd = mbs.systemData
-        X = np.full((n, self._n_ode2), np.nan)
-        Xt = np.full_like(X, np.nan)
-        Xtt = np.full_like(X, np.nan)
-        reached = [-1]
+        record_t: list[float] = []
+        record: list[tuple] = []
 
         def pre_step(mbs, t):  # receives t_{n+1}: the end of the step about to be solved
             x = t / step
@@ -454,23 +514,14 @@ class PFSystem:
                 for j in range(k):
                     targets[j].SetVector(row[j])
             else:  # a reduced step (adaptive step control): interpolate at t
-                i = min(int(t / frame_dt_s), n - 2)
-                p, v = _hermite(pos[i], vel[i], pos[i + 1], vel[i + 1], t / frame_dt_s - i, frame_dt_s)
+                p, v = targets_at(t / frame_dt_s)
                 for j in range(k):
                     targets[j].SetVector(list(p[j]) + list(v[j]))
             return True
 
-        rate = 1.0 / frame_dt_s
-        n_done = [0]  # accepted steps
-
-        def post_step(mbs, t):  # also called once at t = 0, after the initial accelerations
-            if t > 0.0:
-                n_done[0] += 1
-            x = t * rate
-            i = int(x + 0.5)
-            if abs(x - i) < 1e-6 and 0 <= i < n:
-                X[i], Xt[i], Xtt[i] = sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t(), sd.GetODE2Coordinates_tt()
-                reached[0] = i
+        def post_step(mbs, t):  # every accepted step, and once at t = 0 after the initial accelerations
+            record_t.append(t)
+            record.append((sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t(), sd.GetODE2Coordinates_tt()))
             return True
 
         mbs.SetPreStepUserFunction(pre_step)
@@ -493,7 +544,8 @@ class PFSystem:
             mbs.SetPreStepUserFunction(0)
             mbs.SetPostStepUserFunction(0)
         wall = time.perf_counter() - t0
-        completed = reached[0] + 1
+
+        X, Xt, Xtt, completed = _frames_from_steps(np.asarray(record_t), record, n, frame_dt_s, self._n_ode2)
         success = success and completed == n
         if not success:
             log.warning("PF integration stopped at frame %d of %d: %s", completed, n, message)
@@ -503,7 +555,7 @@ class PFSystem:
         it = solver.it
         return self._decode(
             X, Xt, Xtt, frame_dt_s, completed=completed, success=success, message=message, wall=wall, times=times,
-            newton=int(it.newtonStepsCount), jacobians=int(it.newtonJacobiCount), steps=n_done[0])
+            newton=int(it.newtonStepsCount), jacobians=int(it.newtonJacobiCount), steps=max(len(record_t) - 1, 0))
 
     def _settings(self, n_steps: int, step: float, options: IntegratorOptions):
         s = exu.SimulationSettings()

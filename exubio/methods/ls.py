@@ -3,7 +3,9 @@
 Per frame: minimise sum_i w_i |r_Ri(q) - r_Mi|^2 subject to the two ellipsoid constraints
 g(q) = 0, with markers missing in that frame left out of the sum. Solver: Gauss-Newton SQP on the
 KKT system [J^T W J + mu I, G^T; G, 0] [dq; lambda] = [-J^T W e; -g] with the analytic Jacobians
-of exubio.kinematics; its fixed points satisfy the first-order optimality conditions exactly.
+of exubio.kinematics; its fixed points satisfy the first-order optimality conditions exactly. A step
+is kept only if it lowers the l1 merit function (cost + rho |g|_1); otherwise the Levenberg-Marquardt
+damping mu grows, which keeps large-residual frames (a generic model on a real subject) convergent.
 
 Frames are solved in short blocks that run through numpy together: every frame of a block starts
 from the previous block's last solution (the warm start; blocks are ``block_s`` = 0.2 s long) and
@@ -34,36 +36,70 @@ MIN_MARKERS = 5  # fewer markers than this in a frame: the 11-DOF pose is not de
 @dataclass(frozen=True)
 class LSOptions:
     tol_rad: float = 1e-8  # convergence: largest coordinate step (rad)
-    max_iterations: int = 30  # per frame (the first frame gets 10x)
+    max_iterations: int = 100  # per frame (the first frame gets 10x per start posture)
     block_s: float = 0.2  # frames solved together: about this much time
     max_step_rad: float = 0.3  # step cap, for robustness far from the solution
     regularisation: float = 1e-6  # mu (m^2/rad^2): damps steps in weakly observed directions and
     # keeps unobservable coordinates where they were; it does not move the converged optimum
 
 
-def _solve_kkt(kin: Kinematics, points: PointSet, q: np.ndarray, target: np.ndarray, w: np.ndarray, mu: float):
-    """One Gauss-Newton SQP step for a batch (B, m); returns dq (B, m) and weighted cost (B,)."""
+@dataclass
+class _Linearisation:
+    """Everything one kinematics evaluation gives at q for a batch of frames (B, ...)."""
+
+    H: np.ndarray  # J^T W J (B, m, m)
+    grad: np.ndarray  # J^T W e (B, m)
+    G: np.ndarray  # (B, 2, m)
+    g: np.ndarray  # (B, 2)
+    cost: np.ndarray  # e^T W e (B,)
+
+    def take(self, mask: np.ndarray, other: "_Linearisation") -> None:
+        """Replace the frames where ``mask`` is True by those of ``other``."""
+        for name in ("H", "grad", "G", "g", "cost"):
+            getattr(self, name)[mask] = getattr(other, name)[mask]
+
+
+def _linearise(kin: Kinematics, points: PointSet, q: np.ndarray, target: np.ndarray, w: np.ndarray) -> _Linearisation:
     fr = kin.frames(q)
     r = kin.points(q, points, frames=fr)
     J = kin.point_jacobian(q, points, frames=fr, positions=r)  # (B, k, 3, m)
     e = np.where(w[..., None] > 0, r - target, 0.0)  # (B, k, 3)
     Jw = J * w[..., None, None]
-    H = np.einsum("bkcm,bkcn->bmn", Jw, J)
-    grad = np.einsum("bkcm,bkc->bm", Jw, e)
     rc = kin.points(q, kin.contacts, frames=fr)
     Jc = kin.point_jacobian(q, kin.contacts, frames=fr, positions=rc)
     ec = rc - kin.centre
-    G = 2.0 * np.einsum("bkc,bkcm->bkm", ec * kin.a_diag, Jc)
-    g = np.einsum("bkc,c->bk", ec * ec, kin.a_diag) - 1.0
-    m = q.shape[1]
-    K = np.zeros((q.shape[0], m + 2, m + 2))
-    K[:, :m, :m] = H + mu * np.eye(m)
-    K[:, :m, m:] = np.swapaxes(G, 1, 2)
-    K[:, m:, :m] = G
-    rhs = np.concatenate([-grad, -g], axis=1)
+    return _Linearisation(
+        H=np.einsum("bkcm,bkcn->bmn", Jw, J),
+        grad=np.einsum("bkcm,bkc->bm", Jw, e),
+        G=2.0 * np.einsum("bkc,bkcm->bkm", ec * kin.a_diag, Jc),
+        g=np.einsum("bkc,c->bk", ec * ec, kin.a_diag) - 1.0,
+        cost=np.einsum("bk,bkc->b", w, e * e),
+    )
+
+
+def _kkt_step(lin: _Linearisation, mu: np.ndarray):
+    """Gauss-Newton SQP step with Levenberg-Marquardt damping mu (B,): (dq (B, m), lambda (B, 2))."""
+    B, m = lin.grad.shape
+    K = np.zeros((B, m + 2, m + 2))
+    K[:, :m, :m] = lin.H + mu[:, None, None] * np.eye(m)
+    K[:, :m, m:] = np.swapaxes(lin.G, 1, 2)
+    K[:, m:, :m] = lin.G
+    rhs = np.concatenate([-lin.grad, -lin.g], axis=1)
     sol = np.linalg.solve(K, rhs[..., None])[..., 0]
-    cost = np.einsum("bk,bkc->b", w, e * e)
-    return sol[:, :m], cost
+    return sol[:, :m], sol[:, m:]
+
+
+def _start_postures(kin: Kinematics, q_start: np.ndarray) -> np.ndarray:
+    """q_start and the same with the humerus abducted or flexed by 45 and 90 degrees."""
+    names = kin.model.coordinate_names
+    out = [np.asarray(q_start, dtype=float)]
+    for name in ("gh_abduction", "gh_flexion"):
+        if name in names:
+            for angle in (np.pi / 4, np.pi / 2):
+                q = out[0].copy()
+                q[names.index(name)] += angle
+                out.append(q)
+    return np.array(out)
 
 
 def solve_positions(kin: Kinematics, points: PointSet, targets_m: np.ndarray, weights: np.ndarray, /, *,
@@ -81,24 +117,49 @@ def solve_positions(kin: Kinematics, points: PointSet, targets_m: np.ndarray, we
     block = max(1, int(round(options.block_s / frame_dt)))
 
     def run(idx: slice, q0: np.ndarray, max_it: int):
+        """Levenberg-Marquardt-safeguarded SQP: a step is kept only if it lowers the l1 merit
+        cost + rho |g|_1 (rho above the multipliers); otherwise the damping grows tenfold."""
+        tgt, w = tgt_all[idx], w_all[idx]
         q = q0.copy()
-        active = np.ones(q.shape[0], dtype=bool)
-        it = np.zeros(q.shape[0], dtype=int)
+        B = q.shape[0]
+        lin = _linearise(kin, points, q, tgt, w)
+        mu = np.full(B, options.regularisation)
+        active = np.ones(B, dtype=bool)
+        done = np.zeros(B, dtype=bool)
+        it = np.zeros(B, dtype=int)
         for _ in range(max_it):
             a = np.flatnonzero(active)
             if a.size == 0:
                 break
-            dq, _ = _solve_kkt(kin, points, q[a], tgt_all[idx][a], w_all[idx][a], options.regularisation)
-            big = np.abs(dq).max(axis=1, keepdims=True)
-            dq = np.where(big > options.max_step_rad, dq * (options.max_step_rad / np.maximum(big, 1e-300)), dq)
-            q[a] += dq
+            sub = _Linearisation(lin.H[a], lin.grad[a], lin.G[a], lin.g[a], lin.cost[a])
+            dq, lam = _kkt_step(sub, mu[a])
+            big = np.abs(dq).max(axis=1)
+            dq = dq * np.minimum(1.0, options.max_step_rad / np.maximum(big, 1e-300))[:, None]
+            q_try = q[a] + dq
+            trial = _linearise(kin, points, q_try, tgt[a], w[a])
+            rho = 2.0 * np.abs(lam).max(axis=1) + 1e-6
+            merit_old = sub.cost + rho * np.abs(sub.g).sum(axis=1)
+            merit_new = trial.cost + rho * np.abs(trial.g).sum(axis=1)
+            ok = merit_new <= merit_old * (1.0 + 1e-12) + 1e-18
+            q[a[ok]] = q_try[ok]
+            sub.take(ok, trial)
+            for name in ("H", "grad", "G", "g", "cost"):
+                getattr(lin, name)[a] = getattr(sub, name)
+            mu[a] = np.where(ok, np.maximum(mu[a] / 3.0, options.regularisation), mu[a] * 10.0)
             it[a] += 1
-            active[a] = np.abs(dq).max(axis=1) > options.tol_rad
-        return q, it, ~active
+            stalled = merit_old - merit_new <= 1e-12 * merit_old  # flat valley: the objective no longer cares
+            finished = ok & ((np.abs(dq).max(axis=1) <= options.tol_rad) | stalled)
+            stuck = mu[a] > 1e8
+            done[a[finished]] = True
+            active[a[finished | stuck]] = False
+        return q, it, done
 
-    # first frame: from the start posture, many iterations
-    q0, it0, ok0 = run(slice(0, 1), q_start[None, :], options.max_iterations * 10)
-    q_out[0], iters[0], converged[0] = q0[0], it0[0], ok0[0]
+    # first frame: several start postures (arm down, abducted, flexed), many iterations, best kept
+    starts = _start_postures(kin, q_start)
+    q0, it0, ok0 = run(np.zeros(len(starts), dtype=int), starts, options.max_iterations * 10)
+    cost0 = np.array([_linearise(kin, points, q0[i:i + 1], tgt_all[:1], w_all[:1]).cost[0] for i in range(len(starts))])
+    best = int(np.argmin(np.where(ok0, cost0, cost0 + 1e9)))
+    q_out[0], iters[0], converged[0] = q0[best], it0.sum(), ok0[best]
     prev = q_out[0]
     start = 1
     if progress:
@@ -112,7 +173,22 @@ def solve_positions(kin: Kinematics, points: PointSet, targets_m: np.ndarray, we
         if progress:
             progress(stop - start)
         start = stop
-    return q_out, iters, converged
+    return project_on_constraints(kin, q_out), iters, converged
+
+
+def project_on_constraints(kin: Kinematics, q: np.ndarray, /, *, tol: float = 1e-13, max_iterations: int = 10) -> np.ndarray:
+    """Smallest change of q (n, m) that makes g(q) = 0 (Newton with minimum-norm steps), so every
+    returned frame satisfies the constraints even where the optimisation stopped early."""
+    q = np.array(q, dtype=float)
+    for _ in range(max_iterations):
+        g = kin.g(q)
+        bad = np.abs(g).max(axis=1) > tol
+        if not bad.any():
+            break
+        G = kin.G(q[bad])
+        step = np.einsum("nkm,nk->nm", G, np.linalg.solve(G @ np.swapaxes(G, 1, 2), g[bad][..., None])[..., 0])
+        q[bad] -= step
+    return q
 
 
 def solve_rates(kin: Kinematics, points: PointSet, q: np.ndarray, vel: np.ndarray, acc: np.ndarray,

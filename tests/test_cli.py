@@ -1,0 +1,159 @@
+"""The exubio command end to end: outputs, exit codes, and one clear message per kind of bad input."""
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from exubio.cli import main
+from exubio.io.c3d import write_c3d
+from exubio.io.results import read_angles_csv, read_mot, read_npz
+from exubio.model import load_model
+from exubio.simulate import Motion, simulate_trial
+
+SHARED = Path(__file__).resolve().parents[2] / "shared"
+PROTOCOL = Path(__file__).resolve().parents[1] / "protocols" / "upper_limb_21.yaml"
+
+
+@pytest.fixture(scope="module")
+def trial():
+    return simulate_trial(load_model(), Motion.ABDUCTION, duration_s=2.0, rate_hz=100.0, noise_mm=0.5, seed=4)
+
+
+@pytest.fixture()
+def c3d(tmp_path, trial):
+    return write_c3d(tmp_path / "abd.c3d", trial.trajectories)
+
+
+def test_reconstruct_writes_all_outputs_with_consistent_content(tmp_path, c3d, trial, capsys):
+    out = tmp_path / "out"
+    assert main(["-q", "reconstruct", str(c3d), "--method", "ls", "--out", str(out)]) == 0
+    t, names, q = read_angles_csv(out / "abd.ls.csv")
+    assert names == load_model().coordinate_names
+    assert np.allclose(t, trial.time_s)
+    t2, names2, q2 = read_mot(out / "abd.ls.mot")
+    assert names2 == names and np.abs(q2 - q).max() < 1e-7
+    recon = read_npz(out / "abd.ls.npz")
+    assert np.abs(np.rad2deg(recon.q_rad) - np.rad2deg(q)).max() < 1e-5  # CSV holds 6 decimals of degrees
+    summ = json.loads((out / "abd.ls.summary.json").read_text())
+    for key in ("method", "n_frames", "wall_time_s", "ms_per_frame", "residual_mm", "constraint_max_abs"):
+        assert key in summ
+    assert summ["n_frames"] == trial.time_s.size
+    assert set(summ["residual_mm"]) >= {"mean", "sd", "max", "max_marker"}
+    assert summ["constraint_max_abs"] < 1e-9
+    assert "ls" in capsys.readouterr().out
+
+
+def test_existing_result_is_refused_and_left_intact(tmp_path, c3d, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    earlier = out / "abd.ls.csv"
+    earlier.write_text("earlier result\n")
+    assert main(["-q", "reconstruct", str(c3d), "--method", "ls", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "abd.ls.csv" in err and "--overwrite" in err
+    assert earlier.read_text() == "earlier result\n"
+    assert main(["-q", "reconstruct", str(c3d), "--method", "ls", "--out", str(out), "--overwrite"]) == 0
+    assert earlier.read_text().startswith("time_s,")
+
+
+def test_missing_trial_file(tmp_path, capsys):
+    assert main(["reconstruct", str(tmp_path / "nope.c3d"), "--out", str(tmp_path / "o")]) == 2
+    assert "nope.c3d" in capsys.readouterr().err
+
+
+def test_truncated_and_non_c3d_files(tmp_path, c3d, capsys):
+    data = c3d.read_bytes()
+    bad = tmp_path / "truncated.c3d"
+    bad.write_bytes(data[: len(data) // 2])
+    assert main(["reconstruct", str(bad), "--out", str(tmp_path / "o1")]) == 2
+    assert "truncated.c3d" in capsys.readouterr().err
+    text = tmp_path / "notes.c3d"
+    text.write_text("this is not a c3d file\n" * 50)
+    assert main(["reconstruct", str(text), "--out", str(tmp_path / "o2")]) == 2
+    assert "notes.c3d" in capsys.readouterr().err
+
+
+def test_protocol_marker_absent_from_trial(tmp_path, trial, capsys):
+    traj = trial.trajectories
+    keep = [i for i, lab in enumerate(traj.labels) if lab != "DELT"]
+    path = write_c3d(tmp_path / "nodelt.c3d", replace(traj, labels=tuple(traj.labels[i] for i in keep),
+                                                       positions_m=traj.positions_m[:, keep]))
+    assert main(["reconstruct", str(path), "--out", str(tmp_path / "o")]) == 2
+    assert "DELT" in capsys.readouterr().err
+
+
+def test_all_nan_marker(tmp_path, trial, capsys):
+    pos = trial.trajectories.positions_m.copy()
+    pos[:, trial.trajectories.index("ARM")] = np.nan
+    path = write_c3d(tmp_path / "nanarm.c3d", replace(trial.trajectories, positions_m=pos))
+    assert main(["reconstruct", str(path), "--out", str(tmp_path / "o")]) == 2
+    assert "ARM" in capsys.readouterr().err
+
+
+def test_gap_is_handled_and_reported(tmp_path, trial, capsys):
+    pos = trial.trajectories.positions_m.copy()
+    pos[50:80, trial.trajectories.index("ARM")] = np.nan
+    path = write_c3d(tmp_path / "gap.c3d", replace(trial.trajectories, positions_m=pos))
+    out = tmp_path / "o"
+    assert main(["-q", "reconstruct", str(path), "--method", "ls", "--out", str(out)]) == 0
+    summ = json.loads((out / "gap.ls.summary.json").read_text())
+    gaps = [g for g in summ["gaps"] if g["marker"] == "ARM"]
+    assert gaps and gaps[0]["start_frame"] == 50 and gaps[0]["stop_frame"] == 80
+    assert "ARM" in capsys.readouterr().out
+    recon = read_npz(out / "gap.ls.npz")
+    assert np.isnan(recon.residuals_m[50:80, recon.marker_names.index("ARM")]).all()
+    assert not np.isnan(recon.q_rad).any()
+
+
+@pytest.mark.parametrize("edit, named", [
+    (lambda s: s.replace("\nfilter: {cutoff_hz:", "\nfilter: {cutof_hz:", 1), "cutof_hz"),
+    (lambda s: s.replace("segment: humerus", "segment: humerous", 1), "humerous"),
+])
+def test_bad_protocol_yaml_names_the_key(tmp_path, c3d, capsys, edit, named):
+    text = PROTOCOL.read_text()
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(edit(text))
+    assert edit(text) != text
+    assert main(["reconstruct", str(c3d), "--protocol", str(bad), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert named in err and "bad.yaml" in err
+
+
+def test_data_in_mm_declared_as_metres(tmp_path, trial, capsys):
+    """A file that says 'm' but holds millimetre numbers is caught, not reconstructed as a giant."""
+    scaled = replace(trial.trajectories, positions_m=trial.trajectories.positions_m * 1000.0)
+    path = write_c3d(tmp_path / "mm_as_m.c3d", scaled, units="m")
+    assert main(["reconstruct", str(path), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "mm_as_m.c3d" in err and "mm" in err
+
+
+def test_millimetre_and_metre_files_give_the_same_angles(tmp_path, trial):
+    a = write_c3d(tmp_path / "in_mm.c3d", trial.trajectories, units="mm")
+    b = write_c3d(tmp_path / "in_m.c3d", trial.trajectories, units="m")
+    assert main(["-q", "reconstruct", str(a), "--method", "ls", "--out", str(tmp_path / "o")]) == 0
+    assert main(["-q", "reconstruct", str(b), "--method", "ls", "--out", str(tmp_path / "o")]) == 0
+    _, _, qa = read_angles_csv(tmp_path / "o" / "in_mm.ls.csv")
+    _, _, qb = read_angles_csv(tmp_path / "o" / "in_m.ls.csv")
+    assert np.abs(np.rad2deg(qa - qb)).max() < 1e-3
+
+
+def test_simulate_command_writes_c3d_and_truth(tmp_path):
+    out = tmp_path / "sier.c3d"
+    assert main(["simulate", "--motion", "sier", "--duration", "1", "--rate", "50", "--out", str(out)]) == 0
+    t, names, q = read_angles_csv(tmp_path / "sier.truth.csv")
+    assert t.size == 50 and names == load_model().coordinate_names
+    assert np.ptp(np.rad2deg(q[:, names.index("gh_internal_rotation")])) > 30
+
+
+@pytest.mark.skipif(not (SHARED / "data" / "c3d").is_dir(), reason="../shared/data absent")
+@pytest.mark.parametrize("name", ["bioptim_exo_martin_statique.c3d", "bioptim_exo_F0_boire_05.c3d"])
+def test_reconstruct_real_c3d_files(tmp_path, name, capsys):
+    out = tmp_path / "real"
+    assert main(["-q", "reconstruct", str(SHARED / "data" / "c3d" / name), "--method", "ls", "--out", str(out)]) == 0
+    summ = json.loads((out / f"{Path(name).stem}.ls.summary.json").read_text())
+    assert summ["n_frames"] > 200
+    assert summ["constraint_max_abs"] < 1e-8
+    assert 0 < summ["residual_mm"]["mean"] < 100  # generic model, not yet fitted to the subject
