@@ -89,23 +89,26 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+EXAMPLE_COMMAND = ("exubio simulate --motion abduction --duration 10 --rate 100 --noise-mm 1 --sta-mm 10 "
+                   "--seed 1 --out exubio/data/example_abduction.c3d")
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     import numpy as np
 
     from exubio.evaluate import rmse_deg
     from exubio.io.results import read_angles_csv
-    from exubio.model import load_model
     from exubio.pipeline import agreement_deg, reconstruct_file
-    from exubio.simulate import Motion, simulate_trial, write_simulated_trial
+    from exubio.resources import shipped_file
 
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    model = load_model()
-    print(f"1/2 simulating 10 s of arm abduction at 100 Hz with 1 mm noise -> {out}")
-    trial = simulate_trial(model, Motion.ABDUCTION, duration_s=10.0, rate_hz=100.0, noise_mm=1.0, seed=1)
-    c3d, truth_csv = write_simulated_trial(trial, out / "demo_abduction.c3d")
-    print("2/2 reconstructing it with the potential-field (pf) and least-squares (ls) methods")
-    outputs = reconstruct_file(c3d, out, methods=["pf", "ls"], model=model, overwrite=True,
+    c3d = shipped_file("exubio.data", "example_abduction.c3d", "exubio/data")
+    truth_csv = c3d.with_name("example_abduction.truth.csv")
+    print(f"example trial: {c3d}")
+    print("  synthetic arm abduction, 10 s at 100 Hz, 22 markers, 1 mm noise, 10 mm soft-tissue artefact;")
+    print(f"  made by: {EXAMPLE_COMMAND}")
+    print(f"reconstructing it with the potential-field (pf) and least-squares (ls) methods -> {out}")
+    outputs = reconstruct_file(c3d, out, methods=["pf", "ls"], overwrite=True,
                                progress_factory=_progress_factory(not args.quiet))
     _, names, q_true = read_angles_csv(truth_csv)
     for recon, paths, summ in outputs:
@@ -148,7 +151,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--overwrite", action="store_true", help="replace earlier results in --out")
     r.set_defaults(func=cmd_reconstruct)
 
-    d = sub.add_parser("demo", help="simulate an abduction trial, reconstruct it with PF and LS")
+    d = sub.add_parser("demo", help="reconstruct the shipped example trial with PF and LS, compare with its truth")
     d.add_argument("--out", default="exubio_demo", help="output folder (default ./exubio_demo)")
     d.set_defaults(func=cmd_demo)
     return p
