@@ -19,6 +19,13 @@ def _skew(a: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
 
 
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product over the last axis (broadcasting); faster than np.cross for small batches."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
 def axis_rotation(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
     """Rotation matrices (..., 3, 3) about a fixed unit ``axis`` by ``angle`` (...) (Rodrigues)."""
     k = _skew(axis)
@@ -96,6 +103,13 @@ class Kinematics:
             while a >= 0:
                 self.affects[s, self._joint_coords[a]] = True
                 a = self.parent_index[a]
+        self._affects_f = self.affects.astype(float)
+        self._sk = np.array([sk for skews in self._axis_skews for sk, _ in skews]).reshape(-1, 3, 3)
+        self._sk2 = np.array([sk2 for skews in self._axis_skews for _, sk2 in skews]).reshape(-1, 3, 3)
+        self._chain = [(i, int(self.parent_index[i]), self._joint_coords[i], seg.joint.centre_m, seg.joint.axes)
+                       for i, seg in enumerate(model.segments) if seg.joint is not None]
+        if self.parent_index[0] != -1 or any(par < 0 for _, par, *_ in self._chain):
+            raise ModelError(f"{model.source}: the first segment must be the fixed root, and only it")
         # precedes[j, k]: coordinate k comes before j on the chain from the root to j.
         self.precedes = np.zeros((self.n_coordinates, self.n_coordinates), dtype=bool)
         for j in range(self.n_coordinates):
@@ -134,21 +148,18 @@ class Kinematics:
         p = np.empty(batch + (self.n_segments, 3))
         axes = np.empty(batch + (self.n_coordinates, 3))
         pivots = np.empty(batch + (self.n_coordinates, 3))
-        eye = np.eye(3)
-        for i, seg in enumerate(self.model.segments):
-            par = self.parent_index[i]
-            if par < 0:
-                R[..., i, :, :] = eye
-                p[..., i, :] = 0.0
-                continue
+        # every elementary rotation at once (Rodrigues): (..., m, 3, 3)
+        elem = np.eye(3) + np.sin(q)[..., None, None] * self._sk + (1.0 - np.cos(q))[..., None, None] * self._sk2
+        R[..., 0, :, :] = np.eye(3)
+        p[..., 0, :] = 0.0
+        for i, par, idx, centre, ax in self._chain:
             Rp = R[..., par, :, :]
-            pos = p[..., par, :] + Rp @ seg.joint.centre_m
+            pos = p[..., par, :] + Rp @ centre
             Rc = Rp
-            for (sk, sk2), j, a in zip(self._axis_skews[i], self._joint_coords[i], seg.joint.axes):
+            for j, a in zip(idx, ax):
                 axes[..., j, :] = Rc @ a
-                pivots[..., j, :] = pos
-                qj = q[..., j][..., None, None]
-                Rc = Rc @ (eye + np.sin(qj) * sk + (1.0 - np.cos(qj)) * sk2)
+                Rc = Rc @ elem[..., j, :, :]
+            pivots[..., idx, :] = pos[..., None, :]
             R[..., i, :, :] = Rc
             p[..., i, :] = pos
         return Frames(R, p, axes, pivots)
@@ -170,8 +181,8 @@ class Kinematics:
         fr = self.frames(q) if frames is None else frames
         r = self.points(q, points, frames=fr) if positions is None else positions
         diff = r[..., :, None, :] - fr.pivots[..., None, :, :]  # (..., k, m, 3)
-        cols = np.cross(fr.axes[..., None, :, :], diff)  # (..., k, m, 3)
-        cols = cols * self.affects[points.segment_index][..., :, None]
+        cols = cross(fr.axes[..., None, :, :], diff)  # (..., k, m, 3)
+        cols = cols * self._affects_f[points.segment_index][..., :, None]
         return np.swapaxes(cols, -1, -2)
 
     def point_bias_acceleration(self, q: np.ndarray, qd: np.ndarray, points: PointSet) -> np.ndarray:
@@ -183,11 +194,11 @@ class Kinematics:
         rd = np.einsum("...kim,...m->...ki", J, qd)
         wq = fr.axes * qd[..., None]  # (..., m, 3)
         omega = np.einsum("jk,...kc->...jc", self.precedes.astype(float), wq)  # frame rate of axis j
-        wdot = np.cross(omega, fr.axes)
-        cdot = np.cross(omega, fr.pivots) - np.einsum(
-            "jk,...kc->...jc", self.precedes.astype(float), np.cross(wq, fr.pivots))
+        wdot = cross(omega, fr.axes)
+        cdot = cross(omega, fr.pivots) - np.einsum(
+            "jk,...kc->...jc", self.precedes.astype(float), cross(wq, fr.pivots))
         diff = r[..., :, None, :] - fr.pivots[..., None, :, :]
-        term = np.cross(wdot[..., None, :, :], diff) + np.cross(fr.axes[..., None, :, :], rd[..., :, None, :] - cdot[..., None, :, :])
+        term = cross(wdot[..., None, :, :], diff) + cross(fr.axes[..., None, :, :], rd[..., :, None, :] - cdot[..., None, :, :])
         mask = self.affects[points.segment_index] * qd[..., None, :]
         return np.einsum("...km,...kmc->...kc", mask, term)
 
@@ -244,7 +255,7 @@ class Kinematics:
                 cos = 0.5 * np.einsum("ij,...jk,ki->...", P, Rrel, P)
                 q[..., idx[0]] = np.arctan2(sin, cos)
                 continue
-            B = np.column_stack([axes[0], axes[1], np.cross(axes[0], axes[1])])
+            B = np.column_stack([axes[0], axes[1], cross(axes[0], axes[1])])
             Rs = B.T @ Rrel @ B  # = Rx(q1) Ry(q2) [Rz(sign * q3)]
             if len(idx) == 3:
                 sign = float(np.sign(axes[2] @ B[:, 2]))
@@ -286,7 +297,7 @@ class Kinematics:
                 Om = np.repeat(omega[..., par, None, :], len(idx), axis=-2).copy()
                 for n in range(1, len(idx)):
                     Om[..., n, :] = Om[..., n - 1, :] + fr.axes[..., idx[n - 1], :] * qd_j[..., n - 1, None]
-                bias = np.einsum("...kc,...k->...c", np.cross(Om, fr.axes[..., idx, :]), qd_j)
+                bias = np.einsum("...kc,...k->...c", cross(Om, fr.axes[..., idx, :]), qd_j)
                 da = np.asarray(alpha)[..., s, :] - np.asarray(alpha)[..., par, :] - bias
                 qdd[..., idx] = np.einsum("...kc,...c->...k", pinv, da)
         return (qd, qdd) if alpha is not None else qd

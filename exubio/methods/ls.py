@@ -61,19 +61,20 @@ class _Linearisation:
 
 def _linearise(kin: Kinematics, points: PointSet, q: np.ndarray, target: np.ndarray, w: np.ndarray) -> _Linearisation:
     fr = kin.frames(q)
+    B, k = w.shape
     r = kin.points(q, points, frames=fr)
-    J = kin.point_jacobian(q, points, frames=fr, positions=r)  # (B, k, 3, m)
-    e = np.where(w[..., None] > 0, r - target, 0.0)  # (B, k, 3)
-    Jw = J * w[..., None, None]
+    J = kin.point_jacobian(q, points, frames=fr, positions=r).reshape(B, 3 * k, -1)  # (B, 3k, m)
+    e = np.where(w[..., None] > 0, r - target, 0.0).reshape(B, 3 * k, 1)
+    Jw_t = np.swapaxes(J * np.repeat(w, 3, axis=1)[..., None], 1, 2)  # (B, m, 3k)
     rc = kin.points(q, kin.contacts, frames=fr)
-    Jc = kin.point_jacobian(q, kin.contacts, frames=fr, positions=rc)
+    Jc = kin.point_jacobian(q, kin.contacts, frames=fr, positions=rc)  # (B, 2, 3, m)
     ec = rc - kin.centre
     return _Linearisation(
-        H=np.einsum("bkcm,bkcn->bmn", Jw, J),
-        grad=np.einsum("bkcm,bkc->bm", Jw, e),
-        G=2.0 * np.einsum("bkc,bkcm->bkm", ec * kin.a_diag, Jc),
-        g=np.einsum("bkc,c->bk", ec * ec, kin.a_diag) - 1.0,
-        cost=np.einsum("bk,bkc->b", w, e * e),
+        H=Jw_t @ J,
+        grad=(Jw_t @ e)[..., 0],
+        G=2.0 * ((ec * kin.a_diag)[..., None, :] @ Jc)[..., 0, :],
+        g=(ec * ec) @ kin.a_diag - 1.0,
+        cost=(e[..., 0] ** 2 * np.repeat(w, 3, axis=1)).sum(axis=1),
     )
 
 
