@@ -11,12 +11,18 @@ node (spherical joint to the scapula point) and an ``ObjectConnectorCoordinateVe
 quadratic term, so g = (r - c)^T A (r - c) - 1 = 0 is an index-3 constraint without Python.
 
 Every measured marker pulls its segment-fixed model point through a linear spring-damper,
-f = c (r_R - r_M) + d (v_R - v_M): an ``ObjectConnectorCartesianSpringDamper`` from the ground
-origin to the model point with a *symbolic* force function (no Python inside Newton) that reads
-the marker's position and velocity from a symbolic 6-vector set once per time step by a
-pre-step function. A missing marker switches its spring off (``activeConnector``) for the gap.
-The equations of motion are integrated with Exudyn's implicit generalized-alpha solver (index 3,
-modified Newton). Segment poses, velocities and accelerations are read at the frame times.
+f = c (r_R - r_M) + d (v_R - v_M) = c (r_R - [r_M + (d/c) v_M]) + d v_R: Exudyn's own
+``ObjectConnectorCartesianSpringDamper`` from the ground origin to the model point whose offset
+is set to r_M + (d/c) v_M once per time step by a pre-step function (no Python inside Newton,
+analytic Jacobian; measured ~20 % faster than the same force as a symbolic user function, which
+remains the fallback when a spring has c = 0). A missing marker switches its spring off
+(``activeConnector``) for the steps that touch the gap. The equations of motion are integrated
+with Exudyn's implicit generalized-alpha solver (index 3, modified Newton, Eigen's sparse LU
+with the analysed pattern reused). A step may span several frames: the springs are then set to
+the frame each step ends on and the frames inside a step are quintic Hermite interpolations of
+the step states (q, q̇, q̈ of one polynomial, so the three stay consistent); a last, shorter step
+ends on the last frame. Segment poses, velocities and accelerations are returned at the frame
+times.
 
 Outside this module nothing knows about Exudyn: inputs and outputs are numpy arrays (SI units,
 time first) and the frozen dataclasses below. Segment indices are those of ``Model.segments``
@@ -44,6 +50,7 @@ from exubio.types import JointKind, Model
 log = logging.getLogger(__name__)
 
 GRAVITY_M_S2 = np.array([0.0, -9.81, 0.0])  # thorax frame: Y up
+_SYMBOLIC_SPRINGS = False  # benchmarks only: force the symbolic spring force (the former design)
 _AUX_MASS_KG = 1e-3  # mass of each auxiliary ellipsoid point (numerically needed, physically negligible)
 _TIMER_FIELDS = (
     "total", "factorization", "newtonIncrement", "integrationFormula", "ODE2RHS", "AERHS",
@@ -94,19 +101,23 @@ class SpringSet:
 
 @dataclass(frozen=True)
 class IntegratorOptions:
-    """Settings of Exudyn's generalized-alpha integration.
+    """Settings of Exudyn's generalized-alpha integration (the PF method passes its own, see
+    exubio.methods.pf.PFOptions; these defaults are the ones for one step per frame).
 
-    step_s: time step; None = one step per frame. frame_dt_s / step_s must be an integer (the
-        targets between frames are cubic Hermite interpolations of positions and velocities).
-    spectral_radius, newton_relative_tolerance, modified_newton_contractivity: the defaults
-        (0, 1e-5, 0.2) were the fastest measured and keep the accelerations nearly free of the
-        step-to-step oscillation that other settings leave in them (its size relative to max
-        |alpha| on fast synthetic motion: rho_inf 0.8 / 1e-5 / 0.5: 100 %; 0.5 / 1e-5 / 0.2: 7 %;
-        defaults: 1.4 %; 0 / 1e-6 / 0.2: 0.7 % for +20 % time). Positions do not change (< 1e-4 mm).
+    step_s: time step; None = one step per frame. Shorter than a frame: frame_dt_s / step_s must
+        be an integer (targets between frames: cubic Hermite interpolation of positions and
+        velocities). Longer: step_s / frame_dt_s must be an integer (see ``PFSystem.run``).
+    spectral_radius, newton_relative_tolerance, modified_newton_contractivity: at one step per
+        5 ms frame (0, 1e-5, 0.2) keep q̈ closest to the derivative of q̇ (benchmarks/README.md).
+        Exudyn's Newton stops when its residual (forces in N and constraint violations in m, one
+        L2 norm) has dropped by newton_relative_tolerance, or is below
+        newton_absolute_tolerance.
     modified_newton: Jacobian kept over steps and rebuilt when the contraction of the Newton
         residual is worse than ``modified_newton_contractivity`` (modified Newton measured 2-4x
-        faster *and* more accurate than full Newton here).
-    timing_breakdown: fill ``PFRun.solver_times_s`` with Exudyn's CPU timers (~5 % cost).
+        faster *and* more accurate than full Newton here; a Jacobian every step: +30 % time).
+    sparse_solver: Eigen's SparseLU reusing its analysed pattern (~15 % faster than Exudyn's own
+        dense LU, the 1.13 default); False = the dense LU.
+    timing_breakdown: fill ``PFRun.solver_times_s`` with Exudyn's CPU timers (~1 % cost).
     """
 
     step_s: float | None = None
@@ -117,6 +128,7 @@ class IntegratorOptions:
     modified_newton_contractivity: float = 0.2
     max_newton_iterations: int = 25
     adaptive_step: bool = True
+    sparse_solver: bool = True
     timing_breakdown: bool = True
 
 
@@ -131,7 +143,8 @@ class PFRun:
     completed_frames: frames the solver reached (rows from here on are NaN if it stopped early).
     success: the solver finished the whole trial; message: its error otherwise.
     wall_time_s: the solve alone; solver_times_s: Exudyn's CPU-time breakdown (s).
-    newton_iterations, jacobian_updates, steps: solver statistics of the whole run.
+    newton_iterations, jacobian_updates, steps: solver statistics of the whole run; step_s: the
+    step used.
     """
 
     time_s: np.ndarray
@@ -149,6 +162,7 @@ class PFRun:
     newton_iterations: int = 0
     jacobian_updates: int = 0
     steps: int = 0
+    step_s: float = float("nan")
 
     @property
     def n_frames(self) -> int:
@@ -341,15 +355,25 @@ class PFSystem:
         self._user_functions = []  # must stay alive as long as the system
         self._spring_objects = []
         self._point_markers = []
+        # c (r - r_M) + d (v - v_M) = c (r - [r_M + (d/c) v_M]) + d v: Exudyn's own Cartesian
+        # spring-damper with the offset r_M + (d/c) v_M set once per step (analytic Jacobian, no
+        # user function; ~20 % faster than a symbolic force function). A spring without stiffness
+        # cannot carry the damper's target velocity in its offset: then every spring is symbolic.
+        self._native = bool(np.all(springs.stiffness_n_per_m > 0)) and not _SYMBOLIC_SPRINGS
         for k in range(springs.n_springs):
-            target = exu.symbolic.Vector(f"pf_target_{k}", [0.0] * 6)
-            uf = CreateSymbolicUserFunction(mbs, _spring_force(target), "springForceUserFunction",
-                                            itemTypeName="ObjectConnectorCartesianSpringDamper")
             point = mbs.AddMarker(eii.MarkerBodyPosition(bodyNumber=self._bodies[springs.segment_index[k]],
                                                          localPosition=list(springs.local_m[k])))
+            if self._native:
+                target = uf = None
+                extra = {}
+            else:
+                target = exu.symbolic.Vector(f"pf_target_{k}", [0.0] * 6)
+                uf = CreateSymbolicUserFunction(mbs, _spring_force(target), "springForceUserFunction",
+                                                itemTypeName="ObjectConnectorCartesianSpringDamper")
+                extra = {"springForceUserFunction": uf}
             obj = mbs.AddObject(eii.ObjectConnectorCartesianSpringDamper(
                 markerNumbers=[origin, point], stiffness=[float(springs.stiffness_n_per_m[k])] * 3,
-                damping=[float(springs.damping_ns_per_m[k])] * 3, springForceUserFunction=uf,
+                damping=[float(springs.damping_ns_per_m[k])] * 3, **extra,
                 visualization=eii.VObjectConnectorCartesianSpringDamper(show=False)))
             self._targets.append(target)
             self._user_functions.append(uf)
@@ -433,7 +457,13 @@ class PFSystem:
             times i * frame_dt_s; frame 0 is the initial state (q0, qd0). Values where ``active``
             is False are ignored (NaN allowed there).
         active: (n, k) bool, False where a marker is missing: its spring is switched off. A step
-            between two frames uses a spring only if it is active at both.
+            uses a spring only if it is active in every frame the step touches.
+
+        Steps: ``options.step_s`` None = one per frame; shorter than a frame: a whole number per
+        frame, the targets between frames from cubic Hermite interpolation of positions and
+        velocities; longer: a whole number of frames per step (the springs see the frames the
+        steps end on; the frames inside a step are quintic Hermite interpolations of the step
+        states q, q̇, q̈), the last step shortened to end on the last frame.
         """
         pos = np.asarray(targets_pos, dtype=float)
         vel = np.asarray(targets_vel, dtype=float)
@@ -460,63 +490,75 @@ class PFSystem:
             if abs(sub * step - frame_dt_s) > 1e-9 * frame_dt_s:
                 raise ValueError(f"run: frame_dt_s / step_s must be a positive integer when step_s < frame_dt_s, "
                                  f"got {frame_dt_s} / {step}")
-            n_steps = (n - 1) * sub
-        else:  # steps over several frames: the largest uniform step <= step_s that ends on the last frame
-            n_steps = int(math.ceil((n - 1) * frame_dt_s / step - 1e-9))
-        step = (n - 1) * frame_dt_s / n_steps
-        ratio = step / frame_dt_s  # frames per step
+            per_frame, n_steps = 1.0 / sub, (n - 1) * sub
+        else:  # a whole number of frames per step; a last step over the remaining frames
+            per = int(round(step / frame_dt_s))
+            if abs(per * frame_dt_s - step) > 1e-9 * step:
+                raise ValueError(f"run: step_s / frame_dt_s must be a positive integer when step_s > frame_dt_s, "
+                                 f"got {step} / {frame_dt_s}")
+            per_frame, n_steps = float(per), int(math.ceil((n - 1) / per))
+            if (n - 1) % per and not options.adaptive_step:
+                raise ValueError(f"run: {n - 1} frame intervals are not a multiple of {per} frames per step "
+                                 f"(needs adaptive_step=True for the shorter last step)")
         pos = np.where(act[..., None], pos, 0.0)
         vel = np.where(act[..., None], vel, 0.0)
+        d_over_c = np.divide(self.springs.damping_ns_per_m, self.springs.stiffness_n_per_m,
+                             out=np.zeros(k), where=self.springs.stiffness_n_per_m > 0)[:, None]
 
-        # targets at every step time s * step (frame position x = s * ratio), s = 0 .. n_steps:
-        # the frame values where a step ends on a frame, cubic Hermite interpolation otherwise
-        x_step = np.minimum(np.arange(n_steps + 1) * ratio, n - 1.0)
+        def rows_of(p, v):  # what the springs are set to: native offset r_M + (d/c) v_M, or [r_M, v_M]
+            return (p + d_over_c * v).tolist() if self._native else np.concatenate([p, v], axis=-1).tolist()
 
-        def targets_at(x):
-            x = np.asarray(x, dtype=float)
-            i = np.clip(np.floor(x + 1e-9).astype(int), 0, n - 2)
-            s = (x - i)[..., None, None]
-            return _hermite(pos[i], vel[i], pos[i + 1], vel[i + 1], s, frame_dt_s)
+        # the rows of the frames the steps end on (nested lists: fast setters); others on demand
+        ends = np.unique(np.r_[np.arange(0, n, max(int(round(per_frame)), 1)), n - 1])
+        frame_rows = dict(zip(ends.tolist(), rows_of(pos[ends], vel[ends])))
 
-        sp, sv = targets_at(x_step)
+        def rows_between(x):  # a step that ends between frames (sub-steps, reduced steps): cubic Hermite
+            i = min(max(int(math.floor(x + 1e-9)), 0), n - 2)
+            p, v = _hermite(pos[i], vel[i], pos[i + 1], vel[i + 1], x - i, frame_dt_s)
+            return rows_of(p, v)
+
         # a step uses a spring only if its marker is present in every frame the step touches
         cmiss = np.vstack([np.zeros((1, k), dtype=int), np.cumsum(~act, axis=0)])
-        lo = np.clip(np.floor(np.maximum(x_step - ratio, 0.0) + 1e-9).astype(int), 0, n - 1)
-        hi = np.clip(np.ceil(x_step - 1e-9).astype(int), 0, n - 1)
-        lo[0] = hi[0] = 0
-        step_active = (cmiss[hi + 1] - cmiss[lo]) == 0
-        rows = np.concatenate([sp, sv], axis=2).tolist()  # (n_steps + 1, k, 6) nested lists: fast SetVector
-        changes = np.argwhere(step_active[1:] != step_active[:-1])
-        events: dict[int, list[tuple[int, bool]]] = {}
-        for s, j in changes:
-            events.setdefault(int(s) + 1, []).append((int(j), bool(step_active[s + 1, j])))
-
+        any_missing = bool(cmiss[-1].any())
         mbs = self._mbs
-        targets, springs = self._targets, self._spring_objects
+        springs = self._spring_objects
+        native, symbolic_targets, set_parameter = self._native, self._targets, mbs.SetObjectParameter
+
+        def set_targets(row):
+            if native:
+                for j in range(k):
+                    set_parameter(springs[j], "offset", row[j])
+            else:
+                for j in range(k):
+                    symbolic_targets[j].SetVector(row[j])
+
+        state = act[0].copy()
+        set_targets(frame_rows[0])
         for j in range(k):
-            targets[j].SetVector(rows[0][j])
-            mbs.SetObjectParameter(springs[j], "activeConnector", bool(step_active[0, j]))
-        applied = [0]
+            mbs.SetObjectParameter(springs[j], "activeConnector", bool(state[j]))
 
         sd = mbs.systemData
-        record_t: list[float] = []
+        record_t: list[float] = []  # times of the recorded states: t = 0, then every accepted step
         record: list[tuple] = []
 
         def pre_step(mbs, t):  # receives t_{n+1}: the end of the step about to be solved
-            x = t / step
-            s = int(x + 0.5)
-            while applied[0] < math.ceil(x - 1e-6):  # switch at the step that ends at or after t
-                applied[0] += 1
-                for j, on in events.get(applied[0], ()):
-                    mbs.SetObjectParameter(springs[j], "activeConnector", on)
-            if abs(x - s) < 1e-6:
-                row = rows[s]
-                for j in range(k):
-                    targets[j].SetVector(row[j])
-            else:  # a reduced step (adaptive step control): interpolate at t
-                p, v = targets_at(t / frame_dt_s)
-                for j in range(k):
-                    targets[j].SetVector(list(p[j]) + list(v[j]))
+            x = t / frame_dt_s
+            i = int(x + 0.5)
+            if any_missing:
+                start = record_t[-1] if record_t else 0.0  # the step starts at the last accepted time
+                lo = min(max(int(math.floor(start / frame_dt_s + 1e-6)), 0), n - 1)
+                hi = min(max(int(math.ceil(x - 1e-6)), 0), n - 1)
+                now = (cmiss[hi + 1] - cmiss[lo]) == 0
+                for j in np.flatnonzero(now != state):
+                    mbs.SetObjectParameter(springs[j], "activeConnector", bool(now[j]))
+                state[:] = now
+            if abs(x - i) < 1e-6:
+                row = frame_rows.get(i)
+                if row is None:  # a reduced step that ends on another frame
+                    row = rows_of(pos[i], vel[i])
+            else:
+                row = rows_between(x)
+            set_targets(row)
             return True
 
         def post_step(mbs, t):  # every accepted step, and once at t = 0 after the initial accelerations
@@ -526,14 +568,22 @@ class PFSystem:
 
         mbs.SetPreStepUserFunction(pre_step)
         mbs.SetPostStepUserFunction(post_step)
-        settings = self._settings(n_steps, step, options)
+        settings = self._settings(n_steps, (n - 1) * frame_dt_s, options)
         solver = exu.MainSolverImplicitSecondOrder()
         print_before = exu.config.printToConsole
         exu.config.printToConsole = False  # Exudyn prints progress/warnings itself; we log instead
         message = ""
         t0 = time.perf_counter()
         try:
-            success = bool(solver.SolveSystem(mbs, settings))
+            success = bool(solver.InitializeSolver(mbs, settings))
+            if success:
+                # steps of per_frame frames; with adaptive steps the solver shortens the last one to end
+                # on the last frame (a uniform endTime / numberOfSteps would miss the frame times)
+                solver.it.maxStepSize = solver.it.currentStepSize = per_frame * frame_dt_s
+                t_steps = time.perf_counter()
+                success = bool(solver.SolveSteps(mbs, settings))
+                solver.timer.total = time.perf_counter() - t_steps  # SolveSteps alone does not set it
+                solver.FinalizeSolver(mbs, settings)
             if not success:
                 message = solver.GetErrorString() or "solver did not finish"
         except Exception as exc:  # Exudyn raises its own error types on divergence
@@ -555,13 +605,14 @@ class PFSystem:
         it = solver.it
         return self._decode(
             X, Xt, Xtt, frame_dt_s, completed=completed, success=success, message=message, wall=wall, times=times,
-            newton=int(it.newtonStepsCount), jacobians=int(it.newtonJacobiCount), steps=max(len(record_t) - 1, 0))
+            newton=int(it.newtonStepsCount), jacobians=int(it.newtonJacobiCount), steps=sum(1 for t in record_t if t > 0.0),
+            step=per_frame * frame_dt_s)
 
-    def _settings(self, n_steps: int, step: float, options: IntegratorOptions):
+    def _settings(self, n_steps: int, end_time: float, options: IntegratorOptions):
         s = exu.SimulationSettings()
         ti = s.timeIntegration
         ti.numberOfSteps = n_steps
-        ti.endTime = n_steps * step
+        ti.endTime = end_time
         ti.verboseMode = 0
         ti.adaptiveStep = options.adaptive_step
         ti.generalizedAlpha.spectralRadius = options.spectral_radius
@@ -572,6 +623,11 @@ class PFSystem:
         ti.newton.relativeTolerance = options.newton_relative_tolerance
         ti.newton.absoluteTolerance = options.newton_absolute_tolerance
         ti.newton.maxIterations = options.max_newton_iterations
+        if options.sparse_solver:  # Eigen's SparseLU, symbolic analysis kept while the pattern holds
+            s.linearSolver.solverType = exu.LinearSolverType.EigenSparse
+            s.linearSolver.reuseAnalyzedPattern = True
+        else:
+            s.linearSolver.solverType = exu.LinearSolverType.EXUdense
         s.solution.file.write = False
         s.solution.sensors.active = False
         s.show.computationTime = options.timing_breakdown
@@ -579,7 +635,8 @@ class PFSystem:
         s.show.statistics = False
         return s
 
-    def _decode(self, X, Xt, Xtt, frame_dt_s, *, completed, success, message, wall, times, newton, jacobians, steps) -> PFRun:
+    def _decode(self, X, Xt, Xtt, frame_dt_s, *, completed, success, message, wall, times, newton, jacobians, steps,
+                step) -> PFRun:
         n = X.shape[0]
         n_seg = len(self.model.segments)
         R = np.zeros((n, n_seg, 3, 3))
@@ -602,7 +659,7 @@ class PFSystem:
             time_s=np.arange(n) * frame_dt_s, rotations=R, origins_m=p, velocities_m_s=v, accelerations_m_s2=a,
             angular_velocities_rad_s=w, angular_accelerations_rad_s2=al, completed_frames=int(completed),
             success=bool(success), message=message, wall_time_s=float(wall), solver_times_s=times,
-            newton_iterations=newton, jacobian_updates=jacobians, steps=steps)
+            newton_iterations=newton, jacobian_updates=jacobians, steps=steps, step_s=float(step))
 
 
 def _spring_force(target):
