@@ -77,7 +77,8 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
 
     outputs = reconstruct_file(args.trial, args.out, methods=_methods(args.method), model_path=args.model,
                                protocol_path=args.protocol, body_mass_kg=args.body_mass,
-                               overwrite=args.overwrite, progress_factory=_progress_factory(not args.quiet))
+                               overwrite=args.overwrite, method_options={"pf": {"gravity": args.gravity}},
+                               progress_factory=_progress_factory(not args.quiet))
     for recon, paths, summ in outputs:
         _print_result(recon, paths, summ)
     if len(outputs) == 2:
@@ -149,6 +150,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--body-mass", type=float, help="body mass, kg (scales segment inertia)")
     r.add_argument("--out", required=True, help="output folder")
     r.add_argument("--overwrite", action="store_true", help="replace earlier results in --out")
+    r.add_argument("--gravity", action="store_true",
+                   help="PF: apply gravity (-Y of the thorax frame); off by default, the springs then also "
+                        "carry the limb's weight and model points sag below their markers")
     r.set_defaults(func=cmd_reconstruct)
 
     d = sub.add_parser("demo", help="reconstruct the shipped example trial with PF and LS, compare with its truth")

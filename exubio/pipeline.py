@@ -128,6 +128,7 @@ def run_metadata(inputs: TrialInputs, trial_path: str | Path, method: Method) ->
 def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods: list[Method | str],
                      model_path: str | Path | None = None, protocol_path: str | Path | None = None,
                      body_mass_kg: float | None = None, overwrite: bool = False, model: Model | None = None,
+                     method_options: dict[str, dict[str, Any]] | None = None,
                      progress_factory: Callable[[str, int], Callable[[int], None]] | None = None
                      ) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
     """Everything ``exubio reconstruct`` does for one trial; returns (reconstruction, paths, summary)
@@ -140,9 +141,13 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
     out = []
     for method, stem in zip(methods, stems):
         progress = progress_factory(method.value, inputs.targets.n_frames) if progress_factory else None
-        recon = reconstruct(inputs.model, inputs.protocol, inputs.targets, method=method, progress=progress)
+        opts = (method_options or {}).get(method.value, {})
+        recon = reconstruct(inputs.model, inputs.protocol, inputs.targets, method=method, progress=progress, **opts)
         meta = run_metadata(inputs, trial_path, method)
-        summ = summary(recon, source=str(trial_path), extra={"unused_trial_labels": _unused(inputs)})
+        extra = {"unused_trial_labels": _unused(inputs)}
+        if "mean_spring_deflection_mm" in recon.info:
+            extra["mean_spring_deflection_mm"] = recon.info["mean_spring_deflection_mm"]
+        summ = summary(recon, source=str(trial_path), extra=extra)
         paths = write_outputs(recon, out_dir, stem, metadata=meta, summary_data=summ)
         out.append((recon, paths, summ))
     return out
