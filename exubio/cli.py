@@ -72,13 +72,45 @@ def _print_result(recon, paths, summ) -> None:
         print(f"  {paths[key]}")
 
 
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from exubio.calibrate import calibrate_file, format_report, parse_frames
+
+    if Path(args.out).suffix.lower() not in (".yaml", ".yml"):
+        raise InputError(f"--out {args.out}: expected a model file ending in .yaml")
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    _, _, report = calibrate_file(args.static, protocol_path=args.protocol, model_path=args.model,
+                                  body_mass_kg=args.body_mass, frames=parse_frames(args.static_frames),
+                                  out_path=args.out, overwrite=args.overwrite)
+    print(format_report(report))
+    print(f"wrote {args.out}")
+    return EXIT_OK
+
+
 def cmd_reconstruct(args: argparse.Namespace) -> int:
     from exubio.pipeline import reconstruct_file
 
+    model, extra = None, {}
+    if args.static or args.static_frames:
+        from exubio.calibrate import calibrate_file, format_report, parse_frames
+        from exubio.io.results import prepare_output_dir
+        from exubio.model import save_model
+
+        source = args.static or args.trial
+        model_file = Path(args.out) / f"{Path(args.trial).stem}.model.yaml"
+        prepare_output_dir(args.out, [model_file.name], overwrite=args.overwrite)
+        model, _, report = calibrate_file(source, protocol_path=args.protocol, model_path=args.model,
+                                          body_mass_kg=args.body_mass, frames=parse_frames(args.static_frames))
+        save_model(model, model_file, calibration=report.to_dict())
+        if not args.quiet:
+            print(format_report(report))
+        print(f"calibrated model: {model_file}")
+        extra = {"calibration": {"static": str(source), "model_file": str(model_file),
+                                 "mean_residual_mm": report.mean_residual_mm,
+                                 "residual_mm": report.to_dict().get("residual_mm")}}
     outputs = reconstruct_file(args.trial, args.out, methods=_methods(args.method), model_path=args.model,
-                               protocol_path=args.protocol, body_mass_kg=args.body_mass,
+                               protocol_path=args.protocol, body_mass_kg=args.body_mass, model=model,
                                overwrite=args.overwrite, method_options={"pf": {"gravity": args.gravity}},
-                               progress_factory=_progress_factory(not args.quiet))
+                               summary_extra=extra, progress_factory=_progress_factory(not args.quiet))
     for recon, paths, summ in outputs:
         _print_result(recon, paths, summ)
     if len(outputs) == 2:
@@ -150,10 +182,23 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--body-mass", type=float, help="body mass, kg (scales segment inertia)")
     r.add_argument("--out", required=True, help="output folder")
     r.add_argument("--overwrite", action="store_true", help="replace earlier results in --out")
+    r.add_argument("--static", help="static trial: calibrate the model to the subject first")
+    r.add_argument("--static-frames", help="A:B frames used for the calibration (of --static, or of the trial "
+                   "itself when there is no static trial)")
     r.add_argument("--gravity", action="store_true",
                    help="PF: apply gravity (-Y of the thorax frame); off by default, the springs then also "
                         "carry the limb's weight and model points sag below their markers")
     r.set_defaults(func=cmd_reconstruct)
+
+    c = sub.add_parser("calibrate", help="fit the model to a subject from a static trial")
+    c.add_argument("static", help="static trial (.c3d or .trc)")
+    c.add_argument("--protocol", help="protocol YAML (default: protocols/upper_limb_21.yaml)")
+    c.add_argument("--model", help="generic model YAML (default: models/upper_extremity.yaml)")
+    c.add_argument("--body-mass", type=float, help="body mass, kg")
+    c.add_argument("--static-frames", help="A:B frames to use (default: the longest still stretch)")
+    c.add_argument("--out", required=True, help="MODEL.yaml to write")
+    c.add_argument("--overwrite", action="store_true", help="replace an existing MODEL.yaml")
+    c.set_defaults(func=cmd_calibrate)
 
     d = sub.add_parser("demo", help="reconstruct the shipped example trial with PF and LS, compare with its truth")
     d.add_argument("--out", default="exubio_demo", help="output folder (default ./exubio_demo)")

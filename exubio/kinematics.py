@@ -226,6 +226,10 @@ class Kinematics:
         return 2.0 * np.einsum("...kc,c->...k", v * v + e * bias, self.a_diag)
 
     # ---------------------------------------------------------------- inverse maps
+    def joint_coordinate_indices(self, segment_index: int) -> np.ndarray:
+        """Indices of the coordinates of the joint that moves this segment."""
+        return self._joint_coords[segment_index]
+
     def joint_frames(self) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
         """(segment index, parent index, coordinate indices, axes) of every joint."""
         out = []

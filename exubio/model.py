@@ -29,7 +29,9 @@ _INERTIA_KEYS = {
     "mass_fraction",
     "com_between",
     "com_fraction",
+    "com_mm",
     "principal_kgm2_per_kg",
+    "inertia_kgm2_per_kg",
     "radius_of_gyration_fraction",
     "axial_radius_of_gyration_fraction",
     "long_axis",
@@ -182,12 +184,30 @@ def _parse_inertia(raw: Any, where: str, body_mass: float, origin: np.ndarray, f
     """Mass (kg), local centre of mass (m) and inertia about it (kg m^2) from table fractions."""
     if raw is None:
         return 0.0, np.zeros(3), np.zeros((3, 3))
-    check_keys(raw, _INERTIA_KEYS, where, error=ModelError, required={"mass_fraction", "com_between", "com_fraction"})
+    check_keys(raw, _INERTIA_KEYS, where, error=ModelError, required={"mass_fraction"})
     mass = float(raw["mass_fraction"]) * body_mass
-    a_name, b_name = raw["com_between"]
-    a, b = find_point(a_name, where), find_point(b_name, where)
-    com_global = a + float(raw["com_fraction"]) * (b - a)
-    if "principal_kgm2_per_kg" in raw:
+    if "com_mm" in raw:  # explicit centre of mass (files written by save_model)
+        if "com_between" in raw or "com_fraction" in raw:
+            raise ModelError(f"{where}: give either 'com_mm' or 'com_between' + 'com_fraction', not both")
+        com_global = _vec3(raw["com_mm"], f"{where}.com_mm") / 1000.0
+    else:
+        missing = sorted({"com_between", "com_fraction"} - set(raw))
+        if missing:
+            raise ModelError(f"{where}: missing required key(s) {missing} (or give 'com_mm')")
+        a_name, b_name = raw["com_between"]
+        a, b = find_point(a_name, where), find_point(b_name, where)
+        com_global = a + float(raw["com_fraction"]) * (b - a)
+    if "inertia_kgm2_per_kg" in raw:  # full 3x3 about the centre of mass, per kg of segment mass
+        try:
+            tensor = np.asarray(raw["inertia_kgm2_per_kg"], dtype=float)
+        except (TypeError, ValueError):
+            tensor = np.full(1, np.nan)
+        if (tensor.shape != (3, 3) or not np.all(np.isfinite(tensor))
+                or np.abs(tensor - tensor.T).max() > 1e-12 * max(np.abs(tensor).max(), 1e-300)):
+            raise ModelError(f"{where}.inertia_kgm2_per_kg: expected a symmetric 3x3 matrix of finite numbers, "
+                             f"got {raw['inertia_kgm2_per_kg']!r}")
+        inertia = tensor * mass
+    elif "principal_kgm2_per_kg" in raw:
         inertia = np.diag(_vec3(raw["principal_kgm2_per_kg"], f"{where}.principal_kgm2_per_kg")) * mass
     else:
         for key in ("radius_of_gyration_fraction", "axial_radius_of_gyration_fraction", "long_axis"):
@@ -202,3 +222,118 @@ def _parse_inertia(raw: Any, where: str, body_mass: float, origin: np.ndarray, f
     if mass <= 0:
         raise ModelError(f"{where}: mass must be > 0")
     return mass, com_global - origin, inertia
+
+
+# --------------------------------------------------------------------------------------------
+# Writing
+# --------------------------------------------------------------------------------------------
+def _origin_point_name(seg: Segment, parent: Segment | None) -> str | None:
+    """The name of a point of ``seg`` at its origin (local zero), preferring one the parent also
+    has at the joint centre (e.g. GH on the humerus and on the scapula)."""
+    at_zero = [n for n, v in seg.points.items() if np.linalg.norm(v) < 1e-12]
+    if parent is not None and seg.joint is not None:
+        for n in at_zero:
+            if n in parent.points and np.linalg.norm(parent.points[n] - seg.joint.centre_m) < 1e-12:
+                return n
+    return at_zero[0] if at_zero else None
+
+
+def _plain(value: Any) -> Any:
+    """numpy scalars/arrays and tuples -> plain Python for yaml.safe_dump."""
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_plain(v) for v in (value.tolist() if isinstance(value, np.ndarray) else value)]
+    if isinstance(value, (np.floating, float)):
+        return float(value)
+    if isinstance(value, (np.integer, int)) and not isinstance(value, bool):
+        return int(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    return value
+
+
+def _mm(v: np.ndarray) -> list[float]:
+    return [float(x) for x in np.asarray(v, dtype=float) * 1000.0]
+
+
+def model_to_dict(model: Model, /, *, calibration: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The model as the mapping ``load_model`` reads (schema_version 1): every point, origin and
+    centre of mass in mm in the thorax frame in the reference posture, joint axes as unit vectors,
+    inertia as mass fraction + full tensor per kg, so the file does not depend on the tables or
+    point names the generic file derived them from."""
+    ref_origin: dict[str, np.ndarray] = {}
+    segments = []
+    for seg in model.segments:
+        parent = model.segment(seg.parent) if seg.parent is not None else None
+        origin = np.zeros(3) if parent is None else ref_origin[parent.name] + seg.joint.centre_m
+        ref_origin[seg.name] = origin
+        points = {name: _mm(origin + local) for name, local in seg.points.items()}
+        raw: dict[str, Any] = {"name": seg.name}
+        if parent is not None:
+            name = _origin_point_name(seg, parent)
+            if name is None:
+                name = f"{seg.name}_origin"
+                if name in points:
+                    raise ModelError(f"{model.source or model.name}: cannot name the origin of segment '{seg.name}'")
+                points[name] = _mm(origin)
+            raw["parent"] = parent.name
+            raw["origin"] = name
+            raw["joint"] = {
+                "name": seg.joint.name,
+                "type": seg.joint.kind.value,
+                "coordinates": [{"name": c, "axis": [float(x) for x in a]}
+                                for c, a in zip(seg.joint.coordinates, seg.joint.axes)],
+            }
+        if seg.mass_kg > 0:
+            tensor = np.asarray(seg.inertia_kgm2, dtype=float) / seg.mass_kg
+            tensor = 0.5 * (tensor + tensor.T)
+            raw["inertia"] = {
+                "mass_fraction": float(seg.mass_kg / model.body_mass_kg),
+                "com_mm": _mm(origin + seg.com_m),
+                "inertia_kgm2_per_kg": [[float(x) for x in row] for row in tensor],
+            }
+        raw["points_mm"] = points
+        segments.append(raw)
+    ell = model.ellipsoid
+    out: dict[str, Any] = {
+        "schema_version": SCHEMA_VERSION,
+        "name": model.name,
+        "side": str(model.metadata.get("side", "right")),
+        "body_mass_kg": float(model.body_mass_kg),
+        "segments": segments,
+        "ellipsoid": {
+            "centre_mm": _mm(ell.centre_m),
+            "radii_mm": _mm(ell.radii_m),
+            "contact_points": [[s, p] for s, p in ell.contact_points],
+        },
+    }
+    if calibration is not None:
+        out["calibration"] = _plain(calibration)
+    return out
+
+
+def save_model(model: Model, path: str | Path, *, calibration: Mapping[str, Any] | None) -> Path:
+    """Write ``model`` as a model YAML that ``load_model`` reads back to the same geometry (points
+    to well below 1e-9 m), atomically. ``calibration`` (plain data: what was fitted, the residual
+    per marker, ...) is stored under the top-level key ``calibration`` and comes back as
+    ``model.metadata["calibration"]``; pass None for a model that was not calibrated."""
+    import yaml
+
+    from exubio.io.results import atomic_write
+
+    path = Path(path)
+    data = model_to_dict(model, calibration=calibration)
+    header = (
+        f"# exubio model '{model.name}', written by exubio.model.save_model.\n"
+        "# Format: see the top of models/upper_extremity.yaml (positions in mm in the ISB thorax frame in\n"
+        "# the reference posture, all coordinates zero). Geometry sources: the generic model it was made\n"
+        "# from" + (f" ({model.metadata.get('generic_source')})" if model.metadata.get("generic_source") else "")
+        + "; what a calibration changed is recorded under 'calibration'.\n"
+    )
+    text = header + yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=110)
+
+    def writer(tmp: Path) -> None:
+        tmp.write_text(text, encoding="utf-8")
+
+    return atomic_write(path, writer)

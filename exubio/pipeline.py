@@ -50,12 +50,22 @@ class TrialInputs:
     targets: MarkerTargets
 
 
+def protocol_for_model(model: Model, protocol_path: str | Path | None = None, /) -> Protocol:
+    """Load a protocol against a model; a calibrated model rebinds the markers to the points the
+    calibration registered for them."""
+    protocol = load_protocol(protocol_path or DEFAULT_PROTOCOL, segments=model.segment_names,
+                             model_points={s.name: dict(s.points) for s in model.segments})
+    if model.metadata.get("calibration"):
+        from exubio.calibrate import calibrated_protocol
+
+        protocol = calibrated_protocol(protocol, model)
+    return protocol
+
+
 def load_model_and_protocol(*, model_path: str | Path | None = None, protocol_path: str | Path | None = None,
                             body_mass_kg: float | None = None) -> tuple[Model, Protocol]:
     model = load_model(model_path or DEFAULT_MODEL, body_mass_kg=body_mass_kg)
-    protocol = load_protocol(protocol_path or DEFAULT_PROTOCOL, segments=model.segment_names,
-                             model_points={s.name: dict(s.points) for s in model.segments})
-    return model, protocol
+    return model, protocol_for_model(model, protocol_path)
 
 
 def load_inputs(trial_path: str | Path, /, *, model_path: str | Path | None = None,
@@ -67,8 +77,7 @@ def load_inputs(trial_path: str | Path, /, *, model_path: str | Path | None = No
         model, protocol = load_model_and_protocol(model_path=model_path, protocol_path=protocol_path,
                                                   body_mass_kg=body_mass_kg)
     else:
-        protocol = load_protocol(protocol_path or DEFAULT_PROTOCOL, segments=model.segment_names,
-                                 model_points={s.name: dict(s.points) for s in model.segments})
+        protocol = protocol_for_model(model, protocol_path)
     targets = prepare_targets(traj, protocol)
     return TrialInputs(traj, model, protocol, targets)
 
@@ -129,6 +138,7 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
                      model_path: str | Path | None = None, protocol_path: str | Path | None = None,
                      body_mass_kg: float | None = None, overwrite: bool = False, model: Model | None = None,
                      method_options: dict[str, dict[str, Any]] | None = None,
+                     summary_extra: dict[str, Any] | None = None,
                      progress_factory: Callable[[str, int], Callable[[int], None]] | None = None
                      ) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
     """Everything ``exubio reconstruct`` does for one trial; returns (reconstruction, paths, summary)
@@ -144,7 +154,7 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
         opts = (method_options or {}).get(method.value, {})
         recon = reconstruct(inputs.model, inputs.protocol, inputs.targets, method=method, progress=progress, **opts)
         meta = run_metadata(inputs, trial_path, method)
-        extra = {"unused_trial_labels": _unused(inputs)}
+        extra = {"unused_trial_labels": _unused(inputs), **(summary_extra or {})}
         if "mean_spring_deflection_mm" in recon.info:
             extra["mean_spring_deflection_mm"] = recon.info["mean_spring_deflection_mm"]
         summ = summary(recon, source=str(trial_path), extra=extra)

@@ -193,3 +193,28 @@ def test_projection_on_constraints_on_perturbed_truth(setup, exact):
     assert np.abs(np.einsum("nkm,nm->nk", kin.G(p[ok]), pdd[ok]) + kin.eta(p[ok], pd[ok])).max() < 1e-10
     assert np.abs(p[ok] - q[ok]).max() < 1e-5
     assert np.isnan(p[5]).all()
+
+
+def test_unobserved_segments_are_held_at_their_start_posture():
+    """Without forearm and hand markers (like the thoracoscapular TRC set) PF locks elbow, forearm
+    and wrist at the start posture, as LS holds them, and both still track the rest."""
+    import dataclasses
+
+    from exubio.pipeline import load_model_and_protocol, reconstruct
+    from exubio.preprocess import prepare_targets
+    from exubio.simulate import Motion, simulate_trial
+
+    model, protocol = load_model_and_protocol()
+    girdle_arm = dataclasses.replace(protocol, markers=tuple(
+        m for m in protocol.markers if m.segment in ("clavicle", "scapula", "humerus")))
+    trial = simulate_trial(model, Motion.ABDUCTION, duration_s=3.0, rate_hz=100.0)
+    targets = prepare_targets(trial.trajectories, girdle_arm)
+    names = model.coordinate_names
+    held = [names.index(n) for n in ("elbow_flexion", "pronation", "wrist_flexion", "wrist_radial_deviation")]
+    pf = reconstruct(model, girdle_arm, targets, method="pf")
+    ls = reconstruct(model, girdle_arm, targets, method="ls")
+    for recon in (pf, ls):
+        assert np.ptp(recon.q_rad[:, held], axis=0).max() < 1e-6  # PF: held by Exudyn's joint to its tolerance
+        assert np.abs(recon.qd_rad_s[:, held]).max() < 1e-5
+    gh = names.index("gh_abduction")
+    assert np.sqrt(np.mean(np.rad2deg(pf.q_rad[:, gh] - ls.q_rad[:, gh]) ** 2)) < 0.5

@@ -34,7 +34,7 @@ import logging
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import Sequence, Mapping
 
 import numpy as np
 
@@ -266,8 +266,9 @@ class PFSystem:
     """
 
     def __init__(self, model: Model, springs: SpringSet, /, *, q0: np.ndarray, qd0: np.ndarray | None = None,
-                 gravity: bool = False, kinematics: Kinematics | None = None):
+                 gravity: bool = False, kinematics: Kinematics | None = None, locked_segments: Sequence[int] = ()):
         self.model = model
+        self.locked_segments = frozenset(int(i) for i in locked_segments)
         self.kin = kinematics if kinematics is not None else Kinematics(model)
         self.springs = springs
         n_seg = len(model.segments)
@@ -323,7 +324,11 @@ class PFSystem:
 
         names = model.segment_names
         for i, seg in enumerate(model.segments[1:], start=1):
-            self._add_joint(seg, self._bodies[names.index(seg.parent)], self._bodies[i])
+            if i in self.locked_segments:  # no marker moves it: held at its initial relative orientation
+                self._add_locked_joint(seg, self._bodies[names.index(seg.parent)], self._bodies[i],
+                                       R0[names.index(seg.parent)].T @ R0[i])
+            else:
+                self._add_joint(seg, self._bodies[names.index(seg.parent)], self._bodies[i])
 
         # ellipsoid: auxiliary point held to each contact point, g = (r - c)^T A (r - c) - 1 = 0
         ell = model.ellipsoid
@@ -387,6 +392,15 @@ class PFSystem:
         self.build_time_s = time.perf_counter() - t_build
 
     # ---------------------------------------------------------------- building blocks
+    def _add_locked_joint(self, seg, parent_body, child_body, R_rel: np.ndarray) -> None:
+        """A rigid connection that keeps the child at the relative orientation R_rel."""
+        mbs = self._mbs
+        centre = [float(x) for x in seg.joint.centre_m]
+        m0 = mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=parent_body, localHT=exu.HT(rotation=R_rel, translation=centre)))
+        m1 = mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=child_body, localHT=exu.HT(rotation=np.eye(3), translation=[0.0, 0.0, 0.0])))
+        mbs.AddObject(eii.ObjectJointGeneric(markerNumbers=[m0, m1], constrainedAxes=[1, 1, 1, 1, 1, 1],
+                                             visualization=eii.VObjectJointGeneric(show=False)))
+
     def _add_joint(self, seg, parent_body, child_body) -> None:
         mbs = self._mbs
         joint = seg.joint

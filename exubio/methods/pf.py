@@ -20,6 +20,9 @@ tracked motion within about 0.05 s (the stiff spring-damper mode, d/m ~ 1e3 1/s)
 must also carry the limb's weight and every model point sags below its marker (about 1-2 mm
 and 1° on the synthetic trials; see the README).
 
+Segments that no marker observes (no marker on them or on a segment they carry) have their joints
+locked at the start posture; LS holds the same coordinates at their start value.
+
 A marker missing in a frame switches its spring off for that stretch (reported as a gap). A run
 whose solver stops, or whose spring deflections grow beyond ``divergence_deflection_m``, raises a
 ReconstructionError naming the time and the worst marker.
@@ -163,6 +166,18 @@ def project_on_constraints(kin: Kinematics, q: np.ndarray, qd: np.ndarray, qdd: 
     return q, qd, qdd, before
 
 
+def unobserved_segments(kin: Kinematics, points, /) -> tuple[int, ...]:
+    """Segments with no tracked marker on them or on any segment they carry: no spring can move
+    them, so their joints are locked at the start posture (a marker set without forearm or hand
+    markers, e.g. the thoracoscapular TRC set, leaves elbow, forearm and wrist unobserved)."""
+    observed = set()
+    for s in set(int(i) for i in points.segment_index):
+        while s >= 0 and s not in observed:
+            observed.add(s)
+            s = int(kin.parent_index[s])
+    return tuple(i for i in range(1, kin.n_segments) if i not in observed)
+
+
 def initial_state(kin: Kinematics, points, targets: MarkerTargets, stiffness: np.ndarray, /):
     """Static equilibrium of the springs at the first frame with its consistent velocity."""
     first = 0
@@ -195,9 +210,13 @@ def reconstruct_pf(model: Model, protocol: Protocol, targets: MarkerTargets, /, 
     stiffness = np.array([m.stiffness_n_per_m for m in protocol.markers])
     damping = np.array([m.damping_ns_per_m for m in protocol.markers])
     q0, qd0 = initial_state(kin, points, targets, stiffness)
+    locked = unobserved_segments(kin, points)
+    for i in locked:  # held at their start value, like LS does through its regularisation
+        qd0[kin.joint_coordinate_indices(i)] = 0.0
     t1 = time.perf_counter()
     springs = SpringSet.from_points(points, stiffness_n_per_m=stiffness, damping_ns_per_m=damping)
-    system = PFSystem(model, springs, q0=q0, qd0=qd0, gravity=options.gravity, kinematics=kin)
+    system = PFSystem(model, springs, q0=q0, qd0=qd0, gravity=options.gravity, kinematics=kin,
+                      locked_segments=locked)
     t2 = time.perf_counter()
     integ = IntegratorOptions(step_s=integration_step(dt, options.step_s, protocol.cutoff_hz),
                               spectral_radius=options.spectral_radius,
@@ -211,6 +230,7 @@ def reconstruct_pf(model: Model, protocol: Protocol, targets: MarkerTargets, /, 
         _raise_failure(kin, points, targets, run)
     q = kin.coordinates_from_rotations(run.rotations)
     q = np.unwrap(q, axis=0)
+    q -= 2.0 * np.pi * np.round((q[0] - q0) / (2.0 * np.pi))  # same branch as the start posture
     qd, qdd = kin.coordinate_rates(q, run.angular_velocities_rad_s, run.angular_accelerations_rad_s2)
     raw_g = raw_gqd = float("nan")
     if options.project_constraints:

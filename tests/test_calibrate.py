@@ -1,0 +1,392 @@
+"""Static calibration against known truths (a subject model made by scaling the generic one and
+moving its markers), the model file round trip, and the robustness of the whole pipeline on small
+trial files the tests write themselves (extra and prefixed labels, gaps anywhere, missing markers)."""
+import dataclasses
+
+import numpy as np
+import pytest
+
+from exubio.calibrate import (
+    CalibrationReport,
+    calibrate_model,
+    calibrated_protocol,
+    find_still_frames,
+    fit_ellipsoid,
+    format_report,
+    parse_frames,
+    scale_model,
+)
+from exubio.errors import InputError
+from exubio.evaluate import residual_statistics
+from exubio.io.c3d import write_c3d
+from exubio.kinematics import Kinematics
+from exubio.model import load_model, save_model
+from exubio.pipeline import load_model_and_protocol, reconstruct, reconstruct_file
+from exubio.preprocess import prepare_targets
+from exubio.protocol import load_protocol
+from exubio.resources import shipped_file
+from exubio.simulate import simulate_trial
+from exubio.types import Trajectories
+
+TRUE_SCALE = {"thorax": 1.05, "humerus": 1.10, "ulna": 0.95, "radius": 0.95, "hand": 1.05}
+MARKER_SHIFT_M = 0.005  # every marker of the subject sits 5 mm (random direction) off the generic one
+TRC_PROTOCOL = shipped_file("exubio.protocols", "thoracoscapular_9.yaml", "protocols")
+
+
+@pytest.fixture(scope="module")
+def generic():
+    return load_model_and_protocol()
+
+
+@pytest.fixture(scope="module")
+def subject(generic):
+    """The 'true' subject: the generic model scaled by TRUE_SCALE, markers moved by 5 mm."""
+    model, protocol = generic
+    truth = scale_model(model, TRUE_SCALE)
+    rng = np.random.default_rng(0)
+    markers = set(protocol.marker_names)
+    segments = []
+    for seg in truth.segments:
+        points = dict(seg.points)
+        for name in points:
+            if name in markers:
+                d = rng.normal(size=3)
+                points[name] = points[name] + MARKER_SHIFT_M * d / np.linalg.norm(d)
+        segments.append(dataclasses.replace(seg, points=points))
+    return dataclasses.replace(truth, segments=tuple(segments))
+
+
+@pytest.fixture(scope="module")
+def calibrated(generic, subject):
+    """The generic model calibrated on the first 0.2 s of a simulated abduction of the subject."""
+    model, protocol = generic
+    static = simulate_trial(subject, "abduction", duration_s=0.5, rate_hz=100.0)
+    cal, report = calibrate_model(model, protocol, static.trajectories, frames=slice(0, 20))
+    return cal, report, static
+
+
+def test_scale_factors_are_recovered(calibrated):
+    _, report, _ = calibrated
+    for seg, s in report.scale_factors.items():
+        assert s == pytest.approx(TRUE_SCALE.get(seg, 1.0), rel=0.03), (seg, s)
+    assert report.thorax_scale_measured
+    assert report.scale_factors["ulna"] == report.scale_factors["radius"]  # one forearm factor
+
+
+def test_marker_positions_are_recovered_within_a_few_mm(generic, subject, calibrated):
+    _, protocol = generic
+    cal, report, _ = calibrated
+    err = {}
+    for m in report.markers:
+        assert m.registered and m.point == m.name
+        err[m.name] = np.linalg.norm(cal.segment(m.segment).points[m.point] - subject.segment(m.segment).points[m.name])
+    err_mm = np.array(list(err.values())) * 1000
+    assert err_mm.max() < 6.0, err
+    assert err_mm.mean() < 3.5, err
+    # the generic model was 5 mm off everywhere (plus the scaling): that is what the offsets report
+    offsets = np.array([m.generic_offset_mm for m in report.markers])
+    assert np.all((offsets > 0.5) & (offsets < 12.0)), offsets
+
+
+def test_ellipsoid_passes_through_the_contact_points_at_the_static_pose(calibrated):
+    cal, report, _ = calibrated
+    kin = Kinematics(cal)
+    assert np.abs(kin.g(report.static_q_rad)).max() < 1e-10
+    assert report.constraint_abs < 1e-10
+    # radii keep the generic ratios
+    generic_radii = load_model().ellipsoid.radii_m
+    ratio = cal.ellipsoid.radii_m / generic_radii
+    assert np.ptp(ratio) < 1e-12
+
+
+def test_calibration_residual_is_reported_per_marker(calibrated):
+    cal, report, _ = calibrated
+    res = report.residual_mm
+    assert set(res) == {m.name for m in report.markers}
+    assert all(np.isfinite(v) and 0 <= v < 1.0 for v in res.values())  # noise-free static frames
+    assert report.mean_residual_mm < 1.0
+    assert cal.metadata["calibration"]["markers"]["EPI_lat"]["residual_mm"] == pytest.approx(res["EPI_lat"], abs=1e-3)
+    text = format_report(report)
+    assert "EPI_lat" in text and "calibration residual" in text
+
+
+def test_model_file_round_trip(tmp_path, generic, calibrated):
+    _, protocol = generic
+    cal, report, _ = calibrated
+    path = save_model(cal, tmp_path / "subject.yaml", calibration=report.to_dict())
+    back = load_model(path)
+    assert back.segment_names == cal.segment_names
+    assert back.coordinate_names == cal.coordinate_names
+    for a, b in zip(cal.segments, back.segments):
+        assert set(a.points) == set(b.points), a.name
+        for name in a.points:
+            np.testing.assert_allclose(b.points[name], a.points[name], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(b.com_m, a.com_m, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(b.inertia_kgm2, a.inertia_kgm2, rtol=1e-9, atol=1e-15)
+        assert b.mass_kg == pytest.approx(a.mass_kg, rel=1e-12)
+        if a.joint is not None:
+            np.testing.assert_allclose(b.joint.centre_m, a.joint.centre_m, rtol=0, atol=1e-9)
+            np.testing.assert_allclose(b.joint.axes, a.joint.axes, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(back.ellipsoid.centre_m, cal.ellipsoid.centre_m, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(back.ellipsoid.radii_m, cal.ellipsoid.radii_m, rtol=0, atol=1e-9)
+    recorded = back.metadata["calibration"]
+    assert recorded["scale_factors"]["humerus"] == pytest.approx(report.scale_factors["humerus"], abs=1e-6)
+    assert recorded["frames"]["start"] == 0 and recorded["frames"]["stop"] == 20
+    assert set(recorded["markers"]) == set(protocol.marker_names)
+    # the protocol, loaded against the file's points, picks up the calibrated positions
+    reloaded = load_protocol(protocol.source, segments=back.segment_names,
+                             model_points={s.name: dict(s.points) for s in back.segments})
+    for m, c in zip(reloaded.markers, calibrated_protocol(protocol, cal).markers):
+        np.testing.assert_allclose(m.local_position_m, c.local_position_m, rtol=0, atol=1e-9)
+    # body mass still scales the inertia of a written model
+    heavier = load_model(path, body_mass_kg=2 * cal.body_mass_kg)
+    assert heavier.segment("humerus").mass_kg == pytest.approx(2 * cal.segment("humerus").mass_kg)
+
+
+def test_calibrated_model_tracks_the_subject_better_than_the_generic(generic, subject, calibrated):
+    model, protocol = generic
+    cal, _, _ = calibrated
+    trial = simulate_trial(subject, "abduction", duration_s=5.0, rate_hz=100.0, noise_mm=1.0, seed=3)
+    targets = prepare_targets(trial.trajectories, protocol)
+    gen = reconstruct(model, protocol, targets, method="ls")
+    sub = reconstruct(cal, calibrated_protocol(protocol, cal), targets, method="ls")
+    r_gen, r_sub = residual_statistics(gen), residual_statistics(sub)
+    assert r_sub["mean"] < 0.2 * r_gen["mean"], (r_sub["mean"], r_gen["mean"])
+    assert r_sub["max_frame_mean"] < 3.0
+    assert np.abs(sub.constraint).max() < 1e-8
+    # and the joint angles come closer to the truth
+    rmse = lambda rec: np.sqrt(np.mean(np.rad2deg(rec.q_rad - trial.q_true) ** 2))
+    assert rmse(sub) < rmse(gen)
+
+
+def test_joint_centre_markers_are_registered_beside_the_joint(generic, tmp_path):
+    """The TRC set ties gu to GH and centelbow to EJC: the calibration registers them as points of
+    their own and leaves the joint centres; ts and ai become the ellipsoid contact points."""
+    model, _ = generic
+    protocol = load_protocol(TRC_PROTOCOL, segments=model.segment_names,
+                             model_points={s.name: dict(s.points) for s in model.segments})
+    sim = simulate_trial(model, "flexion", duration_s=0.3, rate_hz=100.0, lab_transform=False,
+                         marker_names=("AA", "TS", "AI", "GH", "EL", "EJC"))
+    traj = dataclasses.replace(sim.trajectories, labels=("aa", "ts", "ai", "gu", "EpL", "centelbow"))
+    cal, report = calibrate_model(model, protocol, traj, frames=slice(0, 10))
+    points = {m.name: m.point for m in report.markers}
+    assert points == {"aa": "AA", "ts": "TS", "ai": "AI", "gu": "gu", "EpL": "EL", "centelbow": "centelbow"}
+    hum, gen_hum = cal.segment("humerus"), scale_model(model, report.scale_factors).segment("humerus")
+    np.testing.assert_allclose(hum.points["GH"], 0.0, atol=1e-15)  # GH is still the humerus origin
+    np.testing.assert_allclose(cal.segment("ulna").joint.centre_m, gen_hum.points["EJC"], atol=1e-12)
+    # forearm and hand carry no marker: not scaled
+    assert report.scale_factors["ulna"] == report.scale_factors["hand"] == 1.0
+    # noise-free truth = generic model: gu lands (nearly) on GH, and the protocol binds to it
+    assert np.linalg.norm(hum.points["gu"]) < 0.003
+    bound = calibrated_protocol(protocol, cal)
+    np.testing.assert_array_equal(bound.markers[protocol.marker_names.index("gu")].local_position_m, hum.points["gu"])
+    # from the model file: the protocol loaded against its points ties gu to the joint centre GH;
+    # calibrated_protocol rebinds it to the registered point the file records
+    back = load_model(save_model(cal, tmp_path / "trc_subject.yaml", calibration=report.to_dict()))
+    from_file = load_protocol(TRC_PROTOCOL, segments=back.segment_names,
+                              model_points={s.name: dict(s.points) for s in back.segments})
+    np.testing.assert_array_equal(from_file.markers[3].local_position_m, back.segment("humerus").points["GH"])
+    rebound = calibrated_protocol(from_file, back)
+    for a, b in zip(rebound.markers, bound.markers):
+        np.testing.assert_allclose(a.local_position_m, b.local_position_m, rtol=0, atol=1e-9)
+    kin = Kinematics(cal)
+    contacts = kin.points(report.static_q_rad, kin.contacts)
+    static = np.nanmean(prepare_targets(traj, protocol).positions_m[:10], axis=0)
+    np.testing.assert_allclose(contacts, static[[1, 2]], atol=1e-12)  # ts, ai
+    assert np.abs(kin.g(report.static_q_rad)).max() < 1e-10
+
+
+def test_a_marker_absent_from_the_calibration_frames(generic, subject):
+    model, protocol = generic
+    static = simulate_trial(subject, "abduction", duration_s=0.3, rate_hz=100.0)
+    pos = static.trajectories.positions_m.copy()
+    traj = static.trajectories
+    pos[:, traj.index("ELB")] = np.nan  # optional: keeps its scaled generic position
+    cal, report = calibrate_model(model, protocol, dataclasses.replace(traj, positions_m=pos), frames=slice(0, 20))
+    elb = next(m for m in report.markers if m.name == "ELB")
+    assert not elb.registered and np.isnan(elb.residual_mm)
+    expected = model.segment("ulna").points["ELB"] * report.scale_factors["ulna"]
+    # the registered model frame differs from the scaled generic one only by the static pose error
+    assert np.linalg.norm(cal.segment("ulna").points["ELB"] - expected) < 0.01
+    pos[:25, traj.index("SEML")] = np.nan  # not optional: a clear error naming it
+    with pytest.raises(InputError, match="SEML.*calibration frames 0:20"):
+        calibrate_model(model, protocol, dataclasses.replace(traj, positions_m=pos), frames=slice(0, 20))
+
+
+def test_static_frames():
+    assert parse_frames("10:60") == slice(10, 60)
+    assert parse_frames(":50") == slice(None, 50)
+    assert parse_frames(None) is None and parse_frames("") is None
+    for bad in ("10", "a:b", "1:2:0"):
+        with pytest.raises(InputError, match="static-frames"):
+            parse_frames(bad)
+
+
+def test_still_frames_are_found(generic):
+    model, protocol = generic
+    sim = simulate_trial(model, "abduction", duration_s=4.0, rate_hz=100.0)
+    pos = sim.trajectories.positions_m.copy()
+    pos[100:250] = pos[100]  # hold the pose for 1.5 s (the 2 Hz filter blurs its edges)
+    targets = prepare_targets(dataclasses.replace(sim.trajectories, positions_m=pos), protocol)
+    found = find_still_frames(targets)
+    assert 100 <= found.start and found.stop <= 250 and found.stop - found.start >= 50, found
+
+
+def test_ellipsoid_fit_keeps_ratios_and_moves_in_the_sagittal_plane():
+    ell = load_model().ellipsoid
+    contacts = np.array([[-0.14, -0.02, 0.09], [-0.13, -0.15, 0.10]])
+    fitted, k = fit_ellipsoid(ell, contacts)
+    d = (contacts - fitted.centre_m) / fitted.radii_m
+    np.testing.assert_allclose((d * d).sum(axis=1), 1.0, atol=1e-12)
+    assert fitted.centre_m[2] == ell.centre_m[2]
+    np.testing.assert_allclose(fitted.radii_m / ell.radii_m, k)
+
+
+# --------------------------------------------------------------------------------------------
+# Robustness of the pipeline on small files
+# --------------------------------------------------------------------------------------------
+GAPS = {  # marker -> missing frames [start, stop) of the 100-frame test trial
+    "CLAV_SC": (0, 8),  # at the very start
+    "MET2": (94, 100),  # at the very end
+    "DELT": (50, 51),  # one frame
+    "SCAP_FRONT": (20, 70),  # half the trial
+}
+
+
+def _messy_trial(model, path, *, drop=(), never=()) -> Trajectories:
+    """A 2 s, 50 Hz abduction written as C3D with 'Subject:' prefixes, two extra labelled
+    markers, an unlabelled one, the gaps of GAPS, markers in ``drop`` left out and markers in
+    ``never`` present but missing in every frame."""
+    sim = simulate_trial(model, "abduction", duration_s=2.0, rate_hz=50.0, noise_mm=0.5, seed=5)
+    t = sim.trajectories
+    pos = t.positions_m.copy()
+    for name, (a, b) in GAPS.items():
+        pos[a:b, t.index(name)] = np.nan
+    for name in never:
+        pos[:, t.index(name)] = np.nan
+    keep = [i for i, lab in enumerate(t.labels) if lab not in drop]
+    extra = pos[:, [t.index("ARM")]] + np.array([0.0, 0.05, 0.0])
+    labels = [f"Subject:{t.labels[i]}" for i in keep] + ["Subject:EXTRA_1", "Subject:KNEE", "*12"]
+    pos = np.concatenate([pos[:, keep], extra, extra + 0.1, extra - 0.1], axis=1)
+    write_c3d(path, Trajectories(tuple(labels), pos, t.rate_hz, t.time_s, source="test"))
+    return t
+
+
+@pytest.fixture(scope="module")
+def messy_results(tmp_path_factory, generic):
+    model, _ = generic
+    folder = tmp_path_factory.mktemp("messy")
+    trial = folder / "messy.c3d"
+    _messy_trial(model, trial)
+    return reconstruct_file(trial, folder / "out", methods=["ls", "pf"])
+
+
+def test_extra_and_prefixed_labels(messy_results):
+    for recon, _, summ in messy_results:
+        assert set(summ["unused_trial_labels"]) >= {"EXTRA_1", "KNEE", "*12"}
+        assert "ARM" in recon.marker_names  # 'Subject:ARM' found as ARM
+
+
+@pytest.mark.parametrize("which", [0, 1], ids=["ls", "pf"])
+def test_gaps_anywhere_are_handled_and_reported(messy_results, which):
+    recon, _, summ = messy_results[which]
+    gaps = {(g["marker"], g["start_frame"], g["stop_frame"]) for g in summ["gaps"]}
+    assert gaps == {(m, a, b) for m, (a, b) in GAPS.items()}
+    assert np.isfinite(recon.q_rad).all() and np.isfinite(recon.qd_rad_s).all()
+    assert np.abs(recon.constraint).max() < 1e-8
+    for name, (a, b) in GAPS.items():
+        j = recon.marker_names.index(name)
+        assert np.isnan(recon.residuals_m[a:b, j]).all()
+        assert np.isfinite(np.delete(recon.residuals_m[:, j], np.arange(a, b))).all()
+    assert summ["residual_mm"]["max_frame_mean"] < 5.0  # generic model on its own simulation
+    assert summ["frames"]["converged"] == recon.n_frames
+
+
+def test_a_protocol_marker_that_never_appears(tmp_path, generic):
+    model, protocol = generic
+    trial = tmp_path / "no_seml.c3d"
+    _messy_trial(model, trial, drop=("SEML",))
+    with pytest.raises(InputError, match="SEML"):
+        reconstruct_file(trial, tmp_path / "out", methods=["ls"])
+    trial = tmp_path / "nan_seml.c3d"
+    _messy_trial(model, trial, never=("SEML",))
+    with pytest.raises(InputError, match="SEML"):
+        reconstruct_file(trial, tmp_path / "out", methods=["ls"])
+    # unless the protocol marks it optional (ELB already is)
+    text = shipped_file("exubio.protocols", "upper_limb_21.yaml", "protocols").read_text()
+    text = text.replace("SEML:       {segment: hand, point: SEML}", "SEML:       {segment: hand, point: SEML, optional: true}")
+    custom = tmp_path / "optional_seml.yaml"
+    custom.write_text(text)
+    trial = tmp_path / "no_seml_elb.c3d"
+    _messy_trial(model, trial, drop=("SEML", "ELB"))
+    (recon, _, summ), = reconstruct_file(trial, tmp_path / "out2", methods=["ls"], protocol_path=custom)
+    assert np.isnan(recon.residuals_m[:, recon.marker_names.index("SEML")]).all()
+    assert summ["residual_mm"]["per_marker_rmse"]["SEML"] is None
+    assert np.abs(recon.constraint).max() < 1e-8
+
+
+def test_report_is_a_dataclass_with_plain_data(calibrated):
+    _, report, _ = calibrated
+    assert isinstance(report, CalibrationReport)
+    d = report.to_dict()
+    import json
+
+    json.dumps(d)  # plain data only
+    assert d["residual_mm"]["mean"] == pytest.approx(report.mean_residual_mm)
+
+
+def test_written_inertia_keys_are_checked(tmp_path, calibrated):
+    """The explicit inertia form save_model writes (com_mm, inertia_kgm2_per_kg) is validated."""
+    from exubio.errors import ModelError
+
+    cal, report, _ = calibrated
+    path = save_model(cal, tmp_path / "m.yaml", calibration=None)
+    text = path.read_text()
+    assert "com_mm" in text and "com_between" not in text
+    both = text.replace("    com_mm:", "    com_between: [GH, EJC]\n    com_mm:", 1)
+    with pytest.raises(ModelError, match="com_mm"):
+        load_model(_write(tmp_path, "both.yaml", both))
+    bad = text.replace("inertia_kgm2_per_kg:\n    - [", "inertia_kgm2_per_kg:\n    - [1.0, ", 1)
+    with pytest.raises(ModelError, match="inertia_kgm2_per_kg"):
+        load_model(_write(tmp_path, "bad.yaml", bad))
+
+
+def _write(folder, name, text):
+    p = folder / name
+    p.write_text(text)
+    return p
+
+
+def test_anatomical_fit_jacobian_matches_finite_differences(generic):
+    """d(model points)/d(q, scale factors) of the anatomical fit against central differences at
+    random poses and scale factors."""
+    from exubio.calibrate import _Anchor, _groups
+
+    model, protocol = generic
+    group_of = _groups(model, {"ulna": "forearm", "radius": "forearm"})
+    groups = list(dict.fromkeys(group_of.values()))
+    seg_index = np.array([model.segment_index(m.segment) for m in protocol.markers])
+    local = np.array([m.local_position_m for m in protocol.markers])
+    rng = np.random.default_rng(7)
+    anchor = _Anchor(model=model, seg_index=seg_index, local_generic=local, target=np.zeros((len(local), 3)),
+                     groups=groups, group_of=group_of, fixed={"thorax": 1.07}, prior_q=np.zeros(model.n_coordinates))
+    w = np.ones(len(local))
+    h = 1e-6
+    for _ in range(3):
+        q = rng.uniform(-1.0, 1.0, model.n_coordinates)
+        s = {g: (1.07 if g == "thorax" else float(rng.uniform(0.8, 1.2))) for g in groups}
+        _, e, J = anchor.evaluate(q, s, w, jacobian=True)
+        # the points themselves: the scaled model's forward kinematics
+        kin, pts = anchor.points(s)
+        np.testing.assert_allclose(e, kin.points(q, pts), rtol=0, atol=1e-12)
+        fd = []
+        for j in range(model.n_coordinates):
+            dq = np.zeros_like(q)
+            dq[j] = h
+            fd.append((anchor.evaluate(q + dq, s, w, jacobian=False)[1] - anchor.evaluate(q - dq, s, w, jacobian=False)[1]) / (2 * h))
+        for g in anchor.free:
+            up, dn = dict(s), dict(s)
+            up[g] += h
+            dn[g] -= h
+            fd.append((anchor.evaluate(q, up, w, jacobian=False)[1] - anchor.evaluate(q, dn, w, jacobian=False)[1]) / (2 * h))
+        np.testing.assert_allclose(J, np.stack(fd, axis=2), rtol=0, atol=1e-8)
