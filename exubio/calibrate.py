@@ -72,7 +72,7 @@ from exubio.errors import InputError, ModelError, ProtocolError
 from exubio.kinematics import Kinematics, PointSet
 from exubio.methods.common import tracked_points
 from exubio.methods.ls import LSOptions, solve_positions
-from exubio.preprocess import prepare_targets, thorax_frame, to_thorax_frame, valid_runs
+from exubio.preprocess import isb_landmarks, prepare_targets, thorax_frame, to_thorax_frame, valid_runs
 from exubio.protocol import resolve_labels
 from exubio.types import Ellipsoid, MarkerTargets, Model, Protocol, Trajectories
 
@@ -317,10 +317,12 @@ def _thorax_scale(model: Model, protocol: Protocol, traj: Trajectories, frames: 
         return None
     thorax = model.segments[0]
     match = resolve_labels(protocol, traj.labels, source=traj.source)
-    keys = ("ij", "px", "c7", "t8")
+    keys = frame.keys
+    if "c7" not in keys:
+        return None  # only the two midpoints: no landmark distances to scale the thorax with
     isb = {"ij": "IJ", "px": "PX", "c7": "C7", "t8": "T8"}
     lab = {k: traj.positions_m[list(frames), match.thorax_columns[k]] for k in keys}
-    rot, origin = thorax_frame(lab["ij"], lab["px"], lab["c7"], lab["t8"])
+    rot, origin = thorax_frame(*isb_landmarks(lab))
     measured, modelled = {}, {}
     for k in keys:
         label = getattr(frame, k)

@@ -156,6 +156,20 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_validate(args: argparse.Namespace) -> int:
+    from exubio.validate import run_validation
+
+    runs = run_validation(args.out, quick=args.quick,
+                          progress=None if args.quiet else (lambda msg: print(msg, file=sys.stderr)))
+    checks = runs.get("checks", [])
+    for c in checks:
+        print(f"{'PASS' if c['passed'] else 'FAIL'}  {c['what']}: {c['value']:.3g} {c['unit']} "
+              f"(limit {c['limit']:.3g} {c['unit']})")
+    print(f"wrote {Path(args.out) / 'validation.pdf'}, the figures and table1.json; "
+          f"{sum(bool(c['passed']) for c in checks)}/{len(checks)} checks passed")
+    return EXIT_OK
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="exubio", description="Upper-extremity joint kinematics from skin markers "
                                 "(potential-field and least-squares methods on Exudyn).")
@@ -199,6 +213,11 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--out", required=True, help="MODEL.yaml to write")
     c.add_argument("--overwrite", action="store_true", help="replace an existing MODEL.yaml")
     c.set_defaults(func=cmd_calibrate)
+
+    v = sub.add_parser("validate", help="the paper's evaluation (Fig. 2-5, Table 1) as a PDF/PNG report")
+    v.add_argument("--out", default="reports/validation", help="output folder (default reports/validation)")
+    v.add_argument("--quick", action="store_true", help="short trials (a smoke run, not the report)")
+    v.set_defaults(func=cmd_validate)
 
     d = sub.add_parser("demo", help="reconstruct the shipped example trial with PF and LS, compare with its truth")
     d.add_argument("--out", default="exubio_demo", help="output folder (default ./exubio_demo)")

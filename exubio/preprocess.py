@@ -28,6 +28,7 @@ __all__ = [
     "spline_derivatives",
     "thorax_frame",
     "to_thorax_frame",
+    "isb_landmarks",
     "valid_runs",
 ]
 
@@ -80,6 +81,16 @@ def thorax_frame(
     z = np.cross(x, y)  # exactly orthonormal despite rounding
     rot = np.stack([x, y, z], axis=-1)
     return rot, ij.copy()
+
+
+def isb_landmarks(landmarks: dict[str, np.ndarray], /) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(IJ, PX, C7, T8) from the landmarks a protocol names: either those four, or IJ with the
+    midpoints IJ-C7 and PX-T8 (then C7 = 2 mid_up - IJ and PX = T8 = mid_low, which give the same
+    ISB axes: Y through the two midpoints, Z normal to the plane of IJ, C7 and the PX-T8 midpoint)."""
+    if "c7" in landmarks:
+        return landmarks["ij"], landmarks["px"], landmarks["c7"], landmarks["t8"]
+    ij, up, low = landmarks["ij"], landmarks["ij_c7_midpoint"], landmarks["px_t8_midpoint"]
+    return ij, low, 2.0 * up - ij, low
 
 
 def to_thorax_frame(positions: np.ndarray, rot: np.ndarray, origin: np.ndarray, /) -> np.ndarray:
@@ -314,7 +325,7 @@ def prepare_targets(
                 )
             landmarks[key] = filled
         try:
-            rot, origin = thorax_frame(landmarks["ij"], landmarks["px"], landmarks["c7"], landmarks["t8"])
+            rot, origin = thorax_frame(*isb_landmarks(landmarks))
         except InputError as exc:
             raise InputError(f"{src}: {exc}") from None
         pos = to_thorax_frame(pos, rot, origin)

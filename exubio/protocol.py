@@ -38,6 +38,7 @@ THORAX_SEGMENT = "thorax"  # the fixed segment: its markers only build the thora
 
 _TOP_KEYS = ("schema_version", "name", "description", "thorax_frame", "filter", "defaults", "markers")
 _FRAME_KEYS = ("ij", "px", "c7", "t8")
+_MIDPOINT_FRAME_KEYS = ("ij", "ij_c7_midpoint", "px_t8_midpoint")
 _FILTER_KEYS = ("cutoff_hz", "order")
 _DEFAULT_KEYS = ("stiffness_n_per_m", "damping_ns_per_m")
 _MARKER_KEYS = (
@@ -172,19 +173,21 @@ def _parse_thorax_frame(data: Mapping[str, Any], src: str) -> ThoraxFrameSpec:
         raise ProtocolError(
             f"{src}: thorax_frame must be 'identity' or a mapping {{ij, px, c7, t8}}, got {_kind(raw)}"
         )
-    check_keys(raw, _FRAME_KEYS, where="thorax_frame", source=src)
+    keys = _MIDPOINT_FRAME_KEYS if ("ij_c7_midpoint" in raw or "px_t8_midpoint" in raw) else _FRAME_KEYS
+    check_keys(raw, keys, where="thorax_frame", source=src)
     labels: dict[str, str] = {}
-    for key in _FRAME_KEYS:
+    for key in keys:
         if key not in raw:
             raise ProtocolError(
-                f"{src}: thorax_frame.{key} is missing; the ISB thorax frame needs all of {list(_FRAME_KEYS)}"
+                f"{src}: thorax_frame.{key} is missing; the ISB thorax frame needs all of {list(keys)} "
+                f"(or {list(_FRAME_KEYS) if keys != _FRAME_KEYS else list(_MIDPOINT_FRAME_KEYS)})"
             )
         value = raw[key]
         if not isinstance(value, str) or not value:
             raise ProtocolError(f"{src}: thorax_frame.{key} must be a trial marker label, got {_kind(value)}")
         labels[key] = value
     if len(set(labels.values())) != len(labels):
-        raise ProtocolError(f"{src}: thorax_frame needs four different labels, got {labels}")
+        raise ProtocolError(f"{src}: thorax_frame needs {['', '', '', 'three', 'four'][len(keys)]} different labels, got {labels}")
     return ThoraxFrameSpec(**labels)
 
 
@@ -406,7 +409,7 @@ def resolve_labels(protocol: Protocol, labels: Sequence[str], /, *, source: str 
     thorax: dict[str, int] = {}
     frame = protocol.thorax_frame
     if not frame.is_identity:
-        for key in _FRAME_KEYS:
+        for key in frame.keys:
             lab = getattr(frame, key)
             if lab not in index:
                 missing.append(f"'{lab}' (thorax_frame.{key})")

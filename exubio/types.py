@@ -226,17 +226,29 @@ class MarkerSpec:
 
 @dataclass(frozen=True)
 class ThoraxFrameSpec:
-    """How the ISB thorax frame is built from thorax landmarks, or ``None`` labels when the data
+    """How the ISB thorax frame is built: from the trial labels of IJ, PX, C7 and T8; or from IJ and
+    the two midpoints IJ-C7 and PX-T8 (which define the same frame); or, with no labels, the data
     are already expressed in a thorax-fixed frame (identity)."""
 
     ij: str | None = None
     px: str | None = None
     c7: str | None = None
     t8: str | None = None
+    ij_c7_midpoint: str | None = None
+    px_t8_midpoint: str | None = None
 
     @property
     def is_identity(self) -> bool:
         return self.ij is None
+
+    @property
+    def keys(self) -> tuple[str, ...]:
+        """The landmark keys this frame is built from (empty for identity)."""
+        if self.is_identity:
+            return ()
+        if self.ij_c7_midpoint is not None:
+            return ("ij", "ij_c7_midpoint", "px_t8_midpoint")
+        return ("ij", "px", "c7", "t8")
 
 
 @dataclass(frozen=True)

@@ -166,8 +166,11 @@ def test_joint_centre_markers_are_registered_beside_the_joint(generic, tmp_path)
     protocol = load_protocol(TRC_PROTOCOL, segments=model.segment_names,
                              model_points={s.name: dict(s.points) for s in model.segments})
     sim = simulate_trial(model, "flexion", duration_s=0.3, rate_hz=100.0, lab_transform=False,
-                         marker_names=("AA", "TS", "AI", "GH", "EL", "EJC"))
-    traj = dataclasses.replace(sim.trajectories, labels=("aa", "ts", "ai", "gu", "EpL", "centelbow"))
+                         marker_names=("AA", "TS", "AI", "GH", "EL", "EJC", "IJ", "C7", "PX", "T8"))
+    pos = sim.trajectories.positions_m
+    thorax = np.stack([pos[:, 6], 0.5 * (pos[:, 6] + pos[:, 7]), 0.5 * (pos[:, 8] + pos[:, 9])], axis=1)
+    traj = dataclasses.replace(sim.trajectories, positions_m=np.concatenate([pos[:, :6], thorax], axis=1),
+                               labels=("aa", "ts", "ai", "gu", "EpL", "centelbow", "ij", "centijc7", "centpxt8"))
     cal, report = calibrate_model(model, protocol, traj, frames=slice(0, 10))
     points = {m.name: m.point for m in report.markers}
     assert points == {"aa": "AA", "ts": "TS", "ai": "AI", "gu": "gu", "EpL": "EL", "centelbow": "centelbow"}

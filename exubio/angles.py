@@ -1,0 +1,271 @@
+"""ISB joint angles of the shoulder: Euler/Cardan decompositions, the ISB anatomical frames of the
+model's segments, and the sternoclavicular (SC), acromioclavicular (AC), scapulothoracic (ST),
+glenohumeral (GH) and humerothoracic (HT) angles of a motion.
+
+Conventions
+-----------
+* Sequences are **intrinsic** (mobile axes): ``"YXZ"`` (also written ``"Y-X'-Z''"``) means
+  R = R_Y(a) R_X(b) R_Z(c), the second rotation about the once-rotated X axis, and so on.
+  ``euler_angles`` returns (a, b, c) in radians, each in (-pi, pi].
+* Tait-Bryan (Cardan) sequences (three different axes): b in [-pi/2, pi/2]. Proper Euler
+  sequences (first axis = last axis, e.g. ``"YXY"``): b in [0, pi] by default, or in [-pi, 0]
+  with ``negative_middle=True`` (ISB humerothoracic elevation is negative).
+* Gimbal lock (cos b = 0 for Tait-Bryan, sin b = 0 for proper Euler, within ``gimbal_tol``): only
+  a +- c is defined; the first angle is set to 0 and the third carries the whole rotation.
+* Anatomical frames follow Wu et al. 2005 (J Biomech 38:981-992) for a right arm, from the model's
+  landmarks in its reference posture (where every segment frame is parallel to the ISB thorax
+  frame X anterior, Y superior, Z right):
+
+  - thorax: the global frame (the model is defined in the ISB thorax frame);
+  - clavicle: Z from SC to AC; X perpendicular to Z and to the thorax Y axis, anterior
+    (X = Y_thorax x Z); Y = Z x X;
+  - scapula: Z from TS to AA; X normal to the plane AI-AA-TS, anterior; Y = Z x X;
+  - humerus (Wu option 1): Y from the elbow centre to GH; X normal to the plane EL-EM-GH,
+    anterior; Z = X x Y. The elbow centre is the model's elbow joint centre EJC (in the generic
+    model the midpoint of EL and EM; on a calibrated model the registered elbow-centre marker),
+    else the midpoint of EL and EM; the plane is spanned by GH, the centre and EL (EL - EJC is
+    parallel to EL - EM when EJC is their midpoint), so a calibration that registers only EL
+    and EJC still gives Wu's frame.
+
+* Joint angles are the decomposition of the relative rotation R_proximal^T R_distal of the
+  anatomical frames, **without any sign flip**: SC, AC, ST in Y-X'-Z''; GH in X-Z'-Y'' (Phadke
+  et al. 2011, the sequence of the paper and of Ludewig et al. 2009 as distributed by Spartacus);
+  HT in Y-X'-Y'' with the middle angle <= 0. For a right arm this gives (verified on the
+  simulated abduction and flexion of ``exubio.simulate``, see tests/test_angles.py):
+
+  ====  =====================  ===========================  ==============================
+  joint first angle            second angle                 third angle
+  ====  =====================  ===========================  ==============================
+  SC    Y: + protraction,      X': - elevation              Z'': + posterior (backward)
+        - retraction                                        axial rotation
+  AC    Y: + internal rotation X': - upward rotation        Z'': + posterior tilt
+  ST    Y: + internal rotation X': - upward rotation        Z'': + posterior tilt
+  GH    X: - elevation         Z': + flexion (forward)      Y'': + internal, - external
+        (abduction)                                         axial rotation
+  HT    Y: plane of elevation  X': - elevation              Y'': + internal axial rotation
+        (0 abduction, 90 deg
+        forward flexion)
+  ====  =====================  ===========================  ==============================
+
+  These are the signs of Ludewig et al. 2009's published means (retraction, elevation, posterior
+  clavicle rotation, scapular upward rotation and posterior tilt during arm elevation come out
+  negative, negative, positive, negative, positive). ``humerothoracic_elevation`` is the positive
+  angle between the humerus long axis and the thorax Y axis (= -b of HT).
+"""
+from __future__ import annotations
+
+from typing import Mapping
+
+import numpy as np
+
+from exubio.errors import InputError, ModelError
+from exubio.kinematics import Kinematics
+from exubio.types import Model
+
+__all__ = [
+    "ISB_SEQUENCES",
+    "ANGLE_NAMES",
+    "anatomical_frames",
+    "euler_angles",
+    "humerothoracic_elevation",
+    "isb_angles",
+    "rotation_from_euler",
+    "segment_anatomical_rotations",
+]
+
+ISB_SEQUENCES: dict[str, str] = {"SC": "YXZ", "AC": "YXZ", "ST": "YXZ", "GH": "XZY", "HT": "YXY"}
+"""Rotation sequence of every joint angle set (intrinsic)."""
+
+ANGLE_NAMES: dict[str, tuple[str, str, str]] = {
+    "SC": ("protraction (+) / retraction (-)", "elevation (-)", "posterior rotation (+)"),
+    "AC": ("internal rotation (+)", "upward rotation (-)", "posterior tilt (+)"),
+    "ST": ("internal rotation (+)", "upward rotation (-)", "posterior tilt (+)"),
+    "GH": ("elevation (-)", "forward flexion (+)", "internal (+) / external (-) rotation"),
+    "HT": ("plane of elevation", "elevation (-)", "axial rotation, internal (+)"),
+}
+"""What each of the three angles means, with its sign (right arm)."""
+
+# (proximal frame, distal frame) of every joint angle set; "thorax" is the global frame
+_JOINTS: dict[str, tuple[str, str]] = {
+    "SC": ("thorax", "clavicle"),
+    "AC": ("clavicle", "scapula"),
+    "ST": ("thorax", "scapula"),
+    "GH": ("scapula", "humerus"),
+    "HT": ("thorax", "humerus"),
+}
+
+_AXES = {"X": 0, "Y": 1, "Z": 2}
+
+
+# --------------------------------------------------------------------------------------------
+# Euler / Cardan angles
+# --------------------------------------------------------------------------------------------
+def _parse_sequence(sequence: str) -> tuple[int, int, int]:
+    letters = [ch for ch in str(sequence).upper() if ch in "XYZ"]
+    rest = [ch for ch in str(sequence).upper() if ch not in "XYZ-' "]
+    if len(letters) != 3 or rest or letters[0] == letters[1] or letters[1] == letters[2]:
+        raise InputError(
+            f"rotation sequence '{sequence}': expected three axes out of X, Y, Z with no axis repeated "
+            f"in succession, e.g. 'YXZ', \"Y-X'-Z''\" or 'YXY'"
+        )
+    return _AXES[letters[0]], _AXES[letters[1]], _AXES[letters[2]]
+
+
+def _basic_rotation(axis: int, angle: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) about coordinate axis ``axis`` (0, 1, 2) by ``angle`` (...)."""
+    angle = np.asarray(angle, dtype=float)
+    c, s = np.cos(angle), np.sin(angle)
+    R = np.zeros(angle.shape + (3, 3))
+    u, v = (axis + 1) % 3, (axis + 2) % 3
+    R[..., axis, axis] = 1.0
+    R[..., u, u] = c
+    R[..., v, v] = c
+    R[..., v, u] = s
+    R[..., u, v] = -s
+    return R
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    """Angles in (-pi, pi]."""
+    return np.pi - np.mod(np.pi - a, 2.0 * np.pi)
+
+
+def rotation_from_euler(angles: np.ndarray, sequence: str, /) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) from intrinsic angles (..., 3) in radians:
+    R = R_a1(angles[..., 0]) R_a2(angles[..., 1]) R_a3(angles[..., 2])."""
+    i, j, k = _parse_sequence(sequence)
+    angles = np.asarray(angles, dtype=float)
+    if angles.shape[-1:] != (3,):
+        raise InputError(f"angles must have shape (..., 3), got {angles.shape}")
+    return _basic_rotation(i, angles[..., 0]) @ _basic_rotation(j, angles[..., 1]) @ _basic_rotation(k, angles[..., 2])
+
+
+def euler_angles(R: np.ndarray, sequence: str, /, *, negative_middle: bool = False,
+                 gimbal_tol: float = 1e-9) -> np.ndarray:
+    """Intrinsic angles (..., 3) in radians of rotation matrices R (..., 3, 3) in ``sequence``
+    (see the module docstring for ranges and the gimbal-lock rule).
+
+    negative_middle: proper Euler sequences only: take the branch with the middle angle in
+        [-pi, 0] instead of [0, pi] (both describe the same rotation).
+    gimbal_tol: |cos b| (Tait-Bryan) or |sin b| (proper Euler) below which the sequence is
+        treated as locked: the first angle is then 0.
+    """
+    i, j, k = _parse_sequence(sequence)
+    R = np.asarray(R, dtype=float)
+    if R.shape[-2:] != (3, 3):
+        raise InputError(f"rotation matrices must have shape (..., 3, 3), got {R.shape}")
+    s = 1.0 if (j - i) % 3 == 1 else -1.0  # parity of the axis order
+    if i != k:  # Tait-Bryan
+        b = np.arctan2(s * R[..., i, k], np.hypot(R[..., i, i], R[..., i, j]))
+        a = np.arctan2(-s * R[..., j, k], R[..., k, k])
+        locked = np.cos(b) < gimbal_tol
+    else:  # proper Euler
+        m = 3 - i - j
+        sb = np.hypot(R[..., i, j], R[..., i, m])
+        b = np.arctan2(sb, R[..., i, i])
+        a = np.arctan2(R[..., j, i], -s * R[..., m, i])
+        if negative_middle:
+            b, a = -b, a + np.pi
+        locked = sb < gimbal_tol
+    a = np.where(locked, 0.0, a)
+    # third angle from what the first two leave: R_k(c) = R_j(b)^T R_i(a)^T R
+    M = np.swapaxes(_basic_rotation(i, a) @ _basic_rotation(j, b), -1, -2) @ R
+    u, v = (k + 1) % 3, (k + 2) % 3
+    c = np.arctan2(M[..., v, u] - M[..., u, v], M[..., u, u] + M[..., v, v])
+    return np.stack([_wrap(a), _wrap(b), _wrap(c)], axis=-1)
+
+
+# --------------------------------------------------------------------------------------------
+# Anatomical frames
+# --------------------------------------------------------------------------------------------
+def _unit(v: np.ndarray, what: str, model: Model) -> np.ndarray:
+    n = float(np.linalg.norm(v))
+    if n < 1e-9:
+        raise ModelError(f"{model.source or model.name}: cannot build the ISB frame: {what} has zero length")
+    return v / n
+
+
+def _point(model: Model, segment: str, name: str) -> np.ndarray:
+    seg = model.segment(segment)
+    if name not in seg.points:
+        raise ModelError(
+            f"{model.source or model.name}: the ISB {segment} frame needs landmark '{name}' on segment "
+            f"'{segment}'; it has {sorted(seg.points)}"
+        )
+    return np.asarray(seg.points[name], dtype=float)
+
+
+def anatomical_frames(model: Model, /) -> dict[str, np.ndarray]:
+    """ISB anatomical frames (Wu et al. 2005, module docstring) of thorax, clavicle, scapula and
+    humerus as constant rotations A_s (3, 3) relative to each segment's model frame: the columns
+    of A_s are the anatomical X, Y, Z axes in segment coordinates, so the anatomical frame at
+    posture q is R_s(q) @ A_s. Built from the landmarks SC, AC (clavicle), AA, TS, AI (scapula),
+    GH, EL, EM or EJC (humerus) in the reference posture."""
+    y_thorax = np.array([0.0, 1.0, 0.0])
+    out = {"thorax": np.eye(3)}
+
+    sc, ac = _point(model, "clavicle", "SC"), _point(model, "clavicle", "AC")
+    z = _unit(ac - sc, "SC->AC", model)
+    x = _unit(np.cross(y_thorax, z), "thorax Y x clavicle Z", model)
+    out["clavicle"] = np.column_stack([x, np.cross(z, x), z])
+
+    aa, ts, ai = (_point(model, "scapula", n) for n in ("AA", "TS", "AI"))
+    z = _unit(aa - ts, "TS->AA", model)
+    x = _unit(np.cross(ts - ai, aa - ai), "normal of plane AI-AA-TS", model)
+    x = _unit(x - (x @ z) * z, "scapula X", model)
+    out["scapula"] = np.column_stack([x, np.cross(z, x), z])
+
+    hum = model.segment("humerus")
+    gh = _point(model, "humerus", "GH")
+    if "EJC" in hum.points:
+        elbow = _point(model, "humerus", "EJC")
+    elif "EL" in hum.points and "EM" in hum.points:
+        elbow = 0.5 * (_point(model, "humerus", "EL") + _point(model, "humerus", "EM"))
+    else:
+        raise ModelError(f"{model.source or model.name}: the ISB humerus frame needs EJC, or EL and EM, on the "
+                         f"humerus; it has {sorted(hum.points)}")
+    if "EL" in hum.points:
+        lateral = _point(model, "humerus", "EL") - elbow  # = (EL - EM) / 2 when EJC is their midpoint
+    else:
+        lateral = elbow - _point(model, "humerus", "EM")
+    y = _unit(gh - elbow, "elbow centre->GH", model)
+    x = _unit(np.cross(y, lateral), "normal of plane EL-EM-GH", model)  # anterior for a right arm
+    x = _unit(x - (x @ y) * y, "humerus X", model)
+    out["humerus"] = np.column_stack([x, y, np.cross(x, y)])
+    return out
+
+
+def segment_anatomical_rotations(model: Model, q: np.ndarray, /, *, kinematics: Kinematics | None = None,
+                                 frames: Mapping[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
+    """Global orientation (..., 3, 3) of every anatomical frame at coordinates q (..., m)."""
+    kin = kinematics if kinematics is not None else Kinematics(model)
+    frames = anatomical_frames(model) if frames is None else frames
+    q = np.asarray(q, dtype=float)
+    if q.shape[-1] != model.n_coordinates:
+        raise InputError(f"q must have {model.n_coordinates} coordinates in its last axis, got shape {q.shape}")
+    R, _ = kin.poses(q)
+    return {name: R[..., model.segment_index(name), :, :] @ A for name, A in frames.items()}
+
+
+def isb_angles(model: Model, q: np.ndarray, /, *, kinematics: Kinematics | None = None,
+               unwrap: bool = True) -> dict[str, np.ndarray]:
+    """ISB angles (radians) of every frame of q (n, m) or (m,): a dict with "SC", "AC", "ST",
+    "GH" (X-Z'-Y'') and "HT" (Y-X'-Y'', middle angle <= 0), each (n, 3) (or (3,)); signs in the
+    module docstring. ``unwrap``: remove 2 pi jumps along the frames (for plotting)."""
+    Rg = segment_anatomical_rotations(model, q, kinematics=kinematics)
+    out = {}
+    for joint, (prox, dist) in _JOINTS.items():
+        Rrel = np.swapaxes(Rg[prox], -1, -2) @ Rg[dist]
+        ang = euler_angles(Rrel, ISB_SEQUENCES[joint], negative_middle=(joint == "HT"))
+        if unwrap and ang.ndim == 2 and ang.shape[0] > 1:
+            ang = np.unwrap(ang, axis=0)
+        out[joint] = ang
+    return out
+
+
+def humerothoracic_elevation(model: Model, q: np.ndarray, /, *, kinematics: Kinematics | None = None) -> np.ndarray:
+    """Humerothoracic elevation (..., ) in radians, >= 0: the angle between the humerus long axis
+    (ISB Y, elbow centre -> GH) and the thorax Y axis; equals minus the HT X' angle."""
+    Rg = segment_anatomical_rotations(model, q, kinematics=kinematics)
+    cos = np.clip(Rg["humerus"][..., 1, 1], -1.0, 1.0)  # thorax Y . humerus Y
+    return np.arccos(cos)

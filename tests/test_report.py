@@ -1,0 +1,203 @@
+"""The validation study and its report: a quick run writes the data files, the PDF with the
+expected pages and the PNGs; the report is rebuilt from the files alone without importing the
+solver; the bundled Ludewig et al. 2009 data; the real-trial plumbing (skipped without
+../shared/data)."""
+from __future__ import annotations
+
+import ast
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from exubio.report import FIGURES, REPORT_PAGES
+from exubio.validate import (
+    LUDEWIG_COLUMNS,
+    load_ludewig2009,
+    run_validation,
+    shared_data_dir,
+    undetermined_coordinates,
+    unobserved_segments,
+    why_no_real_trial,
+)
+
+PACKAGE = Path(__file__).resolve().parents[1] / "exubio"
+SOLVER_MODULES = ("exubio.methods", "exubio.backend", "exubio.pipeline", "exudyn")
+
+
+def _pdf_pages(path: Path) -> int:
+    return len(re.findall(rb"/Type\s*/Page[^s]", path.read_bytes()))
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory):
+    out = tmp_path_factory.mktemp("validation")
+    messages: list[str] = []
+    runs = run_validation(out, quick=True, progress=messages.append)
+    return out, runs, messages
+
+
+def test_quick_run_writes_every_file(quick):
+    out, runs, messages = quick
+    for name in ("validation.pdf", "validation_data.npz", "table1.json", "validation_runs.json", *FIGURES):
+        assert (out / name).is_file(), name
+    for png in FIGURES:
+        assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert _pdf_pages(out / "validation.pdf") >= len(REPORT_PAGES)
+    assert not list(out.glob("*.tmp*"))
+    assert any("sensitivity" in m for m in messages)
+
+
+def test_quick_run_content(quick):
+    out, runs, _ = quick
+    assert runs["quick"] is True
+    # provenance: a quick run uses simulated trials only, and says so
+    assert {k: v["kind"] for k, v in runs["data"].items()} == {"abduction": "simulated", "flexion": "simulated",
+                                                               "sier": "simulated"}
+    assert "reason_not_real" in runs["data"]["abduction"]
+    # the 32-run sensitivity grid
+    sens = runs["sensitivity"]
+    assert sens["runs"] == 32 and len(sens["stiffness_n_per_m"]) == 8 and len(sens["ratio_s"]) == 4
+    assert sens["stiffness_n_per_m"][0] == pytest.approx(10.0) and sens["stiffness_n_per_m"][-1] == pytest.approx(1e4)
+    assert sens["total_wall_s"] > 0
+    with np.load(out / "validation_data.npz") as z:
+        assert z["sens__mean_deflection_mm"].shape == (4, 8)
+        assert z["res__sier__pf__mean_mm"].ndim == 1
+        assert z["iv__abduction__pf__ST_deg"].shape[1] == 3
+    # Table 1 rows with both methods and the paper's numbers beside them
+    table = json.loads((out / "table1.json").read_text())
+    assert set(table["rows"]) == {"abduction", "flexion", "sier"}
+    for row in table["rows"].values():
+        for method in ("pf", "ls"):
+            assert row[method]["max_mean_residual_mm"] > 0
+            assert isinstance(row[method]["max_residual_marker"], str)
+    assert table["paper"]["sier"]["frames"] == 96001
+    # SIER figures against the truth exist and are finite; the checks are recorded
+    assert np.isfinite(runs["sier"]["pf"]["gh_axial_rotation_rmse_deg"])
+    assert len(runs["sier"]["pf"]["gh_marker_rmse_xyz_mm"]) == 3
+    assert {c["what"] for c in runs["checks"]} >= {"SIER: PF GH axial rotation RMSE vs truth"}
+    assert all(isinstance(c["passed"], bool) for c in runs["checks"])
+    # simulated data with the full marker set: every coordinate determined
+    assert runs["agreement"]["sier"]["undetermined_coordinates"] == []
+    # Ludewig deviations at the four elevations
+    dev = runs["invivo"]["abduction"]["pf"]["ST_medRotation_X"]
+    assert len(dev["deviation_deg"]) == 4
+
+
+def test_report_rebuilds_from_files_without_the_solver(quick, tmp_path):
+    out, _, _ = quick
+    for name in ("validation_data.npz", "table1.json", "validation_runs.json"):
+        (tmp_path / name).write_bytes((out / name).read_bytes())
+    code = (
+        "import sys\n"
+        "from exubio.report import build_report\n"
+        f"build_report({str(tmp_path)!r})\n"
+        f"bad = [m for m in sys.modules if m.startswith({SOLVER_MODULES!r})]\n"
+        "assert not bad, bad\n"
+        "assert 'matplotlib.pyplot' not in sys.modules  # Agg canvases only, no global backend state\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=300)
+    assert (tmp_path / "validation.pdf").is_file()
+    for png in FIGURES:
+        assert (tmp_path / png).is_file()
+
+
+def _imports(path: Path) -> set[str]:
+    tree = ast.parse(path.read_text())
+    names = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            names.add(node.module)
+    return names
+
+
+def test_report_package_imports_no_solver():
+    files = sorted((PACKAGE / "report").glob("*.py"))
+    assert files
+    for f in files:
+        bad = [m for m in _imports(f) if m.startswith(SOLVER_MODULES) or m == "matplotlib.pyplot"]
+        assert not bad, f"{f.name} imports {bad}"
+
+
+def test_only_the_report_package_imports_matplotlib():
+    for f in PACKAGE.rglob("*.py"):
+        if "report" in f.relative_to(PACKAGE).parts:
+            continue
+        assert not [m for m in _imports(f) if m.split(".")[0] == "matplotlib"], f
+
+
+# --------------------------------------------------------------------------------------------
+# Reference data
+# --------------------------------------------------------------------------------------------
+def test_ludewig_data_file_is_cited_and_complete():
+    path = PACKAGE / "data" / "ludewig2009.csv"
+    header = "".join(line for line in path.read_text().splitlines(keepends=True) if line.startswith("#"))
+    for needle in ("Ludewig PM", "J Bone Joint Surg Am 91(2):378-389", "10.2106/JBJS.G.01483", "Spartacus",
+                   "10.5281/zenodo.11455521"):
+        assert needle in header
+    data = load_ludewig2009()
+    assert set(data) == {"frontal", "scapular", "sagittal"}
+    for plane in data.values():
+        np.testing.assert_array_equal(plane["ht_elevation_deg"], np.arange(30.0, 121.0, 5.0))
+        for cols in LUDEWIG_COLUMNS.values():
+            for c in cols:
+                assert plane[c].shape == (19,)
+
+
+def test_ludewig_values_match_the_published_tables():
+    data = load_ludewig2009()
+    f = data["frontal"]
+    i = {h: int(np.flatnonzero(f["ht_elevation_deg"] == h)[0]) for h in (30, 60, 90, 120)}
+    assert [f["ST_medRotation_X"][i[h]] for h in (30, 60, 90, 120)] == [-15.6, -26.5, -36.5, -46.4]
+    assert [f["SC_elevation_X"][i[h]] for h in (30, 60, 90, 120)] == [-14.3, -16.8, -18.1, -19.5]
+    s = data["sagittal"]
+    assert s["GH_abduction_X"][i[90]] == -58.2 and s["ST_protraction_Y"][i[120]] == 43.5
+    # the same numbers as the rhythm table of exubio.simulate (every 15 deg)
+    from exubio.simulate import LUDEWIG_2009, LUDEWIG_HT_DEG
+
+    for plane, cols in LUDEWIG_2009.items():
+        for col, values in cols.items():
+            ours = {"SC_protraction": "SC_protraction_Y", "SC_elevation": "SC_elevation_X",
+                    "SC_rotation": "SC_rotation_Z", "ST_protraction": "ST_protraction_Y",
+                    "ST_medRotation": "ST_medRotation_X", "ST_tilt": "ST_tilt_Z"}[col]
+            got = np.interp(LUDEWIG_HT_DEG, data[plane]["ht_elevation_deg"], data[plane][ours])
+            np.testing.assert_allclose(got, values, atol=1e-9, err_msg=f"{plane} {col}")
+
+
+# --------------------------------------------------------------------------------------------
+# Observability and the real trials
+# --------------------------------------------------------------------------------------------
+def test_undetermined_coordinates():
+    from exubio.pipeline import load_model_and_protocol
+
+    model, protocol = load_model_and_protocol()
+    q = np.zeros((1, model.n_coordinates))
+    q[0, model.coordinate_names.index("gh_abduction")] = 0.8
+    assert max(undetermined_coordinates(model, protocol, q).values()) < 0.1
+    assert unobserved_segments(model, protocol) == []
+    no_forearm = protocol.__class__(**{**protocol.__dict__, "markers": tuple(
+        m for m in protocol.markers if m.segment not in ("ulna", "radius", "hand"))})
+    share = undetermined_coordinates(model, no_forearm, q)
+    for c in ("elbow_flexion", "pronation", "wrist_flexion", "wrist_radial_deviation"):
+        assert share[c] == pytest.approx(1.0)
+    assert share["gh_abduction"] < 0.1
+    assert unobserved_segments(model, no_forearm) == ["ulna", "radius", "hand"]
+
+
+@pytest.mark.skipif(why_no_real_trial("abduction") is not None,
+                    reason=f"real trial not available: {why_no_real_trial('abduction')}")
+def test_real_trial_is_calibrated_and_prepared():
+    from exubio.validate import _real_trial
+
+    model, protocol, targets, cal = _real_trial("abduction")
+    assert (shared_data_dir() / "trc").is_dir()
+    assert "calibrated" in model.name
+    assert set(protocol.marker_names) == {"aa", "ts", "ai", "gu", "EpL", "centelbow"}
+    assert targets.n_frames == 1091
+    assert cal["residual_mm"]["mean"] < 5.0
