@@ -34,7 +34,7 @@ import logging
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Sequence, Mapping
+from typing import Callable, Sequence, Mapping
 
 import numpy as np
 
@@ -464,7 +464,8 @@ class PFSystem:
 
     # ---------------------------------------------------------------- run
     def run(self, targets_pos: np.ndarray, targets_vel: np.ndarray, active: np.ndarray | None = None, /, *,
-            frame_dt_s: float, options: IntegratorOptions = IntegratorOptions()) -> PFRun:
+            frame_dt_s: float, options: IntegratorOptions = IntegratorOptions(),
+            progress: Callable[[int], None] | None = None) -> PFRun:
         """Integrate the PF system through the measured marker trajectories.
 
         targets_pos, targets_vel: (n, k, 3) marker positions (m) and velocities (m/s) at the frame
@@ -575,9 +576,17 @@ class PFSystem:
             set_targets(row)
             return True
 
+        reported = [0]
+        report_every = max(1, int(round(0.5 / frame_dt_s)))  # progress about every 0.5 s of motion
+
         def post_step(mbs, t):  # every accepted step, and once at t = 0 after the initial accelerations
             record_t.append(t)
             record.append((sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t(), sd.GetODE2Coordinates_tt()))
+            if progress is not None:
+                frame = int(t / frame_dt_s + 0.5)
+                if frame - reported[0] >= report_every:
+                    progress(frame - reported[0])
+                    reported[0] = frame
             return True
 
         mbs.SetPreStepUserFunction(pre_step)

@@ -222,10 +222,18 @@ def reconstruct_pf(model: Model, protocol: Protocol, targets: MarkerTargets, /, 
                               spectral_radius=options.spectral_radius,
                               newton_relative_tolerance=options.newton_relative_tolerance,
                               modified_newton=options.modified_newton, timing_breakdown=options.timing_breakdown)
-    run = system.run(targets.positions_m, targets.velocities_m_s, targets.present, frame_dt_s=dt, options=integ)
+    done = [0]
+
+    def tick(n: int) -> None:
+        done[0] += n
+        if progress:
+            progress(n)
+
+    run = system.run(targets.positions_m, targets.velocities_m_s, targets.present, frame_dt_s=dt, options=integ,
+                     progress=tick)
     t3 = time.perf_counter()
-    if progress:
-        progress(run.completed_frames)
+    if progress and run.completed_frames > done[0]:
+        progress(run.completed_frames - done[0])
     if not run.success:
         _raise_failure(kin, points, targets, run)
     q = kin.coordinates_from_rotations(run.rotations)
