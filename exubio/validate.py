@@ -120,9 +120,13 @@ class _Trial:
 # Data
 # --------------------------------------------------------------------------------------------
 def shared_data_dir() -> Path:
-    """``$EXUBIO_SHARED_DATA`` or ``../shared/data`` beside the checkout."""
+    """``$EXUBIO_SHARED_DATA``, else ``../shared/data`` beside the working directory (a checkout's
+    root, as the README runs it) or beside the source checkout (editable installs)."""
     env = os.environ.get("EXUBIO_SHARED_DATA")
-    return Path(env) if env else _CHECKOUT.parent / "shared" / "data"
+    if env:
+        return Path(env)
+    candidates = [Path.cwd().parent / "shared" / "data", _CHECKOUT.parent / "shared" / "data"]
+    return next((c for c in candidates if c.is_dir()), candidates[0])
 
 
 def why_no_real_trial(name: str) -> str | None:
