@@ -54,7 +54,8 @@ def protocol_for_model(model: Model, protocol_path: str | Path | None = None, /)
     """Load a protocol against a model; a calibrated model rebinds the markers to the points the
     calibration registered for them."""
     protocol = load_protocol(protocol_path or DEFAULT_PROTOCOL, segments=model.segment_names,
-                             model_points={s.name: dict(s.points) for s in model.segments})
+                             model_points={s.name: dict(s.points) for s in model.segments},
+                             coordinates=model.coordinate_names)
     if model.metadata.get("calibration"):
         from exubio.calibrate import calibrated_protocol
 

@@ -36,7 +36,7 @@ log = logging.getLogger(__name__)
 SCHEMA_VERSION = 1
 THORAX_SEGMENT = "thorax"  # the fixed segment: its markers only build the thorax frame
 
-_TOP_KEYS = ("schema_version", "name", "description", "thorax_frame", "filter", "defaults", "markers")
+_TOP_KEYS = ("schema_version", "name", "description", "thorax_frame", "filter", "defaults", "markers", "hold")
 _FRAME_KEYS = ("ij", "px", "c7", "t8")
 _MIDPOINT_FRAME_KEYS = ("ij", "ij_c7_midpoint", "px_t8_midpoint")
 _FILTER_KEYS = ("cutoff_hz", "order")
@@ -65,12 +65,14 @@ def load_protocol(
     *,
     segments: Sequence[str],
     model_points: Mapping[str, Mapping[str, np.ndarray]] | None = None,
+    coordinates: Sequence[str] | None = None,
 ) -> Protocol:
     """Load and validate a protocol YAML (format: see ``protocols/upper_limb_21.yaml``).
 
     segments:     the model's segment names (``thorax`` first); every marker must sit on one.
     model_points: segment -> {point name -> local position (m)}, used by markers that give
                   ``point:`` instead of ``local_position_mm``.
+    coordinates:  the model's coordinate names, to check ``hold`` against (unchecked if None).
 
     Markers on the thorax are validated but not tracked (the thorax is fixed; its landmarks only
     build the thorax frame, named by trial label in ``thorax_frame``). Every problem raises a
@@ -144,7 +146,17 @@ def load_protocol(
                     f"'{tracked_labels[label]}' on segment '{seg}'; thorax landmarks must be on the thorax"
                 )
 
+    held = data.get("hold", []) or []
+    if not isinstance(held, list) or not all(isinstance(h, str) for h in held):
+        raise ProtocolError(f"{src}: 'hold' must be a list of model coordinate names, got {_kind(held)}")
+    if coordinates is not None:
+        for h in held:
+            if h not in coordinates:
+                hint = difflib.get_close_matches(h, list(coordinates), n=1)
+                did = f" (did you mean '{hint[0]}'?)" if hint else ""
+                raise ProtocolError(f"{src}: hold: unknown coordinate '{h}'{did}; the model has {list(coordinates)}")
     return Protocol(
+        held_coordinates=tuple(held),
         name=name,
         markers=tuple(tracked),
         thorax_frame=frame,

@@ -263,6 +263,7 @@ class Protocol:
     default_stiffness_n_per_m: float = 1500.0
     default_damping_ns_per_m: float = 300.0
     source: str = ""
+    held_coordinates: tuple[str, ...] = ()  # not observable with this marker set: held at 0
 
     @property
     def marker_names(self) -> tuple[str, ...]:

@@ -44,7 +44,7 @@ from exudyn.advancedUtilities import CreateSymbolicUserFunction
 from exudyn.rigidBodyUtilities import RotationMatrix2EulerParameters
 
 from exubio.errors import ModelError
-from exubio.kinematics import Kinematics, PointSet
+from exubio.kinematics import axis_rotation, Kinematics, PointSet
 from exubio.types import JointKind, Model
 
 log = logging.getLogger(__name__)
@@ -266,9 +266,11 @@ class PFSystem:
     """
 
     def __init__(self, model: Model, springs: SpringSet, /, *, q0: np.ndarray, qd0: np.ndarray | None = None,
-                 gravity: bool = False, kinematics: Kinematics | None = None, locked_segments: Sequence[int] = ()):
+                 gravity: bool = False, kinematics: Kinematics | None = None, locked_segments: Sequence[int] = (),
+                 held_coordinates: Sequence[int] = ()):
         self.model = model
         self.locked_segments = frozenset(int(i) for i in locked_segments)
+        self.held_coordinates = frozenset(int(i) for i in held_coordinates)
         self.kin = kinematics if kinematics is not None else Kinematics(model)
         self.springs = springs
         n_seg = len(model.segments)
@@ -328,7 +330,18 @@ class PFSystem:
                 self._add_locked_joint(seg, self._bodies[names.index(seg.parent)], self._bodies[i],
                                        R0[names.index(seg.parent)].T @ R0[i])
             else:
-                self._add_joint(seg, self._bodies[names.index(seg.parent)], self._bodies[i])
+                idx = [int(j) for j in self.kin.joint_coordinate_indices(i)]
+                held = [j in self.held_coordinates for j in idx]
+                parent, child = self._bodies[names.index(seg.parent)], self._bodies[i]
+                if all(held):
+                    self._add_locked_joint(seg, parent, child, R0[names.index(seg.parent)].T @ R0[i])
+                elif any(held):
+                    if held != [False] * (len(idx) - 1) + [True]:
+                        raise ModelError(f"joint '{seg.joint.name}': only its last coordinate, or all, can be held; "
+                                         f"asked to hold {[self.model.coordinate_names[j] for j, h in zip(idx, held) if h]}")
+                    self._add_joint_last_held(seg, parent, child, float(q0[idx[-1]]))
+                else:
+                    self._add_joint(seg, parent, child)
 
         # ellipsoid: auxiliary point held to each contact point, g = (r - c)^T A (r - c) - 1 = 0
         ell = model.ellipsoid
@@ -400,6 +413,30 @@ class PFSystem:
         m1 = mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=child_body, localHT=exu.HT(rotation=np.eye(3), translation=[0.0, 0.0, 0.0])))
         mbs.AddObject(eii.ObjectJointGeneric(markerNumbers=[m0, m1], constrainedAxes=[1, 1, 1, 1, 1, 1],
                                              visualization=eii.VObjectJointGeneric(show=False)))
+
+    def _add_joint_last_held(self, seg, parent_body, child_body, value: float) -> None:
+        """A spherical joint with its third rotation held (a cardan joint), or a cardan joint with its
+        second held (a revolute joint), the held rotation fixed at ``value`` in the child's frame."""
+        mbs = self._mbs
+        joint = seg.joint
+        centre = [float(x) for x in joint.centre_m]
+        axes = [np.asarray(a, dtype=float) for a in joint.axes]
+        offset = axis_rotation(axes[-1], np.array(value)).T  # child-frame coordinates of the free axes
+        if joint.kind is JointKind.SPHERICAL:
+            a1, a2 = axes[0], axes[1]
+            J0 = _frame_with_z(a1)[:, [1, 2, 0]]
+            J1 = offset @ _frame_with_z(a2)
+            m0 = mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=parent_body, localHT=exu.HT(rotation=J0, translation=centre)))
+            m1 = mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=child_body, localHT=exu.HT(rotation=J1, translation=[0.0, 0.0, 0.0])))
+            mbs.AddObject(eii.ObjectJointGeneric(markerNumbers=[m0, m1], constrainedAxes=[1, 1, 1, 1, 0, 0],
+                                                 visualization=eii.VObjectJointGeneric(show=False)))
+        elif joint.kind is JointKind.CARDAN:
+            J = _frame_with_z(axes[0])
+            m0 = mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=parent_body, localHT=exu.HT(rotation=J, translation=centre)))
+            m1 = mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=child_body, localHT=exu.HT(rotation=offset @ J, translation=[0.0, 0.0, 0.0])))
+            mbs.AddObject(eii.ObjectJointRevoluteZ(markerNumbers=[m0, m1], visualization=eii.VObjectJointRevoluteZ(show=False)))
+        else:
+            raise ModelError(f"joint '{joint.name}' ({joint.kind.value}): hold all of its coordinates or none")
 
     def _add_joint(self, seg, parent_body, child_body) -> None:
         mbs = self._mbs

@@ -78,7 +78,18 @@ def _linearise(kin: Kinematics, points: PointSet, q: np.ndarray, target: np.ndar
     )
 
 
-def _kkt_step(lin: _Linearisation, mu: np.ndarray):
+def _hold(K: np.ndarray, rhs: np.ndarray, held: np.ndarray | None) -> None:
+    """Give held coordinates a zero step: their rows and columns of the KKT matrix become identity."""
+    if held is None or not held.any():
+        return
+    idx = np.flatnonzero(held)
+    K[:, idx, :] = 0.0
+    K[:, :, idx] = 0.0
+    K[:, idx, idx] = 1.0
+    rhs[:, idx] = 0.0
+
+
+def _kkt_step(lin: _Linearisation, mu: np.ndarray, held: np.ndarray | None = None):
     """Gauss-Newton SQP step with Levenberg-Marquardt damping mu (B,): (dq (B, m), lambda (B, 2))."""
     B, m = lin.grad.shape
     K = np.zeros((B, m + 2, m + 2))
@@ -86,6 +97,7 @@ def _kkt_step(lin: _Linearisation, mu: np.ndarray):
     K[:, :m, m:] = np.swapaxes(lin.G, 1, 2)
     K[:, m:, :m] = lin.G
     rhs = np.concatenate([-lin.grad, -lin.g], axis=1)
+    _hold(K, rhs, held)
     sol = np.linalg.solve(K, rhs[..., None])[..., 0]
     return sol[:, :m], sol[:, m:]
 
@@ -105,7 +117,7 @@ def _start_postures(kin: Kinematics, q_start: np.ndarray) -> np.ndarray:
 
 def solve_positions(kin: Kinematics, points: PointSet, targets_m: np.ndarray, weights: np.ndarray, /, *,
                     q_start: np.ndarray, options: LSOptions, frame_dt: float,
-                    progress: Callable[[int], None] | None = None):
+                    progress: Callable[[int], None] | None = None, held: np.ndarray | None = None):
     """q (n, m) per frame, iterations (n,), converged (n,) bool."""
     n = targets_m.shape[0]
     m = kin.n_coordinates
@@ -133,7 +145,7 @@ def solve_positions(kin: Kinematics, points: PointSet, targets_m: np.ndarray, we
             if a.size == 0:
                 break
             sub = _Linearisation(lin.H[a], lin.grad[a], lin.G[a], lin.g[a], lin.cost[a])
-            dq, lam = _kkt_step(sub, mu[a])
+            dq, lam = _kkt_step(sub, mu[a], held)
             big = np.abs(dq).max(axis=1)
             dq = dq * np.minimum(1.0, options.max_step_rad / np.maximum(big, 1e-300))[:, None]
             q_try = q[a] + dq
@@ -174,10 +186,11 @@ def solve_positions(kin: Kinematics, points: PointSet, targets_m: np.ndarray, we
         if progress:
             progress(stop - start)
         start = stop
-    return project_on_constraints(kin, q_out), iters, converged
+    return project_on_constraints(kin, q_out, held=held), iters, converged
 
 
-def project_on_constraints(kin: Kinematics, q: np.ndarray, /, *, tol: float = 1e-13, max_iterations: int = 10) -> np.ndarray:
+def project_on_constraints(kin: Kinematics, q: np.ndarray, /, *, tol: float = 1e-13, max_iterations: int = 10,
+                           held: np.ndarray | None = None) -> np.ndarray:
     """Smallest change of q (n, m) that makes g(q) = 0 (Newton with minimum-norm steps), so every
     returned frame satisfies the constraints even where the optimisation stopped early."""
     q = np.array(q, dtype=float)
@@ -187,13 +200,15 @@ def project_on_constraints(kin: Kinematics, q: np.ndarray, /, *, tol: float = 1e
         if not bad.any():
             break
         G = kin.G(q[bad])
+        if held is not None:
+            G = G * ~held
         step = np.einsum("nkm,nk->nm", G, np.linalg.solve(G @ np.swapaxes(G, 1, 2), g[bad][..., None])[..., 0])
         q[bad] -= step
     return q
 
 
 def solve_rates(kin: Kinematics, points: PointSet, q: np.ndarray, vel: np.ndarray, acc: np.ndarray,
-                weights: np.ndarray, mu: float):
+                weights: np.ndarray, mu: float, held: np.ndarray | None = None):
     """Consistent q̇, q̈ (n, m) from marker velocities/accelerations (weighted LS + constraints)."""
     n, m = q.shape
     present = ~np.isnan(vel).any(axis=2) & ~np.isnan(acc).any(axis=2)
@@ -207,12 +222,20 @@ def solve_rates(kin: Kinematics, points: PointSet, q: np.ndarray, vel: np.ndarra
     K[:, m:, :m] = G
     v = np.where(present[..., None], vel, 0.0)
     rhs = np.concatenate([np.einsum("nkcm,nkc->nm", Jw, v), np.zeros((n, 2))], axis=1)
-    qd = np.linalg.solve(K, rhs[..., None])[..., 0, ][:, :m]
+    _hold(K, rhs, held)
+    qd = np.linalg.solve(K, rhs[..., None])[..., 0][:, :m]
     bias = kin.point_bias_acceleration(q, qd, points)
     a = np.where(present[..., None], acc - bias, 0.0)
     rhs = np.concatenate([np.einsum("nkcm,nkc->nm", Jw, a), -kin.eta(q, qd)], axis=1)
+    _hold(K, rhs, held)
     qdd = np.linalg.solve(K, rhs[..., None])[..., 0][:, :m]
     return qd, qdd
+
+
+def held_mask(model: Model, protocol: Protocol, /) -> np.ndarray:
+    """(m,) True for the coordinates the protocol holds at 0 (not observable with its markers)."""
+    names = model.coordinate_names
+    return np.array([n in protocol.held_coordinates for n in names], dtype=bool)
 
 
 def reconstruct_ls(model: Model, protocol: Protocol, targets: MarkerTargets, /, *,
@@ -226,11 +249,13 @@ def reconstruct_ls(model: Model, protocol: Protocol, targets: MarkerTargets, /, 
     dt = float(np.median(np.diff(targets.time_s))) if targets.n_frames > 1 else 1.0
     q0 = np.zeros(kin.n_coordinates) if q_start is None else np.asarray(q_start, dtype=float)
     t1 = time.perf_counter()
+    held = held_mask(model, protocol)
+    q0[held] = 0.0
     q, iters, converged = solve_positions(kin, points, targets.positions_m, weights, q_start=q0,
-                                          options=options, frame_dt=dt, progress=progress)
+                                          options=options, frame_dt=dt, progress=progress, held=held)
     t2 = time.perf_counter()
     qd, qdd = solve_rates(kin, points, q, targets.velocities_m_s, targets.accelerations_m_s2, weights,
-                          RATES_REGULARISATION)
+                          RATES_REGULARISATION, held)
     t3 = time.perf_counter()
     n_present = targets.present.sum(axis=1)
     status = np.where(converged, FrameStatus.CONVERGED, FrameStatus.NOT_CONVERGED)

@@ -42,7 +42,7 @@ from exubio.backend.exudyn_system import IntegratorOptions, PFSystem, SpringSet
 from exubio.errors import ReconstructionError
 from exubio.kinematics import Kinematics
 from exubio.methods.common import assemble, tracked_points
-from exubio.methods.ls import RATES_REGULARISATION, LSOptions, solve_positions, solve_rates
+from exubio.methods.ls import RATES_REGULARISATION, LSOptions, held_mask, solve_positions, solve_rates
 from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Reconstruction
 
 log = logging.getLogger(__name__)
@@ -139,7 +139,7 @@ def _pinv_apply(G: np.ndarray, rhs: np.ndarray) -> np.ndarray:
 
 
 def project_on_constraints(kin: Kinematics, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, /, *,
-                           tol: float = 1e-13, max_iterations: int = 4):
+                           tol: float = 1e-13, max_iterations: int = 4, held: np.ndarray | None = None):
     """Project (q, q̇, q̈) on g = 0, G q̇ = 0, G q̈ + eta = 0 (least-norm corrections in coordinate
     space, every frame at once; only the coordinates g depends on change). Frames with non-finite
     values are left alone. Returns q, q̇, q̈ and (max |g|, max |G q̇|) before the projection."""
@@ -149,18 +149,19 @@ def project_on_constraints(kin: Kinematics, q: np.ndarray, qd: np.ndarray, qdd: 
     chain, cols = _constraint_chain(kin)
     q, qd, qdd = q.copy(), qd.copy(), qdd.copy()
     x, v, a = (arr[np.ix_(ok, cols)] for arr in (q, qd, qdd))
+    free = np.ones(len(cols)) if held is None else (~np.asarray(held, dtype=bool)[cols]).astype(float)
     g, G, e, J = _constraint_terms(chain, x)
     before = (float(np.abs(g).max()), float(np.abs(np.einsum("...km,...m->...k", G, v)).max()))
     for _ in range(max_iterations):
         if np.abs(g).max() <= tol:
             break
-        x = x - _pinv_apply(G, g)
+        x = x - _pinv_apply(G * free, g)  # held coordinates are not corrected
         g, G, e, J = _constraint_terms(chain, x)
-    v = v - _pinv_apply(G, np.einsum("...km,...m->...k", G, v))
+    v = v - _pinv_apply(G * free, np.einsum("...km,...m->...k", G, v))
     rd = np.einsum("...kcm,...m->...kc", J, v)
     bias = chain.point_bias_acceleration(x, v, chain.contacts)
     eta = 2.0 * np.einsum("...kc,c->...k", rd * rd + e * bias, chain.a_diag)
-    a = a - _pinv_apply(G, np.einsum("...km,...m->...k", G, a) + eta)
+    a = a - _pinv_apply(G * free, np.einsum("...km,...m->...k", G, a) + eta)
     rows = np.flatnonzero(ok)[:, None]
     q[rows, cols], qd[rows, cols], qdd[rows, cols] = x, v, a
     return q, qd, qdd, before
@@ -178,20 +179,21 @@ def unobserved_segments(kin: Kinematics, points, /) -> tuple[int, ...]:
     return tuple(i for i in range(1, kin.n_segments) if i not in observed)
 
 
-def initial_state(kin: Kinematics, points, targets: MarkerTargets, stiffness: np.ndarray, /):
+def initial_state(kin: Kinematics, points, targets: MarkerTargets, stiffness: np.ndarray, /, *,
+                  held: np.ndarray | None = None):
     """Static equilibrium of the springs at the first frame with its consistent velocity."""
     first = 0
     present = targets.present
     weights = stiffness / stiffness.mean()
     q0, _, ok = solve_positions(kin, points, targets.positions_m[first:first + 1], weights,
                                 q_start=np.zeros(kin.n_coordinates), options=LSOptions(tol_rad=1e-12, max_iterations=60),
-                                frame_dt=1.0)
+                                frame_dt=1.0, held=held)
     if not ok[0]:
         raise ReconstructionError(
             f"{targets.source or 'trial'}: no static equilibrium at t = {targets.time_s[0]:.3f} s "
             f"(markers present: {int(present[0].sum())} of {present.shape[1]})")
     qd0, _ = solve_rates(kin, points, q0, targets.velocities_m_s[:1], targets.accelerations_m_s2[:1], weights,
-                         RATES_REGULARISATION)
+                         RATES_REGULARISATION, held)
     return q0[0], qd0[0]
 
 
@@ -209,14 +211,15 @@ def reconstruct_pf(model: Model, protocol: Protocol, targets: MarkerTargets, /, 
     points = tracked_points(kin, protocol)
     stiffness = np.array([m.stiffness_n_per_m for m in protocol.markers])
     damping = np.array([m.damping_ns_per_m for m in protocol.markers])
-    q0, qd0 = initial_state(kin, points, targets, stiffness)
+    held = held_mask(model, protocol)
+    q0, qd0 = initial_state(kin, points, targets, stiffness, held=held)
     locked = unobserved_segments(kin, points)
     for i in locked:  # held at their start value, like LS does through its regularisation
         qd0[kin.joint_coordinate_indices(i)] = 0.0
     t1 = time.perf_counter()
     springs = SpringSet.from_points(points, stiffness_n_per_m=stiffness, damping_ns_per_m=damping)
     system = PFSystem(model, springs, q0=q0, qd0=qd0, gravity=options.gravity, kinematics=kin,
-                      locked_segments=locked)
+                      locked_segments=locked, held_coordinates=np.flatnonzero(held))
     t2 = time.perf_counter()
     integ = IntegratorOptions(step_s=integration_step(dt, options.step_s, protocol.cutoff_hz),
                               spectral_radius=options.spectral_radius,
@@ -242,7 +245,7 @@ def reconstruct_pf(model: Model, protocol: Protocol, targets: MarkerTargets, /, 
     qd, qdd = kin.coordinate_rates(q, run.angular_velocities_rad_s, run.angular_accelerations_rad_s2)
     raw_g = raw_gqd = float("nan")
     if options.project_constraints:
-        q, qd, qdd, (raw_g, raw_gqd) = project_on_constraints(kin, q, qd, qdd)
+        q, qd, qdd, (raw_g, raw_gqd) = project_on_constraints(kin, q, qd, qdd, held=held)
     t4 = time.perf_counter()
     recon = assemble(kin, points, targets, method="pf", q=q, qd=qd, qdd=qdd,
                      status=np.full(targets.n_frames, FrameStatus.CONVERGED), timings_s={}, info={})
