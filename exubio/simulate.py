@@ -20,9 +20,10 @@ ac_posterior_tilt prescribed the 2x2 block of G stays well conditioned, cond < 4
   of Ludewig et al. 2009 (table ``LUDEWIG_2009`` below): the changes of the SC and ST angles
   relative to the lowest tabulated elevation (30°), extrapolated linearly below 30° with the
   30->45° slope and shifted to be zero at 0° (the model's reference posture, arm hanging),
-  interpolated with a natural cubic spline over HT elevation (C2). The SC changes go onto the SC
-  coordinates: sc_protraction = +ΔY (Ludewig's negative values are retraction),
-  sc_elevation = -ΔX, sc_posterior_rotation = +ΔZ. The scapula has one rotation left once the
+  interpolated with a natural cubic spline over HT elevation (C2). The SC changes are applied to
+  the ISB clavicle frame (Y-X'-Z'' from the model's reference SC angles) and expressed in the
+  model's SC coordinates (``_sc_in_isb_frame``), so the simulated ISB SC angles change as
+  Ludewig's do. The scapula has one rotation left once the
   clavicle and the two ellipsoid constraints are set; it is chosen (through ac_posterior_tilt,
   fitted on a 5° grid and splined over θ) so that the changes of the ISB scapulothoracic angles
   (``scapula_isb_angles``: ISB scapula frame from AA, TS, AI; Y-X'-Z'') are as close as possible,
@@ -222,6 +223,31 @@ def _cycle(low: float, high: float, w: float) -> _Signal:
     return _Signal(0.5 * (low + high), ((-0.5 * (high - low), w, 0.5 * np.pi),))
 
 
+def _sc_in_isb_frame(kin: Kinematics, splines: dict[str, CubicSpline]) -> dict[str, CubicSpline]:
+    """Put Ludewig's SC changes on the ISB clavicle frame (Y-X'-Z'' from the model's reference
+    ISB SC angles), not on the model's thorax-parallel SC axes, and express the result in the
+    model's SC coordinates, splined over HT elevation. (Applied to the model's axes directly, a
+    clavicle elevation change about thorax -X also turns the clavicle about its own oblique axis,
+    and the acromion ends up lower than Ludewig's clavicle at high elevation.)"""
+    from exubio.angles import anatomical_frames, euler_angles, rotation_from_euler
+
+    model = kin.model
+    A = anatomical_frames(model)["clavicle"]  # ISB clavicle frame at q = 0 (segment = thorax axes)
+    ref = euler_angles(A, "YXZ")
+    nodes = np.radians(np.arange(0.0, 160.1, 2.5))
+    delta = np.stack([splines["sc_protraction"](nodes), -splines["sc_elevation"](nodes),
+                      splines["sc_posterior_rotation"](nodes)], axis=1)  # Ludewig's ΔY, ΔX, ΔZ
+    R_seg = rotation_from_euler(ref + delta, "YXZ") @ A.T
+    R_all = np.tile(np.eye(3), (nodes.size, len(model.segments), 1, 1))
+    ci = model.segment_index("clavicle")
+    R_all[:, ci] = R_seg
+    q = kin.coordinates_from_rotations(R_all)
+    out = dict(splines)
+    for c in model.segment("clavicle").joint.coordinates:
+        out[c] = CubicSpline(nodes, q[:, model.coordinate_names.index(c)], bc_type="natural")
+    return out
+
+
 def _rhythm_splines(plane: str) -> dict[str, CubicSpline]:
     """Natural cubic splines (HT elevation, rad -> change, rad) of every rhythm column: the change
     from the lowest tabulated elevation (30 deg), linear below it (30->45 deg slope), shifted to
@@ -349,7 +375,7 @@ def rhythm_table(model: Model, motion: Motion | str = Motion.ABDUCTION, /) -> tu
     kin = Kinematics(model)
     plane = "sagittal" if Motion.parse(motion) is Motion.FLEXION else "frontal"
     free = np.array([model.coordinate_names.index(c) for c in _FREE])
-    return RHYTHM_TABLE_COLUMNS, _girdle_calibration(kin, _rhythm_splines(plane), free)[3]
+    return RHYTHM_TABLE_COLUMNS, _girdle_calibration(kin, _sc_in_isb_frame(kin, _rhythm_splines(plane)), free)[3]
 
 
 def _segment_angular_accelerations(kin: Kinematics, fr, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
@@ -392,7 +418,7 @@ def _true_motion(kin: Kinematics, motion: Motion, t: np.ndarray):
     free = np.array([ix[c] for c in _FREE])
     w = 2.0 * np.pi / CYCLE_S
     plane = "sagittal" if motion is Motion.FLEXION else "frontal"
-    splines = _rhythm_splines(plane)
+    splines = _sc_in_isb_frame(kin, _rhythm_splines(plane))
     fit_spline, f0_spline, f1_spline, _ = _girdle_calibration(kin, splines, free)
     d = np.radians
 
