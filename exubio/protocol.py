@@ -11,14 +11,14 @@ import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
 import difflib
 
 from exubio.config import _kind, check_keys, read_yaml
-from exubio.errors import ExubioError, InputError, ProtocolError
+from exubio.errors import InputError, ProtocolError
 from exubio.types import MarkerSpec, Protocol, ThoraxFrameSpec
 
 __all__ = [

@@ -21,7 +21,9 @@ must also carry the limb's weight and every model point sags below its marker (a
 and 1° on the synthetic trials; see the README).
 
 Segments that no marker observes (no marker on them or on a segment they carry) have their joints
-locked at the start posture; LS holds the same coordinates at their start value.
+locked at the start posture; LS holds the same coordinates at their start value. Coordinates a
+protocol lists under ``hold`` (e.g. the clavicle's axial rotation for a set without clavicle
+markers) are held at 0 by both methods.
 
 A marker missing in a frame switches its spring off for that stretch (reported as a gap). A run
 whose solver stops, or whose spring deflections grow beyond ``divergence_deflection_m``, raises a
@@ -268,7 +270,7 @@ def reconstruct_pf(model: Model, protocol: Protocol, targets: MarkerTargets, /, 
         "options": options.__dict__,
         "initial_q_rad": q0.tolist(),
     }
-    return Reconstruction(**{**recon.__dict__, "timings_s": timings, "info": info})
+    return dataclasses.replace(recon, timings_s=timings, info=info)
 
 
 def _worst(kin: Kinematics, points, targets: MarkerTargets, q: np.ndarray, frame: int) -> tuple[str, float]:

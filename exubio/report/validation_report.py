@@ -393,7 +393,6 @@ def _text_pages(title: str, subtitle: str, blocks: list[tuple[str, str]]) -> lis
 
 def summary_pages(d: _Data) -> list[Figure]:
     r = d.runs
-    s = r["settings"]
     t1 = d.table1["rows"]
     p = r["paper"]
     sier = r["sier"]
