@@ -55,21 +55,40 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _print_result(recon, paths, summ) -> None:
+def _print_summary(method: str, paths: dict, summ: dict) -> None:
     r = summ["residual_mm"]
-    print(f"[{recon.method}] {summ['n_frames']} frames in {summ['wall_time_s']:.2f} s "
+    print(f"[{method}] {summ['n_frames']} frames in {summ['wall_time_s']:.2f} s "
           f"({summ['ms_per_frame']:.3f} ms/frame); residual mean {r['mean']:.2f} mm, SD {r['sd']:.2f} mm, "
           f"max {r['max']:.2f} mm ({r['max_marker']}); max |g| {summ['constraint_max_abs']:.1e}")
     not_conv = summ["frames"].get("not_converged", 0) + summ["frames"].get("too_few_markers", 0)
     if not_conv:
-        print(f"[{recon.method}] WARNING: {not_conv} frames not converged or with too few markers "
-              f"(see status in {paths['npz'].name})")
+        print(f"[{method}] WARNING: {not_conv} frames not converged or with too few markers "
+              f"(see status in {Path(paths['npz']).name})")
     if summ["gaps"]:
-        print(f"[{recon.method}] gaps: " + ", ".join(f"{g['marker']} {g['duration_s']:.2f} s at {g['start_s']:.2f} s"
-                                                   for g in summ["gaps"][:8])
+        print(f"[{method}] gaps: " + ", ".join(f"{g['marker']} {g['duration_s']:.2f} s at {g['start_s']:.2f} s"
+                                             for g in summ["gaps"][:8])
               + (" ..." if len(summ["gaps"]) > 8 else ""))
     for key in ("csv", "mot", "npz", "summary"):
         print(f"  {paths[key]}")
+
+
+def _print_result(recon, paths, summ) -> None:
+    _print_summary(recon.method, paths, summ)
+
+
+def _print_trial(result: dict, quiet: bool) -> None:
+    from exubio.calibrate import format_report
+
+    if result["calibration"]:
+        if not quiet:
+            print(format_report(result["calibration"]["report"]))
+        print(f"calibrated model: {result['calibration']['model_file']}")
+    for m in result["methods"]:
+        _print_summary(m["method"], m["paths"], m["summary"])
+    if "agreement_deg" in result:
+        agree = result["agreement_deg"]
+        worst = max(agree, key=agree.get)
+        print(f"PF-LS agreement: max RMSE {agree[worst]:.3f} deg ({worst})")
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
@@ -86,40 +105,66 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _run_trial(kwargs: dict) -> tuple[str, dict | None, int, str]:
+    """One trial in a worker process: (trial, result, exit code, error message)."""
+    from exubio.pipeline import process_trial
+
+    trial = kwargs.pop("trial")
+    try:
+        return trial, process_trial(trial, **kwargs), EXIT_OK, ""
+    except (InputError, ProtocolError, ModelError) as exc:
+        return trial, None, EXIT_BAD_INPUT, str(exc)
+    except ExubioError as exc:
+        return trial, None, EXIT_FAILED, str(exc)
+
+
 def cmd_reconstruct(args: argparse.Namespace) -> int:
-    from exubio.pipeline import reconstruct_file
+    from exubio.pipeline import calibrate_into
 
-    model, extra = None, {}
-    if args.static or args.static_frames:
-        from exubio.calibrate import calibrate_file, format_report, parse_frames
-        from exubio.io.results import prepare_output_dir
-        from exubio.model import save_model
-
-        source = args.static or args.trial
-        model_file = Path(args.out) / f"{Path(args.trial).stem}.model.yaml"
-        prepare_output_dir(args.out, [model_file.name], overwrite=args.overwrite)
-        model, _, report = calibrate_file(source, protocol_path=args.protocol, model_path=args.model,
-                                          body_mass_kg=args.body_mass, frames=parse_frames(args.static_frames))
-        save_model(model, model_file, calibration=report.to_dict())
+    model_path, extra = args.model, {}
+    if args.static:
+        model_file, report = calibrate_into(args.static, args.out, Path(args.static).stem, protocol_path=args.protocol,
+                                            model_path=args.model, body_mass_kg=args.body_mass,
+                                            frames_text=args.static_frames, overwrite=args.overwrite)
         if not args.quiet:
+            from exubio.calibrate import format_report
+
             print(format_report(report))
         print(f"calibrated model: {model_file}")
-        extra = {"calibration": {"static": str(source), "model_file": str(model_file),
+        model_path = model_file
+        extra = {"calibration": {"static": str(args.static), "model_file": str(model_file),
                                  "mean_residual_mm": report.mean_residual_mm,
                                  "residual_mm": report.to_dict().get("residual_mm")}}
-    outputs = reconstruct_file(args.trial, args.out, methods=_methods(args.method), model_path=args.model,
-                               protocol_path=args.protocol, body_mass_kg=args.body_mass, model=model,
-                               overwrite=args.overwrite, method_options={"pf": {"gravity": args.gravity}},
-                               summary_extra=extra, progress_factory=_progress_factory(not args.quiet))
-    for recon, paths, summ in outputs:
-        _print_result(recon, paths, summ)
-    if len(outputs) == 2:
-        from exubio.pipeline import agreement_deg
+    common = dict(out_dir=args.out, methods=_methods(args.method), model_path=model_path,
+                  protocol_path=args.protocol, body_mass_kg=args.body_mass, overwrite=args.overwrite,
+                  method_options={"pf": {"gravity": args.gravity}}, summary_extra=extra,
+                  static_frames=None if args.static else args.static_frames)
+    jobs = [dict(common, trial=t) for t in args.trials]
+    if len(jobs) == 1:  # errors propagate to main(): one message, one exit code
+        from exubio.pipeline import process_trial
 
-        agree = agreement_deg(outputs[0][0], outputs[1][0])
-        worst = max(agree, key=agree.get)
-        print(f"PF-LS agreement: max RMSE {agree[worst]:.3f} deg ({worst})")
-    return EXIT_OK
+        result = process_trial(args.trials[0], **dict(common, progress_factory=_progress_factory(not args.quiet)))
+        _print_trial(result, args.quiet)
+        return EXIT_OK
+    codes = []
+    if args.jobs > 1:
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+            done = list(pool.map(_run_trial, jobs))
+    else:
+        done = [_run_trial(j) for j in jobs]
+    for trial, result, code, message in done:
+        print(f"== {trial}")
+        if result is not None:
+            _print_trial(result, args.quiet)
+        else:
+            print(f"exubio: {'error' if code == EXIT_BAD_INPUT else 'reconstruction failed'}: {message}",
+                  file=sys.stderr)
+        codes.append(code)
+    failed = sum(c != EXIT_OK for c in codes)
+    print(f"{len(codes) - failed} of {len(codes)} trials reconstructed")
+    return max(codes)
 
 
 EXAMPLE_COMMAND = ("exubio simulate --motion abduction --duration 10 --rate 100 --noise-mm 1 --sta-mm 10 "
@@ -189,15 +234,16 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_simulate)
 
     r = sub.add_parser("reconstruct", help="joint angles from a C3D/TRC trial")
-    r.add_argument("trial", help="trial file (.c3d or .trc)")
+    r.add_argument("trials", nargs="+", metavar="TRIAL", help="trial file(s) (.c3d or .trc); several = a study")
+    r.add_argument("--jobs", type=int, default=1, help="trials reconstructed in parallel processes (default 1)")
     r.add_argument("--protocol", help="protocol YAML (default: protocols/upper_limb_21.yaml)")
     r.add_argument("--model", help="model YAML (default: models/upper_extremity.yaml)")
     r.add_argument("--method", choices=["pf", "ls", "both"], default="pf")
     r.add_argument("--body-mass", type=float, help="body mass, kg (scales segment inertia)")
     r.add_argument("--out", required=True, help="output folder")
     r.add_argument("--overwrite", action="store_true", help="replace earlier results in --out")
-    r.add_argument("--static", help="static trial: calibrate the model to the subject first")
-    r.add_argument("--static-frames", help="A:B frames used for the calibration (of --static, or of the trial "
+    r.add_argument("--static", help="static trial: calibrate the model to the subject first (once, for every trial)")
+    r.add_argument("--static-frames", help="A:B frames used for the calibration (of --static, or of each trial "
                    "itself when there is no static trial)")
     r.add_argument("--gravity", action="store_true",
                    help="PF: apply gravity (-Y of the thorax frame); off by default, the springs then also "

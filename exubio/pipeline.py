@@ -175,3 +175,51 @@ def agreement_deg(a: Reconstruction, b: Reconstruction, /) -> dict[str, float]:
     """RMSE (deg) per coordinate between two reconstructions of the same trial."""
     d = np.rad2deg(a.q_rad - b.q_rad)
     return {n: float(v) for n, v in zip(a.coordinate_names, np.sqrt(np.mean(d**2, axis=0)))}
+
+
+def calibrate_into(source: str | Path, out_dir: str | Path, stem: str, /, *, protocol_path: str | Path | None = None,
+                   model_path: str | Path | None = None, body_mass_kg: float | None = None,
+                   frames_text: str | None = None, overwrite: bool = False):
+    """Calibrate the model to ``source`` (a static trial, or frames of the trial itself) and write
+    ``out_dir/<stem>.model.yaml``; returns (model file, CalibrationReport)."""
+    from exubio.calibrate import calibrate_file, parse_frames
+    from exubio.model import save_model
+
+    model_file = Path(out_dir) / f"{stem}.model.yaml"
+    results.prepare_output_dir(out_dir, [model_file.name], overwrite=overwrite)
+    model, _, report = calibrate_file(source, protocol_path=protocol_path, model_path=model_path,
+                                      body_mass_kg=body_mass_kg, frames=parse_frames(frames_text))
+    save_model(model, model_file, calibration=report.to_dict())
+    return model_file, report
+
+
+def process_trial(trial_path: str | Path, /, *, out_dir: str | Path, methods: list[Method | str],
+                  model_path: str | Path | None = None, protocol_path: str | Path | None = None,
+                  body_mass_kg: float | None = None, overwrite: bool = False,
+                  method_options: dict[str, dict[str, Any]] | None = None, static_frames: str | None = None,
+                  summary_extra: dict[str, Any] | None = None,
+                  progress_factory: Callable[[str, int], Callable[[int], None]] | None = None) -> dict[str, Any]:
+    """One trial of a study, as ``exubio reconstruct`` runs it: calibrate on its own frames if
+    ``static_frames`` is given, reconstruct with every method, write the outputs. Returns what the
+    CLI prints (small and picklable, for a process pool): per method the summary and the paths,
+    the PF-LS agreement, and the calibration."""
+    extra = dict(summary_extra or {})
+    out: dict[str, Any] = {"trial": str(trial_path), "calibration": None}
+    if static_frames:
+        model_file, report = calibrate_into(trial_path, out_dir, Path(trial_path).stem, protocol_path=protocol_path,
+                                            model_path=model_path, body_mass_kg=body_mass_kg,
+                                            frames_text=static_frames, overwrite=overwrite)
+        model_path = model_file
+        out["calibration"] = {"model_file": str(model_file), "report": report}
+        extra["calibration"] = {"static": str(trial_path), "frames": static_frames, "model_file": str(model_file),
+                                "mean_residual_mm": report.mean_residual_mm,
+                                "residual_mm": report.to_dict().get("residual_mm")}
+    outputs = reconstruct_file(trial_path, out_dir, methods=methods, model_path=model_path,
+                               protocol_path=protocol_path, body_mass_kg=body_mass_kg, overwrite=overwrite,
+                               method_options=method_options, summary_extra=extra,
+                               progress_factory=progress_factory)
+    out["methods"] = [{"method": r.method, "paths": {k: str(v) for k, v in paths.items()}, "summary": summ}
+                      for r, paths, summ in outputs]
+    if len(outputs) == 2:
+        out["agreement_deg"] = agreement_deg(outputs[0][0], outputs[1][0])
+    return out

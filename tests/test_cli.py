@@ -157,3 +157,20 @@ def test_reconstruct_real_c3d_files(tmp_path, name, capsys):
     assert summ["n_frames"] > 200
     assert summ["constraint_max_abs"] < 1e-8
     assert 0 < summ["residual_mm"]["mean"] < 100  # generic model, not yet fitted to the subject
+
+
+@pytest.mark.parametrize("jobs", ["1", "2"])
+def test_a_study_of_several_trials_runs_and_reports_each(tmp_path, trial, jobs, capsys):
+    """Several trials in one call (optionally in parallel processes): every good trial is written,
+    a bad one is reported by name and sets the exit code, the others still run."""
+    a = write_c3d(tmp_path / "s1.c3d", trial.trajectories)
+    b = write_c3d(tmp_path / "s2.c3d", trial.trajectories)
+    out = tmp_path / "study"
+    code = main(["-q", "reconstruct", str(a), str(tmp_path / "missing.c3d"), str(b), "--method", "ls",
+                 "--jobs", jobs, "--out", str(out)])
+    assert code == 2
+    captured = capsys.readouterr()
+    assert "missing.c3d" in captured.err and "2 of 3 trials reconstructed" in captured.out
+    for stem in ("s1", "s2"):
+        _, _, q = read_angles_csv(out / f"{stem}.ls.csv")
+        assert q.shape == (trial.time_s.size, 13)
