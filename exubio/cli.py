@@ -89,6 +89,8 @@ def _print_trial(result: dict, quiet: bool) -> None:
         agree = result["agreement_deg"]
         worst = max(agree, key=agree.get)
         print(f"PF-LS agreement: max RMSE {agree[worst]:.3f} deg ({worst})")
+    if result.get("report"):
+        print(f"report: {result['report']['pdf']} (+ .png)")
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
@@ -138,7 +140,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     common = dict(out_dir=args.out, methods=_methods(args.method), model_path=model_path,
                   protocol_path=args.protocol, body_mass_kg=args.body_mass, overwrite=args.overwrite,
                   method_options={"pf": {"gravity": args.gravity}}, summary_extra=extra,
-                  static_frames=None if args.static else args.static_frames)
+                  static_frames=None if args.static else args.static_frames, report=not args.no_report)
     jobs = [dict(common, trial=t) for t in args.trials]
     if len(jobs) == 1:  # errors propagate to main(): one message, one exit code
         from exubio.pipeline import process_trial
@@ -242,6 +244,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--body-mass", type=float, help="body mass, kg (scales segment inertia)")
     r.add_argument("--out", required=True, help="output folder")
     r.add_argument("--overwrite", action="store_true", help="replace earlier results in --out")
+    r.add_argument("--no-report", action="store_true", help="skip the per-trial PDF/PNG report")
     r.add_argument("--static", help="static trial: calibrate the model to the subject first (once, for every trial)")
     r.add_argument("--static-frames", help="A:B frames used for the calibration (of --static, or of each trial "
                    "itself when there is no static trial)")

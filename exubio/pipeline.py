@@ -127,6 +127,7 @@ def run_metadata(inputs: TrialInputs, trial_path: str | Path, method: Method) ->
         "body_mass_kg": inputs.model.body_mass_kg,
         "protocol": inputs.protocol.source,
         "protocol_name": inputs.protocol.name,
+        "held_coordinates": list(inputs.protocol.held_coordinates),
         "method": method.value,
         "units": {"angles_in_files": "deg", "positions_in_npz": "m", "time": "s"},
         "ignored_labels": list(inputs.trajectories.ignored_labels),
@@ -197,14 +198,17 @@ def process_trial(trial_path: str | Path, /, *, out_dir: str | Path, methods: li
                   model_path: str | Path | None = None, protocol_path: str | Path | None = None,
                   body_mass_kg: float | None = None, overwrite: bool = False,
                   method_options: dict[str, dict[str, Any]] | None = None, static_frames: str | None = None,
-                  summary_extra: dict[str, Any] | None = None,
+                  summary_extra: dict[str, Any] | None = None, report: bool = True,
                   progress_factory: Callable[[str, int], Callable[[int], None]] | None = None) -> dict[str, Any]:
     """One trial of a study, as ``exubio reconstruct`` runs it: calibrate on its own frames if
     ``static_frames`` is given, reconstruct with every method, write the outputs. Returns what the
     CLI prints (small and picklable, for a process pool): per method the summary and the paths,
     the PF-LS agreement, and the calibration."""
     extra = dict(summary_extra or {})
-    out: dict[str, Any] = {"trial": str(trial_path), "calibration": None}
+    out: dict[str, Any] = {"trial": str(trial_path), "calibration": None, "report": None}
+    stem = Path(trial_path).stem
+    if report:
+        results.prepare_output_dir(out_dir, [f"{stem}.report.pdf", f"{stem}.report.png"], overwrite=overwrite)
     if static_frames:
         model_file, report = calibrate_into(trial_path, out_dir, Path(trial_path).stem, protocol_path=protocol_path,
                                             model_path=model_path, body_mass_kg=body_mass_kg,
@@ -222,4 +226,9 @@ def process_trial(trial_path: str | Path, /, *, out_dir: str | Path, methods: li
                       for r, paths, summ in outputs]
     if len(outputs) == 2:
         out["agreement_deg"] = agreement_deg(outputs[0][0], outputs[1][0])
+    if report:
+        from exubio.report.trial_report import build_trial_report
+
+        pdf, png = build_trial_report([paths["npz"] for _, paths, _ in outputs], Path(out_dir) / f"{stem}.report.pdf")
+        out["report"] = {"pdf": str(pdf), "png": str(png)}
     return out

@@ -43,6 +43,9 @@ def test_reconstruct_writes_all_outputs_with_consistent_content(tmp_path, c3d, t
     assert set(summ["residual_mm"]) >= {"mean", "sd", "max", "max_marker"}
     assert summ["constraint_max_abs"] < 1e-9
     assert "ls" in capsys.readouterr().out
+    pdf, png = out / "abd.report.pdf", out / "abd.report.png"
+    assert pdf.read_bytes()[:5] == b"%PDF-" and pdf.stat().st_size > 10_000
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_existing_result_is_refused_and_left_intact(tmp_path, c3d, capsys):

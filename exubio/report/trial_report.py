@@ -1,0 +1,145 @@
+"""The report of one reconstructed trial: a PDF (and a PNG of its first page) a lab can show.
+
+It reads the ``<trial>.<method>.npz`` results written by ``exubio reconstruct`` (through
+exubio.io.results) and never imports the solver. Page 1: joint angles of every method against time,
+grouped by joint (degrees). Page 2: marker residuals (mean ± SD over markers per frame, per-marker
+RMSE), constraint residuals and the gaps, with the run's figures.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.backends.backend_pdf import PdfPages
+from matplotlib.figure import Figure
+
+from exubio.evaluate import per_frame_residuals_mm, residual_statistics
+from exubio.io.results import atomic_write, read_npz, read_npz_metadata
+from exubio.types import Reconstruction
+
+_COLOURS = {"pf": "black", "ls": "tab:red"}
+_JOINTS = (("sternoclavicular", "sc_"), ("acromioclavicular", "ac_"), ("glenohumeral", "gh_"),
+           ("elbow and forearm", ("elbow_", "pronation")), ("wrist", "wrist_"))
+
+
+def _figure(size=(11.69, 8.27)) -> Figure:
+    fig = Figure(figsize=size)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _members(names: Sequence[str], prefix) -> list[int]:
+    prefixes = (prefix,) if isinstance(prefix, str) else prefix
+    return [i for i, n in enumerate(names) if n.startswith(prefixes)]
+
+
+def _title(recons: Sequence[Reconstruction], meta: dict) -> str:
+    trial = Path(meta.get("trial", "trial")).name
+    return (f"exubio {meta.get('exubio_version', '')}: {trial} — model {meta.get('model_name', '')}, "
+            f"protocol {meta.get('protocol_name', '')}, methods {', '.join(r.method.upper() for r in recons)}")
+
+
+def angles_page(recons: Sequence[Reconstruction], meta: dict) -> Figure:
+    fig = _figure()
+    names = recons[0].coordinate_names
+    axes = fig.subplots(len(_JOINTS), 1, sharex=True)
+    held = set(meta.get("held_coordinates", []))
+    for ax, (label, prefix) in zip(axes, _JOINTS):
+        idx = _members(names, prefix)
+        styles = ["-", "--", ":"]
+        for r in recons:
+            for k, i in enumerate(idx):
+                ax.plot(r.time_s, np.rad2deg(r.q_rad[:, i]), styles[k % 3], color=_COLOURS.get(r.method, None),
+                        lw=1.0, label=f"{names[i]} ({r.method.upper()})" + (" held" if names[i] in held else ""))
+        ax.set_ylabel(f"{label}\n(deg)", fontsize=8)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=6, ncol=3, loc="upper right")
+        ax.tick_params(labelsize=7)
+    axes[-1].set_xlabel("time (s)")
+    fig.suptitle(_title(recons, meta) + "\njoint coordinates of the model (intrinsic sequences as in the model "
+                 "file; positive = the motion the name says)", fontsize=9)
+    fig.subplots_adjust(left=0.08, right=0.98, top=0.91, bottom=0.06, hspace=0.15)
+    return fig
+
+
+def residuals_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[str, dict]) -> Figure:
+    fig = _figure()
+    grid = fig.add_gridspec(2, 2, height_ratios=[1.0, 1.0])
+    ax_t = fig.add_subplot(grid[0, :])
+    ax_m = fig.add_subplot(grid[1, 0])
+    ax_text = fig.add_subplot(grid[1, 1])
+    width = 0.8 / len(recons)
+    markers = recons[0].marker_names
+    for k, r in enumerate(recons):
+        mean, sd = per_frame_residuals_mm(r)
+        c = _COLOURS.get(r.method, None)
+        ax_t.plot(r.time_s, mean, color=c, lw=1.0, label=f"{r.method.upper()} mean over markers")
+        ax_t.fill_between(r.time_s, mean - sd, mean + sd, color=c, alpha=0.12, lw=0, label=f"{r.method.upper()} ± SD")
+        stats = residual_statistics(r)
+        rmse = [stats["per_marker_rmse"].get(m) or np.nan for m in markers]
+        ax_m.bar(np.arange(len(markers)) + k * width, rmse, width, color=c, label=r.method.upper())
+    for g in recons[0].gaps:
+        t = recons[0].time_s
+        ax_t.axvspan(t[g.start], t[min(g.stop, len(t)) - 1], color="orange", alpha=0.2)
+    ax_t.set_xlabel("time (s)")
+    ax_t.set_ylabel("marker residual (mm)")
+    ax_t.grid(alpha=0.3)
+    ax_t.legend(fontsize=7)
+    ax_t.set_title("distance between each skin marker and its model point (orange: marker gaps)", fontsize=9)
+    ax_m.set_xticks(np.arange(len(markers)) + 0.4 - width / 2)
+    ax_m.set_xticklabels(markers, rotation=70, fontsize=7)
+    ax_m.set_ylabel("RMSE per marker (mm)")
+    ax_m.legend(fontsize=7)
+    ax_m.grid(alpha=0.3, axis="y")
+    ax_text.axis("off")
+    lines = []
+    for r in recons:
+        s = summaries.get(r.method, {})
+        rs = s.get("residual_mm", {})
+        lines += [f"{r.method.upper()}: {s.get('n_frames', r.n_frames)} frames, {s.get('wall_time_s', float('nan')):.2f} s "
+                  f"({s.get('ms_per_frame', float('nan')):.3f} ms/frame)",
+                  f"  residual mean {rs.get('mean', float('nan')):.2f} mm, SD {rs.get('sd', float('nan')):.2f} mm, "
+                  f"max {rs.get('max', float('nan')):.1f} mm ({rs.get('max_marker')})",
+                  f"  max per-frame mean {rs.get('max_frame_mean', float('nan')):.2f} ± "
+                  f"{rs.get('max_frame_mean_sd', float('nan')):.2f} mm",
+                  f"  constraints: max |g| {np.nanmax(np.abs(r.constraint)):.1e}, "
+                  f"max |G q̇| {np.nanmax(np.abs(r.constraint_velocity)):.1e} 1/s",
+                  f"  frames not converged / too few markers: {int((np.asarray(r.status) == 1).sum())} / "
+                  f"{int((np.asarray(r.status) == 2).sum())}", ""]
+    gaps = recons[0].gaps
+    lines.append(f"gaps: {len(gaps)}" + ("" if not gaps else " — " + ", ".join(
+        f"{g.marker} ({g.n_frames} frames)" for g in gaps[:6]) + (" ..." if len(gaps) > 6 else "")))
+    unused = meta.get("ignored_labels", [])
+    if unused:
+        lines.append(f"ignored trial labels: {', '.join(unused[:10])}")
+    lines.append(f"units in the trial file: {meta.get('units_in_trial_file', '?')}; rate {meta.get('rate_hz', '?')} Hz")
+    ax_text.text(0.0, 1.0, "\n".join(lines), va="top", family="monospace", fontsize=7)
+    fig.suptitle(_title(recons, meta), fontsize=9)
+    fig.subplots_adjust(left=0.07, right=0.98, top=0.92, bottom=0.13, hspace=0.35, wspace=0.2)
+    return fig
+
+
+def build_trial_report(npz_paths: Sequence[str | Path], pdf_path: str | Path, /) -> tuple[Path, Path]:
+    """Write ``pdf_path`` and a PNG of the joint-angle page beside it (``.png``), atomically."""
+    recons = [read_npz(p) for p in npz_paths]
+    meta = read_npz_metadata(npz_paths[0])
+    summaries = {}
+    for p, r in zip(npz_paths, recons):
+        summary = Path(str(p)[: -len(".npz")] + ".summary.json")
+        if summary.is_file():
+            summaries[r.method] = json.loads(summary.read_text())
+    pages = [angles_page(recons, meta), residuals_page(recons, meta, summaries)]
+    pdf_path = Path(pdf_path)
+
+    def write_pdf(tmp: Path) -> None:
+        with PdfPages(tmp) as pdf:
+            for page in pages:
+                pdf.savefig(page)
+
+    atomic_write(pdf_path, write_pdf)
+    png = pdf_path.with_suffix(".png")
+    atomic_write(png, lambda tmp: pages[0].savefig(tmp, dpi=110))
+    return pdf_path, png
