@@ -199,6 +199,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
     agree = agreement_deg(outputs[0][0], outputs[1][0])
     worst = max(agree, key=agree.get)
     print(f"PF-LS agreement: max RMSE {agree[worst]:.3f} deg ({worst})")
+    from exubio.report.trial_report import build_trial_report
+
+    pdf, png = build_trial_report([paths["npz"] for _, paths, _ in outputs], out / "example_abduction.report.pdf")
+    print(f"report: {pdf} and {png}")
     print(f"results are in {out.resolve()}")
     return EXIT_OK
 
