@@ -203,14 +203,14 @@ class Kinematics:
         return np.einsum("...km,...kmc->...kc", mask, term)
 
     # ---------------------------------------------------------------- constraints
-    def g(self, q: np.ndarray) -> np.ndarray:
+    def g(self, q: np.ndarray, *, frames: Frames | None = None) -> np.ndarray:
         """Ellipsoid constraints g_j = e_j^T A e_j - 1 (..., 2) (paper Eq. 1)."""
-        e = self.points(q, self.contacts) - self.centre
+        e = self.points(q, self.contacts, frames=frames) - self.centre
         return np.einsum("...kc,c->...k", e * e, self.a_diag) - 1.0
 
-    def G(self, q: np.ndarray) -> np.ndarray:
+    def G(self, q: np.ndarray, *, frames: Frames | None = None) -> np.ndarray:
         """Constraint Jacobian G_j = 2 e_j^T A J_Pj (..., 2, m) (paper Eq. 2)."""
-        fr = self.frames(q)
+        fr = self.frames(q) if frames is None else frames
         r = self.points(q, self.contacts, frames=fr)
         J = self.point_jacobian(q, self.contacts, frames=fr, positions=r)
         return 2.0 * np.einsum("...kc,...kcm->...km", (r - self.centre) * self.a_diag, J)

@@ -23,10 +23,11 @@ def assemble(kin: Kinematics, points: PointSet, targets: MarkerTargets, /, *, me
              qd: np.ndarray, qdd: np.ndarray, status: np.ndarray, timings_s: Mapping[str, float],
              info: Mapping[str, Any], gaps: tuple[Gap, ...] = ()) -> Reconstruction:
     """Build the Reconstruction: model points at q, residuals |R_i - M_i| (NaN in gaps), g and G q̇."""
-    model_points = kin.points(q, points)
+    fr = kin.frames(q)
+    model_points = kin.points(q, points, frames=fr)
     residuals = np.linalg.norm(model_points - targets.positions_m, axis=2)  # NaN where missing
-    constraint = kin.g(q)
-    constraint_velocity = np.einsum("nkm,nm->nk", kin.G(q), qd)
+    constraint = kin.g(q, frames=fr)
+    constraint_velocity = np.einsum("nkm,nm->nk", kin.G(q, frames=fr), qd)
     return Reconstruction(
         method=method,
         time_s=np.asarray(targets.time_s, dtype=float),
