@@ -68,6 +68,8 @@ def _print_summary(method: str, paths: dict, summ: dict) -> None:
         print(f"[{method}] gaps: " + ", ".join(f"{g['marker']} {g['duration_s']:.2f} s at {g['start_s']:.2f} s"
                                              for g in summ["gaps"][:8])
               + (" ..." if len(summ["gaps"]) > 8 else ""))
+    if summ.get("absent_markers"):
+        print(f"[{method}] optional markers absent from the trial: {', '.join(summ['absent_markers'])}")
     for key in ("csv", "mot", "npz", "summary"):
         print(f"  {paths[key]}")
 

@@ -70,7 +70,8 @@ def summary(recon: Reconstruction, /, *, source: str = "", extra: dict[str, Any]
         "coordinates": list(recon.coordinate_names),
         "gaps": [{"marker": g.marker, "start_frame": g.start, "stop_frame": g.stop,
                   "start_s": float(recon.time_s[g.start]) if g.start < recon.n_frames else None,
-                  "duration_s": g.n_frames / _rate(recon)} for g in recon.gaps],
+                  "duration_s": g.n_frames / _rate(recon)} for g in recon.gaps if g.n_frames < recon.n_frames],
+        "absent_markers": [g.marker for g in recon.gaps if g.n_frames >= recon.n_frames],
         "info": dict(recon.info),
     }
     if extra:
