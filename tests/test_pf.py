@@ -11,7 +11,8 @@ pytest.importorskip("exudyn")
 from exubio.errors import ReconstructionError  # noqa: E402
 from exubio.kinematics import Kinematics  # noqa: E402
 from exubio.methods.common import tracked_points  # noqa: E402
-from exubio.methods.pf import PFOptions, integration_step, project_on_constraints, reconstruct_pf  # noqa: E402
+from exubio.methods.constraints import project_on_constraints  # noqa: E402
+from exubio.methods.pf import PFOptions, integration_step, reconstruct_pf  # noqa: E402
 from exubio.pipeline import load_model_and_protocol, reconstruct  # noqa: E402
 from exubio.preprocess import prepare_targets  # noqa: E402
 from exubio.simulate import Motion, simulate_trial  # noqa: E402

@@ -25,6 +25,7 @@ import numpy as np
 
 from exubio.kinematics import Kinematics, PointSet
 from exubio.methods.common import assemble, tracked_points
+from exubio.methods.constraints import project_on_constraints
 from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Reconstruction
 
 log = logging.getLogger(__name__)
@@ -186,25 +187,9 @@ def solve_positions(kin: Kinematics, points: PointSet, targets_m: np.ndarray, we
         if progress:
             progress(stop - start)
         start = stop
-    return project_on_constraints(kin, q_out, held=held), iters, converged
-
-
-def project_on_constraints(kin: Kinematics, q: np.ndarray, /, *, tol: float = 1e-13, max_iterations: int = 10,
-                           held: np.ndarray | None = None) -> np.ndarray:
-    """Smallest change of q (n, m) that makes g(q) = 0 (Newton with minimum-norm steps), so every
-    returned frame satisfies the constraints even where the optimisation stopped early."""
-    q = np.array(q, dtype=float)
-    for _ in range(max_iterations):
-        g = kin.g(q)
-        bad = np.abs(g).max(axis=1) > tol
-        if not bad.any():
-            break
-        G = kin.G(q[bad])
-        if held is not None:
-            G = G * ~held
-        step = np.einsum("nkm,nk->nm", G, np.linalg.solve(G @ np.swapaxes(G, 1, 2), g[bad][..., None])[..., 0])
-        q[bad] -= step
-    return q
+    # every returned frame satisfies the constraints, also where the optimisation stopped early
+    q_out = project_on_constraints(kin, q_out, held=held, max_iterations=10)[0]
+    return q_out, iters, converged
 
 
 def solve_rates(kin: Kinematics, points: PointSet, q: np.ndarray, vel: np.ndarray, acc: np.ndarray,
