@@ -81,6 +81,7 @@ from scipy.interpolate import CubicSpline
 
 from exubio.errors import InputError, ModelError
 from exubio.kinematics import Kinematics, axis_rotation
+from exubio.reference import ludewig2009_at
 from exubio.types import Model, Trajectories
 
 __all__ = [
@@ -106,24 +107,9 @@ __all__ = [
 # SC: Y + protraction, X - elevation, Z + posterior rotation; ST: Y + internal rotation,
 # X - upward rotation, Z + posterior tilt.
 LUDEWIG_HT_DEG = (30.0, 45.0, 60.0, 75.0, 90.0, 105.0, 120.0)
-LUDEWIG_2009: dict[str, dict[str, tuple[float, ...]]] = {
-    "frontal": {  # coronal-plane abduction, files *_elevationFrontal.csv
-        "SC_protraction": (-31.3, -34.7, -37.3, -39.1, -40.6, -42.6, -44.0),
-        "SC_elevation": (-14.3, -15.7, -16.8, -17.5, -18.1, -19.2, -19.5),
-        "SC_rotation": (3.1, 5.9, 8.6, 11.8, 15.8, 19.9, 24.8),
-        "ST_protraction": (31.2, 30.9, 30.5, 30.6, 30.8, 30.6, 30.6),
-        "ST_medRotation": (-15.6, -21.1, -26.5, -31.5, -36.5, -41.7, -46.4),
-        "ST_tilt": (-10.2, -8.1, -6.1, -4.2, -2.1, 1.1, 3.8),
-    },
-    "sagittal": {  # flexion, files *_elevationSagittal.csv
-        "SC_protraction": (-20.4, -21.6, -22.7, -23.8, -24.8, -26.6, -31.7),
-        "SC_elevation": (-10.1, -10.8, -12.0, -12.7, -13.5, -14.1, -14.5),
-        "SC_rotation": (0.0, 2.8, 6.6, 10.2, 14.1, 19.0, 25.0),
-        "ST_protraction": (44.3, 45.6, 46.7, 47.4, 47.8, 47.4, 43.5),
-        "ST_medRotation": (-15.1, -19.6, -24.4, -28.7, -32.9, -37.4, -43.3),
-        "ST_tilt": (-10.4, -8.0, -5.7, -3.6, -1.4, 1.1, 5.4),
-    },
-}
+LUDEWIG_2009: dict[str, dict[str, tuple[float, ...]]] = ludewig2009_at(
+    LUDEWIG_HT_DEG, ("SC_protraction", "SC_elevation", "SC_rotation", "ST_protraction", "ST_medRotation", "ST_tilt"))
+# frontal = coronal-plane abduction, sagittal = flexion; read from exubio/data/ludewig2009.csv
 # model SC coordinate <- (Ludewig column, sign)
 _RHYTHM_MAP = {
     "sc_protraction": ("SC_protraction", +1.0),

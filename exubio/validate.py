@@ -50,6 +50,7 @@ from exubio.evaluate import per_frame_residuals_mm, residual_statistics
 from exubio.kinematics import Kinematics
 from exubio.pipeline import load_model_and_protocol, reconstruct
 from exubio.preprocess import prepare_targets
+from exubio.reference import load_ludewig2009
 from exubio.resources import _CHECKOUT, shipped_file
 from exubio.simulate import Motion, SimulatedTrial, simulate_trial
 from exubio.types import MarkerTargets, Model, Protocol, Reconstruction
@@ -233,20 +234,6 @@ def _with_springs(protocol: Protocol, stiffness: float, damping: float) -> Proto
                     for m in protocol.markers)
     return dataclasses.replace(protocol, markers=markers, default_stiffness_n_per_m=stiffness,
                                default_damping_ns_per_m=damping)
-
-
-def load_ludewig2009() -> dict[str, dict[str, np.ndarray]]:
-    """Ludewig et al. 2009 mean curves from ``exubio/data/ludewig2009.csv``:
-    {plane: {"ht_elevation_deg": (n,), "<column>": (n,) deg}}."""
-    path = shipped_file("exubio.data", "ludewig2009.csv", "exubio/data")
-    lines = [ln for ln in path.read_text().splitlines() if ln and not ln.startswith("#")]
-    header = lines[0].split(",")
-    rows = [ln.split(",") for ln in lines[1:]]
-    out: dict[str, dict[str, np.ndarray]] = {}
-    for plane in dict.fromkeys(r[0] for r in rows):
-        sel = np.array([[float(v) for v in r[1:]] for r in rows if r[0] == plane])
-        out[plane] = {name: sel[:, i] for i, name in enumerate(header[1:])}
-    return out
 
 
 RAISING_MIN_SPAN_DEG = 20.0  # a raising phase must cover at least this much HT elevation

@@ -16,23 +16,12 @@ from exubio.angles import (
     rotation_from_euler,
 )
 from exubio.errors import InputError
-from exubio.kinematics import Kinematics, axis_rotation
-from exubio.model import load_model
+from exubio.kinematics import axis_rotation
 from exubio.simulate import scapula_isb_angles, simulate_trial
 
 TAIT_BRYAN = ["XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX"]
 PROPER = ["XYX", "XZX", "YXY", "YZY", "ZXZ", "ZYZ"]
 X, Y, Z = np.eye(3)
-
-
-@pytest.fixture(scope="module")
-def model():
-    return load_model()
-
-
-@pytest.fixture(scope="module")
-def kin(model):
-    return Kinematics(model)
 
 
 def _random_angles(rng, n, proper, negative=False):

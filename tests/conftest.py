@@ -1,0 +1,15 @@
+"""Fixtures shared by the test modules: the generic model and its kinematics."""
+import pytest
+
+from exubio.kinematics import Kinematics
+from exubio.model import load_model
+
+
+@pytest.fixture(scope="module")
+def model():
+    return load_model()
+
+
+@pytest.fixture(scope="module")
+def kin(model):
+    return Kinematics(model)
