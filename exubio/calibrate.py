@@ -71,7 +71,8 @@ from exubio.config import read_yaml
 from exubio.errors import InputError, ModelError, ProtocolError
 from exubio.kinematics import Kinematics, PointSet
 from exubio.methods.common import tracked_points
-from exubio.methods.ls import LSOptions, solve_positions
+from exubio.methods.ls import Limits, LSOptions, solve_positions
+from exubio.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD, violation
 from exubio.preprocess import isb_landmarks, prepare_targets, thorax_frame, to_thorax_frame, valid_runs
 from exubio.protocol import resolve_labels
 from exubio.types import Ellipsoid, MarkerTargets, Model, Protocol, Trajectories
@@ -172,6 +173,9 @@ class CalibrationReport:
     constraint_abs: float
     markers: tuple[MarkerCalibration, ...]
     fit_iterations: int
+    window_motion_mm: Mapping[str, float] = dataclasses.field(default_factory=dict)  # RMS motion of
+    # each marker about its mean over the calibration frames: a "static" window that moves
+    static_pose_beyond_range_deg: Mapping[str, float] = dataclasses.field(default_factory=dict)
 
     @property
     def residual_mm(self) -> dict[str, float]:
@@ -236,6 +240,8 @@ class CalibrationReport:
                 for m in self.markers
             },
             "fit_iterations": self.fit_iterations,
+            "window_motion_mm": {k: round(float(v), 3) for k, v in self.window_motion_mm.items()},
+            "static_pose_beyond_range_deg": {k: round(float(v), 3) for k, v in self.static_pose_beyond_range_deg.items()},
         }
 
 
@@ -384,16 +390,18 @@ def _start_postures(model: Model) -> np.ndarray:
 
 
 def _fit_pose(kin: Kinematics, points: PointSet, target: np.ndarray, w: np.ndarray, q_starts: np.ndarray,
-              prior: np.ndarray, *, max_iterations: int = 300, tol: float = 1e-10) -> tuple[np.ndarray, np.ndarray]:
-    """min_q sum w_i |r_i(q) - m_i|^2 + sum_j prior_j q_j^2 for every start (S, m) at once,
-    Levenberg-Marquardt; returns (q (S, m), cost (S,))."""
+              prior: np.ndarray, *, limits: Limits | None = None, max_iterations: int = 300,
+              tol: float = 1e-10) -> tuple[np.ndarray, np.ndarray]:
+    """min_q sum w_i |r_i(q) - m_i|^2 + sum_j prior_j q_j^2 + kappa sum_j v_j(q)^2 (the joint
+    ranges, exubio.ranges) for every start (S, m) at once, Levenberg-Marquardt; returns (q (S, m),
+    cost (S,))."""
     q = np.array(q_starts, dtype=float)
     S, m = q.shape
     tgt = np.where(np.isnan(target), 0.0, target)
 
     def evaluate(qq):
         e = (kin.points(qq, points) - tgt) * (w[:, None] > 0)
-        return e, np.einsum("k,skc->s", w, e * e) + (prior * qq * qq).sum(axis=1)
+        return e, np.einsum("k,skc->s", w, e * e) + (prior * qq * qq).sum(axis=1) + _range_cost(qq, limits)
 
     e, cost = evaluate(q)
     mu = np.full(S, 1e-4)
@@ -406,6 +414,10 @@ def _fit_pose(kin: Kinematics, points: PointSet, target: np.ndarray, w: np.ndarr
         Jw = J * w[None, :, None, None]
         H = np.einsum("akcm,akcn->amn", Jw, J) + np.eye(m) * prior
         grad = np.einsum("akcm,akc->am", Jw, e[a]) + prior * q[a]
+        if limits is not None:
+            v = violation(q[a], limits.ranges_rad)
+            H = H + limits.kappa * (v != 0)[..., :, None] * np.eye(m)
+            grad = grad + limits.kappa * v
         dq = -np.linalg.solve(H + mu[a, None, None] * np.eye(m), grad[..., None])[..., 0]
         big = np.abs(dq).max(axis=1)
         dq *= np.minimum(1.0, 0.3 / np.maximum(big, 1e-300))[:, None]
@@ -420,6 +432,13 @@ def _fit_pose(kin: Kinematics, points: PointSet, target: np.ndarray, w: np.ndarr
     return q, cost
 
 
+def _range_cost(q: np.ndarray, limits: Limits | None) -> np.ndarray | float:
+    if limits is None:
+        return 0.0
+    v = violation(q, limits.ranges_rad)
+    return limits.kappa * (v * v).sum(axis=-1)
+
+
 @dataclass
 class _Anchor:
     """The anatomical-fit problem: the generic model, its marker points, scale groups, weights."""
@@ -432,6 +451,7 @@ class _Anchor:
     group_of: dict[str, str]  # segment -> group
     fixed: dict[str, float]  # groups whose factor is not fitted
     prior_q: np.ndarray  # (m,) m^2/rad^2
+    limits: Limits | None = None  # the joint ranges (the static pose must respect them too)
 
     def __post_init__(self) -> None:
         self.kin = Kinematics(self.model)
@@ -461,7 +481,7 @@ class _Anchor:
         e = np.where(np.isnan(self.target), 0.0, r - np.where(np.isnan(self.target), 0.0, self.target))
         s_free = np.array([s[g] for g in self.free])
         cost = float(np.einsum("k,kc->", w, e * e) + (self.prior_q * q * q).sum()
-                     + SCALE_PRIOR_M2 * ((s_free - 1.0) ** 2).sum())
+                     + SCALE_PRIOR_M2 * ((s_free - 1.0) ** 2).sum() + _range_cost(q, self.limits))
         if not jacobian:
             return cost, e, None
         pivots = (O @ s_all)[self.kin.coordinate_segment]  # (m, 3): each coordinate turns about its joint centre
@@ -482,6 +502,10 @@ class _Anchor:
             Jw = J * w[:, None, None]
             H = np.einsum("kcm,kcn->mn", Jw, J) + np.diag(prior)
             grad = np.einsum("kcm,kc->m", Jw, e) + prior * x_dev
+            if self.limits is not None:
+                v = violation(q, self.limits.ranges_rad)
+                H[:m, :m] += self.limits.kappa * np.diag((v != 0).astype(float))
+                grad[:m] += self.limits.kappa * v
             dx = -np.linalg.solve(H + mu * np.eye(H.shape[0]), grad)
             dx *= min(1.0, 0.3 / max(np.abs(dx).max(), 1e-300))
             q_t = q + dx[:m]
@@ -647,6 +671,8 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
     window, auto = _window(targets, frames)
     idx = list(window)
     static = _nanmean(targets.positions_m[idx], axis=0)  # (k, 3) the static pose
+    with np.errstate(invalid="ignore"):  # how much each marker moves within the window (RMS, m)
+        spread = np.sqrt(_nanmean(((targets.positions_m[idx] - static) ** 2).sum(axis=2), axis=0))
     present = np.isfinite(static).all(axis=1)
     for j, m in enumerate(protocol.markers):
         if not present[j] and not m.optional:
@@ -674,12 +700,14 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
     prior = np.array([GIRDLE_PRIOR_M2_PER_RAD2 if names[coord_segment[j]] in GIRDLE_SEGMENTS else ARM_PRIOR_M2_PER_RAD2
                       for j in range(model.n_coordinates)])
 
+    limits = Limits.of(model, protocol, DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD)
     anchor = _Anchor(model=model, seg_index=seg_index, local_generic=local_generic, target=static,
-                     groups=list(dict.fromkeys(group_of.values())), group_of=group_of, fixed=fixed, prior_q=prior)
+                     groups=list(dict.fromkeys(group_of.values())), group_of=group_of, fixed=fixed, prior_q=prior,
+                     limits=limits)
     factors = {g: fixed.get(g, 1.0) for g in anchor.groups}
     # start posture: several at once, pose only, generic scale factors
     kin, pts = anchor.points(factors)
-    qs, cost = _fit_pose(kin, pts, static, w_protocol, _start_postures(model), prior)
+    qs, cost = _fit_pose(kin, pts, static, w_protocol, _start_postures(model), prior, limits=limits)
     q = qs[int(np.argmin(cost))]
     # iteratively reweighted joint fit; the robust scale is annealed from 100 mm to ROBUST_SCALE_M so
     # that the first, rough poses do not discard markers a better pose would fit
@@ -737,7 +765,10 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
         scale_factors={s: float(v) for s, v in seg_factors.items()}, thorax_scale_measured=st is not None,
         static_q_rad=q.copy(), coordinate_names=model.coordinate_names,
         ellipsoid_centre_m=np.array(ellipsoid.centre_m), ellipsoid_radii_m=np.array(ellipsoid.radii_m),
-        ellipsoid_scale=k_ell, constraint_abs=g_abs, markers=tuple(markers), fit_iterations=it)
+        ellipsoid_scale=k_ell, constraint_abs=g_abs, markers=tuple(markers), fit_iterations=it,
+        window_motion_mm={m.name: float(spread[j] * 1000) for j, m in enumerate(protocol.markers) if present[j]},
+        static_pose_beyond_range_deg={n: float(np.degrees(v)) for n, v in
+                                      zip(model.coordinate_names, violation(q, model.coordinate_ranges_rad)) if v != 0})
     stem = Path(trajectories.source).stem if trajectories.source else "subject"
     calibrated = dataclasses.replace(
         calibrated, name=f"{model.name}_calibrated_{stem}",

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from exubio.errors import ModelError
+from exubio.ranges import violation, wrap_into_range
 from exubio.types import JointKind, Model
 
 
@@ -239,16 +240,26 @@ class Kinematics:
         return out
 
     def coordinates_from_rotations(self, R: np.ndarray, *, q_previous: np.ndarray | None = None) -> np.ndarray:
-        """Joint coordinates (..., m) from segment orientations R (..., n_seg, 3, 3).
+        """Joint coordinates (..., m) from segment orientations R (..., n_seg, 3, 3), over the full
+        range of every joint type.
 
-        Spherical joints decompose in their own axis sequence; where the middle angle comes within
-        1e-6 rad of +-90 deg the split between first and last angle is undetermined: the first
-        angle then keeps ``q_previous`` (or 0). Revolute joints take the rotation about their axis.
+        A spherical joint's rotation has two angle triples, (q1, q2, q3) and (q1 + pi, pi - q2,
+        q3 + pi); a cardan joint's and a revolute joint's are unique up to 2 pi. Of the candidates
+        (and their 2 pi shifts) the one inside the coordinates' ranges of motion (the model's
+        ``range_deg``), or nearest to them, is returned; among equally good ones, the one nearest
+        ``q_previous`` when it is given, otherwise the principal branch (|q2| <= 90 deg, angles
+        nearest the middle of their ranges). Where the middle angle of a spherical joint comes
+        within 1e-6 rad of +-90 deg the split between first and last angle is undetermined: the
+        first angle then keeps ``q_previous`` (or 0).
         """
         R = np.asarray(R, dtype=float)
         q = np.zeros(R.shape[:-3] + (self.n_coordinates,))
+        ranges = self.model.coordinate_ranges_rad
+        prev = None if q_previous is None else np.broadcast_to(np.asarray(q_previous, dtype=float), q.shape)
         for s, par, idx, axes in self.joint_frames():
             Rrel = np.swapaxes(R[..., par, :, :], -1, -2) @ R[..., s, :, :]
+            rng = ranges[idx]
+            ref = None if prev is None else prev[..., idx]
             if len(idx) == 1:
                 a = axes[0]
                 vee = np.stack([Rrel[..., 2, 1] - Rrel[..., 1, 2], Rrel[..., 0, 2] - Rrel[..., 2, 0],
@@ -257,28 +268,38 @@ class Kinematics:
                 # cos from the part of R orthogonal to the axis: trace of (I - aa^T) R (I - aa^T) = 2 cos
                 P = np.eye(3) - np.outer(a, a)
                 cos = 0.5 * np.einsum("ij,...jk,ki->...", P, Rrel, P)
-                q[..., idx[0]] = np.arctan2(sin, cos)
+                q[..., idx] = wrap_into_range(np.arctan2(sin, cos)[..., None], rng, ref)
                 continue
             B = np.column_stack([axes[0], axes[1], cross(axes[0], axes[1])])
             Rs = B.T @ Rrel @ B  # = Rx(q1) Ry(q2) [Rz(sign * q3)]
-            if len(idx) == 3:
-                sign = float(np.sign(axes[2] @ B[:, 2]))
-                q2 = np.arctan2(Rs[..., 0, 2], np.hypot(Rs[..., 0, 0], Rs[..., 0, 1]))
-                q1 = np.arctan2(-Rs[..., 1, 2], Rs[..., 2, 2])
-                q3 = np.arctan2(-Rs[..., 0, 1], Rs[..., 0, 0])
-                lock = np.cos(q2) < 1e-6
-                if np.any(lock):
-                    # Rx(q1) Ry(+-90) Rz(q3): only q1 +- q3 is defined; keep q1 and solve q3.
-                    prev = np.zeros_like(q1) if q_previous is None else np.broadcast_to(q_previous[..., idx[0]], q1.shape)
-                    q1 = np.where(lock, prev, q1)
-                    # R[1,0] = cos q1 sin q3 + sin q1 sin q2 cos q3 ; R[1,1] = cos q1 cos q3 - sin q1 sin q2 sin q3
-                    s2 = np.sign(Rs[..., 0, 2])
-                    phi = np.arctan2(Rs[..., 1, 0], Rs[..., 1, 1])  # = q3 + s2*q1 at lock
-                    q3 = np.where(lock, phi - s2 * q1, q3)
-                q[..., idx[0]], q[..., idx[1]], q[..., idx[2]] = q1, q2, sign * q3
-            else:  # cardan: Rx(q1) Ry(q2)
-                q[..., idx[0]] = np.arctan2(-Rs[..., 1, 2], Rs[..., 2, 2])
-                q[..., idx[1]] = np.arctan2(Rs[..., 0, 2], Rs[..., 0, 0])
+            if len(idx) == 2:  # cardan: Rx(q1) Ry(q2) = [[c2, 0, s2], [s1 s2, c1, -s1 c2], [-c1 s2, s1, c1 c2]]
+                q1 = np.arctan2(Rs[..., 2, 1], Rs[..., 1, 1])
+                q2 = np.arctan2(Rs[..., 0, 2], Rs[..., 0, 0])
+                q[..., idx] = wrap_into_range(np.stack([q1, q2], axis=-1), rng, ref)
+                continue
+            sign = float(np.sign(axes[2] @ B[:, 2]))
+            q2 = np.arctan2(Rs[..., 0, 2], np.hypot(Rs[..., 0, 0], Rs[..., 0, 1]))
+            q1 = np.arctan2(-Rs[..., 1, 2], Rs[..., 2, 2])
+            q3 = np.arctan2(-Rs[..., 0, 1], Rs[..., 0, 0])
+            lock = np.cos(q2) < 1e-6
+            if np.any(lock):
+                # Rx(q1) Ry(+-90) Rz(q3): only q1 +- q3 is defined; keep q1 and solve q3.
+                first = np.zeros_like(q1) if prev is None else prev[..., idx[0]]
+                q1 = np.where(lock, first, q1)
+                # R[1,0] = cos q1 sin q3 + sin q1 sin q2 cos q3 ; R[1,1] = cos q1 cos q3 - sin q1 sin q2 sin q3
+                s2 = np.sign(Rs[..., 0, 2])
+                phi = np.arctan2(Rs[..., 1, 0], Rs[..., 1, 1])  # = q3 + s2*q1 at lock
+                q3 = np.where(lock, phi - s2 * q1, q3)
+            a_sol = wrap_into_range(np.stack([q1, q2, sign * q3], axis=-1), rng, ref)
+            b_sol = wrap_into_range(np.stack([q1 + np.pi, np.pi - q2, sign * (q3 + np.pi)], axis=-1), rng, ref)
+            cost_a = np.abs(violation(a_sol, rng)).sum(axis=-1)
+            cost_b = np.abs(violation(b_sol, rng)).sum(axis=-1)
+            take_b = cost_b < cost_a - 1e-12
+            if ref is not None:
+                tie = np.abs(cost_b - cost_a) <= 1e-12
+                near_b = np.abs(b_sol - ref).sum(axis=-1) < np.abs(a_sol - ref).sum(axis=-1)
+                take_b |= tie & near_b
+            q[..., idx] = np.where(take_b[..., None], b_sol, a_sol)
         return q
 
     def coordinate_rates(self, q: np.ndarray, omega: np.ndarray, alpha: np.ndarray | None = None):

@@ -24,7 +24,7 @@ DEFAULT_MODEL = shipped_file("exubio.models", "upper_extremity.yaml", "models")
 _TOP_KEYS = {"schema_version", "name", "side", "body_mass_kg", "segments", "ellipsoid", "calibration"}
 _SEGMENT_KEYS = {"name", "parent", "origin", "joint", "inertia", "points_mm"}
 _JOINT_KEYS = {"name", "type", "coordinates"}
-_COORD_KEYS = {"name", "axis"}
+_COORD_KEYS = {"name", "axis", "range_deg"}
 _INERTIA_KEYS = {
     "mass_fraction",
     "com_between",
@@ -168,16 +168,34 @@ def _parse_joint(raw: Any, where: str, *, centre: np.ndarray, find_point) -> Joi
     coords = raw["coordinates"]
     if not isinstance(coords, list) or len(coords) != kind.n_coordinates:
         raise ModelError(f"{where}.coordinates: a {kind.value} joint needs {kind.n_coordinates} coordinates, got {coords!r}")
-    names, axes = [], []
+    names, axes, ranges = [], [], []
     for k, c in enumerate(coords):
-        check_keys(c, _COORD_KEYS, f"{where}.coordinates[{k}]", error=ModelError, required=_COORD_KEYS)
+        check_keys(c, _COORD_KEYS, f"{where}.coordinates[{k}]", error=ModelError, required={"name", "axis"})
         names.append(str(c["name"]))
         axes.append(_parse_axis(c["axis"], f"{where}.coordinates[{k}].axis", find_point))
+        ranges.append(_parse_range(c.get("range_deg"), f"{where}.coordinates[{k}].range_deg"))
     axes_arr = np.array(axes)
     for a in range(len(axes_arr) - 1):
         if abs(axes_arr[a] @ axes_arr[a + 1]) > 0.999:
             raise ModelError(f"{where}: consecutive axes {a} and {a + 1} are parallel; the sequence would be singular")
-    return Joint(name=str(raw["name"]), kind=kind, coordinates=tuple(names), axes=axes_arr, centre_m=centre)
+    return Joint(name=str(raw["name"]), kind=kind, coordinates=tuple(names), axes=axes_arr, centre_m=centre,
+                 ranges_rad=np.radians(np.array(ranges)))
+
+
+def _parse_range(value: Any, where: str) -> tuple[float, float]:
+    """[lower, upper] in degrees (null for no limit on that side); absent: no limits."""
+    if value is None:
+        return (-np.inf, np.inf)
+    ok = isinstance(value, (list, tuple)) and len(value) == 2
+    if ok:
+        try:
+            lo = -np.inf if value[0] is None else float(value[0])
+            hi = np.inf if value[1] is None else float(value[1])
+        except (TypeError, ValueError):
+            ok = False
+    if not ok or np.isnan(lo) or np.isnan(hi) or not lo < hi:
+        raise ModelError(f"{where}: expected [lower, upper] in degrees with lower < upper (null: no limit), got {value!r}")
+    return (lo, hi)
 
 
 def _parse_inertia(raw: Any, where: str, body_mass: float, origin: np.ndarray, find_point):
@@ -257,6 +275,12 @@ def _mm(v: np.ndarray) -> list[float]:
     return [float(x) for x in np.asarray(v, dtype=float) * 1000.0]
 
 
+def _range_entry(rng: np.ndarray) -> dict[str, Any]:
+    if not np.isfinite(rng).any():
+        return {}
+    return {"range_deg": [float(np.degrees(x)) if np.isfinite(x) else None for x in rng]}
+
+
 def model_to_dict(model: Model, /, *, calibration: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """The model as the mapping ``load_model`` reads (schema_version 1): every point, origin and
     centre of mass in mm in the thorax frame in the reference posture, joint axes as unit vectors,
@@ -282,8 +306,8 @@ def model_to_dict(model: Model, /, *, calibration: Mapping[str, Any] | None = No
             raw["joint"] = {
                 "name": seg.joint.name,
                 "type": seg.joint.kind.value,
-                "coordinates": [{"name": c, "axis": [float(x) for x in a]}
-                                for c, a in zip(seg.joint.coordinates, seg.joint.axes)],
+                "coordinates": [{"name": c, "axis": [float(x) for x in a], **_range_entry(r)}
+                                for c, a, r in zip(seg.joint.coordinates, seg.joint.axes, seg.joint.ranges_rad)],
             }
         if seg.mass_kg > 0:
             tensor = np.asarray(seg.inertia_kgm2, dtype=float) / seg.mass_kg

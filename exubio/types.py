@@ -109,6 +109,8 @@ class Joint:
     axes:     (k, 3) unit rotation axes of the intrinsic sequence q_1, q_2, ... Each axis is
               expressed in the parent frame at q = 0, where parent and child frames coincide.
     coordinates: the names of the k joint coordinates, in sequence order.
+    ranges_rad: (k, 2) range of motion [lower, upper] of each coordinate (rad); -inf/+inf where
+              the model gives none.
     """
 
     name: str
@@ -116,6 +118,15 @@ class Joint:
     coordinates: tuple[str, ...]
     axes: np.ndarray
     centre_m: np.ndarray
+    ranges_rad: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        k = len(self.coordinates)
+        if self.ranges_rad is None:
+            rng = np.tile([-np.inf, np.inf], (k, 1))
+        else:
+            rng = np.asarray(self.ranges_rad, dtype=float).reshape(k, 2)
+        object.__setattr__(self, "ranges_rad", rng)
 
 
 @dataclass(frozen=True)
@@ -193,6 +204,12 @@ class Model:
     @property
     def n_coordinates(self) -> int:
         return len(self.coordinate_names)
+
+    @property
+    def coordinate_ranges_rad(self) -> np.ndarray:
+        """(m, 2) range of motion [lower, upper] of every coordinate (rad; +-inf where none)."""
+        rows = [seg.joint.ranges_rad for seg in self.segments if seg.joint is not None]
+        return np.concatenate(rows, axis=0) if rows else np.zeros((0, 2))
 
     def segment(self, name: str) -> Segment:
         for seg in self.segments:

@@ -26,6 +26,7 @@ import numpy as np
 from exubio.kinematics import Kinematics, PointSet
 from exubio.methods.common import assemble, tracked_points
 from exubio.methods.constraints import project_on_constraints
+from exubio.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD, penalty_weight, violation
 from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Reconstruction
 
 log = logging.getLogger(__name__)
@@ -42,6 +43,8 @@ class LSOptions:
     max_step_rad: float = 0.3  # step cap, for robustness far from the solution
     regularisation: float = 1e-6  # mu (m^2/rad^2): damps steps in weakly observed directions and
     # keeps unobservable coordinates where they were; it does not move the converged optimum
+    limit_stiffness_nm_per_rad: float | None = DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD  # k_lim of the
+    # joint ranges (exubio.ranges); None or 0: no ranges in the solve
 
 
 @dataclass
@@ -60,7 +63,38 @@ class _Linearisation:
             getattr(self, name)[mask] = getattr(other, name)[mask]
 
 
-def _linearise(kin: Kinematics, points: PointSet, q: np.ndarray, target: np.ndarray, w: np.ndarray) -> _Linearisation:
+@dataclass(frozen=True)
+class Limits:
+    """The joint ranges inside the solve: cost + kappa sum_j v_j(q)^2 with v_j the excursion beyond
+    the range (exubio.ranges; kappa = k_lim / c_default, the same potential as PF's limits)."""
+
+    ranges_rad: np.ndarray  # (m, 2)
+    kappa: float  # m^2/rad^2
+
+    @classmethod
+    def of(cls, model: Model, protocol: Protocol, limit_stiffness_nm_per_rad: float | None) -> "Limits | None":
+        if limit_stiffness_nm_per_rad is None or limit_stiffness_nm_per_rad <= 0:
+            return None
+        rng = model.coordinate_ranges_rad
+        if not np.isfinite(rng).any():
+            return None
+        return cls(rng, penalty_weight(limit_stiffness_nm_per_rad, protocol.default_stiffness_n_per_m))
+
+
+def _add_limits(lin: "_Linearisation", q: np.ndarray, limits: Limits | None) -> None:
+    """Add the one-sided limit potential to cost, gradient and Gauss-Newton matrix (in place)."""
+    if limits is None:
+        return
+    v = violation(q, limits.ranges_rad)
+    if not v.any():
+        return
+    lin.cost += limits.kappa * (v * v).sum(axis=-1)
+    lin.grad += limits.kappa * v
+    lin.H += limits.kappa * (v != 0)[..., :, None] * np.eye(q.shape[-1])
+
+
+def _linearise(kin: Kinematics, points: PointSet, q: np.ndarray, target: np.ndarray, w: np.ndarray,
+               limits: Limits | None = None) -> _Linearisation:
     fr = kin.frames(q)
     B, k = w.shape
     r = kin.points(q, points, frames=fr)
@@ -70,13 +104,15 @@ def _linearise(kin: Kinematics, points: PointSet, q: np.ndarray, target: np.ndar
     rc = kin.points(q, kin.contacts, frames=fr)
     Jc = kin.point_jacobian(q, kin.contacts, frames=fr, positions=rc)  # (B, 2, 3, m)
     ec = rc - kin.centre
-    return _Linearisation(
+    lin = _Linearisation(
         H=Jw_t @ J,
         grad=(Jw_t @ e)[..., 0],
         G=2.0 * ((ec * kin.a_diag)[..., None, :] @ Jc)[..., 0, :],
         g=(ec * ec) @ kin.a_diag - 1.0,
         cost=(e[..., 0] ** 2 * np.repeat(w, 3, axis=1)).sum(axis=1),
     )
+    _add_limits(lin, q, limits)
+    return lin
 
 
 def _hold(K: np.ndarray, rhs: np.ndarray, held: np.ndarray | None) -> None:
@@ -118,7 +154,8 @@ def _start_postures(kin: Kinematics, q_start: np.ndarray) -> np.ndarray:
 
 def solve_positions(kin: Kinematics, points: PointSet, targets_m: np.ndarray, weights: np.ndarray, /, *,
                     q_start: np.ndarray, options: LSOptions, frame_dt: float,
-                    progress: Callable[[int], None] | None = None, held: np.ndarray | None = None):
+                    progress: Callable[[int], None] | None = None, held: np.ndarray | None = None,
+                    limits: Limits | None = None):
     """q (n, m) per frame, iterations (n,), converged (n,) bool."""
     n = targets_m.shape[0]
     m = kin.n_coordinates
@@ -136,7 +173,7 @@ def solve_positions(kin: Kinematics, points: PointSet, targets_m: np.ndarray, we
         tgt, w = tgt_all[idx], w_all[idx]
         q = q0.copy()
         B = q.shape[0]
-        lin = _linearise(kin, points, q, tgt, w)
+        lin = _linearise(kin, points, q, tgt, w, limits)
         mu = np.full(B, options.regularisation)
         active = np.ones(B, dtype=bool)
         done = np.zeros(B, dtype=bool)
@@ -150,7 +187,7 @@ def solve_positions(kin: Kinematics, points: PointSet, targets_m: np.ndarray, we
             big = np.abs(dq).max(axis=1)
             dq = dq * np.minimum(1.0, options.max_step_rad / np.maximum(big, 1e-300))[:, None]
             q_try = q[a] + dq
-            trial = _linearise(kin, points, q_try, tgt[a], w[a])
+            trial = _linearise(kin, points, q_try, tgt[a], w[a], limits)
             rho = 2.0 * np.abs(lam).max(axis=1) + 1e-6
             merit_old = sub.cost + rho * np.abs(sub.g).sum(axis=1)
             merit_new = trial.cost + rho * np.abs(trial.g).sum(axis=1)
@@ -171,7 +208,7 @@ def solve_positions(kin: Kinematics, points: PointSet, targets_m: np.ndarray, we
     # first frame: several start postures (arm down, abducted, flexed), many iterations, best kept
     starts = _start_postures(kin, q_start)
     q0, it0, ok0 = run(np.zeros(len(starts), dtype=int), starts, options.max_iterations * 10)
-    cost0 = np.array([_linearise(kin, points, q0[i:i + 1], tgt_all[:1], w_all[:1]).cost[0] for i in range(len(starts))])
+    cost0 = np.array([_linearise(kin, points, q0[i:i + 1], tgt_all[:1], w_all[:1], limits).cost[0] for i in range(len(starts))])
     best = int(np.argmin(np.where(ok0, cost0, cost0 + 1e9)))
     q_out[0], iters[0], converged[0] = q0[best], it0.sum(), ok0[best]
     prev = q_out[0]
@@ -193,8 +230,10 @@ def solve_positions(kin: Kinematics, points: PointSet, targets_m: np.ndarray, we
 
 
 def solve_rates(kin: Kinematics, points: PointSet, q: np.ndarray, vel: np.ndarray, acc: np.ndarray,
-                weights: np.ndarray, mu: float, held: np.ndarray | None = None):
-    """Consistent q̇, q̈ (n, m) from marker velocities/accelerations (weighted LS + constraints)."""
+                weights: np.ndarray, mu: float, held: np.ndarray | None = None, limits: Limits | None = None):
+    """Consistent q̇, q̈ (n, m) from marker velocities/accelerations (weighted LS + constraints);
+    a coordinate beyond its limit adds the limit potential's stiffness kappa to its diagonal (the
+    time derivative of the optimality conditions)."""
     n, m = q.shape
     present = ~np.isnan(vel).any(axis=2) & ~np.isnan(acc).any(axis=2)
     w = np.where(present, weights[None, :], 0.0)
@@ -202,6 +241,8 @@ def solve_rates(kin: Kinematics, points: PointSet, q: np.ndarray, vel: np.ndarra
     Jw = J * w[..., None, None]
     K = np.zeros((n, m + 2, m + 2))
     K[:, :m, :m] = np.einsum("nkcm,nkcl->nml", Jw, J) + mu * np.eye(m)
+    if limits is not None:
+        K[:, :m, :m] += limits.kappa * (violation(q, limits.ranges_rad) != 0)[..., :, None] * np.eye(m)
     G = kin.G(q)
     K[:, :m, m:] = np.swapaxes(G, 1, 2)
     K[:, m:, :m] = G
@@ -236,11 +277,12 @@ def reconstruct_ls(model: Model, protocol: Protocol, targets: MarkerTargets, /, 
     t1 = time.perf_counter()
     held = held_mask(model, protocol)
     q0[held] = 0.0
+    limits = Limits.of(model, protocol, options.limit_stiffness_nm_per_rad)
     q, iters, converged = solve_positions(kin, points, targets.positions_m, weights, q_start=q0,
-                                          options=options, frame_dt=dt, progress=progress, held=held)
+                                          options=options, frame_dt=dt, progress=progress, held=held, limits=limits)
     t2 = time.perf_counter()
     qd, qdd = solve_rates(kin, points, q, targets.velocities_m_s, targets.accelerations_m_s2, weights,
-                          RATES_REGULARISATION, held)
+                          RATES_REGULARISATION, held, limits)
     t3 = time.perf_counter()
     n_present = targets.present.sum(axis=1)
     status = np.where(converged, FrameStatus.CONVERGED, FrameStatus.NOT_CONVERGED)
