@@ -93,6 +93,24 @@ def _print_trial(result: dict, quiet: bool) -> None:
         print(f"PF-LS agreement: max RMSE {agree[worst]:.3f} deg ({worst})")
     if result.get("report"):
         print(f"report: {result['report']['pdf']} (+ .png)")
+    for m in result["methods"]:
+        _print_quality(m["method"], m["summary"])
+
+
+def _print_quality(method: str, summ: dict) -> None:
+    q = summ.get("quality")
+    if not q:
+        return
+    print(f"[{method}] QUALITY: {q['verdict'].upper()}")
+    for r in q["reasons"]:
+        print(f"[{method}]   {r['level']}: {r['message']}")
+    if summ.get("not_measured"):
+        print(f"[{method}]   not measured (held or not observed): {', '.join(summ['not_measured'])}")
+
+
+def _trial_code(result: dict) -> int:
+    """1 when any method's verdict is 'fail' (see exubio.quality), else 0."""
+    return EXIT_FAILED if "fail" in (result.get("verdicts") or {}).values() else EXIT_OK
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
@@ -115,7 +133,8 @@ def _run_trial(kwargs: dict) -> tuple[str, dict | None, int, str]:
 
     trial = kwargs.pop("trial")
     try:
-        return trial, process_trial(trial, **kwargs), EXIT_OK, ""
+        result = process_trial(trial, **kwargs)
+        return trial, result, _trial_code(result), ""
     except (InputError, ProtocolError, ModelError) as exc:
         return trial, None, EXIT_BAD_INPUT, str(exc)
     except ExubioError as exc:
@@ -123,7 +142,7 @@ def _run_trial(kwargs: dict) -> tuple[str, dict | None, int, str]:
 
 
 def cmd_reconstruct(args: argparse.Namespace) -> int:
-    from exubio.pipeline import calibrate_into
+    from exubio.pipeline import calibrate_into, calibration_summary
 
     model_path, extra = args.model, {}
     if args.static:
@@ -136,9 +155,8 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
             print(format_report(report))
         print(f"calibrated model: {model_file}")
         model_path = model_file
-        extra = {"calibration": {"static": str(args.static), "model_file": str(model_file),
-                                 "mean_residual_mm": report.mean_residual_mm,
-                                 "residual_mm": report.to_dict().get("residual_mm")}}
+        extra = {"calibration": calibration_summary(report, static=str(args.static), model_file=model_file,
+                                                    frames=args.static_frames)}
     common = dict(out_dir=args.out, methods=_methods(args.method), model_path=model_path,
                   protocol_path=args.protocol, body_mass_kg=args.body_mass, overwrite=args.overwrite,
                   method_options={"pf": {"gravity": args.gravity}}, summary_extra=extra,
@@ -149,7 +167,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
 
         result = process_trial(args.trials[0], **dict(common, progress_factory=_progress_factory(not args.quiet)))
         _print_trial(result, args.quiet)
-        return EXIT_OK
+        return _trial_code(result)
     codes = []
     if args.jobs > 1:
         from concurrent.futures import ProcessPoolExecutor
@@ -162,12 +180,16 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         print(f"== {trial}")
         if result is not None:
             _print_trial(result, args.quiet)
+            print(f"verdict: {', '.join(f'{m} {v}' for m, v in result['verdicts'].items())}")
         else:
             print(f"exubio: {'error' if code == EXIT_BAD_INPUT else 'reconstruction failed'}: {message}",
                   file=sys.stderr)
         codes.append(code)
-    failed = sum(c != EXIT_OK for c in codes)
+    failed = sum(r is None for _, r, _, _ in done)
     print(f"{len(codes) - failed} of {len(codes)} trials reconstructed")
+    for trial, result, _, _ in done:
+        if result is not None:
+            print(f"  {trial}: " + ", ".join(f"{m} {v}" for m, v in result["verdicts"].items()))
     return max(codes)
 
 

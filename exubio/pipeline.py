@@ -101,8 +101,11 @@ def output_stem(trial_path: str | Path, method: Method | str) -> str:
 
 
 def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
-                  metadata: dict[str, Any], summary_data: dict[str, Any]) -> dict[str, Path]:
-    """Write <stem>.csv, .mot, .npz and .summary.json into out_dir, each atomically."""
+                  metadata: dict[str, Any], summary_data: dict[str, Any],
+                  undetermined: np.ndarray | None = None) -> dict[str, Path]:
+    """Write <stem>.csv, .mot, .npz and .summary.json into out_dir, each atomically. Coordinates
+    that are not measurements (held, locked, undetermined for the trial) are named in the .mot
+    header and summary.json; ``undetermined`` (n, m) per frame goes into the .npz."""
     out = Path(out_dir)
     paths = {
         "csv": out / f"{stem}.csv",
@@ -110,9 +113,19 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
         "npz": out / f"{stem}.npz",
         "summary": out / f"{stem}.summary.json",
     }
+    notes = []
+    not_measured = summary_data.get("not_measured") or []
+    undet = (summary_data.get("determinacy") or {}).get("undetermined_for_trial") or []
+    if not_measured:
+        notes.append("exubio_not_measured=" + ",".join(not_measured) + " (held or locked: not solved from markers)")
+    if undet:
+        notes.append("exubio_undetermined=" + ",".join(undet) + " (the markers do not determine them; see summary.json)")
+    if summary_data.get("quality"):
+        notes.append(f"exubio_quality={summary_data['quality']['verdict']}")
     results.write_angles_csv(paths["csv"], recon.time_s, recon.coordinate_names, recon.q_rad)
-    results.write_mot(paths["mot"], recon.time_s, recon.coordinate_names, recon.q_rad, name=stem)
-    results.write_npz(paths["npz"], recon, metadata=metadata)
+    results.write_mot(paths["mot"], recon.time_s, recon.coordinate_names, recon.q_rad, name=stem, notes=notes)
+    results.write_npz(paths["npz"], recon, metadata=metadata,
+                      extra_arrays=None if undetermined is None else {"undetermined": undetermined})
     results.write_json(paths["summary"], summary_data)
     return paths
 
@@ -141,26 +154,41 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
                      body_mass_kg: float | None = None, overwrite: bool = False, model: Model | None = None,
                      method_options: dict[str, dict[str, Any]] | None = None,
                      summary_extra: dict[str, Any] | None = None,
-                     progress_factory: Callable[[str, int], Callable[[int], None]] | None = None
+                     progress_factory: Callable[[str, int], Callable[[int], None]] | None = None,
+                     calibration: dict[str, Any] | None = None, static_reference: Any = None
                      ) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
     """Everything ``exubio reconstruct`` does for one trial; returns (reconstruction, paths, summary)
-    per method. Refuses (InputError) to replace earlier results unless ``overwrite``."""
+    per method. Every method runs first; then the trial is assessed (label checks, determinacy,
+    range limits, PF-LS agreement, ``calibration``: the calibration report dict) and every summary
+    carries its quality verdict. Refuses (InputError) to replace earlier results unless
+    ``overwrite``."""
+    from exubio.assess import assess_trial, trial_label_findings
+
     methods = [Method.parse(m) for m in methods]
     stems = [output_stem(trial_path, m) for m in methods]
     results.prepare_output_dir(out_dir, stems, overwrite=overwrite)
     inputs = load_inputs(trial_path, model_path=model_path, protocol_path=protocol_path,
                          body_mass_kg=body_mass_kg, model=model)
-    out = []
-    for method, stem in zip(methods, stems):
+    recons = []
+    for method in methods:
         progress = progress_factory(method.value, inputs.targets.n_frames) if progress_factory else None
         opts = (method_options or {}).get(method.value, {})
-        recon = reconstruct(inputs.model, inputs.protocol, inputs.targets, method=method, progress=progress, **opts)
+        recons.append(reconstruct(inputs.model, inputs.protocol, inputs.targets, method=method, progress=progress, **opts))
+    findings = trial_label_findings(inputs.model, inputs.protocol, inputs.targets, reference=static_reference)
+    assessment = assess_trial(inputs.model, inputs.protocol, inputs.targets, recons, label_findings=findings,
+                              calibration=calibration)
+    out = []
+    for method, stem, recon in zip(methods, stems, recons):
         meta = run_metadata(inputs, trial_path, method)
         extra = {"unused_trial_labels": _unused(inputs), **(summary_extra or {})}
         if "mean_spring_deflection_mm" in recon.info:
             extra["mean_spring_deflection_mm"] = recon.info["mean_spring_deflection_mm"]
+        if inputs.targets.cutoff_hz if hasattr(inputs.targets, "cutoff_hz") else False:
+            extra["filter_cutoff_hz"] = dict(inputs.targets.cutoff_hz)
+        extra.update(assessment.summary_for(recon.method))
         summ = summary(recon, source=str(trial_path), extra=extra)
-        paths = write_outputs(recon, out_dir, stem, metadata=meta, summary_data=summ)
+        paths = write_outputs(recon, out_dir, stem, metadata=meta, summary_data=summ,
+                              undetermined=assessment.determinacy[recon.method].undetermined)
         out.append((recon, paths, summ))
     return out
 
@@ -176,6 +204,13 @@ def agreement_deg(a: Reconstruction, b: Reconstruction, /) -> dict[str, float]:
     """RMSE (deg) per coordinate between two reconstructions of the same trial."""
     d = np.rad2deg(a.q_rad - b.q_rad)
     return {n: float(v) for n, v in zip(a.coordinate_names, np.sqrt(np.mean(d**2, axis=0)))}
+
+
+def calibration_summary(report, /, *, static: str, model_file: str | Path, frames: str | None = None) -> dict[str, Any]:
+    """The calibration as summary.json records it (the full report dict under ``report``)."""
+    return {"static": static, "frames": frames, "model_file": str(model_file),
+            "mean_residual_mm": report.mean_residual_mm, "residual_mm": report.to_dict().get("residual_mm"),
+            "report": report.to_dict()}
 
 
 def calibrate_into(source: str | Path, out_dir: str | Path, stem: str, /, *, protocol_path: str | Path | None = None,
@@ -199,7 +234,8 @@ def process_trial(trial_path: str | Path, /, *, out_dir: str | Path, methods: li
                   body_mass_kg: float | None = None, overwrite: bool = False,
                   method_options: dict[str, dict[str, Any]] | None = None, static_frames: str | None = None,
                   summary_extra: dict[str, Any] | None = None, report: bool = True,
-                  progress_factory: Callable[[str, int], Callable[[int], None]] | None = None) -> dict[str, Any]:
+                  progress_factory: Callable[[str, int], Callable[[int], None]] | None = None,
+                  static_reference: Any = None) -> dict[str, Any]:
     """One trial of a study, as ``exubio reconstruct`` runs it: calibrate on its own frames if
     ``static_frames`` is given, reconstruct with every method, write the outputs. Returns what the
     CLI prints (small and picklable, for a process pool): per method the summary and the paths,
@@ -215,17 +251,20 @@ def process_trial(trial_path: str | Path, /, *, out_dir: str | Path, methods: li
                                             frames_text=static_frames, overwrite=overwrite)
         model_path = model_file
         out["calibration"] = {"model_file": str(model_file), "report": report}
-        extra["calibration"] = {"static": str(trial_path), "frames": static_frames, "model_file": str(model_file),
-                                "mean_residual_mm": report.mean_residual_mm,
-                                "residual_mm": report.to_dict().get("residual_mm")}
+        extra["calibration"] = calibration_summary(report, static=str(trial_path), model_file=model_file,
+                                                   frames=static_frames)
     outputs = reconstruct_file(trial_path, out_dir, methods=methods, model_path=model_path,
                                protocol_path=protocol_path, body_mass_kg=body_mass_kg, overwrite=overwrite,
                                method_options=method_options, summary_extra=extra,
-                               progress_factory=progress_factory)
+                               progress_factory=progress_factory,
+                               calibration=(extra.get("calibration") or {}).get("report"),
+                               static_reference=static_reference)
     out["methods"] = [{"method": r.method, "paths": {k: str(v) for k, v in paths.items()}, "summary": summ}
                       for r, paths, summ in outputs]
     if len(outputs) == 2:
-        out["agreement_deg"] = agreement_deg(outputs[0][0], outputs[1][0])
+        agree = outputs[0][2].get("pf_ls_agreement_deg") or {}
+        out["agreement_deg"] = {k: v for k, v in agree.items() if isinstance(v, float)}
+    out["verdicts"] = {r.method: summ["quality"]["verdict"] for r, _, summ in outputs}
     if report:
         from exubio.report.trial_report import build_trial_report
 

@@ -195,16 +195,20 @@ def write_mot(
     /,
     *,
     name: str = "exubio",
+    notes: Sequence[str] = (),
 ) -> Path:
     """OpenSim motion file (.mot, storage version 1): angles in degrees (``inDegrees=yes``),
-    tab-separated, ``time`` then the coordinates."""
+    tab-separated, ``time`` then the coordinates. ``notes``: single-line ``key=value`` remarks
+    written in the header before ``endheader`` (e.g. coordinates that are not measurements)."""
     path = Path(path)
     time, names, q = _check_angles(path, time_s, coordinate_names, q_rad)
     if "\n" in name or "\r" in name:
         raise InputError(f"{path}: .mot name must be a single line, got {name!r}")
+    if any("\n" in n or "\r" in n or "=" not in n for n in notes):
+        raise InputError(f"{path}: .mot header notes must be single 'key=value' lines, got {list(notes)!r}")
     header = (
         f"{name}\nversion=1\nnRows={time.shape[0]}\nnColumns={len(names) + 1}\n"
-        f"inDegrees=yes\nendheader\n" + "\t".join(("time",) + names) + "\n"
+        f"inDegrees=yes\n" + "".join(f"{n}\n" for n in notes) + "endheader\n" + "\t".join(("time",) + names) + "\n"
     )
     return _write_text(path, header + _table_text(time, np.degrees(q), "\t"))
 
@@ -286,12 +290,18 @@ _NPZ_ARRAYS = (
 )
 
 
-def write_npz(path: str | os.PathLike, reconstruction: Reconstruction, /, *, metadata: Mapping[str, Any]) -> Path:
+def write_npz(path: str | os.PathLike, reconstruction: Reconstruction, /, *, metadata: Mapping[str, Any],
+              extra_arrays: Mapping[str, np.ndarray] | None = None) -> Path:
     """Every array of ``reconstruction`` (names as string arrays, gaps as three parallel arrays,
-    timings/info as JSON) plus ``metadata`` JSON-encoded in the string entry ``metadata_json``.
-    Uncompressed, loadable with ``np.load(path)`` (no pickle)."""
+    timings/info as JSON) plus ``metadata`` JSON-encoded in the string entry ``metadata_json``,
+    and ``extra_arrays`` (e.g. ``undetermined``: (n, m) bool, coordinates the markers do not
+    determine in that frame). Uncompressed, loadable with ``np.load(path)`` (no pickle)."""
     rec = reconstruction
     arrays: dict[str, np.ndarray] = {key: np.asarray(getattr(rec, key)) for key in _NPZ_ARRAYS}
+    for key, value in (extra_arrays or {}).items():
+        if key in arrays or key in _NPZ_RESERVED:
+            raise ValueError(f"write_npz: extra array '{key}' would replace a reconstruction entry")
+        arrays[key] = np.asarray(value)
     arrays.update(
         method=np.array(rec.method),
         coordinate_names=np.array(rec.coordinate_names, dtype=str),
@@ -309,6 +319,10 @@ def write_npz(path: str | os.PathLike, reconstruction: Reconstruction, /, *, met
             np.savez(fh, **arrays)
 
     return atomic_write(path, writer)
+
+
+_NPZ_RESERVED = {"method", "coordinate_names", "marker_names", "gap_markers", "gap_start", "gap_stop",
+                 "timings_json", "info_json", "metadata_json"}
 
 
 def read_npz(path: str | os.PathLike, /) -> Reconstruction:

@@ -1,0 +1,118 @@
+"""Everything measured about one trial's reconstructions to decide whether to trust them: which
+coordinates the markers determine (exubio.observability), frames at a range limit
+(exubio.ranges), PF-LS agreement on determined coordinates, the label checks and the calibration;
+turned into one quality verdict per method (exubio.quality). No solver is run here."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from exubio import quality as Q
+from exubio.calibrate import SCALE_BOUNDS
+from exubio.evaluate import per_frame_residuals_mm, residual_statistics
+from exubio.kinematics import Kinematics
+from exubio.methods.common import tracked_points
+from exubio.methods.ls import held_mask
+from exubio.methods.pf import unobserved_segments
+from exubio.observability import Determinacy, determinacy
+from exubio.ranges import limit_report
+from exubio.types import MarkerTargets, Model, Protocol, Reconstruction
+
+
+@dataclass(frozen=True)
+class TrialAssessment:
+    """Per method: determinacy, limit reports, quality; and the PF-LS agreement (deg RMSE on the
+    frames where each coordinate is determined by both), the label findings, the solved mask."""
+
+    determinacy: Mapping[str, Determinacy]
+    limits: Mapping[str, list]
+    quality: Mapping[str, Q.Quality]
+    agreement_deg: Mapping[str, float] | None
+    labels: tuple
+    not_solved: tuple[str, ...]
+
+    def summary_for(self, method: str) -> dict[str, Any]:
+        """What goes into that method's summary.json."""
+        return {
+            "quality": self.quality[method].to_dict(),
+            "determinacy": self.determinacy[method].to_dict(),
+            "limits": [lim.to_dict() for lim in self.limits[method]],
+            "labels": [_finding_dict(f) for f in self.labels],
+            "pf_ls_agreement_deg": None if self.agreement_deg is None else {
+                "definition": "RMSE over the frames where the coordinate is determined in both reconstructions",
+                **{k: (None if v is None or not np.isfinite(v) else round(float(v), 4)) for k, v in self.agreement_deg.items()}},
+            "not_measured": list(self.not_solved),
+        }
+
+
+def _finding_dict(f) -> dict[str, Any]:
+    if isinstance(f, Mapping):
+        return dict(f)
+    if hasattr(f, "to_dict"):
+        return f.to_dict()
+    return {k: getattr(f, k) for k in ("kind", "markers", "evidence", "severity") if hasattr(f, k)}
+
+
+def trial_label_findings(model: Model, protocol: Protocol, targets: MarkerTargets, /, *, reference: Any = None) -> tuple:
+    """The label checks of exubio.labels on a prepared trial (``reference``: the static trial's
+    pair distances, when the trial was calibrated on another trial)."""
+    return ()
+
+
+def not_solved_mask(model: Model, protocol: Protocol, kin: Kinematics | None = None) -> np.ndarray:
+    """(m,) True for coordinates neither method solves: held by the protocol, or of a segment no
+    marker observes (locked)."""
+    kin = kin or Kinematics(model)
+    mask = held_mask(model, protocol).copy()
+    for s in unobserved_segments(kin, tracked_points(kin, protocol)):
+        mask[kin.joint_coordinate_indices(s)] = True
+    return mask
+
+
+def agreement_on_determined(a: Reconstruction, da: Determinacy, b: Reconstruction, db: Determinacy,
+                            not_solved: np.ndarray) -> dict[str, float]:
+    d = np.degrees(a.q_rad - b.q_rad)
+    ok = ~da.undetermined & ~db.undetermined
+    out = {}
+    for j, n in enumerate(a.coordinate_names):
+        if not_solved[j]:
+            continue
+        sel = ok[:, j] & np.isfinite(d[:, j])
+        out[n] = float(np.sqrt(np.mean(d[sel, j] ** 2))) if sel.any() else float("nan")
+    return out
+
+
+def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recons: Sequence[Reconstruction], /, *,
+                 label_findings: Sequence = (), calibration: Mapping[str, Any] | None = None,
+                 determinacy_every: int = 1) -> TrialAssessment:
+    kin = Kinematics(model)
+    points = tracked_points(kin, protocol)
+    excluded = not_solved_mask(model, protocol, kin)
+    names = model.coordinate_names
+    not_solved = tuple(n for n, e in zip(names, excluded) if e)
+    dets = {r.method: determinacy(kin, points, r.q_rad, targets.present, protocol.weights, excluded=excluded,
+                                  every=determinacy_every) for r in recons}
+    lims = {r.method: limit_report(r.q_rad, model.coordinate_ranges_rad, names, exclude=not_solved) for r in recons}
+    agreement = None
+    by = {r.method: r for r in recons}
+    if "pf" in by and "ls" in by:
+        agreement = agreement_on_determined(by["pf"], dets["pf"], by["ls"], dets["ls"], excluded)
+    off = Q.off_segment_markers(model, protocol) if calibration else {}
+    common = (Q.label_reasons(label_findings)
+              + Q.calibration_reasons(calibration, scale_bounds=SCALE_BOUNDS, off_segment=off))
+    quality = {}
+    for r in recons:
+        det = dets[r.method].to_dict()
+        undetermined = set(det["undetermined_for_trial"])
+        reasons = list(common)
+        reasons += Q.residual_reasons(residual_statistics(r), per_frame_residuals_mm(r)[0])
+        reasons += Q.limit_reasons([lim.to_dict() for lim in lims[r.method]], r.n_frames)
+        reasons += Q.determinacy_reasons(det)
+        status = np.asarray(r.status)
+        frames = {"not_converged": int((status == 1).sum()), "too_few_markers": int((status == 2).sum())}
+        reasons += Q.convergence_reasons(frames, r.n_frames)
+        reasons += Q.agreement_reasons(agreement, sorted(undetermined))
+        quality[r.method] = Q.Quality.of(reasons)
+    return TrialAssessment(dets, lims, quality, agreement, tuple(label_findings), not_solved)

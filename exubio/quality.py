@@ -1,0 +1,223 @@
+"""The quality verdict of a reconstruction: ``ok``, ``check`` or ``fail`` with the reasons.
+
+A wrong result must never look right: every criterion below is measured, every threshold lives
+here with the reason for its value, and each reason names the marker, coordinate or frame it is
+about. ``fail``: the result is wrong or meaningless as it stands (a label swap, markers far from
+any posture of the model, a calibration on a marker that is not on its segment); the CLI exits
+with code 1. ``check``: the result may be right but something a reader must look at first.
+``note``: reported, does not change the verdict. Pure numpy on results; no solver.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Iterable, Mapping, Sequence
+
+import numpy as np
+
+# ---------------------------------------------------------------------------------- thresholds
+RESIDUAL_MEAN_MM = (20.0, 40.0)
+"""Trial mean marker residual (check, fail). Skin-marker models of the shoulder fit real trials
+with mean residuals of about 5-15 mm (the paper's Table 1: 8-18 mm per frame with a generic model;
+OpenSim IK 8-9 mm RMS on the TRC trials); twice that means the model or the labels are wrong."""
+
+MARKER_RMSE_MM = (30.0, 60.0)
+"""One marker's RMSE over the trial (check, fail). Soft-tissue artefact of shoulder and arm
+markers reaches 10-30 mm (Cappozzo et al. 1996; Matsui et al. 2006, J Biomech 39:1190); beyond 30
+mm the marker is misplaced or mislabelled, beyond 60 mm it cannot be on its segment."""
+
+FRAME_RESIDUAL_MM = 30.0
+FRAME_RESIDUAL_FRACTION = 0.05
+"""Frames whose mean residual exceeds FRAME_RESIDUAL_MM: more than this fraction of the trial is a
+'check' (a stretch the model cannot follow: a marker falling off, a label swap mid-trial)."""
+
+AGREEMENT_DEG = (2.0, 10.0)
+"""PF-LS RMSE on a determined coordinate (frames where it is determined), when both ran (check,
+fail). Both methods minimise the same spring potential; on correct data they agree within about
+1 deg (noise, PF's inertial lag); a larger difference means one of them followed another local
+minimum or the coordinate is poorly determined."""
+
+LIMIT_BEYOND_DEG = 5.0
+"""A solved coordinate at its range limit is a 'check'; pushed more than this beyond it (the limit
+potential overpowered by the markers) is a 'fail': the markers describe an impossible posture."""
+
+NOT_CONVERGED_FRACTION = (0.01, 0.10)
+"""Frames not converged or with too few markers (check, fail)."""
+
+WINDOW_MOTION_MM = 5.0
+"""Calibration window: a marker moving more than this RMS about its mean means the 'static'
+window moves (quiet standing sways 1-3 mm), so the calibrated geometry is smeared."""
+
+SCALE_AT_BOUND = 0.01
+"""A calibration scale factor within this of its bound (exubio.calibrate.SCALE_BOUNDS) means the
+subject does not fit the model: another subject's static, or a swapped label."""
+
+OFF_SEGMENT_MARGIN_M = 0.06
+"""A marker registered farther than this (skin, soft tissue and marker base) outside the sphere
+that holds its segment's anatomical points cannot be on that segment: a mislabelled marker."""
+
+LEVELS = ("note", "check", "fail")
+
+
+@dataclass(frozen=True)
+class Reason:
+    code: str  # e.g. "residual", "marker_residual", "label", "limit", "undetermined", ...
+    level: str  # note | check | fail
+    message: str
+
+    def to_dict(self) -> dict[str, str]:
+        return {"code": self.code, "level": self.level, "message": self.message}
+
+
+@dataclass(frozen=True)
+class Quality:
+    verdict: str  # ok | check | fail
+    reasons: tuple[Reason, ...] = field(default_factory=tuple)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"verdict": self.verdict, "reasons": [r.to_dict() for r in self.reasons]}
+
+    @staticmethod
+    def of(reasons: Iterable[Reason]) -> "Quality":
+        reasons = tuple(sorted(reasons, key=lambda r: -LEVELS.index(r.level)))
+        worst = max((LEVELS.index(r.level) for r in reasons), default=0)
+        return Quality({0: "ok", 1: "check", 2: "fail"}[worst], reasons)
+
+
+def _level(value: float, bounds: tuple[float, float]) -> str | None:
+    if value > bounds[1]:
+        return "fail"
+    if value > bounds[0]:
+        return "check"
+    return None
+
+
+# ---------------------------------------------------------------------------------- criteria
+def residual_reasons(residual_mm: Mapping[str, Any], per_frame_mean_mm: np.ndarray) -> list[Reason]:
+    out = []
+    mean = residual_mm.get("mean")
+    if mean is not None:
+        lvl = _level(mean, RESIDUAL_MEAN_MM)
+        if lvl:
+            out.append(Reason("residual", lvl, f"mean marker residual {mean:.1f} mm (check above "
+                              f"{RESIDUAL_MEAN_MM[0]:.0f} mm, fail above {RESIDUAL_MEAN_MM[1]:.0f} mm)"))
+    for name, rmse in (residual_mm.get("per_marker_rmse") or {}).items():
+        if rmse is None:
+            continue
+        lvl = _level(rmse, MARKER_RMSE_MM)
+        if lvl:
+            out.append(Reason("marker_residual", lvl, f"marker {name}: RMSE {rmse:.1f} mm from its model point "
+                              f"(check above {MARKER_RMSE_MM[0]:.0f} mm, fail above {MARKER_RMSE_MM[1]:.0f} mm)"))
+    pf = np.asarray(per_frame_mean_mm, dtype=float)
+    if pf.size:
+        with np.errstate(invalid="ignore"):
+            bad = pf > FRAME_RESIDUAL_MM
+        if bad.mean() > FRAME_RESIDUAL_FRACTION:
+            out.append(Reason("frame_residual", "check", f"{int(bad.sum())} of {pf.size} frames have a mean residual "
+                              f"above {FRAME_RESIDUAL_MM:.0f} mm (first: frame {int(np.argmax(bad))})"))
+    return out
+
+
+def agreement_reasons(agreement_deg: Mapping[str, float] | None, undetermined: Sequence[str]) -> list[Reason]:
+    out = []
+    for name, rmse in (agreement_deg or {}).items():
+        if name in undetermined or rmse is None or not np.isfinite(rmse):
+            continue
+        lvl = _level(rmse, AGREEMENT_DEG)
+        if lvl:
+            out.append(Reason("pf_ls_agreement", lvl, f"{name}: PF and LS differ by {rmse:.1f} deg RMSE where the "
+                              f"markers determine it (check above {AGREEMENT_DEG[0]:.0f}, fail above {AGREEMENT_DEG[1]:.0f})"))
+    return out
+
+
+def limit_reasons(limits: Sequence[Mapping[str, Any]], n_frames: int) -> list[Reason]:
+    out = []
+    for lim in limits:
+        lvl = "fail" if lim["max_beyond_deg"] > LIMIT_BEYOND_DEG else "check"
+        lo, hi = lim["range_deg"]
+        out.append(Reason("limit", lvl, f"{lim['coordinate']} at its range limit [{lo:.0f}, {hi:.0f}] deg in "
+                          f"{lim['frames_at_limit']} of {n_frames} frames (first: frame {lim['first_frame']}; "
+                          f"at most {lim['max_beyond_deg']:.1f} deg beyond)"))
+    return out
+
+
+def determinacy_reasons(det: Mapping[str, Any]) -> list[Reason]:
+    out = []
+    for name in det.get("undetermined_for_trial", []):
+        frac = det.get("frames_undetermined_fraction", {}).get(name, 1.0)
+        out.append(Reason("undetermined", "check", f"{name}: the markers do not determine it in {100 * frac:.0f} % of "
+                          f"the frames (noise gain above {det.get('threshold_deg_per_mm')} deg/mm); hold it in the "
+                          f"protocol or do not read it as a measurement"))
+    gimbal = det.get("frames_near_gimbal_lock_fraction", {})
+    if gimbal:
+        names = ", ".join(f"{n} {100 * f:.0f} %" for n, f in gimbal.items())
+        out.append(Reason("gimbal_lock", "note", f"near the gimbal lock of their rotation sequence, not separable "
+                          f"there (frames marked undetermined): {names}"))
+    for name, frac in det.get("frames_undetermined_fraction", {}).items():
+        if name not in det.get("undetermined_for_trial", []) and name not in gimbal and frac > 0:
+            out.append(Reason("undetermined_frames", "note", f"{name}: undetermined in {100 * frac:.0f} % of the frames "
+                              f"(marked)"))
+    return out
+
+
+def convergence_reasons(frames: Mapping[str, int], n_frames: int) -> list[Reason]:
+    bad = int(frames.get("not_converged", 0)) + int(frames.get("too_few_markers", 0))
+    lvl = _level(bad / max(n_frames, 1), NOT_CONVERGED_FRACTION)
+    if not lvl:
+        return []
+    return [Reason("convergence", lvl, f"{bad} of {n_frames} frames not converged or with too few markers")]
+
+
+def label_reasons(findings: Iterable[Any]) -> list[Reason]:
+    out = []
+    for f in findings:
+        get = f.get if isinstance(f, Mapping) else (lambda k, _f=f: getattr(_f, k))
+        sev = get("severity")
+        lvl = sev if sev in LEVELS else "check"
+        out.append(Reason("label", lvl, f"{get('kind')} ({', '.join(get('markers'))}): {get('evidence')}"))
+    return out
+
+
+def calibration_reasons(cal: Mapping[str, Any] | None, *, scale_bounds: tuple[float, float],
+                        off_segment: Mapping[str, float] | None = None) -> list[Reason]:
+    if not cal:
+        return []
+    out = []
+    src = cal.get("source") or "the static trial"
+    for name, beyond in (cal.get("static_pose_beyond_range_deg") or {}).items():
+        out.append(Reason("calibration_pose", "check", f"calibration ({src}): the static pose puts {name} "
+                          f"{abs(beyond):.1f} deg beyond its range"))
+    for seg, s in (cal.get("scale_factors") or {}).items():
+        if min(abs(s - scale_bounds[0]), abs(s - scale_bounds[1])) < SCALE_AT_BOUND:
+            out.append(Reason("calibration_scale", "check", f"calibration ({src}): {seg} scale factor {s:.2f} at its "
+                              f"bound {scale_bounds}: the subject does not fit the model (another subject's static? a label?)"))
+    motion = cal.get("window_motion_mm") or {}
+    if motion:
+        worst = max(motion, key=motion.get)
+        if motion[worst] > WINDOW_MOTION_MM:
+            out.append(Reason("calibration_motion", "check", f"calibration ({src}): the static window moves: {worst} "
+                              f"{motion[worst]:.1f} mm RMS about its mean (above {WINDOW_MOTION_MM:.0f} mm)"))
+    for name, d in (off_segment or {}).items():
+        out.append(Reason("calibration_off_segment", "fail", f"calibration ({src}): marker {name} was registered "
+                          f"{d * 1000:.0f} mm outside its segment: it is not on that segment (mislabelled?)"))
+    return out
+
+
+def off_segment_markers(model, protocol, /) -> dict[str, float]:
+    """Markers of a calibrated model registered outside their segment: distance (m) beyond the
+    sphere around the segment's anatomical points (every point that is not a protocol marker) plus
+    OFF_SEGMENT_MARGIN_M."""
+    names = set(protocol.marker_names)
+    out = {}
+    for spec in protocol.markers:
+        seg = model.segment(spec.segment)
+        anat = np.array([p for n, p in seg.points.items() if n not in names])
+        if seg.joint is not None:
+            anat = np.vstack([anat, np.zeros((1, 3))]) if anat.size else np.zeros((1, 3))
+        if len(anat) < 2:
+            continue
+        centre = 0.5 * (anat.min(axis=0) + anat.max(axis=0))
+        radius = float(np.linalg.norm(anat - centre, axis=1).max())
+        d = float(np.linalg.norm(np.asarray(spec.local_position_m) - centre)) - radius - OFF_SEGMENT_MARGIN_M
+        if d > 0:
+            out[spec.name] = d
+    return out
