@@ -154,12 +154,16 @@ def test_simulate_command_writes_c3d_and_truth(tmp_path):
 @pytest.mark.skipif(not (SHARED / "data" / "c3d").is_dir(), reason="../shared/data absent")
 @pytest.mark.parametrize("name", ["bioptim_exo_martin_statique.c3d", "bioptim_exo_F0_boire_05.c3d"])
 def test_reconstruct_real_c3d_files(tmp_path, name, capsys):
+    """The generic model, not fitted to the subject, leaves markers 40-130 mm from their model
+    points: the result is written but its verdict is 'fail', named by marker, and the exit code 1."""
     out = tmp_path / "real"
-    assert main(["-q", "reconstruct", str(SHARED / "data" / "c3d" / name), "--method", "ls", "--out", str(out)]) == 0
+    assert main(["-q", "reconstruct", str(SHARED / "data" / "c3d" / name), "--method", "ls", "--out", str(out)]) == 1
     summ = json.loads((out / f"{Path(name).stem}.ls.summary.json").read_text())
     assert summ["n_frames"] > 200
     assert summ["constraint_max_abs"] < 1e-8
-    assert 0 < summ["residual_mm"]["mean"] < 100  # generic model, not yet fitted to the subject
+    assert summ["quality"]["verdict"] == "fail"
+    assert any(r["code"] == "marker_residual" and r["level"] == "fail" for r in summ["quality"]["reasons"])
+    assert "QUALITY: FAIL" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("jobs", ["1", "2"])

@@ -56,7 +56,9 @@ def test_exudyn_joints_with_a_held_last_coordinate_match_the_numpy_kinematics(se
 
 def test_hold_names_must_be_model_coordinates(tmp_path, setup):
     model, _ = setup
-    text = DEFAULT_PROTOCOL.read_text().replace("\nmarkers:", "\nhold: [sc_posterior_rotaton]\nmarkers:", 1)
+    text = DEFAULT_PROTOCOL.read_text()
+    assert "\nhold: [sc_posterior_rotation]\n" in text  # the shipped protocol holds it (see the file)
+    text = text.replace("\nhold: [sc_posterior_rotation]\n", "\nhold: [sc_posterior_rotaton]\n", 1)
     bad = tmp_path / "p.yaml"
     bad.write_text(text)
     with pytest.raises(ProtocolError, match="sc_posterior_rotaton.*sc_posterior_rotation"):
