@@ -215,14 +215,35 @@ def cmd_demo(args: argparse.Namespace) -> int:
     outputs = reconstruct_file(c3d, out, methods=["pf", "ls"], overwrite=True,
                                progress_factory=_progress_factory(not args.quiet))
     _, names, q_true = read_angles_csv(truth_csv)
+    from exubio.kinematics import Kinematics
+    from exubio.model import load_model
+
+    kin = Kinematics(load_model())
     for recon, paths, summ in outputs:
         _print_result(recon, paths, summ)
+        held = set(summ.get("not_measured") or [])
+        # coordinates of the joints after a segment with a held coordinate absorb the held rotation
+        held_segments = {kin.model.segments[kin.coordinate_segment[names.index(n)]].name for n in held}
+        absorbing = {c for seg in kin.model.segments if seg.parent in held_segments and seg.joint
+                     for c in seg.joint.coordinates}
         rmse = rmse_deg(recon.q_rad, q_true, names)
-        print(f"[{recon.method}] joint RMSE against the truth: mean {np.mean(list(rmse.values())):.2f} deg, "
-              f"max {max(rmse.values()):.2f} deg ({max(rmse, key=rmse.get)})")
-    agree = agreement_deg(outputs[0][0], outputs[1][0])
+        measured = {k: v for k, v in rmse.items() if k not in held | absorbing}
+        print(f"[{recon.method}] joint RMSE against the truth, measured coordinates: mean "
+              f"{np.mean(list(measured.values())):.2f} deg, max {max(measured.values()):.2f} deg "
+              f"({max(measured, key=measured.get)})")
+        if held:
+            i = [s.name for s in kin.model.segments].index("scapula")
+            R_rec, R_true = kin.frames(recon.q_rad).R[:, i], kin.frames(q_true).R[:, i]
+            err = np.degrees(np.arccos(np.clip((np.einsum("nji,nji->n", R_rec, R_true) - 1.0) / 2.0, -1.0, 1.0)))
+            print(f"[{recon.method}] held by the protocol (not measured): {', '.join(sorted(held))}; "
+                  f"{', '.join(sorted(absorbing))} absorb it (RMSE {max(rmse[c] for c in held | absorbing):.1f} deg "
+                  f"at most); the scapula's orientation in the thorax: RMSE {np.sqrt(np.mean(err**2)):.2f} deg")
+        _print_quality(recon.method, summ)
+    agree = {k: v for k, v in (outputs[0][2].get("pf_ls_agreement_deg") or {}).items() if isinstance(v, float)}
+    if not agree:
+        agree = agreement_deg(outputs[0][0], outputs[1][0])
     worst = max(agree, key=agree.get)
-    print(f"PF-LS agreement: max RMSE {agree[worst]:.3f} deg ({worst})")
+    print(f"PF-LS agreement (determined coordinates): max RMSE {agree[worst]:.3f} deg ({worst})")
     from exubio.report.trial_report import build_trial_report
 
     pdf, png = build_trial_report([paths["npz"] for _, paths, _ in outputs], out / "example_abduction.report.pdf")
