@@ -126,8 +126,8 @@ def determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present: np.nd
         if blind.any():
             # the coordinates the null direction of M moves
             evals, evecs = np.linalg.eigh(M[blind])
-            null = evecs[..., 0]  # (nb, f-2): smallest eigenvector
-            moved = np.abs(np.einsum("bfr,br->bf", N[blind], null)) > 1e-6
+            null = evals <= 1e-12 * evals[..., -1:]  # (nb, f-2): directions no marker sees
+            moved = (np.abs(np.einsum("bfr,brs->bfs", N[blind], evecs)) * null[:, None, :]).max(axis=2) > 1e-6
             g[blind] = np.where(moved, np.inf, g[blind])
         full = np.full((int(ok.sum()), m), np.nan)
         full[:, free] = g
