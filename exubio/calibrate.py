@@ -72,7 +72,7 @@ from exubio.errors import InputError, ModelError, ProtocolError
 from exubio.kinematics import Kinematics, PointSet
 from exubio.methods.common import tracked_points
 from exubio.methods.ls import Limits, LSOptions, solve_positions
-from exubio.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD, violation
+from exubio.ranges import AT_LIMIT_TOLERANCE_RAD, DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD, violation
 from exubio.preprocess import isb_landmarks, prepare_targets, thorax_frame, to_thorax_frame, valid_runs
 from exubio.protocol import resolve_labels
 from exubio.types import Ellipsoid, MarkerTargets, Model, Protocol, Trajectories
@@ -175,7 +175,8 @@ class CalibrationReport:
     fit_iterations: int
     window_motion_mm: Mapping[str, float] = dataclasses.field(default_factory=dict)  # RMS motion of
     # each marker about its mean over the calibration frames: a "static" window that moves
-    static_pose_beyond_range_deg: Mapping[str, float] = dataclasses.field(default_factory=dict)
+    static_pose_at_limit_deg: Mapping[str, float] = dataclasses.field(default_factory=dict)  # coordinate ->
+    # its static value (deg) where that lies at (within AT_LIMIT_TOLERANCE_RAD of) or beyond its range
 
     @property
     def residual_mm(self) -> dict[str, float]:
@@ -241,7 +242,7 @@ class CalibrationReport:
             },
             "fit_iterations": self.fit_iterations,
             "window_motion_mm": {k: round(float(v), 3) for k, v in self.window_motion_mm.items()},
-            "static_pose_beyond_range_deg": {k: round(float(v), 3) for k, v in self.static_pose_beyond_range_deg.items()},
+            "static_pose_at_limit_deg": {k: round(float(v), 3) for k, v in self.static_pose_at_limit_deg.items()},
         }
 
 
@@ -430,6 +431,12 @@ def _fit_pose(kin: Kinematics, points: PointSet, target: np.ndarray, w: np.ndarr
         done = (ok & (np.abs(dq).max(axis=1) < tol)) | (mu[a] > 1e8)
         active[a[done]] = False
     return q, cost
+
+
+def _at_limit(q: np.ndarray, model: Model) -> dict[str, float]:
+    rng = model.coordinate_ranges_rad
+    at = (q <= rng[:, 0] + AT_LIMIT_TOLERANCE_RAD) | (q >= rng[:, 1] - AT_LIMIT_TOLERANCE_RAD)
+    return {n: float(np.degrees(v)) for n, v, a in zip(model.coordinate_names, q, at) if a}
 
 
 def _range_cost(q: np.ndarray, limits: Limits | None) -> np.ndarray | float:
@@ -767,8 +774,7 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
         ellipsoid_centre_m=np.array(ellipsoid.centre_m), ellipsoid_radii_m=np.array(ellipsoid.radii_m),
         ellipsoid_scale=k_ell, constraint_abs=g_abs, markers=tuple(markers), fit_iterations=it,
         window_motion_mm={m.name: float(spread[j] * 1000) for j, m in enumerate(protocol.markers) if present[j]},
-        static_pose_beyond_range_deg={n: float(np.degrees(v)) for n, v in
-                                      zip(model.coordinate_names, violation(q, model.coordinate_ranges_rad)) if v != 0})
+        static_pose_at_limit_deg=_at_limit(q, model))
     stem = Path(trajectories.source).stem if trajectories.source else "subject"
     calibrated = dataclasses.replace(
         calibrated, name=f"{model.name}_calibrated_{stem}",

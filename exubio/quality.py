@@ -183,9 +183,9 @@ def calibration_reasons(cal: Mapping[str, Any] | None, *, scale_bounds: tuple[fl
         return []
     out = []
     src = cal.get("source") or "the static trial"
-    for name, beyond in (cal.get("static_pose_beyond_range_deg") or {}).items():
-        out.append(Reason("calibration_pose", "check", f"calibration ({src}): the static pose puts {name} "
-                          f"{abs(beyond):.1f} deg beyond its range"))
+    for name, value in (cal.get("static_pose_at_limit_deg") or {}).items():
+        out.append(Reason("calibration_pose", "check", f"calibration ({src}): the static pose puts {name} at its "
+                          f"range limit ({value:.1f} deg): the markers ask for an implausible posture"))
     for seg, s in (cal.get("scale_factors") or {}).items():
         if min(abs(s - scale_bounds[0]), abs(s - scale_bounds[1])) < SCALE_AT_BOUND:
             out.append(Reason("calibration_scale", "check", f"calibration ({src}): {seg} scale factor {s:.2f} at its "
