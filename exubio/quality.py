@@ -171,8 +171,8 @@ def label_reasons(findings: Iterable[Any]) -> list[Reason]:
     out = []
     for f in findings:
         get = f.get if isinstance(f, Mapping) else (lambda k, _f=f: getattr(_f, k))
-        sev = get("severity")
-        lvl = sev if sev in LEVELS else "check"
+        lvl = {"error": "fail", "fail": "fail", "warning": "check", "check": "check", "info": "note",
+               "note": "note"}.get(get("severity"), "check")
         out.append(Reason("label", lvl, f"{get('kind')} ({', '.join(get('markers'))}): {get('evidence')}"))
     return out
 

@@ -1,9 +1,11 @@
 """The report of one reconstructed trial: a PDF (and a PNG of its first page) a lab can show.
 
-It reads the ``<trial>.<method>.npz`` results written by ``exubio reconstruct`` (through
-exubio.io.results) and never imports the solver. Page 1: joint angles of every method against time,
-grouped by joint (degrees). Page 2: marker residuals (mean ± SD over markers per frame, per-marker
-RMSE), constraint residuals and the gaps, with the run's figures.
+It reads the ``<trial>.<method>.npz`` results and their ``summary.json`` written by ``exubio
+reconstruct`` (through exubio.io.results) and never imports the solver. Page 1 (and the PNG): the
+quality verdict of every method with its reasons, the key figures, the worst markers, the label
+findings and the coordinates that are not measurements. Page 2: joint angles of every method
+against time, grouped by joint (degrees; coordinates not measured drawn grey). Page 3: marker
+residuals (mean ± SD over markers per frame, per-marker RMSE), constraint residuals and the gaps.
 """
 from __future__ import annotations
 
@@ -42,18 +44,76 @@ def _title(recons: Sequence[Reconstruction], meta: dict) -> str:
             f"protocol {meta.get('protocol_name', '')}, methods {', '.join(r.method.upper() for r in recons)}")
 
 
-def angles_page(recons: Sequence[Reconstruction], meta: dict) -> Figure:
+_VERDICT_COLOURS = {"ok": "tab:green", "check": "tab:orange", "fail": "tab:red"}
+
+
+def verdict_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[str, dict]) -> Figure:
+    """Page 1: what a supervisor reads first."""
+    fig = _figure()
+    fig.suptitle(_title(recons, meta), fontsize=9)
+    y = 0.93
+    for r in recons:
+        s = summaries.get(r.method, {})
+        q = s.get("quality") or {"verdict": "unknown", "reasons": []}
+        colour = _VERDICT_COLOURS.get(q["verdict"], "grey")
+        fig.text(0.04, y, f"{r.method.upper()}: {q['verdict'].upper()}", fontsize=18, color=colour, weight="bold",
+                 va="top")
+        rs = s.get("residual_mm", {})
+        per = {k: v for k, v in (rs.get("per_marker_rmse") or {}).items() if v is not None}
+        worst = sorted(per, key=per.get, reverse=True)[:3]
+        figures = (f"{s.get('n_frames', r.n_frames)} frames; residual mean {rs.get('mean', float('nan')):.1f} mm, "
+                   f"worst markers (RMSE): " + ", ".join(f"{m} {per[m]:.1f} mm" for m in worst)
+                   + f"; max |g| {np.nanmax(np.abs(r.constraint)):.0e}")
+        fig.text(0.22, y - 0.005, figures, fontsize=8, va="top")
+        y -= 0.045
+        for reason in q["reasons"][:9]:
+            fig.text(0.06, y, f"{reason['level']}: {reason['message']}"[:190], fontsize=7, va="top",
+                     color=_VERDICT_COLOURS.get(reason["level"], "black") if reason["level"] != "note" else "dimgrey")
+            y -= 0.024
+        if len(q["reasons"]) > 9:
+            fig.text(0.06, y, f"... {len(q['reasons']) - 9} more in {r.method}.summary.json", fontsize=7, va="top")
+            y -= 0.024
+        y -= 0.02
+    first = summaries.get(recons[0].method, {})
+    lines = []
+    if first.get("not_measured"):
+        lines.append("not measured (held by the protocol or no marker on the segment): " + ", ".join(first["not_measured"]))
+    det = first.get("determinacy") or {}
+    if det.get("undetermined_for_trial"):
+        lines.append("not determined by the markers (most frames): " + ", ".join(det["undetermined_for_trial"]))
+    if det.get("frames_near_gimbal_lock_fraction"):
+        lines.append("near a gimbal lock (frames marked undetermined): " + ", ".join(
+            f"{k} {100 * v:.0f} %" for k, v in det["frames_near_gimbal_lock_fraction"].items()))
+    for f in first.get("labels") or []:
+        lines.append(f"labels: {f.get('kind')} {', '.join(f.get('markers', []))}: {f.get('evidence', '')}"[:190])
+    cal = first.get("calibration") or {}
+    if cal:
+        lines.append(f"calibrated on {Path(str(cal.get('static', ''))).name}"
+                     + (f" frames {cal['frames']}" if cal.get("frames") else "")
+                     + f": calibration residual mean {cal.get('mean_residual_mm', float('nan')):.2f} mm")
+    lines.append("verdict: ok = nothing found; check = read the reasons before using the angles; "
+                 "fail = the angles are wrong as they stand (exit code 1). Thresholds: exubio/quality.py.")
+    fig.text(0.04, max(y, 0.25), "\n".join(lines), fontsize=8, va="top", family="monospace", wrap=True)
+    return fig
+
+
+def angles_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[str, dict] | None = None) -> Figure:
     fig = _figure()
     names = recons[0].coordinate_names
     axes = fig.subplots(len(_JOINTS), 1, sharex=True)
     held = set(meta.get("held_coordinates", []))
+    for s in (summaries or {}).values():
+        held |= set(s.get("not_measured") or [])
+        held |= set((s.get("determinacy") or {}).get("undetermined_for_trial") or [])
     for ax, (label, prefix) in zip(axes, _JOINTS):
         idx = _members(names, prefix)
         styles = ["-", "--", ":"]
         for r in recons:
             for k, i in enumerate(idx):
-                ax.plot(r.time_s, np.rad2deg(r.q_rad[:, i]), styles[k % 3], color=_COLOURS.get(r.method, None),
-                        lw=1.0, label=f"{names[i]} ({r.method.upper()})" + (" held" if names[i] in held else ""))
+                grey = names[i] in held
+                ax.plot(r.time_s, np.rad2deg(r.q_rad[:, i]), styles[k % 3],
+                        color="lightgrey" if grey else _COLOURS.get(r.method, None),
+                        lw=1.0, label=f"{names[i]} ({r.method.upper()})" + (" not measured" if grey else ""))
         ax.set_ylabel(f"{label}\n(deg)", fontsize=8)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=6, ncol=3, loc="upper right")
@@ -123,7 +183,7 @@ def residuals_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict
 
 
 def build_trial_report(npz_paths: Sequence[str | Path], pdf_path: str | Path, /) -> tuple[Path, Path]:
-    """Write ``pdf_path`` and a PNG of the joint-angle page beside it (``.png``), atomically."""
+    """Write ``pdf_path`` and a PNG of its first page (the verdict) beside it (``.png``), atomically."""
     recons = [read_npz(p) for p in npz_paths]
     meta = read_npz_metadata(npz_paths[0])
     summaries = {}
@@ -131,7 +191,8 @@ def build_trial_report(npz_paths: Sequence[str | Path], pdf_path: str | Path, /)
         summary = Path(str(p)[: -len(".npz")] + ".summary.json")
         if summary.is_file():
             summaries[r.method] = json.loads(summary.read_text())
-    pages = [angles_page(recons, meta), residuals_page(recons, meta, summaries)]
+    pages = [verdict_page(recons, meta, summaries), angles_page(recons, meta, summaries),
+             residuals_page(recons, meta, summaries)]
     pdf_path = Path(pdf_path)
 
     def write_pdf(tmp: Path) -> None:
