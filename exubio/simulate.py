@@ -34,7 +34,8 @@ ac_posterior_tilt prescribed the 2x2 block of G stays well conditioned, cond < 4
   the thorax. ``rhythm_table`` gives the fitted numbers. The GH coordinates follow from
   R_scapula^T R_humerus, and their rates from the (analytic) humerus and the scapula's angular
   velocities and accelerations (Kinematics.coordinate_rates). Elbow flexion goes 15° -> 40° with
-  the elevation, pronation ±20°, wrist flexion ±10° and radial deviation ±8° (sinusoids), so
+  the elevation, pronation 40° ± 20° (from full supination, inside its range), wrist flexion ±10°
+  and radial deviation ±8° (sinusoids), so
   every coordinate moves.
 * SIER (paper, after Roux et al.): arm at 25° HT elevation in the coronal plane (clavicle and
   scapula on the same rhythm, constant), elbow flexed 90°, forearm and wrist at 0°, and
@@ -136,6 +137,7 @@ SIER_ELEVATION_DEG = 25.0
 SIER_AMPLITUDE_DEG = 40.0
 SIER_FREQUENCY_HZ = 0.5
 SIER_ELBOW_DEG = 90.0
+PRONATION_MEAN_DEG = 40.0  # forearm midway from full supination (the reference posture): inside its range
 _NEWTON_TOL = 1e-13
 _FREE = ("ac_protraction", "ac_upward_rotation")  # solved from g(q) = 0 in every frame
 _FITTED = "ac_posterior_tilt"  # the scapular rotation the constraints leave free: fitted to the rhythm
@@ -464,7 +466,7 @@ def _true_motion(kin: Kinematics, motion: Motion, t: np.ndarray):
     else:
         distal = {
             "elbow_flexion": _cycle(d(15.0), d(40.0), w),
-            "pronation": _Signal(0.0, ((d(20.0), w, 0.0),)),
+            "pronation": _Signal(d(PRONATION_MEAN_DEG), ((d(20.0), w, 0.0),)),
             "wrist_flexion": _Signal(0.0, ((d(10.0), w, 0.5),)),
             "wrist_radial_deviation": _Signal(0.0, ((d(8.0), 2.0 * w, 0.0),)),
         }
