@@ -203,7 +203,9 @@ def _parse_thorax_frame(data: Mapping[str, Any], src: str) -> ThoraxFrameSpec:
     return ThoraxFrameSpec(**labels)
 
 
-def _parse_filter(data: Mapping[str, Any], src: str) -> tuple[float | None, int]:
+def _parse_filter(data: Mapping[str, Any], src: str) -> tuple[float | str | None, int]:
+    """(cutoff, order) of the 'filter' key: cutoff a number > 0 (Hz), "auto" (Winter's residual
+    analysis per marker, exubio.preprocess.residual_cutoffs) or None ('filter: none')."""
     if "filter" not in data:
         return _FALLBACK_CUTOFF, _FALLBACK_ORDER
     raw = data["filter"]
@@ -214,11 +216,24 @@ def _parse_filter(data: Mapping[str, Any], src: str) -> tuple[float | None, int]
             f"{src}: filter must be a mapping {{cutoff_hz, order}} or 'none', got {_kind(raw)}"
         )
     check_keys(raw, _FILTER_KEYS, where="filter", source=src)
-    cutoff = _number(raw.get("cutoff_hz", _FALLBACK_CUTOFF), "filter.cutoff_hz", src, minimum=0.0, strict=True)
+    cutoff = _parse_cutoff(raw.get("cutoff_hz", _FALLBACK_CUTOFF), src)
     order = raw.get("order", _FALLBACK_ORDER)
     if isinstance(order, bool) or not isinstance(order, int) or order < 1:
         raise ProtocolError(f"{src}: filter.order must be a whole number >= 1, got {_kind(order)}")
     return cutoff, order
+
+
+def _parse_cutoff(value: Any, src: str) -> float | str:
+    expected = "expected a number > 0 (Hz) or 'auto' (a cut-off per marker by Winter's residual analysis)"
+    if isinstance(value, str):
+        if value.strip().lower() == "auto":
+            return "auto"
+        raise ProtocolError(f"{src}: filter.cutoff_hz is '{value}'; {expected}")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ProtocolError(f"{src}: filter.cutoff_hz is {_kind(value)}; {expected}")
+    if value <= 0:
+        raise ProtocolError(f"{src}: filter.cutoff_hz is {value}; {expected}")
+    return float(value)
 
 
 def _parse_defaults(data: Mapping[str, Any], src: str) -> tuple[float, float]:

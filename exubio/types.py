@@ -9,7 +9,7 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Any, Mapping
+from typing import Any, Literal, Mapping
 
 import numpy as np
 
@@ -270,12 +270,18 @@ class ThoraxFrameSpec:
 
 @dataclass(frozen=True)
 class Protocol:
-    """A marker set: tracked markers, the thorax frame landmarks and the filter settings."""
+    """A marker set: tracked markers, the thorax frame landmarks and the filter settings.
+
+    cutoff_hz: the low-pass cut-off of the marker trajectories (Hz); ``"auto"``: chosen per marker
+    and trial by Winter's residual analysis (:func:`exubio.preprocess.residual_cutoffs`; the
+    cut-offs applied are in ``MarkerTargets.cutoff_hz``); None: no filter.
+    filter_order: order of the Butterworth design (run forward and backward).
+    """
 
     name: str
     markers: tuple[MarkerSpec, ...]
     thorax_frame: ThoraxFrameSpec
-    cutoff_hz: float | None = 2.0
+    cutoff_hz: float | Literal["auto"] | None = 2.0
     filter_order: int = 2
     default_stiffness_n_per_m: float = 1500.0
     default_damping_ns_per_m: float = 300.0
@@ -314,6 +320,8 @@ class MarkerTargets:
 
     positions_m, velocities_m_s, accelerations_m_s2: (n_frames, n_markers, 3), NaN in gaps.
     marker_names: protocol marker names, in protocol order.
+    cutoff_hz:    marker name -> low-pass cut-off actually applied (Hz), in protocol order; only
+                  markers of which at least one run of samples was filtered (empty: unfiltered).
     """
 
     time_s: np.ndarray
@@ -323,6 +331,7 @@ class MarkerTargets:
     accelerations_m_s2: np.ndarray
     gaps: tuple[Gap, ...] = ()
     source: str = ""
+    cutoff_hz: Mapping[str, float] = field(default_factory=dict)
 
     @property
     def n_frames(self) -> int:

@@ -15,6 +15,7 @@ from exubio.preprocess import (
     fill_short_gaps,
     lowpass,
     prepare_targets,
+    residual_cutoffs,
     spline_derivatives,
     thorax_frame,
     to_thorax_frame,
@@ -68,7 +69,8 @@ def make_trial(n: int = 300, *, scale: float = 1.0, source: str = "synthetic.c3d
     return traj, local
 
 
-def make_protocol(*, cutoff: float | None = None, identity: bool = False, optional_extra: bool = False) -> Protocol:
+def make_protocol(*, cutoff: float | str | None = None, identity: bool = False,
+                  optional_extra: bool = False) -> Protocol:
     markers = [MarkerSpec(name, seg, np.zeros(3)) for name, seg in
                zip(LOCAL_MARKERS, ("scapula", "humerus", "hand"))]
     if optional_extra:
@@ -211,6 +213,100 @@ def test_lowpass_rejects_cutoff_above_nyquist():
         lowpass(np.zeros((50, 1, 3)), rate_hz=RATE, cutoff_hz=60.0, order=2)
 
 
+def smooth_trajectory(t: np.ndarray) -> np.ndarray:
+    """(n, 1, 3) a smooth marker path (m): slow sinusoids and a cubic drift, curved at both ends."""
+    return np.stack([0.05 * np.sin(2 * np.pi * 0.4 * t + 0.3),
+                     0.0025 * (t - 1.0) ** 3 - 0.03 * t,
+                     0.04 * np.cos(2 * np.pi * 0.25 * t)], axis=1)[:, None, :]
+
+
+def test_lowpass_does_not_bend_the_ends_of_a_smooth_trajectory():
+    # 4 s at 100 Hz, 2 Hz: the filter's own attenuation of the 0.4 Hz sine is ~0.08 mm everywhere;
+    # the first and last 0.2 s must not deviate more than that (odd-reflection padding: 0.57 mm)
+    t = np.arange(400) / RATE
+    p = smooth_trajectory(t)
+    f = lowpass(p, rate_hz=RATE, cutoff_hz=2.0, order=2)
+    err = np.abs(f - p).max(axis=(1, 2))
+    ends = max(err[:20].max(), err[-20:].max())
+    assert ends < 0.1e-3
+    assert ends < 1.5 * err[50:-50].max()
+    # at 6 Hz everything is within 1 micrometre, ends included (odd reflection: 70 micrometres)
+    f6 = lowpass(p, rate_hz=RATE, cutoff_hz=6.0, order=2)
+    assert np.abs(f6 - p).max() < 1e-6
+
+
+def test_lowpass_ends_of_every_run_and_a_short_run():
+    # gaps split the trajectory into runs of 100, 15 and 100 samples; each run's ends are kept,
+    # the 15-sample run (shorter than the 50-sample end window at 2 Hz) is fitted whole
+    t = np.arange(400) / RATE
+    p = smooth_trajectory(t)
+    p[100:130] = np.nan
+    p[145:300] = np.nan
+    f = lowpass(p, rate_hz=RATE, cutoff_hz=2.0, order=2)
+    assert np.array_equal(np.isnan(f), np.isnan(p))
+    for a, b, tol in [(0, 100, 0.1e-3), (130, 145, 0.02e-3), (300, 400, 0.1e-3)]:
+        assert np.abs(f[a:b] - p[a:b]).max() < tol, (a, b)
+    # a short run that is exactly a (steep) cubic comes back unchanged (odd reflection: 10 mm off)
+    cubic = np.full((60, 1), np.nan)
+    x = np.arange(12) / RATE
+    cubic[20:32, 0] = 0.1 + 0.2 * x - 3.0 * x**2 + 40.0 * x**3
+    np.testing.assert_allclose(lowpass(cubic, rate_hz=RATE, cutoff_hz=2.0, order=2), cubic, rtol=0, atol=1e-6)
+
+
+def test_lowpass_one_cutoff_per_marker():
+    rng = np.random.default_rng(3)
+    p = rng.normal(size=(300, 2, 3))
+    both = lowpass(p, rate_hz=RATE, cutoff_hz=[2.0, 8.0], order=2)
+    np.testing.assert_array_equal(both[:, 0], lowpass(p[:, :1], rate_hz=RATE, cutoff_hz=2.0)[:, 0])
+    np.testing.assert_array_equal(both[:, 1], lowpass(p[:, 1:], rate_hz=RATE, cutoff_hz=8.0)[:, 0])
+    with pytest.raises(InputError, match="Nyquist"):
+        lowpass(p, rate_hz=RATE, cutoff_hz=[2.0, 50.0])
+
+
+def band_limited(n: int, k: int, rng: np.random.Generator, top_hz: float = 3.0) -> np.ndarray:
+    """(n, k, 3) sums of 15 sinusoids of 0.2-``top_hz`` Hz, 5-20 mm each, random phases (m)."""
+    t = np.arange(n) / RATE
+    freqs = np.linspace(0.2, top_hz, 15)
+    amp = rng.uniform(0.005, 0.02, (k, 3, freqs.size))
+    phase = rng.uniform(0.0, 2 * np.pi, (k, 3, freqs.size))
+    return (amp[None] * np.sin(2 * np.pi * freqs * t[:, None, None, None] + phase[None])).sum(axis=3)
+
+
+def test_residual_cutoffs_on_a_band_limited_signal_with_white_noise():
+    rng = np.random.default_rng(0)
+    clean = band_limited(2000, 2, rng)  # content up to 3 Hz, 20 s at 100 Hz
+    noisy = clean + rng.normal(0.0, 1e-3, clean.shape)  # 1 mm white noise
+    cutoff, noise = residual_cutoffs(noisy, rate_hz=RATE)
+    assert cutoff.shape == (2,) and noise.shape == (2,)
+    # above the signal's band, well below Nyquist (50 Hz): inside the bounds, not on them
+    assert np.all(cutoff > 3.0) and np.all(cutoff < 12.0)
+    np.testing.assert_allclose(noise, 1e-3, rtol=0.1)  # the intercept of the noise line is the noise RMS
+
+    def error(f):
+        return np.sqrt(np.mean((f - clean) ** 2))
+
+    auto = error(lowpass(noisy, rate_hz=RATE, cutoff_hz=cutoff))
+    assert auto < 0.7 * error(noisy)  # removes noise ...
+    assert auto < 0.1 * error(lowpass(noisy, rate_hz=RATE, cutoff_hz=2.0))  # ... and keeps the signal
+
+
+def test_residual_cutoffs_bounds_and_missing_markers():
+    rng = np.random.default_rng(1)
+    clean = band_limited(1000, 1, rng)
+    white = rng.normal(0.0, 1e-3, (1000, 1, 3))
+    absent = np.full((1000, 1, 3), np.nan)
+    cutoff, noise = residual_cutoffs(np.concatenate([clean, white, absent], axis=1), rate_hz=RATE)
+    assert cutoff[0] == 12.0 and abs(noise[0]) < 1e-4  # noise-free: nothing to remove, the upper bound
+    assert cutoff[1] == 2.0 and noise[1] == pytest.approx(1e-3, rel=0.1)  # noise only: the lower bound
+    assert np.isnan(cutoff[2]) and np.isnan(noise[2])
+    # at 50 Hz the noise band starts at 6.25 Hz: the cut-off stays below it; at 12.5 Hz (noise
+    # band from 1.6 Hz) there is no room above the lower bound
+    cutoff, _ = residual_cutoffs(clean[::2], rate_hz=50.0)
+    assert cutoff[0] == pytest.approx(6.25)
+    with pytest.raises(InputError, match="too slow for residual analysis"):
+        residual_cutoffs(clean[::8], rate_hz=12.5)
+
+
 def test_spline_derivatives_of_a_sine():
     t = np.arange(500) / RATE
     w = 2 * np.pi * 0.5
@@ -270,6 +366,32 @@ def test_prepare_targets_filtered_and_resampled():
     np.testing.assert_allclose(fine.positions_m[::4], plain.positions_m, atol=1e-12)
     np.testing.assert_allclose(fine.positions_m[2::4], 0.5 * (plain.positions_m[:-1] + plain.positions_m[1:]),
                                atol=1e-5)
+
+
+def test_prepare_targets_reports_the_cutoffs_applied():
+    traj, local = make_trial(200)
+    assert prepare_targets(traj, make_protocol(cutoff=None)).cutoff_hz == {}
+    fixed = prepare_targets(traj, make_protocol(cutoff=6.0, optional_extra=True))
+    assert fixed.cutoff_hz == {"ACR": 6.0, "ELB": 6.0, "HAND": 6.0}  # DELT is absent: nothing filtered
+    # auto, on thorax-frame data with 1 mm noise on ELB only: per marker, the applied cut-offs
+    rng = np.random.default_rng(5)
+    noisy = local + np.where(np.arange(3) == 1, 1.0, 0.0)[None, :, None] * rng.normal(0.0, 1e-3, local.shape)
+    in_thorax = Trajectories(tuple(LOCAL_MARKERS), noisy, RATE, traj.time_s, source="thorax.trc")
+    auto = prepare_targets(in_thorax, make_protocol(identity=True, cutoff="auto"))
+    assert list(auto.cutoff_hz) == list(LOCAL_MARKERS)
+    assert auto.cutoff_hz["ACR"] == auto.cutoff_hz["HAND"] == 12.0  # noise-free: the upper bound
+    assert 2.0 <= auto.cutoff_hz["ELB"] < 6.0  # 1 mm noise on a 0.3 Hz motion: filtered hard
+    expected = lowpass(noisy, rate_hz=RATE, cutoff_hz=list(auto.cutoff_hz.values()), order=2)
+    np.testing.assert_array_equal(auto.positions_m, expected)
+
+
+@pytest.mark.parametrize("cutoff, fragment", [(60.0, "Nyquist"), ("fast", "neither a number")])
+def test_prepare_targets_bad_cutoff_names_protocol_and_key(cutoff, fragment):
+    traj, _ = make_trial(100)
+    with pytest.raises(InputError) as exc:
+        prepare_targets(traj, make_protocol(cutoff=cutoff))
+    msg = str(exc.value)
+    assert "synthetic.c3d" in msg and "test.yaml" in msg and "filter.cutoff_hz" in msg and fragment in msg
 
 
 def test_prepare_targets_does_not_mutate_input():

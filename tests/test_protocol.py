@@ -65,7 +65,7 @@ def test_shipped_upper_limb_21():
     assert prot.name == "upper_limb_21"
     assert prot.source == str(SHIPPED)
     assert prot.thorax_frame == ThoraxFrameSpec(ij="MAN", px="XYP", c7="C7", t8="T10")
-    assert prot.cutoff_hz == 2.0 and prot.filter_order == 2
+    assert prot.cutoff_hz == "auto" and prot.filter_order == 2
     assert prot.default_stiffness_n_per_m == 1500.0 and prot.default_damping_ns_per_m == 300.0
     required = [m for m in prot.markers if not m.optional]
     assert len(required) == 17
@@ -143,6 +143,22 @@ def test_name_defaults_to_file_stem(tmp_path):
 def test_filter_settings(tmp_path):
     prot = load(write(tmp_path, MINIMAL + "filter: {cutoff_hz: 6, order: 4}\n"))
     assert prot.cutoff_hz == 6.0 and prot.filter_order == 4
+
+
+@pytest.mark.parametrize("text", ["auto", "Auto", "'auto'"])
+def test_filter_cutoff_auto(tmp_path, text):
+    prot = load(write(tmp_path, MINIMAL + f"filter: {{cutoff_hz: {text}, order: 2}}\n"))
+    assert prot.cutoff_hz == "auto" and prot.filter_order == 2
+
+
+@pytest.mark.parametrize("value", ["fast", "'2 Hz'", "[2, 6]", "true", "0", "-2", ".nan", "null"])
+def test_filter_cutoff_bad_value_is_one_clear_error(tmp_path, value):
+    path = write(tmp_path, MINIMAL + f"filter: {{cutoff_hz: {value}}}\n")
+    with pytest.raises(ProtocolError) as exc:
+        load(path)
+    msg = str(exc.value)
+    assert msg.startswith(f"{path}: filter.cutoff_hz is ")
+    assert msg.endswith("expected a number > 0 (Hz) or 'auto' (a cut-off per marker by Winter's residual analysis)")
 
 
 # --------------------------------------------------------------------------------------------
