@@ -18,13 +18,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD = 500.0
-"""k_lim. The marker springs give a joint a torsional stiffness of about sum_i c_i L_i^2: with
-c = 1500 N/m and lever arms of 0.05-0.3 m, 4-130 N m/rad per marker and ~10-300 N m/rad per joint.
-500 N m/rad makes a limit dominate the springs of any one joint, so markers that pull a coordinate
-beyond its range leave it within a few degrees of the limit (a 1 N m excess torque: 0.1 deg),
-while keeping the integration no stiffer than the markers' own springs on the light distal
-segments (measured in benchmarks/README.md)."""
+DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD = 1.0e4
+"""k_lim, the same in both methods. Measured on the 21-marker protocol (benchmarks/README.md,
+"Joint limits"): the markers hold a joint with 16-22 N m/rad (pronation, wrist) to 620 (elbow) and
+3-5e3 (GH, girdle) when the other coordinates are held, at most ~110 N m/rad when they are free to
+compensate, which is what resists markers that drive one coordinate past its range. At 1e4 a
+coordinate stops 0.57 deg past its limit per 10 N m of excess torque (elbow driven 20 deg past by
+exact markers: 0.4 deg; 1e3: 3.5 deg); stiffer limits cost PF more Jacobian updates (1e4: +34 %
+while a limit is reached, 3e4: +50 %, 1e5: +67 %), so 1e4 is the knee."""
 
 AT_LIMIT_TOLERANCE_RAD = np.radians(0.5)
 """A coordinate within this of a limit (or beyond) counts as 'at its limit' in the reports."""

@@ -5,7 +5,7 @@ import pytest
 
 pytest.importorskip("exudyn")
 
-from exubio.backend.exudyn_system import IntegratorOptions, PFSystem, SpringSet  # noqa: E402
+from exubio.backend.exudyn_system import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD, IntegratorOptions, PFSystem, SpringSet  # noqa: E402
 from exubio.errors import ModelError  # noqa: E402
 from exubio.kinematics import Kinematics  # noqa: E402
 from exubio.model import load_model  # noqa: E402
@@ -182,3 +182,164 @@ def test_a_diverging_run_is_reported_not_raised(kin, motion):
     assert 0 < run.completed_frames < 40
     assert np.isnan(run.rotations[run.completed_frames:]).all()
     assert np.isfinite(run.rotations[: run.completed_frames]).all()
+
+
+# ---------------------------------------------------------------------------------------------
+# Range-of-motion limits: V = k_lim / 2 (q_j beyond [lo_j, hi_j])^2 per coordinate
+# ---------------------------------------------------------------------------------------------
+K_LIM = DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD
+
+
+def wrap(x):
+    """Angle differences into (-pi, pi]."""
+    return (np.asarray(x) + np.pi) % (2 * np.pi) - np.pi
+
+
+def on_manifold(kin, q):
+    """q with the AC protraction and upward rotation solved so that g(q) = 0."""
+    q = q.copy()
+    for _ in range(50):
+        g = kin.g(q)
+        if np.abs(g).max() < 1e-14:
+            break
+        q[[3, 4]] -= np.linalg.solve(kin.G(q)[:, [3, 4]], g)
+    return q
+
+
+def test_limits_outside_the_motion_change_nothing(kin, springs, motion, tracked):
+    """Far limits: their elements never switch on and the run is the run without limits, to the
+    bit. Limits 0.03 rad outside the motion (inside the switching margin, 0.05 rad at 5 ms steps): the
+    elements switch on, but push nowhere inside the range (measured: also bitwise equal)."""
+    q, qd, pos, vel = motion
+    _, free = tracked
+    for pad, switched_on in ((0.5, False), (0.03, True)):
+        limits = np.column_stack([q.min(axis=0) - pad, q.max(axis=0) + pad])
+        system = PFSystem(kin.model, springs, q0=q[0], qd0=qd[0], kinematics=kin, limits_rad=limits)
+        run = system.run(pos, vel, frame_dt_s=1 / RATE_HZ)
+        assert run.success
+        assert set(run.limit_active_s) == {"sc", "ac", "gh", "elbow", "forearm", "wrist"}  # one element per joint
+        assert (max(run.limit_active_s.values()) > 0) == switched_on
+        assert np.abs(run.rotations - free.rotations).max() < 1e-9  # measured: 0 (bitwise equal)
+
+
+# (coordinate, start deg, end deg, lower deg, upper deg): the markers move the arm from the start
+# posture to the end posture in 0.5 s and hold it there for 2.5 s; the end lies beyond a limit
+LIMIT_SCENARIOS = {
+    # revolute; spherical, all three angles of the joint beyond a limit (first, middle, and the
+    # last one, whose axis is opposite to the sequence's third axis), middle angle 35 deg
+    "elbow_and_gh": [("elbow_flexion", 60, 120, None, 100), ("gh_abduction", 30, 60, None, 50),
+                     ("gh_internal_rotation", 30, 45, None, 35), ("gh_flexion", 10, -50, -35, None)],
+    # revolute across +-180 deg (pronation to 190 deg against 170 deg); cardan, both angles
+    "forearm_and_wrist": [("pronation", 150, 190, None, 170), ("wrist_flexion", 0, 50, -60, 30),
+                          ("wrist_radial_deviation", 0, -30, -15, None), ("elbow_flexion", 60, 60, None, None)],
+    # joints with their last angle held (as protocols do): the wrist a revolute joint (torsional
+    # element), the glenohumeral joint a cardan one
+    "last_angles_held": [("wrist_flexion", 0, 50, -60, 30), ("gh_abduction", 30, 60, None, 50),
+                         ("wrist_radial_deviation", 10, 10, None, None), ("gh_flexion", 20, 20, None, None)],
+}
+HELD = {"last_angles_held": ("wrist_radial_deviation", "gh_flexion")}
+
+
+@pytest.fixture(scope="module", params=sorted(LIMIT_SCENARIOS))
+def beyond_limits(request, kin, springs, points):
+    names = kin.model.coordinate_names
+    q_start, q_end = np.zeros(13), np.zeros(13)
+    limits = np.tile([-np.inf, np.inf], (13, 1))
+    limited = []
+    for name, a, b, lo, hi in LIMIT_SCENARIOS[request.param]:
+        j = names.index(name)
+        q_start[j], q_end[j] = np.radians([a, b])
+        if lo is not None or hi is not None:
+            limits[j] = np.radians([-np.inf if lo is None else lo, np.inf if hi is None else hi])
+            limited.append(j)
+    held = [names.index(name) for name in HELD.get(request.param, ())]
+    q_start, q_end = on_manifold(kin, q_start), on_manifold(kin, q_end)
+    t = np.arange(600) / RATE_HZ
+    s = np.clip(t / 0.5, 0, 1)
+    w, wd = 10 * s**3 - 15 * s**4 + 6 * s**5, (30 * s**2 - 60 * s**3 + 30 * s**4) / 0.5 * (t < 0.5)
+    q, qd = q_start + w[:, None] * (q_end - q_start), wd[:, None] * (q_end - q_start)
+    pos = kin.points(q, points)
+    vel = np.einsum("nkcm,nm->nkc", kin.point_jacobian(q, points), qd)
+    system = PFSystem(kin.model, springs, q0=q[0], qd0=qd[0], kinematics=kin, limits_rad=limits, held_coordinates=held)
+    run = system.run(pos, vel, frame_dt_s=1 / RATE_HZ, options=IntegratorOptions(step_s=0.01, spectral_radius=0.5))
+    assert run.success, run.message
+    q_pf = kin.coordinates_from_rotations(run.rotations[-1])
+    q_pf = q_end + wrap(q_pf - q_end)  # the branch of the end posture (pronation near 180 deg)
+    assert np.all(np.abs(q_pf[held] - q_end[held]) < 1e-7)  # held by the joints (Newton tolerance)
+    return q_pf, pos[-1], limits, np.array(limited), np.setdiff1d(np.arange(13), held)
+
+
+def spring_forces(kin, springs, points, q, targets):
+    """Generalized forces of the marker springs at rest, J^T c (r_M - r_R) (N m)."""
+    r = kin.points(q, points)
+    return np.einsum("k,kcm,kc->m", springs.stiffness_n_per_m, kin.point_jacobian(q, points), targets - r)
+
+
+def test_a_coordinate_driven_beyond_its_limit_settles_where_the_limit_balances_the_springs(kin, springs, points,
+                                                                                            beyond_limits):
+    """Quasi-static equilibrium of coordinate j beyond its limit: the springs' generalized force tau_j
+    equals the limit's k_lim (q_j - limit), i.e. q_j = limit + tau_j / k_lim (none of these
+    coordinates moves a scapula contact point, so no constraint force acts on them). Measured:
+    within 1e-5 deg after 2.5 s at rest; an element that applies its torques about the joint axes
+    instead of the dual basis W^-T misses by 0.1-0.2 deg on the spherical joint."""
+    q, targets, limits, limited, _ = beyond_limits
+    tau = spring_forces(kin, springs, points, q, targets)
+    for j in limited:
+        upper = np.isfinite(limits[j, 1])
+        limit = limits[j, 1] if upper else limits[j, 0]
+        beyond = q[j] - limit if upper else limit - q[j]
+        assert 0 < beyond < np.radians(1.0), (kin.model.coordinate_names[j], np.degrees(beyond))  # reached, and held
+        assert abs(q[j] - (limit + tau[j] / K_LIM)) < np.radians(1e-3), kin.model.coordinate_names[j]
+
+
+def test_a_limit_leaves_the_other_coordinates_at_the_minimum_of_the_potential(kin, springs, points, beyond_limits):
+    """The PF posture is the minimum of sum c/2 |r_R - r_M|^2 + V subject to g = 0: no spurious
+    generalized force on any other coordinate (projected gradient ~ Newton tolerance; 1e-3 N m
+    against the 10-90 N m the limits carry), and the arm's coordinates equal a numpy constrained
+    minimisation (the girdle's are too soft to compare in angles: ~1 N m/rad)."""
+    from scipy.optimize import minimize
+
+    q, targets, limits, limited, free = beyond_limits
+    c = springs.stiffness_n_per_m
+
+    def full(x_free):
+        x = q.copy()
+        x[free] = x_free
+        return x
+
+    def potential(x_free):  # the held coordinates stay where they are
+        x = full(x_free)
+        d = kin.points(x, points) - targets
+        v = np.maximum(x - limits[:, 1], 0) - np.maximum(limits[:, 0] - x, 0)
+        grad = np.einsum("k,kcm,kc->m", c, kin.point_jacobian(x, points), d) + K_LIM * v
+        return 0.5 * np.sum(c * np.sum(d * d, axis=1)) + 0.5 * K_LIM * np.sum(v * v), grad[free]
+
+    grad = potential(q[free])[1]
+    G = kin.G(q)[:, free]
+    projected = grad + G.T @ np.linalg.lstsq(G.T, -grad, rcond=None)[0]  # minus the constraint forces
+    tau = spring_forces(kin, springs, points, q, targets)
+    assert np.abs(tau[limited]).max() > 10.0  # the limits carry real loads
+    assert np.abs(projected).max() < 2e-3
+    best = minimize(potential, q[free], jac=True, method="SLSQP", options={"ftol": 1e-16, "maxiter": 1000},
+                    constraints=[{"type": "eq", "fun": lambda x: kin.g(full(x)), "jac": lambda x: kin.G(full(x))[:, free]}])
+    assert best.success
+    arm = np.arange(6, 13)  # gh, elbow, pronation, wrist
+    assert np.degrees(np.abs(wrap(q - full(best.x))[arm])).max() < 1e-3
+
+
+def test_limits_that_cannot_act_build_no_element_and_bad_limits_are_rejected(kin, springs, motion):
+    q, qd, pos, vel = motion
+    names = kin.model.coordinate_names
+    limits = np.tile([-np.inf, np.inf], (13, 1))
+    limits[names.index("gh_internal_rotation")] = np.radians([-100, 100])  # the middle angle stays within +-90 deg
+    limits[names.index("elbow_flexion")] = np.radians([-170, 170])  # a full turn but 20 deg: ends indistinguishable
+    limits[names.index("pronation")] = np.radians([-20, 185])  # enforceable: its angle is measured from 82.5 deg
+    system = PFSystem(kin.model, springs, q0=q[0], qd0=qd[0], kinematics=kin, limits_rad=limits)
+    assert set(system.run(pos[:5], vel[:5], frame_dt_s=1 / RATE_HZ).limit_active_s) == {"forearm"}
+    bad = limits.copy()
+    bad[0] = [0.5, -0.5]
+    for wrong, match in ((limits[:5], "shape"), (bad, "lower <= upper"), (np.full((13, 2), np.nan), "lower <= upper")):
+        with pytest.raises(ValueError, match=match):
+            PFSystem(kin.model, springs, q0=q[0], qd0=qd[0], kinematics=kin, limits_rad=wrong)
+    with pytest.raises(ValueError, match="limit_stiffness"):
+        PFSystem(kin.model, springs, q0=q[0], qd0=qd[0], kinematics=kin, limits_rad=limits, limit_stiffness_nm_per_rad=0.0)

@@ -75,7 +75,7 @@ def _exact_targets(model, protocol, q):
 
 def test_ls_keeps_a_coordinate_driven_beyond_its_range_at_the_limit_potentials_equilibrium():
     """Markers of an elbow flexed 10 deg beyond its range: LS stops where the markers' pull
-    balances the limit potential (a few degrees beyond), the other coordinates untouched;
+    balances the limit potential (a fraction of a degree beyond), the other coordinates untouched;
     without limits it follows the markers. The frames are reported."""
     model, protocol = load_model_and_protocol()
     protocol = dataclasses.replace(protocol, held_coordinates=())
@@ -90,7 +90,7 @@ def test_ls_keeps_a_coordinate_driven_beyond_its_range_at_the_limit_potentials_e
     assert np.abs(np.angle(np.exp(1j * (free.q_rad - q)))).max() < 1e-6  # the same posture (mod 2 pi)
     lim = reconstruct_ls(model, protocol, targets)
     beyond = np.degrees(lim.q_rad[:, e] - hi)
-    assert (beyond > 0.1).all() and (beyond < 5.0).all(), beyond
+    assert (beyond > 0.01).all() and (beyond < 1.0).all(), beyond  # 0.08 deg with k_lim = 1e4 N m/rad
     # the limit torque balances the markers: kappa v = -(J^T W e)_elbow at the optimum
     kin = Kinematics(model)
     pts = tracked_points(kin, protocol)

@@ -24,12 +24,50 @@ the step states (q, q̇, q̈ of one polynomial, so the three stay consistent); a
 ends on the last frame. Segment poses, velocities and accelerations are returned at the frame
 times.
 
+Range-of-motion limits (optional, ``limits_rad``): the one-sided potential that LS shares,
+V = sum_j k_lim / 2 (q_j - hi_j)^2 above hi_j, (lo_j - q_j)^2 below lo_j, as one Exudyn element per
+joint whose generalized forces are exactly -dV/dq (no approximation):
+- spherical and cardan joints: ``ObjectConnectorRigidBodySpringDamper`` between a frame on the
+  parent and one on the child at the joint centre. Its ``rotation`` argument is Exudyn's
+  RotationMatrix2RotXYZ of the frames' relative rotation, R = Rx(t0) Ry(t1) Rz(t2) (t0, t2 in
+  (-pi, pi], t1 in [-pi/2, pi/2]); with the frames built on the joint's axes (x = axis 1, y =
+  axis 2) these Tait-Bryan angles are the joint coordinates (minus a centre, below). A symbolic
+  ``springForceTorqueUserFunction`` (``_limit_torque``) returns the torque W^-T dV/dt in the parent
+  frame, W the angles' axes (Exudyn applies the connector's torque through the markers' rotation
+  Jacobians, so the generalized forces are -W^T m = -dV/dt).
+- revolute joints (and a cardan joint whose second angle is held): ``ObjectConnectorTorsionalSpringDamper``
+  about the joint axis, symbolic ``springTorqueUserFunction`` k_lim x (angle beyond its range).
+Chosen by measurement (CPU-time ratio to the same run without limits, interleaved runs, every
+element switched on): rigid-body spring-damper with the symbolic torque +12 % per element, with a
+trivial symbolic function +10 % (the cost is the user-function call, whose arguments include two
+6x6 matrices), native (linear, no user function) +5 %; torsional spring-damper symbolic +6 %,
+native +3.5 %. Native elements are linear springs, two-sided within a step (an offset switched by
+the pre-step would pull a joint that moved back inside to the limit); the symbolic ones are exact.
+An element is therefore switched off (``activeConnector`` False: Exudyn skips it, measured +0 %)
+except near a limit: at the start of each step the pre-step reads the Rotation output of an
+element (2 us) and switches it on while one of its angles is within margin = w_max h of a limit
+or beyond it, w_max = ``limit_max_rate_rad_s`` (10 rad/s, the fastest joint rates of arm motion;
+h = the step: 0.1 rad at 10 ms), so no joint can cross a limit during a step with its element
+off; a joint d > margin from its limits is looked at again only after (d - margin) / w_max.
+Measured on the benchmark trial (the model's ranges, none reached): +1-3 % (paired runs; Exudyn's
+python timer +0.005-0.007 ms/frame: about one Rotation read per step); with the benchmark's
+gh_abduction, elbow_flexion, wrist_flexion and sc_elevation limited inside their motion (beyond a
+limit 30-60 % of the time): +22-34 %, 0.34 Jacobians per step instead of 0.26.
+Principal angles wrap, so each element measures its angles from a centre (a joint frame turned
+about the first axis on the parent's side, about the last on the child's): the middle of the
+range, or a quarter turn (cardan middle angle: an eighth) inside a one-sided limit; a limit
+without 30 deg to spare before the wrap, and a spherical joint's middle-angle limit at or beyond
++-90 deg (that angle never gets there), get no element. Limits act on the principal branch of a
+spherical joint (|middle angle| <= 90 deg), the branch exubio.kinematics reports unless only the
+other one lies within the ranges.
+
 Outside this module nothing knows about Exudyn: inputs and outputs are numpy arrays (SI units,
 time first) and the frozen dataclasses below. Segment indices are those of ``Model.segments``
 (0 = thorax, fixed).
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -45,7 +83,10 @@ from exudyn.rigidBodyUtilities import RotationMatrix2EulerParameters
 
 from exubio.errors import ModelError
 from exubio.kinematics import axis_rotation, Kinematics, PointSet
+from exubio.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD  # k_lim, shared with LS
 from exubio.types import JointKind, Model
+
+esym = exu.symbolic
 
 log = logging.getLogger(__name__)
 
@@ -56,6 +97,9 @@ _TIMER_FIELDS = (
     "total", "factorization", "newtonIncrement", "integrationFormula", "ODE2RHS", "AERHS",
     "totalJacobian", "massMatrix", "reactionForces", "python", "postNewton", "writeSolution", "overhead",
 )  # fmt: skip
+DEFAULT_LIMIT_MAX_RATE_RAD_S = 10.0  # fastest joint-angle rate the switching of the limits allows for
+_LIMIT_MIN_COS = 1e-2  # spherical joints: 1 / cos(middle angle) capped at 100 (gimbal lock, |q2| > 89.4 deg)
+_LIMIT_WRAP_TOLERANCE_RAD = math.pi / 6  # a limit needs this much room beyond it before its angle wraps
 
 
 # --------------------------------------------------------------------------------------------
@@ -144,7 +188,8 @@ class PFRun:
     success: the solver finished the whole trial; message: its error otherwise.
     wall_time_s: the solve alone; solver_times_s: Exudyn's CPU-time breakdown (s).
     newton_iterations, jacobian_updates, steps: solver statistics of the whole run; step_s: the
-    step used.
+    step used. limit_active_s: per joint with a limit element, the time (s) it was switched on
+    (near or beyond a limit).
     """
 
     time_s: np.ndarray
@@ -163,6 +208,7 @@ class PFRun:
     jacobian_updates: int = 0
     steps: int = 0
     step_s: float = float("nan")
+    limit_active_s: Mapping[str, float] = field(default_factory=dict)
 
     @property
     def n_frames(self) -> int:
@@ -263,11 +309,38 @@ class PFSystem:
 
     The reference configuration of every body is the posture q0 (so a run starts exactly there,
     with velocities from qd0); every ``run`` starts again from (q0, qd0).
+
+    limits_rad: (m, 2) range [lower, upper] of every coordinate (rad, +-inf = no limit on that
+        side), or None: no limits. Held coordinates and the joints of locked segments get none.
+        See the module docstring for the elements.
+    limit_stiffness_nm_per_rad: k_lim of the limit potential. Default 1e4 N m/rad. The marker
+        springs hold a coordinate with c sum L^2: 4-135 N m/rad per marker (c = 1500 N/m, lever
+        arms L = 0.05-0.3 m); on the 21-marker protocol 16-22 N m/rad for pronation and the wrist,
+        620 for the elbow, 3.4e3 for the glenohumeral and up to 4.6e3 for the girdle coordinates
+        with the other coordinates held, at most 110 N m/rad with them free (which is what resists
+        markers that drive one coordinate beyond its range). A coordinate settles tau / k_lim
+        beyond its limit, tau the springs' generalized force: 0.57 deg per 10 N m. Measured: an
+        elbow driven 20 deg beyond by exact markers stays 0.4 deg beyond (k_lim = 1e3: 3.5 deg);
+        the benchmark abduction with gh_abduction limited 25 deg below its motion: 0.26 deg (1e3:
+        2.2 deg, 3e4: 0.10 deg). Stiffer limits cost Jacobian updates: their modes (up to ~1e4
+        rad/s on the scapula's small inertia, against <= 175 rad/s of the springs) make modified
+        Newton rebuild its Jacobian as a limit engages: on that trial 0.29 / 0.31 / 0.35 / 0.46 /
+        0.63 Jacobians per step (0.27 without limits) and +26 / 33 / 34 / 50 / 67 % time for
+        k_lim = 1e3 / 3e3 / 1e4 / 3e4 / 1e5 N m/rad. 1e4 is the knee. No limit damping: the
+        integrator's numerical damping (rho_inf 0.5) takes the impact. An elbow driven into its
+        limit at 3.7 rad/s (markers going on to 20 deg beyond) peaks 0.9 deg beyond one step later
+        and its rate rings for 3 steps (-0.3, -0.1, +0.08 rad/s), then eases to the 0.4 deg of the
+        equilibrium as the markers stop (k_lim 1e5: +-0.9 rad/s for 5 steps; 1e3: 6 deg beyond).
+    limit_max_rate_rad_s: the largest joint-angle rate the switching of the limit elements allows
+        for (see the module docstring); faster joints may cross a limit for one step before their
+        element switches on.
     """
 
     def __init__(self, model: Model, springs: SpringSet, /, *, q0: np.ndarray, qd0: np.ndarray | None = None,
                  gravity: bool = False, kinematics: Kinematics | None = None, locked_segments: Sequence[int] = (),
-                 held_coordinates: Sequence[int] = ()):
+                 held_coordinates: Sequence[int] = (), limits_rad: np.ndarray | None = None,
+                 limit_stiffness_nm_per_rad: float = DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD,
+                 limit_max_rate_rad_s: float = DEFAULT_LIMIT_MAX_RATE_RAD_S):
         self.model = model
         self.locked_segments = frozenset(int(i) for i in locked_segments)
         self.held_coordinates = frozenset(int(i) for i in held_coordinates)
@@ -342,6 +415,12 @@ class PFSystem:
                     self._add_joint_last_held(seg, parent, child, float(q0[idx[-1]]))
                 else:
                     self._add_joint(seg, parent, child)
+        self._limits: list[_LimitElement] = []
+        if limits_rad is not None:
+            self._add_limits(limits_rad, float(limit_stiffness_nm_per_rad))
+        self.limit_max_rate_rad_s = float(limit_max_rate_rad_s)
+        if not self.limit_max_rate_rad_s > 0:
+            raise ValueError(f"PFSystem: limit_max_rate_rad_s must be > 0, got {limit_max_rate_rad_s}")
 
         # ellipsoid: auxiliary point held to each contact point, g = (r - c)^T A (r - c) - 1 = 0
         ell = model.ellipsoid
@@ -466,6 +545,85 @@ class PFSystem:
                                                  visualization=eii.VObjectJointGeneric(show=False)))
         else:  # pragma: no cover - JointKind is closed
             raise ModelError(f"joint kind {joint.kind} is not supported by the Exudyn backend")
+
+    def _add_limits(self, limits_rad, k_lim: float) -> None:
+        """One limit element per joint with a finite range on a solved coordinate (see the module
+        docstring), switched off; ``run`` switches it on near a limit."""
+        m = self.model.n_coordinates
+        lim = np.array(limits_rad, dtype=float)
+        if lim.shape != (m, 2):
+            raise ValueError(f"PFSystem: limits_rad must have shape ({m}, 2), got {lim.shape}")
+        if np.isnan(lim).any() or np.any(lim[:, 0] > lim[:, 1]) or np.isposinf(lim[:, 0]).any() or np.isneginf(lim[:, 1]).any():
+            raise ValueError("PFSystem: limits_rad rows must be [lower, upper] with lower <= upper (+-inf = no limit)")
+        if not (math.isfinite(k_lim) and k_lim > 0):
+            raise ValueError(f"PFSystem: limit_stiffness_nm_per_rad must be finite and > 0, got {k_lim}")
+        mbs = self._mbs
+        names = self.model.segment_names
+        half = 0.5 * math.pi
+        for i, seg in enumerate(self.model.segments[1:], start=1):
+            if i in self.locked_segments:
+                continue
+            joint = seg.joint
+            idx = [int(j) for j in self.kin.joint_coordinate_indices(i)]
+            axes = [np.asarray(a, dtype=float) for a in joint.axes]
+            if joint.kind is JointKind.REVOLUTE:
+                B = _frame_with_z(axes[0])[:, [2, 0, 1]]  # x = the axis: R_rel = B Rx(q) B^T
+                slots = [(0, idx[0], 1.0, "periodic")]
+            else:
+                B = np.column_stack([axes[0], axes[1], np.cross(axes[0], axes[1])])  # Rx(q1) Ry(q2) [Rz(s q3)]
+                slots = [(0, idx[0], 1.0, "periodic"),
+                         (1, idx[1], 1.0, "middle" if joint.kind is JointKind.SPHERICAL else "window")]
+                if joint.kind is JointKind.SPHERICAL:
+                    slots.append((2, idx[2], float(np.sign(axes[2] @ B[:, 2])), "periodic"))
+            bounds: list = [None, None, None]  # per theta_i: (lower, upper) of theta_i - centre_i, or None
+            centre = [0.0, 0.0, 0.0]
+            for ti, j, sign, kind in slots:
+                if j in self.held_coordinates:
+                    continue
+                lo, hi = (lim[j] if sign > 0 else -lim[j, ::-1])  # range of theta_i = sign * q_j
+                lo, hi, c = _limit_window(float(lo), float(hi), kind, half)
+                if lo is None:
+                    if np.isfinite(lim[j]).any():
+                        log.info("joint '%s': the range of '%s' cannot be enforced (too wide to tell its ends apart)",
+                                 joint.name, self.model.coordinate_names[j])
+                    continue
+                bounds[ti], centre[ti] = (lo, hi), c
+            if all(b is None for b in bounds):
+                continue
+            # marker frames: theta' = RotXYZ(J0^T R_rel J1) = theta - centre (joint frames in the
+            # parent's and the child's coordinates; the two coincide at q = 0)
+            ex, ey, ez = np.eye(3)
+            J0 = B @ axis_rotation(ex, np.array(centre[0]))
+            parent, child = self._bodies[names.index(seg.parent)], self._bodies[i]
+            centre_m = [float(x) for x in joint.centre_m]
+            if joint.kind is JointKind.REVOLUTE or (joint.kind is JointKind.CARDAN and idx[1] in self.held_coordinates):
+                # one free rotation, about the parent-fixed x of B: a torsional spring-damper about
+                # it (the frames' z; a held second cardan angle v is undone on the child's side)
+                v = float(self.q0[idx[1]]) if joint.kind is JointKind.CARDAN else 0.0
+                P = np.column_stack([ey, ez, ex])  # (B P)'s z is B's x
+                m0 = mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=parent, localHT=exu.HT(rotation=J0 @ P, translation=centre_m)))
+                m1 = mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=child, localHT=exu.HT(
+                    rotation=B @ axis_rotation(ey, np.array(-v)) @ P, translation=[0.0, 0.0, 0.0])))
+                uf = CreateSymbolicUserFunction(mbs, _limit_torque_1d(k_lim, *bounds[0]), "springTorqueUserFunction",
+                                                itemTypeName="ObjectConnectorTorsionalSpringDamper")
+                obj = mbs.AddObject(eii.ObjectConnectorTorsionalSpringDamper(
+                    markerNumbers=[m0, m1], springTorqueUserFunction=uf, activeConnector=False,
+                    visualization=eii.VObjectConnectorTorsionalSpringDamper(show=False)))
+                self._limits.append(_LimitElement(joint.name, obj, uf, [(0, *bounds[0])], scalar=True))
+                continue
+            if joint.kind is JointKind.SPHERICAL:
+                J1 = B @ axis_rotation(ez, np.array(-centre[2]))
+            else:
+                J1 = B @ axis_rotation(ey, np.array(-centre[1]))
+            m0 = mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=parent, localHT=exu.HT(rotation=J0, translation=centre_m)))
+            m1 = mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=child, localHT=exu.HT(rotation=J1, translation=[0.0, 0.0, 0.0])))
+            three = joint.kind is JointKind.SPHERICAL and idx[2] not in self.held_coordinates  # else t2 is fixed
+            uf = CreateSymbolicUserFunction(mbs, _limit_torque(k_lim, bounds, three),
+                                            "springForceTorqueUserFunction", itemTypeName="ObjectConnectorRigidBodySpringDamper")
+            obj = mbs.AddObject(eii.ObjectConnectorRigidBodySpringDamper(
+                markerNumbers=[m0, m1], springForceTorqueUserFunction=uf, activeConnector=False,
+                visualization=eii.VObjectConnectorRigidBodySpringDamper(show=False)))
+            self._limits.append(_LimitElement(joint.name, obj, uf, [(ti, b[0], b[1]) for ti, b in enumerate(bounds) if b is not None]))
 
     def _coordinates_for(self, q: np.ndarray) -> np.ndarray:
         """The system's ODE2 coordinates (relative to the reference posture q0) for posture q."""
@@ -593,7 +751,46 @@ class PFSystem:
         record_t: list[float] = []  # times of the recorded states: t = 0, then every accepted step
         record: list[tuple] = []
 
+        # range-of-motion limits: a joint's limit element is on while one of its angles is within
+        # `margin` (one step of travel at the largest rate) of a limit or beyond it, judged from the
+        # state at the start of each step; a joint d > margin away is looked at again only once it
+        # may have come within the margin, i.e. after (d - margin) / rate
+        limits = self._limits
+        rate = self.limit_max_rate_rad_s
+        margin = rate * per_frame * frame_dt_s
+        get_output, rotation_output = mbs.GetObjectOutput, exu.OutputVariableType.Rotation
+        next_limit_check = [math.inf]
+
+        def check_limits(t_start):
+            first = math.inf
+            for e in limits:
+                if e.next_check <= t_start:
+                    d = e.distance(get_output(e.obj, rotation_output))
+                    if (d < margin) != e.active:
+                        e.active = not e.active
+                        set_parameter(e.obj, "activeConnector", e.active)
+                        if e.active:
+                            e.on_since = t_start
+                        else:
+                            e.active_s += t_start - e.on_since
+                    e.next_check = t_start + (d - margin) / rate
+                if e.next_check < first:
+                    first = e.next_check
+            next_limit_check[0] = first
+
+        for e in limits:
+            e.active, e.next_check, e.on_since, e.active_s = False, -math.inf, 0.0, 0.0
+            set_parameter(e.obj, "activeConnector", False)
+        if limits:  # from the initial state, before the initial accelerations are computed
+            sd.SetODE2Coordinates(sd.GetODE2Coordinates(configuration=exu.ConfigurationType.Initial),
+                                  configuration=exu.ConfigurationType.Current)
+            check_limits(0.0)
+
         def pre_step(mbs, t):  # receives t_{n+1}: the end of the step about to be solved
+            if limits:  # the current state is that of the step's start, the last accepted time
+                t_start = record_t[-1] if record_t else 0.0
+                if t_start >= next_limit_check[0]:
+                    check_limits(t_start)
             x = t / frame_dt_s
             i = int(x + 0.5)
             if any_missing:
@@ -663,10 +860,13 @@ class PFSystem:
         timer = solver.timer
         times = {name: float(getattr(timer, name)) for name in _TIMER_FIELDS if hasattr(timer, name)} if options.timing_breakdown else {}
         it = solver.it
-        return self._decode(
+        run = self._decode(
             X, Xt, Xtt, frame_dt_s, completed=completed, success=success, message=message, wall=wall, times=times,
             newton=int(it.newtonStepsCount), jacobians=int(it.newtonJacobiCount), steps=sum(1 for t in record_t if t > 0.0),
             step=per_frame * frame_dt_s)
+        t_end = record_t[-1] if record_t else 0.0
+        active_s = {e.joint: e.active_s + (t_end - e.on_since if e.active else 0.0) for e in limits}
+        return dataclasses.replace(run, limit_active_s=active_s)
 
     def _settings(self, n_steps: int, end_time: float, options: IntegratorOptions):
         s = exu.SimulationSettings()
@@ -731,3 +931,129 @@ def _spring_force(target):
         return [stiffness[i] * (displacement[i] - target[i]) + damping[i] * (velocity[i] - target[3 + i]) for i in range(3)]
 
     return spring_force
+
+
+# --------------------------------------------------------------------------------------------
+# Range-of-motion limits
+# --------------------------------------------------------------------------------------------
+class _LimitElement:
+    """The limit connector of one joint and its switching state. ``bounds``: (i, lower, upper)
+    of every limited theta'_i (the connector's Tait-Bryan angle i, centred; +-inf = no side)."""
+
+    __slots__ = ("joint", "obj", "uf", "bounds", "scalar", "active", "next_check", "on_since", "active_s")
+
+    def __init__(self, joint: str, obj, uf, bounds, *, scalar: bool = False):
+        self.joint, self.obj, self.uf, self.bounds, self.scalar = joint, obj, uf, bounds, scalar
+        self.active, self.next_check, self.on_since, self.active_s = False, -math.inf, 0.0, 0.0
+
+    def distance(self, theta) -> float:
+        """Smallest distance (rad) of a limited angle to its nearest limit (< 0 beyond it);
+        ``theta``: the connector's Rotation output (a scalar for a torsional spring-damper)."""
+        theta = (theta,) if self.scalar else theta.tolist()  # Python floats: 3x faster than numpy scalars
+        d = math.inf
+        for i, lo, hi in self.bounds:
+            x = theta[i]
+            if x - lo < d:
+                d = x - lo
+            if hi - x < d:
+                d = hi - x
+        return d
+
+
+def _limit_window(lo: float, hi: float, kind: str, half: float):
+    """(lower, upper, centre) of a range [lo, hi] of a connector angle measured from ``centre``,
+    or (None, None, 0) if it cannot be enforced. Exudyn's angles are principal values: the first
+    and last (``periodic``) in (-pi, pi], a spherical joint's middle angle (``middle``) in
+    [-pi/2, pi/2] (the branch exubio.kinematics reports), a cardan joint's middle angle
+    (``window``, shiftable) within pi/2 of its centre. The centre is the middle of the range, or a
+    quarter window inside a one-sided limit, so the angle wraps as far as possible beyond the
+    limits; a range that leaves less than _LIMIT_WRAP_TOLERANCE_RAD beyond either end is not
+    enforced (nor is a middle-angle limit at or beyond +-90 deg, which that angle never reaches)."""
+    if kind == "middle":
+        lo = lo if lo > -half else -math.inf
+        hi = hi if hi < half else math.inf
+        return (lo, hi, 0.0) if (math.isfinite(lo) or math.isfinite(hi)) else (None, None, 0.0)
+    window = 4.0 * half if kind == "periodic" else 2.0 * half
+    if math.isfinite(lo) and math.isfinite(hi):
+        if hi - lo > window - 2.0 * _LIMIT_WRAP_TOLERANCE_RAD:
+            return None, None, 0.0
+        c = 0.5 * (lo + hi)
+    elif math.isfinite(hi):
+        c = hi - 0.25 * window
+    elif math.isfinite(lo):
+        c = lo + 0.25 * window
+    else:
+        return None, None, 0.0
+    return lo - c, hi - c, c
+
+
+def _limit_torque_1d(k_lim: float, lower: float, upper: float):
+    """Symbolic springTorqueUserFunction of a torsional limit spring: k_lim times the angle's
+    excursion beyond [lower, upper] (a spring torque: Exudyn applies -torque about the axis to the
+    child, so the generalized force is -dV/dq). A closure without default arguments."""
+
+    def limit_torque(mbs, t, itemNumber, rotation, angularVelocity, stiffness, damping, offset):
+        torque = 0.0 * rotation
+        if math.isfinite(upper):
+            torque = k_lim * esym.max(rotation - upper, 0.0)
+        if math.isfinite(lower):
+            below = k_lim * esym.min(rotation - lower, 0.0)
+            torque = below if not math.isfinite(upper) else torque + below
+        return torque
+
+    return limit_torque
+
+
+def _limit_torque(k_lim: float, bounds, three_angles: bool):
+    """Symbolic springForceTorqueUserFunction of a limit connector: no force, and the spring torque
+    m = W^-T dV/dtheta (joint-0 frame) of V = sum_i k_lim / 2 (theta_i beyond its range)^2. Exudyn
+    applies a connector's force like a spring's (-m on the child, +m on the parent: the generalized
+    force on theta is -W^T m = -dV/dtheta).
+
+    W's columns are the axes of the Tait-Bryan angles (the relative angular velocity is
+    W theta_t): w0 = e_x, w1 = Rx(t0) e_y, w2 = Rx(t0) Ry(t1) e_z. Its dual basis (rows of W^-1) is
+    d0 = (1, s0 s1 / c1, -c0 s1 / c1), d1 = w1, d2 = (0, -s0, c0) / c1, so m = g0 d0 + g1 d1 +
+    g2 d2 with g_i = dV/dtheta_i. Unless ``three_angles`` (a cardan joint, or a spherical one with
+    its last angle held) the joint takes any torque along d2 (theta_2 is fixed), so d0 reduces to
+    e_x. ``bounds``: per angle (lower, upper) or None; 1/c1 is capped at 1/_LIMIT_MIN_COS (gimbal
+    lock of a spherical joint: |t1| > 89.4 deg).
+    A closure without default arguments (Exudyn's symbolic conversion rejects those)."""
+
+    def limit_torque(mbs, t, itemNumber, displacement, rotation, velocity, angularVelocity, stiffness, damping,
+                     rotJ0, rotJ1, offset):
+        g = [None, None, None]
+        for i in range(3):
+            if bounds[i] is None:
+                continue
+            lo, hi = bounds[i]
+            if math.isfinite(hi):
+                g[i] = k_lim * esym.max(rotation[i] - hi, 0.0)
+            if math.isfinite(lo):
+                below = k_lim * esym.min(rotation[i] - lo, 0.0)
+                g[i] = below if g[i] is None else g[i] + below
+        zero = 0.0 * rotation[0]
+        m = [None, None, None]
+
+        def add(i, term):
+            m[i] = term if m[i] is None else m[i] + term
+
+        if g[1] is not None or (three_angles and (g[0] is not None or g[2] is not None)):
+            s0, c0 = esym.sin(rotation[0]), esym.cos(rotation[0])
+        if three_angles and (g[0] is not None or g[2] is not None):
+            inv_c1 = 1.0 / esym.max(esym.cos(rotation[1]), _LIMIT_MIN_COS)
+        if g[0] is not None:
+            add(0, g[0])
+            if three_angles:
+                t1 = esym.sin(rotation[1]) * inv_c1
+                add(1, g[0] * s0 * t1)
+                add(2, -(g[0] * c0 * t1))
+        if g[1] is not None:
+            add(1, g[1] * c0)
+            add(2, g[1] * s0)
+        if g[2] is not None:
+            add(1, -(g[2] * s0 * inv_c1))
+            add(2, g[2] * c0 * inv_c1)
+        m = [zero if x is None else x for x in m]
+        return [zero, zero, zero, m[0], m[1], m[2]]
+
+    return limit_torque

@@ -45,7 +45,8 @@ from exubio.errors import ReconstructionError
 from exubio.kinematics import Kinematics
 from exubio.methods.common import assemble, tracked_points
 from exubio.methods.constraints import project_on_constraints
-from exubio.methods.ls import RATES_REGULARISATION, LSOptions, held_mask, solve_positions, solve_rates
+from exubio.methods.ls import RATES_REGULARISATION, Limits, LSOptions, held_mask, solve_positions, solve_rates
+from exubio.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD
 from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Reconstruction
 
 log = logging.getLogger(__name__)
@@ -75,6 +76,9 @@ class PFOptions:
         tolerance leaves (|g| ~ 1e-8 noise-free, 1e-7 with filtered noise, more on unfiltered
         noisy targets; index 3 does not hold G q̇, ~1e-5 1/s) and move the angles by < 1e-5 deg
         noise-free. False reports Exudyn's own constraint residuals.
+    limit_stiffness_nm_per_rad: k_lim of the range-of-motion limits (the model's coordinate ranges;
+        one-sided quadratic potential beyond each limit, the same as LS's: exubio.ranges; the
+        Exudyn elements: exubio.backend.exudyn_system.PFSystem).
     """
 
     step_s: float | None = 0.01
@@ -85,6 +89,7 @@ class PFOptions:
     gravity: bool = False
     divergence_deflection_m: float = 0.25  # a spring longer than this means the run diverged
     timing_breakdown: bool = True
+    limit_stiffness_nm_per_rad: float = DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD
 
 
 def integration_step(frame_dt_s: float, step_s: float | None, cutoff_hz: float | None = None, /) -> float:
@@ -120,20 +125,20 @@ def unobserved_segments(kin: Kinematics, points, /) -> tuple[int, ...]:
 
 
 def initial_state(kin: Kinematics, points, targets: MarkerTargets, stiffness: np.ndarray, /, *,
-                  held: np.ndarray | None = None):
+                  held: np.ndarray | None = None, limits: Limits | None = None):
     """Static equilibrium of the springs at the first frame with its consistent velocity."""
     first = 0
     present = targets.present
     weights = stiffness / stiffness.mean()
     q0, _, ok = solve_positions(kin, points, targets.positions_m[first:first + 1], weights,
                                 q_start=np.zeros(kin.n_coordinates), options=LSOptions(tol_rad=1e-12, max_iterations=60),
-                                frame_dt=1.0, held=held)
+                                frame_dt=1.0, held=held, limits=limits)
     if not ok[0]:
         raise ReconstructionError(
             f"{targets.source or 'trial'}: no static equilibrium at t = {targets.time_s[0]:.3f} s "
             f"(markers present: {int(present[0].sum())} of {present.shape[1]})")
     qd0, _ = solve_rates(kin, points, q0, targets.velocities_m_s[:1], targets.accelerations_m_s2[:1], weights,
-                         RATES_REGULARISATION, held)
+                         RATES_REGULARISATION, held, limits)
     return q0[0], qd0[0]
 
 
@@ -152,16 +157,21 @@ def reconstruct_pf(model: Model, protocol: Protocol, targets: MarkerTargets, /, 
     stiffness = np.array([m.stiffness_n_per_m for m in protocol.markers])
     damping = np.array([m.damping_ns_per_m for m in protocol.markers])
     held = held_mask(model, protocol)
-    q0, qd0 = initial_state(kin, points, targets, stiffness, held=held)
+    limits = Limits.of(model, protocol, options.limit_stiffness_nm_per_rad)
+    q0, qd0 = initial_state(kin, points, targets, stiffness, held=held, limits=limits)
     locked = unobserved_segments(kin, points)
     for i in locked:  # held at their start value, like LS does through its regularisation
         qd0[kin.joint_coordinate_indices(i)] = 0.0
     t1 = time.perf_counter()
     springs = SpringSet.from_points(points, stiffness_n_per_m=stiffness, damping_ns_per_m=damping)
     system = PFSystem(model, springs, q0=q0, qd0=qd0, gravity=options.gravity, kinematics=kin,
-                      locked_segments=locked, held_coordinates=np.flatnonzero(held))
+                      locked_segments=locked, held_coordinates=np.flatnonzero(held),
+                      limits_rad=model.coordinate_ranges_rad,
+                      limit_stiffness_nm_per_rad=options.limit_stiffness_nm_per_rad)
     t2 = time.perf_counter()
-    integ = IntegratorOptions(step_s=integration_step(dt, options.step_s, protocol.cutoff_hz),
+    cutoff_hz = (max(targets.cutoff_hz.values(), default=None) if protocol.cutoff_hz == "auto"  # widest applied
+                 else protocol.cutoff_hz)
+    integ = IntegratorOptions(step_s=integration_step(dt, options.step_s, cutoff_hz),
                               spectral_radius=options.spectral_radius,
                               newton_relative_tolerance=options.newton_relative_tolerance,
                               modified_newton=options.modified_newton, timing_breakdown=options.timing_breakdown)
@@ -207,6 +217,7 @@ def reconstruct_pf(model: Model, protocol: Protocol, targets: MarkerTargets, /, 
         "exudyn_max_abs_G_qd": raw_gqd,
         "options": options.__dict__,
         "initial_q_rad": q0.tolist(),
+        "limit_active_s": dict(run.limit_active_s),  # per joint with a range: time its limit element was on
     }
     return dataclasses.replace(recon, timings_s=timings, info=info)
 
