@@ -5,6 +5,7 @@ turned into one quality verdict per method (exubio.quality). No solver is run he
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -24,7 +25,9 @@ from exubio.types import MarkerTargets, Model, Protocol, Reconstruction
 @dataclass(frozen=True)
 class TrialAssessment:
     """Per method: determinacy, limit reports, quality; and the PF-LS agreement (deg RMSE on the
-    frames where each coordinate is determined by both), the label findings, the solved mask."""
+    frames where each coordinate is determined by both), the label findings, the solved mask.
+    ``calibration`` (assess_trial): the calibration summary (``report``: the CalibrationReport
+    dict; ``labels``: the label findings on the static trial)."""
 
     determinacy: Mapping[str, Determinacy]
     limits: Mapping[str, list]
@@ -52,13 +55,41 @@ def _finding_dict(f) -> dict[str, Any]:
         return dict(f)
     if hasattr(f, "to_dict"):
         return f.to_dict()
-    return {k: getattr(f, k) for k in ("kind", "markers", "evidence", "severity") if hasattr(f, k)}
+    out = {k: getattr(f, k) for k in ("kind", "markers", "evidence", "severity") if hasattr(f, k)}
+    if "markers" in out:
+        out["markers"] = list(out["markers"])
+    return out
+
+
+def generic_model_and_protocol(model: Model, protocol: Protocol, /) -> tuple[Model, Protocol]:
+    """The generic model a calibrated model was made from (its file, else the shipped one) and the
+    protocol bound to it: what the label checks expect, since a calibration registers every marker
+    where the static trial had it, right or wrong."""
+    from exubio.model import DEFAULT_MODEL, load_model
+    from exubio.pipeline import protocol_for_model
+
+    cal = model.metadata.get("calibration")
+    if not cal:
+        return model, protocol
+    generic_path = Path(str(cal.get("generic_model") or ""))
+    generic = load_model(generic_path if generic_path.is_file() else DEFAULT_MODEL, body_mass_kg=model.body_mass_kg)
+    return generic, protocol_for_model(generic, protocol.source or None)
 
 
 def trial_label_findings(model: Model, protocol: Protocol, targets: MarkerTargets, /, *, reference: Any = None) -> tuple:
-    """The label checks of exubio.labels on a prepared trial (``reference``: the static trial's
-    pair distances, when the trial was calibrated on another trial)."""
-    return ()
+    """The label checks of exubio.labels on a prepared trial, against the generic model's
+    expectations; ``reference``: the session's static trial's pair distances (exubio.labels.pair_distances)."""
+    from exubio.labels import check_trial
+
+    generic, gprot = generic_model_and_protocol(model, protocol)
+    return check_trial(targets, model=generic, protocol=gprot, ranges_rad=generic.coordinate_ranges_rad,
+                       reference=reference)
+
+
+def _same_finding(f: Mapping[str, Any], findings: Sequence) -> bool:
+    """A static-trial finding that the trial repeats (same kind and markers) is reported once."""
+    return any(_finding_dict(g).get("kind") == f.get("kind") and set(_finding_dict(g).get("markers", ()))
+               == set(f.get("markers", ())) for g in findings)
 
 
 def not_solved_mask(model: Model, protocol: Protocol, kin: Kinematics | None = None) -> np.ndarray:
@@ -103,14 +134,18 @@ def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recon
     not_solved = tuple(n for n, e in zip(names, excluded) if e)
     dets = {r.method: determinacy(kin, points, r.q_rad, targets.present, protocol.weights, excluded=excluded,
                                   every=determinacy_every) for r in recons}
-    lims = {r.method: limit_report(r.q_rad, model.coordinate_ranges_rad, names, exclude=not_solved) for r in recons}
+    lims = {r.method: limit_report(r.q_rad, model.coordinate_ranges_rad, names, exclude=not_solved,
+                                   ignore=dets[r.method].undetermined & dets[r.method].near_gimbal_lock)
+            for r in recons}
     agreement = None
     by = {r.method: r for r in recons}
     if "pf" in by and "ls" in by:
         agreement = agreement_on_determined(by["pf"], dets["pf"], by["ls"], dets["ls"], excluded)
     off = Q.off_segment_markers(model, protocol) if calibration else {}
-    common = (Q.label_reasons(label_findings)
-              + Q.calibration_reasons(calibration, scale_bounds=SCALE_BOUNDS, off_segment=off))
+    report = (calibration or {}).get("report")
+    static_labels = [f for f in (calibration or {}).get("labels", []) if not _same_finding(f, label_findings)]
+    common = (Q.label_reasons(label_findings) + Q.label_reasons(static_labels, prefix="static trial: ")
+              + Q.calibration_reasons(report, scale_bounds=SCALE_BOUNDS, off_segment=off))
     quality = {}
     for r in recons:
         det = dets[r.method].to_dict()

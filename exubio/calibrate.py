@@ -572,8 +572,10 @@ def _declared_points(protocol: Protocol) -> dict[str, str]:
     src = Path(protocol.source) if protocol.source else None
     if src is None or not src.is_file():
         return {}
-    try:
-        raw = read_yaml(src, error=ProtocolError).get("markers", {}) or {}
+    from exubio.protocol import read_protocol_mapping
+
+    try:  # a session file's markers may come from the protocol it extends
+        raw = read_protocol_mapping(src).get("markers", {}) or {}
     except ProtocolError:
         return {}
     return {name: spec["point"] for name, spec in raw.items()

@@ -142,21 +142,23 @@ def _run_trial(kwargs: dict) -> tuple[str, dict | None, int, str]:
 
 
 def cmd_reconstruct(args: argparse.Namespace) -> int:
-    from exubio.pipeline import calibrate_into, calibration_summary
+    from exubio.pipeline import calibrate_session
 
     model_path, extra = args.model, {}
     if args.static:
-        model_file, report = calibrate_into(args.static, args.out, Path(args.static).stem, protocol_path=args.protocol,
-                                            model_path=args.model, body_mass_kg=args.body_mass,
-                                            frames_text=args.static_frames, overwrite=args.overwrite)
+        model_file, report, calibration = calibrate_session(args.static, args.out, Path(args.static).stem,
+                                                           protocol_path=args.protocol, model_path=args.model,
+                                                           body_mass_kg=args.body_mass, frames_text=args.static_frames,
+                                                           overwrite=args.overwrite)
         if not args.quiet:
             from exubio.calibrate import format_report
 
             print(format_report(report))
         print(f"calibrated model: {model_file}")
         model_path = model_file
-        extra = {"calibration": calibration_summary(report, static=str(args.static), model_file=model_file,
-                                                    frames=args.static_frames)}
+        extra = {"calibration": calibration}
+        for f in calibration["labels"]:
+            print(f"static trial {args.static}: {f['severity']}: {f['kind']} ({', '.join(f['markers'])}): {f['evidence']}")
     common = dict(out_dir=args.out, methods=_methods(args.method), model_path=model_path,
                   protocol_path=args.protocol, body_mass_kg=args.body_mass, overwrite=args.overwrite,
                   method_options={"pf": {"gravity": args.gravity}}, summary_extra=extra,

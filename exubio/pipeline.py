@@ -181,6 +181,8 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
     for method, stem, recon in zip(methods, stems, recons):
         meta = run_metadata(inputs, trial_path, method)
         extra = {"unused_trial_labels": _unused(inputs), **(summary_extra or {})}
+        if isinstance(extra.get("calibration"), dict):  # private entries (the static's distances) stay out
+            extra["calibration"] = {k: v for k, v in extra["calibration"].items() if not k.startswith("_")}
         if "mean_spring_deflection_mm" in recon.info:
             extra["mean_spring_deflection_mm"] = recon.info["mean_spring_deflection_mm"]
         if inputs.targets.cutoff_hz if hasattr(inputs.targets, "cutoff_hz") else False:
@@ -206,11 +208,28 @@ def agreement_deg(a: Reconstruction, b: Reconstruction, /) -> dict[str, float]:
     return {n: float(v) for n, v in zip(a.coordinate_names, np.sqrt(np.mean(d**2, axis=0)))}
 
 
-def calibration_summary(report, /, *, static: str, model_file: str | Path, frames: str | None = None) -> dict[str, Any]:
-    """The calibration as summary.json records it (the full report dict under ``report``)."""
+def calibration_summary(report, /, *, static: str, model_file: str | Path, frames: str | None = None,
+                        labels: Any = ()) -> dict[str, Any]:
+    """The calibration as summary.json records it (the full report dict under ``report``, the
+    label findings on the static trial under ``labels``)."""
+    from exubio.assess import _finding_dict
+
     return {"static": static, "frames": frames, "model_file": str(model_file),
             "mean_residual_mm": report.mean_residual_mm, "residual_mm": report.to_dict().get("residual_mm"),
-            "report": report.to_dict()}
+            "report": report.to_dict(), "labels": [_finding_dict(f) for f in labels]}
+
+
+def static_checks(static_path: str | Path, /, *, protocol_path: str | Path | None = None,
+                  model_path: str | Path | None = None, frames: slice | None = None):
+    """The label findings on a static trial (against the generic model) and its pair distances,
+    the reference the session's task trials are checked against (exubio.labels)."""
+    from exubio.labels import check_trial, pair_distances
+
+    model, protocol = load_model_and_protocol(model_path=model_path, protocol_path=protocol_path)
+    targets = prepare_targets(read_trial(static_path), protocol)
+    pos = targets.positions_m if frames is None else targets.positions_m[frames]
+    findings = check_trial(targets, model=model, protocol=protocol, ranges_rad=model.coordinate_ranges_rad)
+    return findings, pair_distances(pos, targets.marker_names, source=str(static_path))
 
 
 def calibrate_into(source: str | Path, out_dir: str | Path, stem: str, /, *, protocol_path: str | Path | None = None,
@@ -227,6 +246,28 @@ def calibrate_into(source: str | Path, out_dir: str | Path, stem: str, /, *, pro
                                       body_mass_kg=body_mass_kg, frames=parse_frames(frames_text))
     save_model(model, model_file, calibration=report.to_dict())
     return model_file, report
+
+
+def calibrate_session(source: str | Path, out_dir: str | Path, stem: str, /, *, protocol_path: str | Path | None = None,
+                      model_path: str | Path | None = None, body_mass_kg: float | None = None,
+                      frames_text: str | None = None, overwrite: bool = False,
+                      reference: bool = True) -> tuple[Path, Any, dict[str, Any]]:
+    """calibrate_into plus the static trial's label checks: (model file, report, the calibration
+    summary for summary.json). With ``reference`` (a static trial apart from the task trials) the
+    summary's private ``_reference`` holds the static's pair distances, which the session's trials
+    are checked against; it is not written to summary.json."""
+    from exubio.calibrate import parse_frames
+
+    model_file, report = calibrate_into(source, out_dir, stem, protocol_path=protocol_path, model_path=model_path,
+                                        body_mass_kg=body_mass_kg, frames_text=frames_text, overwrite=overwrite)
+    frames = parse_frames(frames_text)
+    findings, ref_distances = static_checks(source, protocol_path=protocol_path, model_path=model_path,
+                                        frames=slice(*report.frames) if frames is not None else None)
+    summary = calibration_summary(report, static=str(source), model_file=model_file, frames=frames_text,
+                                  labels=findings)
+    if reference:
+        summary["_reference"] = ref_distances
+    return model_file, report, summary
 
 
 def process_trial(trial_path: str | Path, /, *, out_dir: str | Path, methods: list[Method | str],
@@ -246,19 +287,20 @@ def process_trial(trial_path: str | Path, /, *, out_dir: str | Path, methods: li
     if report:
         results.prepare_output_dir(out_dir, [f"{stem}.report.pdf", f"{stem}.report.png"], overwrite=overwrite)
     if static_frames:
-        model_file, report = calibrate_into(trial_path, out_dir, Path(trial_path).stem, protocol_path=protocol_path,
-                                            model_path=model_path, body_mass_kg=body_mass_kg,
-                                            frames_text=static_frames, overwrite=overwrite)
+        model_file, report, cal = calibrate_session(trial_path, out_dir, Path(trial_path).stem,
+                                                    protocol_path=protocol_path, model_path=model_path,
+                                                    body_mass_kg=body_mass_kg, frames_text=static_frames,
+                                                    overwrite=overwrite, reference=False)
         model_path = model_file
         out["calibration"] = {"model_file": str(model_file), "report": report}
-        extra["calibration"] = calibration_summary(report, static=str(trial_path), model_file=model_file,
-                                                   frames=static_frames)
+        extra["calibration"] = cal
     outputs = reconstruct_file(trial_path, out_dir, methods=methods, model_path=model_path,
                                protocol_path=protocol_path, body_mass_kg=body_mass_kg, overwrite=overwrite,
                                method_options=method_options, summary_extra=extra,
                                progress_factory=progress_factory,
-                               calibration=(extra.get("calibration") or {}).get("report"),
-                               static_reference=static_reference)
+                               calibration=extra.get("calibration"),
+                               static_reference=static_reference if static_reference is not None
+                               else (extra.get("calibration") or {}).get("_reference"))
     out["methods"] = [{"method": r.method, "paths": {k: str(v) for k, v in paths.items()}, "summary": summ}
                       for r, paths, summ in outputs]
     if len(outputs) == 2:

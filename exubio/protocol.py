@@ -17,8 +17,11 @@ import numpy as np
 
 import difflib
 
+from types import MappingProxyType
+
 from exubio.config import _kind, check_keys, read_yaml
 from exubio.errors import InputError, ProtocolError
+from exubio.resources import shipped_file
 from exubio.types import MarkerSpec, Protocol, ThoraxFrameSpec
 
 __all__ = [
@@ -27,6 +30,7 @@ __all__ = [
     "LabelMatch",
     "check_keys",
     "load_protocol",
+    "read_protocol_mapping",
     "read_yaml",
     "resolve_labels",
 ]
@@ -36,7 +40,8 @@ log = logging.getLogger(__name__)
 SCHEMA_VERSION = 1
 THORAX_SEGMENT = "thorax"  # the fixed segment: its markers only build the thorax frame
 
-_TOP_KEYS = ("schema_version", "name", "description", "thorax_frame", "filter", "defaults", "markers", "hold")
+_TOP_KEYS = ("schema_version", "name", "description", "thorax_frame", "filter", "defaults", "markers", "hold",
+             "relabel", "extends")
 _FRAME_KEYS = ("ij", "px", "c7", "t8")
 _MIDPOINT_FRAME_KEYS = ("ij", "ij_c7_midpoint", "px_t8_midpoint")
 _FILTER_KEYS = ("cutoff_hz", "order")
@@ -77,62 +82,62 @@ def load_protocol(
     Markers on the thorax are validated but not tracked (the thorax is fixed; its landmarks only
     build the thorax frame, named by trial label in ``thorax_frame``). Every problem raises a
     ProtocolError naming the file and the offending key.
+
+    A file with ``extends: <protocol file>`` starts from that file (found next to it, else among
+    the shipped protocols by name) and replaces the keys it gives; errors name the file a key
+    comes from. ``relabel`` renames trial labels before they are matched (see resolve_labels).
     """
     src = str(path)
-    data = read_yaml(path, error=ProtocolError)
-    check_keys(data, _TOP_KEYS, where="", source=src)
+    data, origin = _read_extended(Path(path), ())
     seg_names = tuple(segments)
 
-    if "schema_version" not in data:
-        raise ProtocolError(f"{src}: missing key 'schema_version'; expected 'schema_version: {SCHEMA_VERSION}'")
-    version = data["schema_version"]
-    if isinstance(version, bool) or version != SCHEMA_VERSION:
-        raise ProtocolError(
-            f"{src}: schema_version is {version!r}; this exubio reads schema_version {SCHEMA_VERSION}"
-        )
+    def src_of(key: str) -> str:
+        return origin.get(key, src)
 
     name = data.get("name", Path(src).stem)
     if not isinstance(name, str) or not name:
-        raise ProtocolError(f"{src}: 'name' must be a non-empty string, got {_kind(name)}")
+        raise ProtocolError(f"{src_of('name')}: 'name' must be a non-empty string, got {_kind(name)}")
     description = data.get("description", "")
     if description is not None and not isinstance(description, str):
-        raise ProtocolError(f"{src}: 'description' must be a string, got {_kind(description)}")
+        raise ProtocolError(f"{src_of('description')}: 'description' must be a string, got {_kind(description)}")
 
-    frame = _parse_thorax_frame(data, src)
-    cutoff, order = _parse_filter(data, src)
-    stiffness0, damping0 = _parse_defaults(data, src)
+    frame = _parse_thorax_frame(data, src_of("thorax_frame"))
+    cutoff, order = _parse_filter(data, src_of("filter"))
+    stiffness0, damping0 = _parse_defaults(data, src_of("defaults"))
+    relabel = _parse_relabel(data.get("relabel"), src_of("relabel"))
+    src_markers = src_of("markers")
 
     raw_markers = data.get("markers")
     if not isinstance(raw_markers, dict) or not raw_markers:
         raise ProtocolError(
-            f"{src}: 'markers' must be a non-empty mapping of marker name -> settings, got {_kind(raw_markers)}"
+            f"{src_markers}: 'markers' must be a non-empty mapping of marker name -> settings, got {_kind(raw_markers)}"
         )
 
     tracked: list[MarkerSpec] = []
     label_owner: dict[str, str] = {}  # every name and alias -> the marker it belongs to
     for mname, spec in raw_markers.items():
         if not isinstance(mname, str) or not mname:
-            raise ProtocolError(f"{src}: marker names must be non-empty strings, got {_kind(mname)} under 'markers'")
+            raise ProtocolError(f"{src_markers}: marker names must be non-empty strings, got {_kind(mname)} under 'markers'")
         marker = _parse_marker(
-            mname, spec, src,
+            mname, spec, src_markers,
             segments=seg_names, model_points=model_points, stiffness0=stiffness0, damping0=damping0,
         )
         for label in (marker.name, *marker.aliases):
             if label in label_owner:
                 other = label_owner[label]
                 raise ProtocolError(
-                    f"{src}: label '{label}' of marker '{mname}' is already used by marker '{other}' "
+                    f"{src_markers}: label '{label}' of marker '{mname}' is already used by marker '{other}' "
                     f"(as its name or an alias); every name and alias must be unique"
                 )
             label_owner[label] = mname
         if marker.segment == THORAX_SEGMENT:
-            log.debug("%s: marker '%s' is on the thorax: not tracked", src, mname)
+            log.debug("%s: marker '%s' is on the thorax: not tracked", src_markers, mname)
             continue
         tracked.append(marker)
 
     if not tracked:
         raise ProtocolError(
-            f"{src}: no tracked marker; 'markers' must list at least one marker on a segment other "
+            f"{src_markers}: no tracked marker; 'markers' must list at least one marker on a segment other "
             f"than '{THORAX_SEGMENT}'"
         )
     if not frame.is_identity:
@@ -142,19 +147,19 @@ def load_protocol(
             if label in tracked_labels:
                 seg = next(m.segment for m in tracked if m.name == tracked_labels[label])
                 raise ProtocolError(
-                    f"{src}: thorax_frame.{key} is '{label}', which is tracked marker "
+                    f"{src_of('thorax_frame')}: thorax_frame.{key} is '{label}', which is tracked marker "
                     f"'{tracked_labels[label]}' on segment '{seg}'; thorax landmarks must be on the thorax"
                 )
 
     held = data.get("hold", []) or []
     if not isinstance(held, list) or not all(isinstance(h, str) for h in held):
-        raise ProtocolError(f"{src}: 'hold' must be a list of model coordinate names, got {_kind(held)}")
+        raise ProtocolError(f"{src_of('hold')}: 'hold' must be a list of model coordinate names, got {_kind(held)}")
     if coordinates is not None:
         for h in held:
             if h not in coordinates:
                 hint = difflib.get_close_matches(h, list(coordinates), n=1)
                 did = f" (did you mean '{hint[0]}'?)" if hint else ""
-                raise ProtocolError(f"{src}: hold: unknown coordinate '{h}'{did}; the model has {list(coordinates)}")
+                raise ProtocolError(f"{src_of('hold')}: hold: unknown coordinate '{h}'{did}; the model has {list(coordinates)}")
     return Protocol(
         held_coordinates=tuple(held),
         name=name,
@@ -165,7 +170,94 @@ def load_protocol(
         default_stiffness_n_per_m=stiffness0,
         default_damping_ns_per_m=damping0,
         source=src,
+        relabel=relabel,
     )
+
+
+def read_protocol_mapping(path: str | os.PathLike[str], /) -> dict[str, Any]:
+    """The top-level mapping of a protocol file with its ``extends`` chain merged in (what
+    load_protocol validates): for code that needs the file's own words, such as the ``point:``
+    each marker names. Raises ProtocolError like load_protocol for unreadable files, unknown keys,
+    a wrong schema_version or a broken ``extends``."""
+    return _read_extended(Path(path), ())[0]
+
+
+def _read_extended(path: Path, seen: tuple[Path, ...]) -> tuple[dict[str, Any], dict[str, str]]:
+    """The top-level mapping of a protocol file, merged over the file it ``extends`` (whose keys it
+    replaces), and for each key the file it comes from. Every file in the chain is checked for
+    unknown keys and its schema_version."""
+    src = str(path)
+    data = read_yaml(path, error=ProtocolError)
+    check_keys(data, _TOP_KEYS, where="", source=src)
+    if "schema_version" not in data:
+        raise ProtocolError(f"{src}: missing key 'schema_version'; expected 'schema_version: {SCHEMA_VERSION}'")
+    version = data["schema_version"]
+    if isinstance(version, bool) or version != SCHEMA_VERSION:
+        raise ProtocolError(
+            f"{src}: schema_version is {version!r}; this exubio reads schema_version {SCHEMA_VERSION}"
+        )
+    own = {key: src for key in data if key != "extends"}
+    if "extends" not in data:
+        return data, own
+    base = _find_base(data["extends"], path)
+    chain = (*seen, path.resolve())
+    if base.resolve() in chain:
+        names = " -> ".join(str(p) for p in (*chain, base.resolve()))
+        raise ProtocolError(f"{src}: extends: '{data['extends']}' leads back to a file already in the chain ({names})")
+    merged, origin = _read_extended(base, chain)
+    merged = {**merged, **{k: v for k, v in data.items() if k != "extends"}}
+    return merged, {**origin, **own}
+
+
+def _find_base(ref: Any, path: Path) -> Path:
+    """The file an ``extends:`` names: relative to the extending file's folder, else a shipped
+    protocol of that name (with or without .yaml)."""
+    src = str(path)
+    if not isinstance(ref, str) or not ref.strip():
+        raise ProtocolError(f"{src}: extends must be the name of a protocol file, got {_kind(ref)}")
+    ref = ref.strip()
+    local = path.parent / ref
+    if local.is_file():
+        return local
+    shipped_dir = shipped_file("exubio.protocols", "upper_limb_21.yaml", "protocols").parent
+    for name in (ref, f"{ref}.yaml"):
+        candidate = shipped_dir / name
+        if Path(name).name == name and candidate.is_file():
+            return candidate
+    shipped = sorted(p.name for p in shipped_dir.glob("*.yaml"))
+    raise ProtocolError(
+        f"{src}: extends: '{ref}' not found; looked for {local} and among the shipped protocols {shipped}"
+    )
+
+
+def _parse_relabel(raw: Any, src: str) -> Mapping[str, str]:
+    """``relabel: {trial label: label to read it as}``: a renaming of trial labels, applied before
+    they are matched; no two labels may be read as the same one."""
+    if raw is None:
+        return MappingProxyType({})
+    if not isinstance(raw, dict):
+        raise ProtocolError(
+            f"{src}: relabel must be a mapping of trial label -> the label to read it as, e.g. "
+            f"{{RADIUS: ULNA, ULNA: RADIUS}}, got {_kind(raw)}"
+        )
+    out: dict[str, str] = {}
+    read_as: dict[str, str] = {}
+    for key, value in raw.items():
+        if not isinstance(key, str) or not key or not isinstance(value, str) or not value:
+            raise ProtocolError(
+                f"{src}: relabel.{key}: trial labels and the labels they are read as must be non-empty "
+                f"strings, got {_kind(key)} -> {_kind(value)}"
+            )
+        if key == value:
+            raise ProtocolError(f"{src}: relabel.{key}: reads '{key}' as itself; remove the entry")
+        if value in read_as:
+            raise ProtocolError(
+                f"{src}: relabel.{key}: '{key}' and '{read_as[value]}' would both be read as '{value}'; "
+                f"a relabel must not make two markers of one label"
+            )
+        read_as[value] = key
+        out[key] = value
+    return MappingProxyType(out)
 
 
 def _parse_thorax_frame(data: Mapping[str, Any], src: str) -> ThoraxFrameSpec:
@@ -403,9 +495,13 @@ def resolve_labels(protocol: Protocol, labels: Sequence[str], /, *, source: str 
 
     A missing non-optional marker or thorax landmark raises an InputError naming them, the file
     (``source``) and the labels the trial has. Missing optional markers map to None.
+
+    The protocol's ``relabel`` is applied first: a trial label that is a key of it is read as its
+    value (the columns are unchanged; ``unused`` lists the labels as the trial has them).
     """
     where = source or "trial"
-    labels = tuple(labels)
+    trial_labels = tuple(labels)
+    labels = _relabelled(protocol, trial_labels, where)
     index = {lab: i for i, lab in enumerate(labels)}
     columns: dict[str, int | None] = {}
     owner: dict[int, str] = {}
@@ -445,8 +541,35 @@ def resolve_labels(protocol: Protocol, labels: Sequence[str], /, *, source: str 
     if missing:
         raise InputError(
             f"{where}: protocol '{protocol.name}' needs marker(s) {', '.join(missing)}, not in the trial; "
-            f"the trial has {list(labels)}"
+            f"the trial has {list(trial_labels)}"
+            + (f" (read as {list(labels)} after the protocol's relabel)" if labels != trial_labels else "")
         )
     used = set(owner) | set(thorax.values())
-    unused = tuple(lab for i, lab in enumerate(labels) if i not in used)
+    unused = tuple(lab for i, lab in enumerate(trial_labels) if i not in used)
     return LabelMatch(columns=columns, thorax_columns=thorax, unused=unused)
+
+
+def _relabelled(protocol: Protocol, labels: tuple[str, ...], where: str) -> tuple[str, ...]:
+    """The trial's labels as the protocol's ``relabel`` reads them. Reading a label as one the
+    trial already has (and keeps) would make two markers of one label: a ProtocolError names the
+    protocol file, the relabel key and the trial."""
+    relabel = getattr(protocol, "relabel", None) or {}
+    if not relabel:
+        return labels
+    out = tuple(relabel.get(lab, lab) for lab in labels)
+    if len(set(out)) != len(out):
+        seen: dict[str, str] = {}
+        for old, new in zip(labels, out):
+            if new in seen:
+                renamed = old if old in relabel else seen[new]
+                other = seen[new] if renamed == old else old
+                raise ProtocolError(
+                    f"{protocol.source or protocol.name}: relabel.{renamed}: {where} has both '{renamed}' and "
+                    f"'{other}', and both would be read as '{new}'; a relabel must be a permutation of the "
+                    f"trial's labels (add '{other}: <label>' to read '{other}' as another label)"
+                )
+            seen[new] = old
+    changed = [f"{a}->{b}" for a, b in zip(labels, out) if a != b]
+    if changed:
+        log.info("%s: labels read as the protocol's relabel says: %s", where, ", ".join(changed))
+    return out

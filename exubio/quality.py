@@ -167,13 +167,13 @@ def convergence_reasons(frames: Mapping[str, int], n_frames: int) -> list[Reason
     return [Reason("convergence", lvl, f"{bad} of {n_frames} frames not converged or with too few markers")]
 
 
-def label_reasons(findings: Iterable[Any]) -> list[Reason]:
+def label_reasons(findings: Iterable[Any], *, prefix: str = "") -> list[Reason]:
     out = []
     for f in findings:
         get = f.get if isinstance(f, Mapping) else (lambda k, _f=f: getattr(_f, k))
         lvl = {"error": "fail", "fail": "fail", "warning": "check", "check": "check", "info": "note",
                "note": "note"}.get(get("severity"), "check")
-        out.append(Reason("label", lvl, f"{get('kind')} ({', '.join(get('markers'))}): {get('evidence')}"))
+        out.append(Reason("label", lvl, f"{prefix}{get('kind')} ({', '.join(get('markers'))}): {get('evidence')}"))
     return out
 
 

@@ -61,21 +61,27 @@ class LimitReport:
                 "max_beyond_deg": self.max_beyond_deg}
 
 
-def limit_report(q: np.ndarray, ranges_rad: np.ndarray, names, /, *, exclude=()) -> list[LimitReport]:
+def limit_report(q: np.ndarray, ranges_rad: np.ndarray, names, /, *, exclude=(),
+                 ignore: np.ndarray | None = None) -> list[LimitReport]:
     """Coordinates of q (n, m) that reach their range limits (coordinates in ``exclude`` are left
-    out: held or locked ones are not solved)."""
+    out: held or locked ones are not solved; frames where ``ignore`` (n, m) is True are not
+    counted, e.g. the first and last angles of a sequence near its gimbal lock, whose split the
+    limit only chooses)."""
     out = []
     lo, hi = ranges_rad[:, 0], ranges_rad[:, 1]
     finite = np.isfinite(q).all(axis=1)
     for j, name in enumerate(names):
         if name in exclude:
             continue
-        qj = q[finite, j]
+        keep = finite if ignore is None else finite & ~ignore[:, j]
+        if not keep.any():
+            continue
+        qj = q[keep, j]
         at = (qj >= hi[j] - AT_LIMIT_TOLERANCE_RAD) | (qj <= lo[j] + AT_LIMIT_TOLERANCE_RAD)
         if at.any():
             beyond = np.maximum(np.maximum(qj - hi[j], lo[j] - qj), 0.0).max()
             out.append(LimitReport(name, float(np.degrees(lo[j])), float(np.degrees(hi[j])), int(at.sum()),
-                                   int(np.flatnonzero(finite)[np.argmax(at)]), float(np.degrees(beyond))))
+                                   int(np.flatnonzero(keep)[np.argmax(at)]), float(np.degrees(beyond))))
     return out
 
 

@@ -287,6 +287,7 @@ class Protocol:
     default_damping_ns_per_m: float = 300.0
     source: str = ""
     held_coordinates: tuple[str, ...] = ()  # not observable with this marker set: held at 0
+    relabel: Mapping[str, str] = field(default_factory=dict)  # trial label -> label it is read as
 
     @property
     def marker_names(self) -> tuple[str, ...]:

@@ -378,3 +378,123 @@ def test_resolve_missing_thorax_landmark(tmp_path):
     prot = load(write(tmp_path, ALIASES))
     with pytest.raises(InputError, match=r"'T8' \(thorax_frame.t8\)"):
         resolve_labels(prot, ("ARM", "HAND", "IJ", "PX", "C7"), source="trial.c3d")
+
+
+# --------------------------------------------------------------------------------------------
+# relabel and extends
+# --------------------------------------------------------------------------------------------
+SESSION_EXAMPLE = REPO / "protocols" / "examples" / "kinova_martin_session.yaml"
+
+
+def test_relabel_defaults_to_nothing_and_is_read(tmp_path):
+    assert dict(load(SHIPPED).relabel) == {}
+    prot = load(write(tmp_path, ALIASES + "relabel: {HAND: RARM, RARM: HAND}\n"))
+    assert dict(prot.relabel) == {"HAND": "RARM", "RARM": "HAND"}
+    with pytest.raises(TypeError):
+        prot.relabel["X"] = "Y"  # read-only
+
+
+def test_relabel_applies_before_matching(tmp_path):
+    prot = load(write(tmp_path, ALIASES + "relabel: {HAND: ARM, ARM: HAND, T8: PX, PX: T8}\n"))
+    labels = ("ARM", "HAND", "IJ", "PX", "C7", "T8", "EXTRA")
+    match = resolve_labels(prot, labels, source="trial.c3d")
+    assert match.columns == {"ARM": 1, "ELB": None, "HAND": 0}  # the columns are exchanged
+    assert match.thorax_columns == {"ij": 2, "px": 5, "c7": 4, "t8": 3}
+    assert match.unused == ("EXTRA",)
+    # a label the relabel does not name is untouched; a missing marker lists the labels as given
+    with pytest.raises(InputError, match=r"the trial has \['HAND', 'IJ', 'PX', 'C7', 'T8'\] \(read as "):
+        resolve_labels(prot, ("HAND", "IJ", "PX", "C7", "T8"), source="trial.c3d")
+
+
+def test_relabel_that_would_duplicate_a_trial_label(tmp_path):
+    path = write(tmp_path, ALIASES + "relabel: {RARM: ARM}\n")
+    prot = load(path)
+    assert resolve_labels(prot, ("RARM", "HAND", "IJ", "PX", "C7", "T8")).columns["ARM"] == 0  # a renaming
+    with pytest.raises(ProtocolError) as exc:
+        resolve_labels(prot, ("RARM", "ARM", "HAND", "IJ", "PX", "C7", "T8"), source="trial.c3d")
+    msg = str(exc.value)
+    assert str(path) in msg and "relabel.RARM" in msg and "trial.c3d" in msg and "'ARM'" in msg
+
+
+@pytest.mark.parametrize(
+    "relabel, fragment",
+    [
+        ("[RADIUS, ULNA]", "relabel must be a mapping"),
+        ("RADIUS", "relabel must be a mapping"),
+        ("{RADIUS: 3}", "relabel.RADIUS: trial labels and the labels they are read as must be non-empty strings"),
+        ("{RADIUS: RADIUS}", "relabel.RADIUS: reads 'RADIUS' as itself"),
+        ("{RADIUS: ULNA, WRIST: ULNA}", "relabel.WRIST: 'WRIST' and 'RADIUS' would both be read as 'ULNA'"),
+    ],
+)
+def test_bad_relabel(tmp_path, relabel, fragment):
+    path = write(tmp_path, MINIMAL + f"relabel: {relabel}\n")
+    with pytest.raises(ProtocolError) as exc:
+        load(path)
+    assert fragment in str(exc.value) and str(path) in str(exc.value)
+
+
+def test_extends_a_file_next_to_it(tmp_path):
+    write(tmp_path, ALIASES.replace("schema_version: 1\n", "schema_version: 1\nname: base\nfilter: {cutoff_hz: 6}\n"),
+          name="base.yaml")
+    session = write(tmp_path, "schema_version: 1\nextends: base.yaml\nfilter: none\nrelabel: {A: B, B: A}\n",
+                    name="session.yaml")
+    prot = load(session)
+    assert prot.name == "base"  # keys the session file does not give come from the base
+    assert prot.marker_names == ("ARM", "ELB", "HAND")
+    assert prot.cutoff_hz is None  # a key it gives replaces the base's
+    assert dict(prot.relabel) == {"A": "B", "B": "A"}
+    assert prot.source == str(session)
+
+
+def test_extends_a_shipped_protocol_by_name(tmp_path):
+    for ref in ("upper_limb_21.yaml", "upper_limb_21"):
+        prot = load(write(tmp_path, f"schema_version: 1\nextends: {ref}\nrelabel: {{RADIUS: ULNA, ULNA: RADIUS}}\n"))
+        shipped = load(SHIPPED)
+        assert prot.marker_names == shipped.marker_names and prot.thorax_frame == shipped.thorax_frame
+        assert dict(prot.relabel) == {"RADIUS": "ULNA", "ULNA": "RADIUS"}
+
+
+def test_example_session_file():
+    prot = load(SESSION_EXAMPLE)
+    assert dict(prot.relabel) == {"RADIUS": "ULNA", "ULNA": "RADIUS"}
+    assert prot.marker_names == load(SHIPPED).marker_names
+    match = resolve_labels(prot, C3D_LABELS_STATIC)
+    labels = C3D_LABELS_STATIC
+    assert labels[match.columns["RADIUS"]] == "ULNA" and labels[match.columns["ULNA"]] == "RADIUS"
+    assert labels[match.columns["MET5"]] == "MET5"
+
+
+@pytest.mark.parametrize(
+    "files, fragment, where",
+    [
+        ({"s.yaml": "schema_version: 1\nextends: nope.yaml\n"}, "extends: 'nope.yaml' not found", "s.yaml"),
+        ({"s.yaml": "schema_version: 1\nextends: [a]\n"}, "extends must be the name of a protocol file", "s.yaml"),
+        ({"s.yaml": "schema_version: 1\nextends: b.yaml\n", "b.yaml": "schema_version: 1\nextends: s.yaml\n"},
+         "leads back to a file already in the chain", "b.yaml"),
+        ({"s.yaml": "schema_version: 1\nextends: b.yaml\nrelabels: {A: B}\n", "b.yaml": MINIMAL},
+         "unknown key 'relabels' (did you mean 'relabel'?)", "s.yaml"),
+        ({"s.yaml": "schema_version: 1\nextends: b.yaml\n", "b.yaml": MINIMAL + "colour: red\n"},
+         "unknown key 'colour'", "b.yaml"),
+        ({"s.yaml": "extends: b.yaml\n", "b.yaml": MINIMAL}, "missing key 'schema_version'", "s.yaml"),
+        ({"s.yaml": "schema_version: 1\nextends: b.yaml\n", "b.yaml": MINIMAL.replace("humerus", "humerous")},
+         "markers.ARM.segment is 'humerous'", "b.yaml"),
+        ({"s.yaml": "schema_version: 1\nextends: b.yaml\nrelabel: {A: A}\n", "b.yaml": MINIMAL},
+         "relabel.A: reads 'A' as itself", "s.yaml"),
+    ],
+)
+def test_extends_errors_name_the_file_and_key(tmp_path, files, fragment, where):
+    for name, text in files.items():
+        write(tmp_path, text, name=name)
+    with pytest.raises(ProtocolError) as exc:
+        load(tmp_path / "s.yaml")
+    msg = str(exc.value)
+    assert fragment in msg
+    assert msg.startswith(str(tmp_path / where)), msg
+
+
+def test_read_protocol_mapping_merges_the_extends_chain(tmp_path):
+    from exubio.protocol import read_protocol_mapping
+
+    data = read_protocol_mapping(SESSION_EXAMPLE)
+    assert data["markers"]["RADIUS"] == {"segment": "radius", "point": "RADIUS"}
+    assert data["relabel"] == {"RADIUS": "ULNA", "ULNA": "RADIUS"} and "extends" not in data

@@ -1,0 +1,122 @@
+"""Every real trial of ../shared/data through both methods, as a lab would run them, with the
+verdicts: what the trust checks say and the figures behind them.
+
+Each C3D task trial is calibrated on its own session's static trial (../shared/data/SOURCES.md);
+F0_boire_05 has none and is calibrated on its own first 20 frames; the TRC trials on their first
+50 frames with the thoracoscapular protocol. The kinova_martin session is run twice: with the
+shipped protocol, and with ``protocols/examples/kinova_martin_session.yaml`` (the shipped protocol
+plus the relabelling of that session's swapped RADIUS/ULNA labels).
+
+Prints, per trial and protocol: the verdict of each method with its reasons, the mean residual,
+the worst PF-LS RMSE over the determined coordinates and every coordinate's range (deg) against
+its limits. One JSON line per run on stdout (``--json``), a table on stderr.
+
+Usage:
+    python benchmarks/trust_real_trials.py            # every trial (about a minute on 2 cores)
+    python benchmarks/trust_real_trials.py --only kinova_martin_tete
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from exubio.io.results import read_npz
+from exubio.model import load_model
+from exubio.pipeline import process_trial
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED = ROOT.parent / "shared" / "data"
+SESSION = ROOT / "protocols" / "examples" / "kinova_martin_session.yaml"
+TRC_PROTOCOL = ROOT / "protocols" / "thoracoscapular_9.yaml"
+
+
+def runs() -> list[dict]:
+    c3d = SHARED / "c3d"
+    out = []
+    for name in ("aisselle", "dent", "manger", "tete"):
+        trial = c3d / f"bioptim_exo_kinova_martin_{name}_f3_1.c3d"
+        static = c3d / "bioptim_exo_kinova_martin_statique.c3d"
+        out.append({"trial": trial, "static": static, "protocol": None})
+        out.append({"trial": trial, "static": static, "protocol": SESSION})
+    out.append({"trial": c3d / "bioptim_exo_martin_dynamique.c3d", "static": c3d / "bioptim_exo_martin_statique.c3d",
+                "protocol": None})
+    out.append({"trial": c3d / "bioptim_exo_F0_boire_05.c3d", "static_frames": "0:20", "protocol": None})
+    for name in ("ABD01", "FLX01"):
+        out.append({"trial": SHARED / "trc" / f"tsm_rmr_{name}.trc", "static_frames": "0:50", "protocol": TRC_PROTOCOL})
+    return out
+
+
+def run_one(spec: dict, work: Path) -> dict:
+    from exubio.pipeline import calibrate_session
+
+    out_dir = work / f"{spec['trial'].stem}_{'session' if spec['protocol'] == SESSION else 'shipped'}"
+    extra, model_path = {}, None
+    if spec.get("static"):  # the session's static trial: calibration, its label checks, the reference
+        model_path, _, extra["calibration"] = calibrate_session(spec["static"], out_dir, "static",
+                                                                protocol_path=spec["protocol"])
+    result = process_trial(spec["trial"], out_dir=out_dir, methods=["pf", "ls"], model_path=model_path,
+                           protocol_path=spec["protocol"], static_frames=spec.get("static_frames"),
+                           summary_extra=extra, report=False)
+    model = load_model(model_path) if model_path else None
+    rec = {"trial": spec["trial"].name, "static": Path(spec["static"]).name if spec.get("static") else spec.get("static_frames"),
+           "protocol": "session relabel" if spec["protocol"] == SESSION else Path(spec["protocol"] or "upper_limb_21").stem,
+           "methods": {}}
+    for m in result["methods"]:
+        s = m["summary"]
+        recon = read_npz(m["paths"]["npz"])
+        rng = np.degrees((model or load_model(result["calibration"]["model_file"])).coordinate_ranges_rad)
+        q = np.degrees(recon.q_rad)
+        outside = {n: [round(float(q[:, j].min()), 1), round(float(q[:, j].max()), 1)]
+                   for j, n in enumerate(recon.coordinate_names)
+                   if n not in s.get("not_measured", []) and (q[:, j].min() < rng[j, 0] - 0.5 or q[:, j].max() > rng[j, 1] + 0.5)}
+        rec["methods"][m["method"]] = {
+            "verdict": s["quality"]["verdict"],
+            "reasons": [f"{r['level']}: {r['message']}" for r in s["quality"]["reasons"]],
+            "mean_residual_mm": round(s["residual_mm"]["mean"], 2),
+            "angles_outside_range_deg": outside,
+            "not_measured": s.get("not_measured", []),
+            "undetermined": s["determinacy"]["undetermined_for_trial"],
+        }
+    agree = {k: v for k, v in (result.get("agreement_deg") or {}).items() if v == v}
+    rec["pf_ls_max_rmse_deg_determined"] = round(max(agree.values()), 2) if agree else None
+    rec["pf_ls_worst"] = max(agree, key=agree.get) if agree else None
+    return rec
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--only", default="", help="run the trials whose file name contains this")
+    ap.add_argument("--json", action="store_true", help="one JSON line per run on stdout")
+    args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.ERROR)
+    if not SHARED.is_dir():
+        print(f"{SHARED} is absent: nothing to run", file=sys.stderr)
+        return 2
+    err = sys.stderr
+    with tempfile.TemporaryDirectory() as tmp:
+        for spec in runs():
+            if args.only and args.only not in spec["trial"].name:
+                continue
+            rec = run_one(spec, Path(tmp))
+            if args.json:
+                print(json.dumps(rec), flush=True)
+            verdicts = ", ".join(f"{m} {v['verdict']}" for m, v in rec["methods"].items())
+            ls = rec["methods"]["ls"]
+            print(f"\n{rec['trial']}  [static {rec['static']}, protocol {rec['protocol']}]: {verdicts}; "
+                  f"residual {rec['methods']['pf']['mean_residual_mm']} / {ls['mean_residual_mm']} mm; "
+                  f"PF-LS max {rec['pf_ls_max_rmse_deg_determined']} deg ({rec['pf_ls_worst']}); "
+                  f"outside range: {ls['angles_outside_range_deg'] or 'none'}", file=err)
+            for m, v in rec["methods"].items():
+                for r in v["reasons"]:
+                    print(f"    [{m}] {r}", file=err)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,90 @@
+"""The quality verdict on trials broken on purpose: each defect is named, the verdict is 'check' or
+'fail', and the exit code is 1 exactly when a verdict is 'fail' (README, "Can I trust it?")."""
+import dataclasses
+import json
+from pathlib import Path
+
+import pytest
+
+from exubio.cli import main
+from exubio.io.c3d import read_c3d, write_c3d
+from exubio.model import load_model
+from exubio.simulate import Motion, simulate_trial
+
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "c3d"
+
+
+@pytest.fixture(scope="module")
+def trajectories():
+    return simulate_trial(load_model(), Motion.ABDUCTION, duration_s=3.0, rate_hz=100.0, noise_mm=1.0, sta_mm=5.0,
+                          seed=3).trajectories
+
+
+def _swap(traj, a, b):
+    labels = list(traj.labels)
+    i, j = labels.index(a), labels.index(b)
+    labels[i], labels[j] = b, a
+    return dataclasses.replace(traj, labels=tuple(labels))
+
+
+def _run(tmp_path, traj, name, *extra):
+    path = write_c3d(tmp_path / f"{name}.c3d", traj)
+    out = tmp_path / name
+    code = main(["-q", "reconstruct", str(path), "--method", "both", "--out", str(out), "--no-report", *extra])
+    summaries = {m: json.loads((out / f"{name}.{m}.summary.json").read_text()) for m in ("pf", "ls")}
+    return code, summaries
+
+
+def _reasons(summ, code=None):
+    return [r for r in summ["quality"]["reasons"] if code is None or r["code"] == code]
+
+
+def test_a_clean_trial_is_ok_and_exits_0(tmp_path, trajectories):
+    code, summ = _run(tmp_path, trajectories, "clean")
+    assert code == 0
+    for s in summ.values():
+        assert s["quality"]["verdict"] == "ok", s["quality"]
+        assert s["not_measured"] == ["sc_posterior_rotation"]
+
+
+def test_two_markers_of_one_segment_swapped_are_named(tmp_path, trajectories):
+    code, summ = _run(tmp_path, _swap(trajectories, "MET2", "MET5"), "met_swap")
+    for s in summ.values():
+        assert s["quality"]["verdict"] in ("check", "fail")
+        labels = _reasons(s, "label")
+        assert labels and any({"MET2", "MET5"} <= set(f["markers"]) for f in s["labels"]), s["labels"]
+    assert code == (1 if "fail" in {s["quality"]["verdict"] for s in summ.values()} else 0)
+
+
+def test_a_marker_on_another_segment_fails_when_calibrated_on_its_own_frames(tmp_path, trajectories):
+    """ARM and MET2 swapped, the model calibrated on the trial's first frames: the calibration
+    registers ARM on the humerus where the hand is; that is named and the trial fails."""
+    code, summ = _run(tmp_path, _swap(trajectories, "ARM", "MET2"), "arm_met2", "--static-frames", "0:20")
+    assert code == 1
+    for s in summ.values():
+        assert s["quality"]["verdict"] == "fail"
+        off = _reasons(s, "calibration_off_segment")
+        assert any("ARM" in r["message"] for r in off), s["quality"]
+
+
+def test_a_moving_static_window_is_named(tmp_path, trajectories):
+    """The first 0.5 s of an abduction are no static pose."""
+    code, summ = _run(tmp_path, trajectories, "moving", "--static-frames", "0:50")
+    for s in summ.values():
+        assert s["quality"]["verdict"] in ("check", "fail")
+        assert _reasons(s, "calibration_motion"), s["quality"]
+
+
+@pytest.mark.skipif(not SHARED.is_dir(), reason="../shared/data absent")
+def test_another_subjects_static_is_named(tmp_path):
+    """martin_dynamique calibrated on the first frames of another subject's trial (F0)."""
+    static = SHARED / "bioptim_exo_F0_boire_05.c3d"
+    trial = SHARED / "bioptim_exo_martin_dynamique.c3d"
+    out = tmp_path / "other"
+    code = main(["-q", "reconstruct", str(trial), "--static", str(static), "--static-frames", "0:20",
+                 "--method", "ls", "--out", str(out), "--no-report"])
+    s = json.loads((out / "bioptim_exo_martin_dynamique.ls.summary.json").read_text())
+    assert s["quality"]["verdict"] in ("check", "fail")
+    kinds = {f["kind"] for f in s["labels"]} | {r["code"] for r in s["quality"]["reasons"]}
+    assert kinds & {"other_subject", "distance", "marker_residual", "residual"}, s["quality"]
+    assert code == (1 if s["quality"]["verdict"] == "fail" else 0)
