@@ -89,7 +89,13 @@ class PFOptions:
     gravity: bool = False
     divergence_deflection_m: float = 0.25  # a spring longer than this means the run diverged
     timing_breakdown: bool = True
-    limit_stiffness_nm_per_rad: float = DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD
+    limit_stiffness_nm_per_rad: float | None = DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD  # None or 0: no limits
+
+
+def limits_stiffness(options: PFOptions) -> float:
+    """The limit stiffness PFSystem gets (its default where the limits are off: no element is built)."""
+    k = options.limit_stiffness_nm_per_rad
+    return float(k) if k else DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD
 
 
 def integration_step(frame_dt_s: float, step_s: float | None, cutoff_hz: float | None = None, /) -> float:
@@ -166,8 +172,8 @@ def reconstruct_pf(model: Model, protocol: Protocol, targets: MarkerTargets, /, 
     springs = SpringSet.from_points(points, stiffness_n_per_m=stiffness, damping_ns_per_m=damping)
     system = PFSystem(model, springs, q0=q0, qd0=qd0, gravity=options.gravity, kinematics=kin,
                       locked_segments=locked, held_coordinates=np.flatnonzero(held),
-                      limits_rad=model.coordinate_ranges_rad,
-                      limit_stiffness_nm_per_rad=options.limit_stiffness_nm_per_rad)
+                      limits_rad=model.coordinate_ranges_rad if limits is not None else None,
+                      limit_stiffness_nm_per_rad=limits_stiffness(options))
     t2 = time.perf_counter()
     cutoff_hz = (max(targets.cutoff_hz.values(), default=None) if protocol.cutoff_hz == "auto"  # widest applied
                  else protocol.cutoff_hz)
