@@ -141,6 +141,7 @@ def run_metadata(inputs: TrialInputs, trial_path: str | Path, method: Method) ->
         "protocol": inputs.protocol.source,
         "protocol_name": inputs.protocol.name,
         "held_coordinates": list(inputs.protocol.held_coordinates),
+        "protocol_relabel": dict(inputs.protocol.relabel),
         "method": method.value,
         "units": {"angles_in_files": "deg", "positions_in_npz": "m", "time": "s"},
         "ignored_labels": list(inputs.trajectories.ignored_labels),

@@ -40,8 +40,9 @@ def _members(names: Sequence[str], prefix) -> list[int]:
 
 def _title(recons: Sequence[Reconstruction], meta: dict) -> str:
     trial = Path(meta.get("trial", "trial")).name
-    return (f"exubio {meta.get('exubio_version', '')}: {trial} — model {meta.get('model_name', '')}, "
-            f"protocol {meta.get('protocol_name', '')}, methods {', '.join(r.method.upper() for r in recons)}")
+    protocol = Path(str(meta.get("protocol") or meta.get("protocol_name", ""))).name
+    return (f"exubio {meta.get('exubio_version', '')}: {trial} — methods {', '.join(r.method.upper() for r in recons)}"
+            f"\nmodel {meta.get('model_name', '')}, protocol {protocol}")
 
 
 _VERDICT_COLOURS = {"ok": "tab:green", "check": "tab:orange", "fail": "tab:red"}
@@ -51,7 +52,7 @@ def verdict_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[s
     """Page 1: what a supervisor reads first."""
     fig = _figure()
     fig.suptitle(_title(recons, meta), fontsize=9)
-    y = 0.93
+    y = 0.90
     for r in recons:
         s = summaries.get(r.method, {})
         q = s.get("quality") or {"verdict": "unknown", "reasons": []}
@@ -76,6 +77,16 @@ def verdict_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[s
         y -= 0.02
     first = summaries.get(recons[0].method, {})
     lines = []
+    if meta.get("protocol_relabel"):
+        lines.append("relabelled by the protocol (trial label -> read as): " + ", ".join(
+            f"{a} -> {b}" for a, b in meta["protocol_relabel"].items()))
+    agree = {k: v for k, v in (first.get("pf_ls_agreement_deg") or {}).items() if isinstance(v, float)}
+    if agree:
+        worst = max(agree, key=agree.get)
+        lines.append(f"PF-LS agreement on determined coordinates: max RMSE {agree[worst]:.2f} deg ({worst})")
+    cut = first.get("filter_cutoff_hz") or {}
+    if cut:
+        lines.append(f"low-pass cut-off per marker: {min(cut.values()):.1f}-{max(cut.values()):.1f} Hz")
     if first.get("not_measured"):
         lines.append("not measured (held by the protocol or no marker on the segment): " + ", ".join(first["not_measured"]))
     det = first.get("determinacy") or {}
@@ -121,7 +132,7 @@ def angles_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[st
     axes[-1].set_xlabel("time (s)")
     fig.suptitle(_title(recons, meta) + "\njoint coordinates of the model (intrinsic sequences as in the model "
                  "file; positive = the motion the name says)", fontsize=9)
-    fig.subplots_adjust(left=0.08, right=0.98, top=0.91, bottom=0.06, hspace=0.15)
+    fig.subplots_adjust(left=0.08, right=0.98, top=0.89, bottom=0.06, hspace=0.15)
     return fig
 
 
@@ -178,7 +189,7 @@ def residuals_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict
     lines.append(f"units in the trial file: {meta.get('units_in_trial_file', '?')}; rate {meta.get('rate_hz', '?')} Hz")
     ax_text.text(0.0, 1.0, "\n".join(lines), va="top", family="monospace", fontsize=7)
     fig.suptitle(_title(recons, meta), fontsize=9)
-    fig.subplots_adjust(left=0.07, right=0.98, top=0.92, bottom=0.13, hspace=0.35, wspace=0.2)
+    fig.subplots_adjust(left=0.07, right=0.98, top=0.90, bottom=0.13, hspace=0.35, wspace=0.2)
     return fig
 
 
