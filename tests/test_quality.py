@@ -4,6 +4,7 @@ import dataclasses
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from exubio.cli import main
@@ -88,3 +89,67 @@ def test_another_subjects_static_is_named(tmp_path):
     kinds = {f["kind"] for f in s["labels"]} | {r["code"] for r in s["quality"]["reasons"]}
     assert kinds & {"other_subject", "distance", "marker_residual", "residual"}, s["quality"]
     assert code == (1 if s["quality"]["verdict"] == "fail" else 0)
+
+
+def _angles_inside_ranges(out: Path, stem: str, summ: dict) -> bool:
+    from exubio.io.results import read_npz
+
+    model = load_model(summ["calibration"]["model_file"]) if summ.get("calibration") else load_model()
+    rng = model.coordinate_ranges_rad
+    recon = read_npz(out / f"{stem}.{summ['method']}.npz")
+    tol = np.radians(1.0)
+    return bool(((recon.q_rad >= rng[:, 0] - tol) & (recon.q_rad <= rng[:, 1] + tol)).all())
+
+
+@pytest.mark.skipif(not SHARED.is_dir(), reason="../shared/data absent")
+@pytest.mark.parametrize("protocol", ["shipped", "session"])
+def test_kinova_session_swap_is_named_and_the_session_protocol_fixes_it(tmp_path, protocol):
+    """The issue's case: every kinova_martin trial has RADIUS and ULNA swapped. With the shipped
+    protocol the swap is named and the trial fails (exit 1); with the session protocol that
+    relabels them: verdict ok, PF-LS <= 2 deg on determined coordinates, residual <= 10 mm, every
+    angle inside its range."""
+    trial = SHARED / "bioptim_exo_kinova_martin_tete_f3_1.c3d"
+    out = tmp_path / protocol
+    args = ["-q", "reconstruct", str(trial), "--static", str(SHARED / "bioptim_exo_kinova_martin_statique.c3d"),
+            "--method", "both", "--out", str(out), "--no-report"]
+    if protocol == "session":
+        args += ["--protocol", str(Path(__file__).resolve().parents[1] / "protocols" / "examples"
+                                   / "kinova_martin_session.yaml")]
+    code = main(args)
+    stem = trial.stem
+    summ = {m: json.loads((out / f"{stem}.{m}.summary.json").read_text()) for m in ("pf", "ls")}
+    if protocol == "shipped":
+        assert code == 1
+        for s in summ.values():
+            assert s["quality"]["verdict"] == "fail"
+            assert any(f["kind"] == "swap" and set(f["markers"]) == {"RADIUS", "ULNA"} for f in s["labels"])
+        return
+    assert code == 0
+    agree = [v for v in summ["pf"]["pf_ls_agreement_deg"].values() if isinstance(v, float)]
+    assert max(agree) <= 2.0
+    for s in summ.values():
+        assert s["quality"]["verdict"] == "ok", s["quality"]
+        assert s["residual_mm"]["mean"] <= 10.0 and s["labels"] == []
+        assert _angles_inside_ranges(out, stem, s)
+
+
+@pytest.mark.skipif(not SHARED.is_dir(), reason="../shared/data absent")
+@pytest.mark.parametrize("trial,calibration", [
+    ("bioptim_exo_martin_dynamique.c3d", ["--static", str(SHARED / "bioptim_exo_martin_statique.c3d")]),
+    ("bioptim_exo_F0_boire_05.c3d", ["--static-frames", "0:20"]),
+])
+def test_correctly_labelled_real_trials_agree_and_stay_in_range(tmp_path, trial, calibration):
+    """PF and LS agree within 2 deg on the coordinates the markers determine, every angle inside
+    its range (F0: pronation was -199 to -267 deg before), no label finding."""
+    out = tmp_path / "real"
+    main(["-q", "reconstruct", str(SHARED / trial), *calibration, "--method", "both", "--out", str(out),
+          "--no-report"])
+    stem = Path(trial).stem
+    summ = {m: json.loads((out / f"{stem}.{m}.summary.json").read_text()) for m in ("pf", "ls")}
+    agree = [v for v in summ["pf"]["pf_ls_agreement_deg"].values() if isinstance(v, float)]
+    assert max(agree) <= 2.0
+    for s in summ.values():
+        assert s["labels"] == [] and s["quality"]["verdict"] != "fail"
+        assert _angles_inside_ranges(out, stem, s)
+    if trial.startswith("bioptim_exo_martin_dynamique"):
+        assert {s["quality"]["verdict"] for s in summ.values()} == {"ok"}
