@@ -655,6 +655,10 @@ def _window(targets: MarkerTargets, frames: slice | None) -> tuple[range, bool]:
         sl = find_still_frames(targets)
         return range(targets.n_frames)[sl], True
     rng = range(targets.n_frames)[frames]
+    past = [v for v in (frames.start, frames.stop) if v is not None and abs(v) > targets.n_frames]
+    if past:
+        raise InputError(f"{targets.source or 'trial'}: the calibration frames {frames.start}:{frames.stop} reach past "
+                         f"the trial, which has {targets.n_frames} frames (0:{targets.n_frames}); nothing is clipped")
     if len(rng) == 0:
         raise InputError(f"{targets.source or 'trial'}: the calibration frames {frames.start}:{frames.stop} select no "
                          f"frame of the {targets.n_frames} in the trial")

@@ -164,6 +164,14 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
                   method_options={"pf": {"gravity": args.gravity}}, summary_extra=extra,
                   static_frames=None if args.static else args.static_frames, report=not args.no_report)
     jobs = [dict(common, trial=t) for t in args.trials]
+    if args.jobs < 1:
+        raise InputError(f"--jobs {args.jobs}: expected a whole number of processes >= 1")
+    stems: dict[str, str] = {}
+    for t in args.trials:  # results are named after the trial file: two of one name would mix
+        other = stems.setdefault(Path(t).stem, str(t))
+        if other != str(t):
+            raise InputError(f"{t} and {other} have the same file name: their results in {args.out} would be mixed; "
+                             f"reconstruct them into different --out folders")
     if len(jobs) == 1:  # errors propagate to main(): one message, one exit code
         from exubio.pipeline import process_trial
 

@@ -54,8 +54,19 @@ def check_keys(mapping: Any, allowed: set[str], where: str, *, error: type[Excep
         raise error(f"{where}: missing required key(s) {missing}")
 
 
+def _number(value: Any, where: str, *, positive: bool = False) -> float:
+    """A finite number from a YAML value (True/False are not numbers); ModelError naming the key."""
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
+    if not ok or (positive and not value > 0):
+        raise ModelError(f"{where}: expected a finite number{' > 0' if positive else ''}, got {value!r}")
+    return float(value)
+
+
 def _vec3(value: Any, where: str) -> np.ndarray:
-    arr = np.asarray(value, dtype=float) if isinstance(value, (list, tuple)) else None
+    try:
+        arr = np.asarray(value, dtype=float) if isinstance(value, (list, tuple)) else None
+    except (TypeError, ValueError):
+        arr = None
     if arr is None or arr.shape != (3,) or not np.all(np.isfinite(arr)):
         raise ModelError(f"{where}: expected three finite numbers, got {value!r}")
     return arr
@@ -69,9 +80,10 @@ def load_model(path: str | Path = DEFAULT_MODEL, /, *, body_mass_kg: float | Non
     check_keys(data, _TOP_KEYS, src, error=ModelError, required={"schema_version", "segments", "ellipsoid"})
     if data["schema_version"] != SCHEMA_VERSION:
         raise ModelError(f"{src}: schema_version {data['schema_version']!r} is not supported (expected {SCHEMA_VERSION})")
-    mass = float(body_mass_kg if body_mass_kg is not None else data.get("body_mass_kg", 75.0))
-    if not mass > 0:
-        raise ModelError(f"{src}: body mass must be > 0 kg, got {mass}")
+    if body_mass_kg is not None:
+        mass = _number(body_mass_kg, "--body-mass (kg)", positive=True)
+    else:
+        mass = _number(data.get("body_mass_kg", 75.0), f"{src}: body_mass_kg", positive=True)
 
     raw_segments = data["segments"]
     if not isinstance(raw_segments, list) or not raw_segments:
@@ -203,7 +215,7 @@ def _parse_inertia(raw: Any, where: str, body_mass: float, origin: np.ndarray, f
     if raw is None:
         return 0.0, np.zeros(3), np.zeros((3, 3))
     check_keys(raw, _INERTIA_KEYS, where, error=ModelError, required={"mass_fraction"})
-    mass = float(raw["mass_fraction"]) * body_mass
+    mass = _number(raw["mass_fraction"], f"{where}.mass_fraction", positive=True) * body_mass
     if "com_mm" in raw:  # explicit centre of mass (files written by save_model)
         if "com_between" in raw or "com_fraction" in raw:
             raise ModelError(f"{where}: give either 'com_mm' or 'com_between' + 'com_fraction', not both")
@@ -214,7 +226,7 @@ def _parse_inertia(raw: Any, where: str, body_mass: float, origin: np.ndarray, f
             raise ModelError(f"{where}: missing required key(s) {missing} (or give 'com_mm')")
         a_name, b_name = raw["com_between"]
         a, b = find_point(a_name, where), find_point(b_name, where)
-        com_global = a + float(raw["com_fraction"]) * (b - a)
+        com_global = a + _number(raw["com_fraction"], f"{where}.com_fraction") * (b - a)
     if "inertia_kgm2_per_kg" in raw:  # full 3x3 about the centre of mass, per kg of segment mass
         try:
             tensor = np.asarray(raw["inertia_kgm2_per_kg"], dtype=float)
@@ -234,8 +246,9 @@ def _parse_inertia(raw: Any, where: str, body_mass: float, origin: np.ndarray, f
         p, d = (find_point(n, where) for n in raw["long_axis"])
         length = float(np.linalg.norm(d - p))
         u = (d - p) / length
-        k_t = float(raw["radius_of_gyration_fraction"]) * length
-        k_a = float(raw["axial_radius_of_gyration_fraction"]) * length
+        k_t = _number(raw["radius_of_gyration_fraction"], f"{where}.radius_of_gyration_fraction", positive=True) * length
+        k_a = _number(raw["axial_radius_of_gyration_fraction"], f"{where}.axial_radius_of_gyration_fraction",
+                      positive=True) * length
         inertia = mass * (k_t**2 * (np.eye(3) - np.outer(u, u)) + k_a**2 * np.outer(u, u))
     if mass <= 0:
         raise ModelError(f"{where}: mass must be > 0")

@@ -181,3 +181,36 @@ def test_a_study_of_several_trials_runs_and_reports_each(tmp_path, trial, jobs, 
     for stem in ("s1", "s2"):
         _, _, q = read_angles_csv(out / f"{stem}.ls.csv")
         assert q.shape == (trial.time_s.size, 13)
+
+
+@pytest.mark.parametrize("edit,key", [
+    (("mass_fraction: 0.028\n", "mass_fraction: abc\n"), "mass_fraction"),
+    (("radii_mm: [100, 200, 160]", "radii_mm: [a, b, c]"), "radii_mm"),
+    (("body_mass_kg: 75.0 ", "body_mass_kg: heavy "), "body_mass_kg"),
+    (("body_mass_kg: 75.0 ", "body_mass_kg: .nan "), "body_mass_kg"),
+    (("range_deg: [-15, 160]", "range_deg: [160, -15]"), "range_deg"),
+])
+def test_a_malformed_number_in_the_model_is_exit_2_naming_the_key(tmp_path, c3d, capsys, edit, key):
+    text = (Path(__file__).resolve().parents[1] / "models" / "upper_extremity.yaml").read_text()
+    assert edit[0] in text
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(text.replace(edit[0], edit[1], 1))
+    assert main(["-q", "reconstruct", str(c3d), "--model", str(bad), "--method", "ls", "--out",
+                 str(tmp_path / "o"), "--no-report"]) == 2
+    err = capsys.readouterr().err
+    assert key in err and "bad.yaml" in err and "Traceback" not in err
+
+
+def test_refused_before_any_work_jobs_window_and_two_trials_of_one_name(tmp_path, trial, capsys):
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    a = write_c3d(tmp_path / "a" / "t.c3d", trial.trajectories)
+    b = write_c3d(tmp_path / "b" / "t.c3d", trial.trajectories)
+    out = tmp_path / "o"
+    assert main(["-q", "reconstruct", str(a), "--jobs", "0", "--method", "ls", "--out", str(out)]) == 2
+    assert "--jobs 0" in capsys.readouterr().err
+    assert main(["-q", "reconstruct", str(a), "--static-frames", "150:500", "--method", "ls", "--out", str(out)]) == 2
+    assert "past the trial" in capsys.readouterr().err
+    assert main(["-q", "reconstruct", str(a), str(b), "--method", "ls", "--out", str(out)]) == 2
+    assert "same file name" in capsys.readouterr().err
+    assert not any(out.glob("*.csv"))
