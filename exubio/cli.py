@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import Callable, Sequence
 
+import exubio
 from exubio.errors import ExubioError, InputError, ModelError, ProtocolError, ReconstructionError
 
 log = logging.getLogger("exubio")
@@ -46,6 +47,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if out.suffix.lower() != ".c3d":
         raise InputError(f"--out {out}: expected a path ending in .c3d")
     model = load_model(args.model) if args.model else load_model()
+    out.parent.mkdir(parents=True, exist_ok=True)
     trial = simulate_trial(model, Motion.parse(args.motion), duration_s=args.duration, rate_hz=args.rate,
                            noise_mm=args.noise_mm, sta_mm=args.sta_mm, seed=args.seed)
     c3d, truth = write_simulated_trial(trial, out)
@@ -279,11 +281,17 @@ def cmd_validate(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="exubio", description="Upper-extremity joint kinematics from skin markers "
                                 "(potential-field and least-squares methods on Exudyn).")
+    p.add_argument("--version", action="version", version=f"exubio {exubio.__version__}")
+    # -v/-q work before and after the subcommand (SUPPRESS: a subcommand's default does not reset them)
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="log details to stderr")
+    common.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
+                        help="no progress bars, shorter output")
     p.add_argument("-v", "--verbose", action="store_true", help="log details to stderr")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars, shorter output")
     sub = p.add_subparsers(dest="command", required=True)
 
-    s = sub.add_parser("simulate", help="write a synthetic trial (C3D) and its true joint angles (CSV)")
+    s = sub.add_parser("simulate", parents=[common], help="write a synthetic trial (C3D) and its true joint angles (CSV)")
     s.add_argument("--motion", required=True, choices=["abduction", "flexion", "sier"])
     s.add_argument("--duration", type=float, default=10.0, help="seconds (default 10)")
     s.add_argument("--rate", type=float, default=100.0, help="sampling rate, Hz (default 100)")
@@ -294,12 +302,14 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="PATH.c3d; PATH.truth.csv is written beside it")
     s.set_defaults(func=cmd_simulate)
 
-    r = sub.add_parser("reconstruct", help="joint angles from a C3D/TRC trial")
+    r = sub.add_parser("reconstruct", parents=[common], help="joint angles from a C3D/TRC trial")
     r.add_argument("trials", nargs="+", metavar="TRIAL", help="trial file(s) (.c3d or .trc); several = a study")
     r.add_argument("--jobs", type=int, default=1, help="trials reconstructed in parallel processes (default 1)")
     r.add_argument("--protocol", help="protocol YAML (default: protocols/upper_limb_21.yaml)")
     r.add_argument("--model", help="model YAML (default: models/upper_extremity.yaml)")
-    r.add_argument("--method", choices=["pf", "ls", "both"], default="pf")
+    r.add_argument("--method", choices=["pf", "ls", "both"], default="pf",
+                   help="pf: potential field on Exudyn; ls: constrained least squares per frame; both: the "
+                        "two, compared (default: pf)")
     r.add_argument("--body-mass", type=float, help="body mass, kg (scales segment inertia)")
     r.add_argument("--out", required=True, help="output folder")
     r.add_argument("--overwrite", action="store_true", help="replace earlier results in --out")
@@ -312,7 +322,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "carry the limb's weight and model points sag below their markers")
     r.set_defaults(func=cmd_reconstruct)
 
-    c = sub.add_parser("calibrate", help="fit the model to a subject from a static trial")
+    c = sub.add_parser("calibrate", parents=[common], help="fit the model to a subject from a static trial")
     c.add_argument("static", help="static trial (.c3d or .trc)")
     c.add_argument("--protocol", help="protocol YAML (default: protocols/upper_limb_21.yaml)")
     c.add_argument("--model", help="generic model YAML (default: models/upper_extremity.yaml)")
@@ -322,12 +332,12 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--overwrite", action="store_true", help="replace an existing MODEL.yaml")
     c.set_defaults(func=cmd_calibrate)
 
-    v = sub.add_parser("validate", help="the paper's evaluation (Fig. 2-5, Table 1) as a PDF/PNG report")
+    v = sub.add_parser("validate", parents=[common], help="the paper's evaluation (Fig. 2-5, Table 1) as a PDF/PNG report")
     v.add_argument("--out", default="reports/validation", help="output folder (default reports/validation)")
     v.add_argument("--quick", action="store_true", help="short trials (a smoke run, not the report)")
     v.set_defaults(func=cmd_validate)
 
-    d = sub.add_parser("demo", help="reconstruct the shipped example trial with PF and LS, compare with its truth")
+    d = sub.add_parser("demo", parents=[common], help="reconstruct the shipped example trial with PF and LS, compare with its truth")
     d.add_argument("--out", default="exubio_demo", help="output folder (default ./exubio_demo)")
     d.set_defaults(func=cmd_demo)
     return p

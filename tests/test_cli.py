@@ -214,3 +214,15 @@ def test_refused_before_any_work_jobs_window_and_two_trials_of_one_name(tmp_path
     assert main(["-q", "reconstruct", str(a), str(b), "--method", "ls", "--out", str(out)]) == 2
     assert "same file name" in capsys.readouterr().err
     assert not any(out.glob("*.csv"))
+
+
+def test_version_quiet_after_the_subcommand_and_simulate_makes_its_folder(tmp_path, capsys):
+    import exubio
+
+    with pytest.raises(SystemExit) as exit_:
+        main(["--version"])
+    assert exit_.value.code == 0 and f"exubio {exubio.__version__}" in capsys.readouterr().out
+    out = tmp_path / "new" / "deeper" / "x.c3d"
+    assert main(["simulate", "--motion", "abduction", "--duration", "1", "--rate", "50", "--out", str(out), "-q"]) == 0
+    assert out.is_file() and out.with_name("x.truth.csv").is_file()
+    assert main(["reconstruct", str(out), "--method", "ls", "--out", str(tmp_path / "o"), "--no-report", "-q"]) == 0
