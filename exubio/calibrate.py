@@ -67,7 +67,6 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from exubio.config import read_yaml
 from exubio.errors import InputError, ModelError, ProtocolError
 from exubio.kinematics import Kinematics, PointSet
 from exubio.methods.common import tracked_points

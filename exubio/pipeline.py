@@ -186,7 +186,7 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
             extra["calibration"] = {k: v for k, v in extra["calibration"].items() if not k.startswith("_")}
         if "mean_spring_deflection_mm" in recon.info:
             extra["mean_spring_deflection_mm"] = recon.info["mean_spring_deflection_mm"]
-        if inputs.targets.cutoff_hz if hasattr(inputs.targets, "cutoff_hz") else False:
+        if inputs.targets.cutoff_hz:
             extra["filter_cutoff_hz"] = dict(inputs.targets.cutoff_hz)
         extra.update(assessment.summary_for(recon.method))
         summ = summary(recon, source=str(trial_path), extra=extra)

@@ -1,6 +1,5 @@
 """Which coordinates the markers determine: noise gains on the generic model and the shipped
 protocol, against what the marker set can see."""
-import dataclasses
 
 import numpy as np
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from exubio.cli import main
-from exubio.io.c3d import read_c3d, write_c3d
+from exubio.io.c3d import write_c3d
 from exubio.model import load_model
 from exubio.simulate import Motion, simulate_trial
 
