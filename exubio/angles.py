@@ -65,6 +65,9 @@ from exubio.types import Model
 __all__ = [
     "ISB_SEQUENCES",
     "ANGLE_NAMES",
+    "ISB_COLUMNS",
+    "isb_table",
+    "measured_isb_joints",
     "anatomical_frames",
     "euler_angles",
     "humerothoracic_elevation",
@@ -84,6 +87,16 @@ ANGLE_NAMES: dict[str, tuple[str, str, str]] = {
     "HT": ("plane of elevation", "elevation (-)", "axial rotation, internal (+)"),
 }
 """What each of the three angles means, with its sign (right arm)."""
+
+ISB_COLUMNS: dict[str, tuple[str, str, str]] = {
+    "SC": ("SC_Y_protraction", "SC_X_elevation", "SC_Z_posterior_rotation"),
+    "AC": ("AC_Y_internal_rotation", "AC_X_upward_rotation", "AC_Z_posterior_tilt"),
+    "ST": ("ST_Y_internal_rotation", "ST_X_upward_rotation", "ST_Z_posterior_tilt"),
+    "GH": ("GH_X_elevation", "GH_Z_flexion", "GH_Y_internal_rotation"),
+    "HT": ("HT_Y_plane_of_elevation", "HT_X_elevation", "HT_Y_axial_rotation"),
+}
+"""Column names of the ISB angles file: joint, axis (in sequence order: the axes of each joint's
+three columns spell its sequence), what the angle is; signs as in ANGLE_NAMES."""
 
 # (proximal frame, distal frame) of every joint angle set; "thorax" is the global frame
 _JOINTS: dict[str, tuple[str, str]] = {
@@ -269,3 +282,24 @@ def humerothoracic_elevation(model: Model, q: np.ndarray, /, *, kinematics: Kine
     Rg = segment_anatomical_rotations(model, q, kinematics=kinematics)
     cos = np.clip(Rg["humerus"][..., 1, 1], -1.0, 1.0)  # thorax Y . humerus Y
     return np.arccos(cos)
+
+
+def isb_table(model: Model, q: np.ndarray, /, *, kinematics: Kinematics | None = None
+              ) -> tuple[tuple[str, ...], np.ndarray]:
+    """The ISB angles of q (n, m) as one table: (column names of ISB_COLUMNS, angles (n, 15) rad)."""
+    ang = isb_angles(model, q, kinematics=kinematics)
+    names = tuple(c for joint in _JOINTS for c in ISB_COLUMNS[joint])
+    return names, np.concatenate([ang[joint] for joint in _JOINTS], axis=-1)
+
+
+def measured_isb_joints(model: Model, not_solved: set[str] | frozenset[str], /) -> list[str]:
+    """The ISB angle sets the markers measure: a segment's orientation is not measured when a
+    coordinate of its own joint is not solved (held by the protocol, or a segment no marker
+    observes), nor are the segments below a locked one; a set is measured when both its frames are.
+    (A held clavicle axial rotation leaves SC and AC unmeasured, while the scapula's free AC joint
+    carries its measured orientation: ST, GH and HT stay measured.)"""
+    measured = {"thorax": True}
+    for seg in model.segments[1:]:
+        own = set(seg.joint.coordinates) if seg.joint else set()
+        measured[seg.name] = not (own & set(not_solved))
+    return [joint for joint, (prox, dist) in _JOINTS.items() if measured.get(prox, False) and measured.get(dist, False)]

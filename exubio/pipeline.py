@@ -102,8 +102,10 @@ def output_stem(trial_path: str | Path, method: Method | str) -> str:
 
 def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
                   metadata: dict[str, Any], summary_data: dict[str, Any],
-                  undetermined: np.ndarray | None = None) -> dict[str, Path]:
-    """Write <stem>.csv, .mot, .npz and .summary.json into out_dir, each atomically. Coordinates
+                  undetermined: np.ndarray | None = None,
+                  isb: tuple[tuple[str, ...], np.ndarray] | None = None) -> dict[str, Path]:
+    """Write <stem>.csv, .mot, .npz and .summary.json into out_dir, each atomically, and with
+    ``isb`` (column names, angles (n, 15) rad) the ISB angles as <stem>.isb.csv (degrees). Coordinates
     that are not measurements (held, locked, undetermined for the trial) are named in the .mot
     header and summary.json; ``undetermined`` (n, m) per frame goes into the .npz."""
     out = Path(out_dir)
@@ -123,6 +125,9 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
     if summary_data.get("quality"):
         notes.append(f"exubio_quality={summary_data['quality']['verdict']}")
     results.write_angles_csv(paths["csv"], recon.time_s, recon.coordinate_names, recon.q_rad)
+    if isb is not None:
+        paths["isb"] = out / f"{stem}.isb.csv"
+        results.write_angles_csv(paths["isb"], recon.time_s, isb[0], isb[1])
     results.write_mot(paths["mot"], recon.time_s, recon.coordinate_names, recon.q_rad, name=stem, notes=notes)
     results.write_npz(paths["npz"], recon, metadata=metadata,
                       extra_arrays=None if undetermined is None else {"undetermined": undetermined})
@@ -163,6 +168,7 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
     range limits, PF-LS agreement, ``calibration``: the calibration report dict) and every summary
     carries its quality verdict. Refuses (InputError) to replace earlier results unless
     ``overwrite``."""
+    from exubio.angles import ANGLE_NAMES, ISB_SEQUENCES, isb_table, measured_isb_joints
     from exubio.assess import assess_trial, trial_label_findings
 
     methods = [Method.parse(m) for m in methods]
@@ -189,9 +195,19 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
         if inputs.targets.cutoff_hz:
             extra["filter_cutoff_hz"] = dict(inputs.targets.cutoff_hz)
         extra.update(assessment.summary_for(recon.method))
+        isb = isb_table(inputs.model, recon.q_rad)
+        measured = measured_isb_joints(inputs.model, set(assessment.not_solved))
+        extra["isb_angles"] = {
+            "file": f"{stem}.isb.csv", "units": "deg",
+            "sequences": {j: "-".join(s) for j, s in ISB_SEQUENCES.items()},
+            "meaning": {j: list(v) for j, v in ANGLE_NAMES.items()},
+            "measured": measured,
+            "not_measured": [j for j in ISB_SEQUENCES if j not in measured],
+            "definition": "Wu et al. 2005 anatomical frames from the model's landmarks; intrinsic sequences; "
+                          "GH X-Z'-Y'' (Phadke et al. 2011), HT Y-X'-Y'' (exubio.angles)"}
         summ = summary(recon, source=str(trial_path), extra=extra)
         paths = write_outputs(recon, out_dir, stem, metadata=meta, summary_data=summ,
-                              undetermined=assessment.determinacy[recon.method].undetermined)
+                              undetermined=assessment.determinacy[recon.method].undetermined, isb=isb)
         out.append((recon, paths, summ))
     return out
 

@@ -226,3 +226,19 @@ def test_version_quiet_after_the_subcommand_and_simulate_makes_its_folder(tmp_pa
     assert main(["simulate", "--motion", "abduction", "--duration", "1", "--rate", "50", "--out", str(out), "-q"]) == 0
     assert out.is_file() and out.with_name("x.truth.csv").is_file()
     assert main(["reconstruct", str(out), "--method", "ls", "--out", str(tmp_path / "o"), "--no-report", "-q"]) == 0
+
+
+def test_isb_angles_file_per_method_with_what_is_measured(tmp_path, c3d):
+    """<trial>.<method>.isb.csv holds exubio.angles' ISB angles of the written q (degrees); with the
+    clavicle's axial rotation held, SC and AC are named as not measured, ST, GH and HT as measured."""
+    from exubio.angles import isb_table
+
+    out = tmp_path / "isb"
+    assert main(["-q", "reconstruct", str(c3d), "--method", "ls", "--out", str(out), "--no-report"]) == 0
+    t, names, ang = read_angles_csv(out / "abd.ls.isb.csv")
+    recon = read_npz(out / "abd.ls.npz")
+    ref_names, ref = isb_table(load_model(), recon.q_rad)
+    assert names == ref_names and np.abs(np.degrees(ang - ref)).max() < 1e-5
+    summ = json.loads((out / "abd.ls.summary.json").read_text())["isb_angles"]
+    assert summ["measured"] == ["ST", "GH", "HT"] and summ["not_measured"] == ["SC", "AC"]
+    assert summ["sequences"]["GH"] == "X-Z-Y" and summ["units"] == "deg"
