@@ -157,6 +157,8 @@ def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recon
         status = np.asarray(r.status)
         frames = {"not_converged": int((status == 1).sum()), "too_few_markers": int((status == 2).sum())}
         reasons += Q.convergence_reasons(frames, r.n_frames)
+        dt = float(np.median(np.diff(r.time_s))) if r.n_frames > 1 else 1.0
+        reasons += Q.gap_reasons(r.gaps, r.n_frames, 1.0 / dt)
         reasons += Q.agreement_reasons(agreement, sorted(undetermined))
         quality[r.method] = Q.Quality.of(reasons)
     return TrialAssessment(dets, lims, quality, agreement, tuple(label_findings), not_solved)

@@ -55,6 +55,11 @@ OFF_SEGMENT_MARGIN_M = 0.06
 """A marker registered farther than this (skin, soft tissue and marker base) outside the sphere
 that holds its segment's anatomical points cannot be on that segment: a mislabelled marker."""
 
+GAP_NOTE_FRACTION = 0.05
+"""A marker missing in more than this fraction of the frames is named on page 1 (a note: the
+gap is handled, its spring or LS term is off there, and the determinacy check says whether the
+remaining markers still determine every coordinate)."""
+
 LEVELS = ("note", "check", "fail")
 
 
@@ -156,6 +161,23 @@ def determinacy_reasons(det: Mapping[str, Any]) -> list[Reason]:
         if name not in det.get("undetermined_for_trial", []) and name not in gimbal and frac > 0:
             out.append(Reason("undetermined_frames", "note", f"{name}: undetermined in {100 * frac:.0f} % of the frames "
                               f"(marked)"))
+    return out
+
+
+def gap_reasons(gaps: Sequence[Any], n_frames: int, rate_hz: float) -> list[Reason]:
+    out = []
+    by_marker: dict[str, list] = {}
+    for g in gaps:
+        by_marker.setdefault(g.marker, []).append(g)
+    for marker, gs in by_marker.items():
+        missing = sum(g.n_frames for g in gs)
+        if missing >= n_frames:
+            continue  # an optional marker absent from the trial: listed as such in summary.json
+        if missing > GAP_NOTE_FRACTION * n_frames:
+            longest = max(gs, key=lambda g: g.n_frames)
+            out.append(Reason("gap", "note", f"marker {marker} missing in {100 * missing / n_frames:.0f} % of the "
+                              f"frames (longest gap {longest.n_frames / rate_hz:.2f} s from frame {longest.start}); "
+                              f"handled: left out where missing (PF spring off, no LS term)"))
     return out
 
 

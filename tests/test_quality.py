@@ -153,3 +153,19 @@ def test_correctly_labelled_real_trials_agree_and_stay_in_range(tmp_path, trial,
         assert _angles_inside_ranges(out, stem, s)
     if trial.startswith("bioptim_exo_martin_dynamique"):
         assert {s["quality"]["verdict"] for s in summ.values()} == {"ok"}
+
+
+def test_gaps_are_handled_and_named(tmp_path, trajectories):
+    """A 0.6 s gap of MET2 and SEML falling off for the last 40 % of the trial: both reconstructed,
+    each marker named with how much is missing; nothing fails for it."""
+    pos = trajectories.positions_m.copy()
+    labels = list(trajectories.labels)
+    pos[100:160, labels.index("MET2")] = np.nan
+    pos[180:, labels.index("SEML")] = np.nan
+    code, summ = _run(tmp_path, dataclasses.replace(trajectories, positions_m=pos), "gaps")
+    assert code == 0
+    for s in summ.values():
+        gaps = {r["message"].split()[1] for r in _reasons(s, "gap")}
+        assert gaps == {"MET2", "SEML"}, s["quality"]
+        assert s["quality"]["verdict"] in ("ok", "check")
+        assert {g["marker"] for g in s["gaps"]} == {"MET2", "SEML"}
