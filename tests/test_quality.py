@@ -169,3 +169,20 @@ def test_gaps_are_handled_and_named(tmp_path, trajectories):
         assert gaps == {"MET2", "SEML"}, s["quality"]
         assert s["quality"]["verdict"] in ("ok", "check")
         assert {g["marker"] for g in s["gaps"]} == {"MET2", "SEML"}
+
+
+def test_calibration_criteria_name_scale_at_bound_pose_at_limit_and_moving_window():
+    from exubio import quality as Q
+
+    cal = {"source": "static.c3d", "scale_factors": {"humerus": 0.7, "hand": 1.0},
+           "static_pose_at_limit_deg": {"pronation": -20.0}, "window_motion_mm": {"MET2": 9.0, "ARM": 1.0}}
+    reasons = Q.calibration_reasons(cal, scale_bounds=(0.7, 1.4), off_segment={"ARM": 0.2})
+    codes = {r.code: r for r in reasons}
+    assert "humerus" in codes["calibration_scale"].message and "hand" not in codes["calibration_scale"].message
+    assert "pronation" in codes["calibration_pose"].message
+    assert "MET2" in codes["calibration_motion"].message
+    assert codes["calibration_off_segment"].level == "fail" and "200 mm" in codes["calibration_off_segment"].message
+    q = Q.Quality.of(reasons)
+    assert q.verdict == "fail" and q.reasons[0].level == "fail"
+    assert Q.Quality.of([r for r in reasons if r.level != "fail"]).verdict == "check"
+    assert Q.Quality.of([Q.Reason("gap", "note", "x")]).verdict == "ok"
