@@ -727,6 +727,11 @@ def _rigid_bad(d: np.ndarray, ref: np.ndarray | None, rigid: np.ndarray) -> np.n
     return np.isfinite(diff) & (diff > RIGID_TOLERANCE_M)
 
 
+def _partners(pairs, m: int, most: int = 3) -> list[int]:
+    """The other marker of (at most ``most`` of) the pairs that contain m."""
+    return [int(p[1] if p[0] == m else p[0]) for p in pairs[:most]]
+
+
 def _cover(pairs: np.ndarray) -> list[int]:
     """Fewest markers (greedy) such that every row of ``pairs`` (p, 2 or 3 marker indices) holds
     one of them: the markers that explain a set of disagreeing pairs or relations."""
@@ -918,10 +923,7 @@ def check_trial(
             if m in used:
                 continue
             mine = [p for p in pairs if m in p]
-            parts = []
-            for p in mine[:3]:
-                o = p[1] if p[0] == m else p[0]
-                parts.append(f"{names[o]} {_mm(d[m, o])} (reference {_mm(ref[m, o])})")
+            parts = [f"{names[o]} {_mm(d[m, o])} (reference {_mm(ref[m, o])})" for o in _partners(mine, m)]
             if len(mine) == 1:  # one distance: either marker may have moved
                 o = int(mine[0][1] if mine[0][0] == m else mine[0][0])
                 who, which = (names[m], names[o]), f"{names[m]} or {names[o]} moved, was re-placed or mislabelled"
@@ -940,10 +942,7 @@ def check_trial(
             if m in used:
                 continue
             mine = [p for p in pairs if m in p]
-            parts = []
-            for p in mine[:3]:
-                o = p[1] if p[0] == m else p[0]
-                parts.append(f"{names[o]} (SD {_mm(spread[m, o])}, median {_mm(d[m, o])})")
+            parts = [f"{names[o]} (SD {_mm(spread[m, o])}, median {_mm(d[m, o])})" for o in _partners(mine, m)]
             findings.append(_finding("jump", (names[m],), (
                 f"the distance of {names[m]} to markers that are rigid with it varies within the trial: "
                 + ", ".join(parts) + f"; skin motion gives at most about {_mm(RIGID_SPREAD_MAX_M)}: the label "
