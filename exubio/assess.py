@@ -11,7 +11,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from exubio import quality as Q
-from exubio.calibrate import SCALE_BOUNDS
+from exubio.calibration import SCALE_BOUNDS
 from exubio.evaluate import per_frame_residuals_mm, residual_statistics
 from exubio.kinematics import Kinematics
 from exubio.methods.common import tracked_points

@@ -81,7 +81,7 @@ def _print_result(recon, paths, summ) -> None:
 
 
 def _print_trial(result: dict, quiet: bool) -> None:
-    from exubio.calibrate import format_report
+    from exubio.calibration import format_report
 
     if result["calibration"]:
         if not quiet:
@@ -116,7 +116,8 @@ def _trial_code(result: dict) -> int:
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    from exubio.calibrate import calibrate_file, format_report, parse_frames
+    from exubio.calibration import format_report, parse_frames
+    from exubio.pipeline import calibrate_file
 
     if Path(args.out).suffix.lower() not in (".yaml", ".yml"):
         raise InputError(f"--out {args.out}: expected a model file ending in .yaml")
@@ -153,7 +154,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
                                                            body_mass_kg=args.body_mass, frames_text=args.static_frames,
                                                            overwrite=args.overwrite)
         if not args.quiet:
-            from exubio.calibrate import format_report
+            from exubio.calibration import format_report
 
             print(format_report(report))
         print(f"calibrated model: {model_file}")

@@ -57,7 +57,7 @@ def protocol_for_model(model: Model, protocol_path: str | Path | None = None, /)
                              model_points={s.name: dict(s.points) for s in model.segments},
                              coordinates=model.coordinate_names)
     if model.metadata.get("calibration"):
-        from exubio.calibrate import calibrated_protocol
+        from exubio.calibration import calibrated_protocol
 
         protocol = calibrated_protocol(protocol, model)
     return protocol
@@ -249,12 +249,33 @@ def static_checks(static_path: str | Path, /, *, protocol_path: str | Path | Non
     return findings, pair_distances(pos, targets.marker_names, source=str(static_path))
 
 
+def calibrate_file(static_path: str | Path, /, *, protocol_path: str | Path | None = None,
+                   model_path: str | Path | None = None, body_mass_kg: float | None = None,
+                   frames: slice | None = None, out_path: str | Path | None = None,
+                   overwrite: bool = False):
+    """Everything ``exubio calibrate`` does: read the trial, the generic model and the protocol,
+    calibrate (``exubio.calibration.calibrate_model``, a pure step), and (with ``out_path``) write
+    the calibrated model YAML. Returns (calibrated model, the protocol bound to it, the
+    CalibrationReport). An existing ``out_path`` is replaced only with ``overwrite``."""
+    from exubio.calibration import calibrate_model, calibrated_protocol
+    from exubio.model import save_model
+
+    if out_path is not None and Path(out_path).exists() and not overwrite:
+        raise InputError(f"{out_path}: the model file already exists; pass --overwrite to replace it")
+    model, protocol = load_model_and_protocol(model_path=model_path, protocol_path=protocol_path,
+                                              body_mass_kg=body_mass_kg)
+    calibrated, report = calibrate_model(model, protocol, read_trial(static_path), frames=frames)
+    if out_path is not None:
+        save_model(calibrated, out_path, calibration=report.to_dict())
+    return calibrated, calibrated_protocol(protocol, calibrated), report
+
+
 def calibrate_into(source: str | Path, out_dir: str | Path, stem: str, /, *, protocol_path: str | Path | None = None,
                    model_path: str | Path | None = None, body_mass_kg: float | None = None,
                    frames_text: str | None = None, overwrite: bool = False):
     """Calibrate the model to ``source`` (a static trial, or frames of the trial itself) and write
     ``out_dir/<stem>.model.yaml``; returns (model file, CalibrationReport)."""
-    from exubio.calibrate import calibrate_file, parse_frames
+    from exubio.calibration import parse_frames
     from exubio.model import save_model
 
     model_file = Path(out_dir) / f"{stem}.model.yaml"
@@ -273,7 +294,7 @@ def calibrate_session(source: str | Path, out_dir: str | Path, stem: str, /, *, 
     summary for summary.json). With ``reference`` (a static trial apart from the task trials) the
     summary's private ``_reference`` holds the static's pair distances, which the session's trials
     are checked against; it is not written to summary.json."""
-    from exubio.calibrate import parse_frames
+    from exubio.calibration import parse_frames
 
     model_file, report = calibrate_into(source, out_dir, stem, protocol_path=protocol_path, model_path=model_path,
                                         body_mass_kg=body_mass_kg, frames_text=frames_text, overwrite=overwrite)

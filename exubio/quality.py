@@ -48,7 +48,7 @@ WINDOW_MOTION_MM = 5.0
 window moves (quiet standing sways 1-3 mm), so the calibrated geometry is smeared."""
 
 SCALE_AT_BOUND = 0.01
-"""A calibration scale factor within this of its bound (exubio.calibrate.SCALE_BOUNDS) means the
+"""A calibration scale factor within this of its bound (exubio.calibration.SCALE_BOUNDS) means the
 subject does not fit the model: another subject's static, or a swapped label."""
 
 OFF_SEGMENT_MARGIN_M = 0.06

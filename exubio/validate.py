@@ -23,7 +23,7 @@ Runs (paper section in brackets):
 5. PF vs LS agreement [Fig. 6]: RMSE per coordinate and per marker, every motion.
 
 Abduction and flexion are the real TRC trials of ``../shared/data/trc`` when the subject
-calibration (``exubio.calibrate``) and the ``thoracoscapular_9`` protocol are available
+calibration (``exubio.calibration``) and the ``thoracoscapular_9`` protocol are available
 (``_real_trial``); otherwise simulated trials (``exubio.simulate``) with noise and STA stand in,
 and every output says so.
 """
@@ -138,20 +138,20 @@ def why_no_real_trial(name: str) -> str | None:
         missing.append(f"trial file {trc}")
     if not shipped_file("exubio.protocols", REAL_PROTOCOL, "protocols").exists():
         missing.append(f"protocol {REAL_PROTOCOL}")
-    if importlib.util.find_spec("exubio.calibrate") is None:
-        missing.append("subject calibration module exubio.calibrate")
+    if importlib.util.find_spec("exubio.calibration") is None:
+        missing.append("subject calibration module exubio.calibration")
     return ("not available: " + ", ".join(missing)) if missing else None
 
 
 def _real_trial(name: str) -> tuple[Model, Protocol, MarkerTargets, dict[str, Any]] | None:
     """The real TRC trial ``name`` ("abduction" or "flexion") of ../shared/data/trc with the
     thoracoscapular_9 protocol and the generic model calibrated to the subject on the trial's own
-    still frames (exubio.calibrate: the TRC trials come without a static trial): (model, protocol,
+    still frames (exubio.calibration: the TRC trials come without a static trial): (model, protocol,
     targets, calibration summary), or None when ``why_no_real_trial`` names something missing.
     The one function to change when the real data or their calibration change."""
     if why_no_real_trial(name) is not None:
         return None
-    from exubio.calibrate import calibrate_model, calibrated_protocol
+    from exubio.calibration import calibrate_model, calibrated_protocol
     from exubio.io.trial import read_trial
 
     trc = shared_data_dir() / "trc" / REAL_TRIALS[name]

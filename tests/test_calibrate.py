@@ -6,7 +6,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from exubio.calibrate import (
+from exubio.calibration import (
     CalibrationReport,
     calibrate_model,
     calibrated_protocol,
@@ -363,7 +363,8 @@ def _write(folder, name, text):
 def test_anatomical_fit_jacobian_matches_finite_differences(generic):
     """d(model points)/d(q, scale factors) of the anatomical fit against central differences at
     random poses and scale factors."""
-    from exubio.calibrate import _Anchor, _groups
+    from exubio.calibration.posefit import _Anchor
+    from exubio.calibration.scaling import _groups
 
     model, protocol = generic
     group_of = _groups(model, {"ulna": "forearm", "radius": "forearm"})

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from exubio import labels as L
-from exubio.calibrate import scale_model
+from exubio.calibration import scale_model
 from exubio.errors import InputError
 from exubio.kinematics import Kinematics
 from exubio.pipeline import protocol_for_model

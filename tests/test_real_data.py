@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from exubio.calibrate import calibrate_model, calibrated_protocol
+from exubio.calibration import calibrate_model, calibrated_protocol
 from exubio.evaluate import residual_statistics
 from exubio.io.trial import read_trial
 from exubio.model import load_model, save_model

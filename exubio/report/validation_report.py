@@ -409,7 +409,7 @@ def summary_pages(d: _Data) -> list[Figure]:
             prov.append(f"• {MOTION_LABEL[name]}: REAL trial {info['source']} ({info['frames']} frames at "
                         f"{info.get('rate_hz', 0):g} Hz, markers {', '.join(info.get('markers', []))}; "
                         f"{info['citation']}), protocol {info['protocol']}. Model: the generic model calibrated to "
-                        f"the subject (exubio.calibrate) on frames {fr.get('start')}-{fr.get('stop')} of the same "
+                        f"the subject (exubio.calibration) on frames {fr.get('start')}-{fr.get('stop')} of the same "
                         f"trial (still arm; no static trial exists), scale factors "
                         + ", ".join(f"{k} {v:.2f}" for k, v in (cal.get('scale_factors') or {}).items() if abs(v - 1) > 1e-9)
                         + f"; calibration residual mean {_fmt(res.get('mean'))} mm. No marker beyond the elbow and "

@@ -1,0 +1,228 @@
+"""Calibrate a generic model to a subject from a static pose: segment scaling, model-point
+registration and the thorax ellipsoid.
+
+Input: a trial (a static trial, or a chosen frame range of any trial when the lab has no static
+trial), the protocol and the generic model. The static pose is the mean of the chosen frames of
+the protocol markers in the ISB thorax frame (``prepare_targets``: same labels, thorax frame and
+filter as a reconstruction). Without ``frames`` the longest still stretch of the trial is used
+(every marker slower than ``STILL_SPEED_M_S``).
+
+Algorithm
+---------
+1. Thorax scale: the ratio of the measured to the model distances between the thorax landmarks
+   that build the thorax frame (least squares over the six pairs). Not measurable when the
+   protocol's thorax frame is the identity: then 1.
+2. Anatomical fit of the scaled generic model (the anchor). The generic model points of the
+   markers, scaled with their segments, are fitted to the static markers over the static pose q
+   (all 13 coordinates; the ellipsoid constraint is *off*, so that the generic ellipsoid does not
+   bias the girdle) and one isotropic scale factor per scale group (clavicle, scapula, humerus,
+   forearm = ulna + radius, hand; a group without markers keeps 1). First q alone from several
+   start postures at once (arm down, abducted, flexed, rotated; elbow extended or flexed), then q
+   and the scale factors together by Levenberg-Marquardt (for fixed rotations a model point is
+   linear in the scale factors: a segment's factor scales its points and its children's
+   joint-centre offsets, which gives that part of the Jacobian exactly). Weak priors keep the
+   scale factors near 1 (bounded to 0.7-1.4) and the clavicle/scapula angles near the reference
+   posture where the markers leave them undetermined. The weights are the protocol weights times
+   robust Cauchy weights 1 / (1 + (d / 20 mm)^2) of each marker's residual d, iterated
+   (iteratively reweighted least squares, the 20 mm reached by annealing from 100 mm so that a
+   rough first pose discards nothing): a marker that the lab placed (or labelled) differently
+   from the generic model, e.g. an acromion-cluster marker, is down-weighted instead of dragging
+   the pose. Only this step decides the static pose, i.e. where the anatomical segment frames
+   are: the registration below cannot, since a freely registered marker fits any pose.
+3. Registration: every marker present in the chosen frames gets its static position as its local
+   position on its segment, l = R_seg(q)^T (m - p_seg(q)), under the model point its protocol
+   entry names (``point:``), or, for markers given by ``local_position_mm``, under the marker's
+   own name. Joint centres are never moved: the skeleton is what step 2 fitted, and a marker tied
+   to a joint centre (e.g. a virtual glenohumeral-centre marker on point GH) is registered as a
+   point named after the marker. A marker tied to an ellipsoid contact point moves the contact
+   point (the ellipsoid is fitted to it next). ``calibrated_protocol`` binds a protocol to the
+   registered points (the model file records which point each marker was registered under).
+4. Ellipsoid: centre and radii scale with the thorax; then its centre moves in the sagittal plane
+   and its radii scale by a common factor (keeping their ratios), with the least change (10 % of
+   radius weighted like 30 mm of centre: a thorax of another depth moves the surface rather than
+   inflating it), until both contact points lie on it at the static pose (Newton, |g| < 1e-12).
+
+What is reported (and stored under ``calibration`` in the written model), per marker:
+
+* ``residual_mm`` -- the calibration residual: the RMS over the calibration frames of the
+  distance between the marker and its model point on the calibrated model, each frame solved
+  with the constrained least-squares method. It says how well the calibrated model, rigid and
+  on its ellipsoid, reproduces the calibration frames (noise, sway, skin motion within them). It
+  is not a validation of the registration: registered at the mean pose, it is small by
+  construction; the residuals of the dynamic trials are that validation.
+* ``generic_offset_mm`` -- the distance from the scaled generic model point to the registered
+  one: the residual of the scaled generic model at the static pose (step 2, what OpenSim's scale
+  tool reports as its marker error). Large values flag markers placed or labelled differently from
+  the generic model; ``fit_weight`` is the robust weight the marker had in step 2.
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+from exubio.calibration.ellipsoid import fit_ellipsoid
+from exubio.calibration.posefit import (ARM_PRIOR_M2_PER_RAD2, GIRDLE_PRIOR_M2_PER_RAD2, GIRDLE_SEGMENTS,
+    MAX_REWEIGHTING, ROBUST_SCALE_M, _Anchor, _at_limit, _fit_pose, _start_postures)
+from exubio.calibration.registration import _register, calibrated_protocol, marker_point_names
+from exubio.calibration.report import CalibrationReport, MarkerCalibration
+from exubio.calibration.scaling import DEFAULT_SCALE_GROUPS, _groups, _thorax_scale, scale_model
+from exubio.calibration.window import _nanmean, _window
+from exubio.errors import InputError
+from exubio.kinematics import Kinematics
+from exubio.methods.common import tracked_points
+from exubio.methods.ls import Limits, LSOptions, solve_positions
+from exubio.preprocess import prepare_targets
+from exubio.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD
+from exubio.types import MarkerTargets, Model, Protocol, Trajectories
+
+log = logging.getLogger(__name__)
+
+RESIDUAL_FRAMES = 60  # the calibration residual is measured on at most this many frames
+
+
+
+def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories, /, *,
+                    frames: slice | None = None, scale_groups: Mapping[str, str] = DEFAULT_SCALE_GROUPS,
+                    targets: MarkerTargets | None = None) -> tuple[Model, CalibrationReport]:
+    """Calibrate ``model`` (generic) to the subject of ``trajectories`` (see the module docstring).
+
+    frames: the frames of the trial that hold the static pose (their mean is used); None = the
+        longest still stretch. targets: the trial's prepared targets, if already computed with
+        ``prepare_targets(trajectories, protocol)``.
+    Returns the calibrated model (its ``metadata["calibration"]`` holds ``report.to_dict()``) and
+    the report. The protocol's markers must reference the model (segment names); reconstruct with
+    ``calibrated_protocol(protocol, calibrated)`` or reload the protocol with the calibrated
+    model's points.
+    """
+    src = trajectories.source or "trial"
+    if targets is None:
+        targets = prepare_targets(trajectories, protocol)
+    window, auto = _window(targets, frames)
+    idx = list(window)
+    static = _nanmean(targets.positions_m[idx], axis=0)  # (k, 3) the static pose
+    with np.errstate(invalid="ignore"):  # how much each marker moves within the window (RMS, m)
+        spread = np.sqrt(_nanmean(((targets.positions_m[idx] - static) ** 2).sum(axis=2), axis=0))
+    present = np.isfinite(static).all(axis=1)
+    for j, m in enumerate(protocol.markers):
+        if not present[j] and not m.optional:
+            raise InputError(f"{src}: marker '{m.name}' has no sample in the calibration frames "
+                             f"{window.start}:{window.stop}; choose other frames")
+    if present.sum() < 5:
+        raise InputError(f"{src}: only {int(present.sum())} protocol markers in the calibration frames; need at least 5")
+
+    group_of = _groups(model, scale_groups)
+    thorax_name = model.segments[0].name
+    st = _thorax_scale(model, protocol, trajectories, window)
+    fixed = {group_of[thorax_name]: 1.0 if st is None else st}
+    # groups without a marker (or a child carrying one) are not measured: they keep factor 1
+    names = model.segment_names
+    seg_index = np.array([names.index(m.segment) for m in protocol.markers])
+    carriers = set()
+    for s in seg_index[present]:
+        carriers.add(group_of[names[s]])
+    for g in set(group_of.values()):
+        if g not in carriers:
+            fixed.setdefault(g, 1.0)
+    local_generic = np.array([np.asarray(m.local_position_m, dtype=float) for m in protocol.markers])
+    w_protocol = np.where(present, protocol.weights, 0.0)
+    coord_segment = Kinematics(model).coordinate_segment
+    prior = np.array([GIRDLE_PRIOR_M2_PER_RAD2 if names[coord_segment[j]] in GIRDLE_SEGMENTS else ARM_PRIOR_M2_PER_RAD2
+                      for j in range(model.n_coordinates)])
+
+    limits = Limits.of(model, protocol, DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD)
+    anchor = _Anchor(model=model, seg_index=seg_index, local_generic=local_generic, target=static,
+                     groups=list(dict.fromkeys(group_of.values())), group_of=group_of, fixed=fixed, prior_q=prior,
+                     limits=limits)
+    factors = {g: fixed.get(g, 1.0) for g in anchor.groups}
+    # start posture: several at once, pose only, generic scale factors
+    kin, pts = anchor.points(factors)
+    qs, cost = _fit_pose(kin, pts, static, w_protocol, _start_postures(model), prior, limits=limits)
+    q = qs[int(np.argmin(cost))]
+    # iteratively reweighted joint fit; the robust scale is annealed from 100 mm to ROBUST_SCALE_M so
+    # that the first, rough poses do not discard markers a better pose would fit
+    robust = np.ones(len(protocol.markers))
+    it = 0
+    for it in range(1, MAX_REWEIGHTING + 1):
+        q, factors, cost = anchor.fit(q, factors, w_protocol * robust)
+        kin, pts = anchor.points(factors)
+        d = np.linalg.norm(kin.points(q, pts) - np.where(np.isnan(static), 0, static), axis=1)
+        c = max(ROBUST_SCALE_M, 0.1 * 0.7 ** (it - 1))
+        new = 1.0 / (1.0 + (d / c) ** 2)
+        log.debug("calibration fit %d: cost %.4g, robust scale %.0f mm, scales %s", it, cost, c * 1000,
+                  {g: round(v, 4) for g, v in factors.items()})
+        change = float(np.abs(new - robust).max())
+        robust = new
+        if c == ROBUST_SCALE_M and change < 1e-3:
+            break
+    else:
+        log.warning("%s: the robust weights of the anatomical fit still changed by %.1e after %d iterations",
+                    src, change, MAX_REWEIGHTING)
+    seg_factors = anchor.segment_factors(factors)
+    scaled = scale_model(model, seg_factors)
+    generic_at_static = kin.points(q, pts)
+    point_names = marker_point_names(protocol, model)
+
+    # registered: the static marker; absent (optional) markers keep their scaled generic position,
+    # written under their point name when the model has no such point yet
+    regs = [(m.segment, point_names[m.name], static[j] if present[j] else generic_at_static[j])
+            for j, m in enumerate(protocol.markers)
+            if present[j] or point_names[m.name] not in model.segment(m.segment).points]
+    calibrated = _register(scaled, q, regs)
+
+    kin_c = Kinematics(calibrated)
+    contacts = kin_c.points(q, kin_c.contacts)
+    ellipsoid, k_ell = fit_ellipsoid(calibrated.ellipsoid, contacts)
+    calibrated = dataclasses.replace(calibrated, ellipsoid=ellipsoid)
+    kin_c = Kinematics(calibrated)
+    g_abs = float(np.abs(kin_c.g(q)).max())
+
+    cal_protocol = calibrated_protocol(protocol, calibrated, point_names=point_names)
+    residual = _calibration_residuals(kin_c, cal_protocol, targets, idx, q)
+    markers = []
+    for j, m in enumerate(protocol.markers):
+        p = point_names[m.name]
+        local = np.array(calibrated.segment(m.segment).points[p], dtype=float)
+        markers.append(MarkerCalibration(
+            name=m.name, segment=m.segment, point=p, local_position_m=local, registered=bool(present[j]),
+            residual_mm=float(residual[j]) if present[j] else float("nan"),
+            generic_offset_mm=float(np.linalg.norm(generic_at_static[j] - static[j]) * 1000) if present[j] else float("nan"),
+            fit_weight=float(robust[j]) if present[j] else 0.0))
+    report = CalibrationReport(
+        source=trajectories.source, frames=(window.start, window.stop, window.step), frames_chosen_automatically=auto,
+        rate_hz=float(trajectories.rate_hz), body_mass_kg=float(model.body_mass_kg), generic_model=model.source or model.name,
+        protocol=protocol.source or protocol.name,
+        scale_factors={s: float(v) for s, v in seg_factors.items()}, thorax_scale_measured=st is not None,
+        static_q_rad=q.copy(), coordinate_names=model.coordinate_names,
+        ellipsoid_centre_m=np.array(ellipsoid.centre_m), ellipsoid_radii_m=np.array(ellipsoid.radii_m),
+        ellipsoid_scale=k_ell, constraint_abs=g_abs, markers=tuple(markers), fit_iterations=it,
+        window_motion_mm={m.name: float(spread[j] * 1000) for j, m in enumerate(protocol.markers) if present[j]},
+        static_pose_at_limit_deg=_at_limit(q, model))
+    stem = Path(trajectories.source).stem if trajectories.source else "subject"
+    calibrated = dataclasses.replace(
+        calibrated, name=f"{model.name}_calibrated_{stem}",
+        source=f"{model.source or model.name} calibrated on {src} frames {window.start}:{window.stop}",
+        metadata={**dict(model.metadata), "calibration": report.to_dict(), "generic_source": model.source})
+    log.info("%s: calibrated on frames %d:%d; residual mean %.2f mm; generic offsets mean %.1f mm",
+             src, window.start, window.stop, report.mean_residual_mm,
+             float(np.mean(list(report.generic_offset_mm.values()))))
+    return calibrated, report
+
+
+def _calibration_residuals(kin: Kinematics, protocol: Protocol, targets: MarkerTargets, idx: list[int],
+                           q_static: np.ndarray) -> np.ndarray:
+    """Per-marker RMS (mm) over (at most RESIDUAL_FRAMES of) the calibration frames, each frame
+    solved with the constrained LS on the calibrated model."""
+    sel = np.array(idx)
+    if sel.size > RESIDUAL_FRAMES:
+        sel = sel[np.unique(np.linspace(0, sel.size - 1, RESIDUAL_FRAMES).round().astype(int))]
+    pts = tracked_points(kin, protocol)
+    tgt = targets.positions_m[sel]
+    dt = float(np.median(np.diff(targets.time_s))) if targets.n_frames > 1 else 1.0
+    q, _, _ = solve_positions(kin, pts, tgt, protocol.weights, q_start=q_static, options=LSOptions(), frame_dt=dt)
+    d = np.linalg.norm(kin.points(q, pts) - tgt, axis=2) * 1000.0
+    return np.sqrt(_nanmean(d * d, axis=0))
+

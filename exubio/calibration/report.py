@@ -1,0 +1,152 @@
+"""What a calibration fitted and how well: typed results, their plain-data form and a text table."""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class MarkerCalibration:
+    """One protocol marker's calibration.
+
+    point: the model point (on ``segment``) that now holds the marker's registered position.
+    local_position_m: (3,) that position in the calibrated segment frame (m).
+    registered: False when the marker had no sample in the calibration frames (optional marker):
+        it keeps its scaled generic position and has no residual.
+    residual_mm: RMS over the calibration frames of |model point - marker| on the calibrated
+        model, each frame solved with the constrained LS (NaN when not registered).
+    generic_offset_mm: |registered - scaled generic position| (the scaled generic model's static
+        residual). fit_weight: the marker's robust weight in the anatomical fit (0..1].
+    """
+
+    name: str
+    segment: str
+    point: str
+    local_position_m: np.ndarray
+    registered: bool
+    residual_mm: float
+    generic_offset_mm: float
+    fit_weight: float
+
+
+@dataclass(frozen=True)
+class CalibrationReport:
+    """What a calibration fitted and how well (see the module docstring).
+
+    frames: (start, stop, step) of the frames whose mean is the static pose.
+    scale_factors: segment -> isotropic scale factor (segments of a group share it).
+    static_q_rad: (m,) the static pose. ellipsoid_scale: the fitted common radii factor (after
+    the thorax scale). constraint_abs: max |g| at the static pose (the ellipsoid fit's residual).
+    """
+
+    source: str
+    frames: tuple[int, int, int]
+    frames_chosen_automatically: bool
+    rate_hz: float
+    body_mass_kg: float
+    generic_model: str
+    protocol: str
+    scale_factors: Mapping[str, float]
+    thorax_scale_measured: bool
+    static_q_rad: np.ndarray
+    coordinate_names: tuple[str, ...]
+    ellipsoid_centre_m: np.ndarray
+    ellipsoid_radii_m: np.ndarray
+    ellipsoid_scale: float
+    constraint_abs: float
+    markers: tuple[MarkerCalibration, ...]
+    fit_iterations: int
+    window_motion_mm: Mapping[str, float] = dataclasses.field(default_factory=dict)  # RMS motion of
+    # each marker about its mean over the calibration frames: a "static" window that moves
+    static_pose_at_limit_deg: Mapping[str, float] = dataclasses.field(default_factory=dict)  # coordinate ->
+    # its static value (deg) where that lies at (within AT_LIMIT_TOLERANCE_RAD of) or beyond its range
+
+    @property
+    def residual_mm(self) -> dict[str, float]:
+        """Calibration residual per registered marker (mm)."""
+        return {m.name: m.residual_mm for m in self.markers if m.registered}
+
+    @property
+    def mean_residual_mm(self) -> float:
+        vals = list(self.residual_mm.values())
+        return float(np.mean(vals)) if vals else float("nan")
+
+    @property
+    def generic_offset_mm(self) -> dict[str, float]:
+        return {m.name: m.generic_offset_mm for m in self.markers if m.registered}
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data (mm, deg) for the model file's ``calibration`` section and JSON."""
+        reg = [m for m in self.markers if m.registered]
+        res = np.array([m.residual_mm for m in reg])
+        off = np.array([m.generic_offset_mm for m in reg])
+        worst = reg[int(np.argmax(res))].name if reg else None
+        return {
+            "method": "exubio.calibration: anatomical fit (pose + segment scales, robust) -> registration -> ellipsoid",
+            "source": self.source,
+            "frames": {"start": self.frames[0], "stop": self.frames[1], "step": self.frames[2],
+                       "n_frames": len(range(*self.frames)), "chosen_automatically": self.frames_chosen_automatically,
+                       "rate_hz": self.rate_hz},
+            "body_mass_kg": self.body_mass_kg,
+            "generic_model": self.generic_model,
+            "protocol": self.protocol,
+            "scale_factors": {k: round(float(v), 6) for k, v in self.scale_factors.items()},
+            "thorax_scale_measured": self.thorax_scale_measured,
+            "static_pose_deg": {n: round(float(np.degrees(v)), 4)
+                                for n, v in zip(self.coordinate_names, self.static_q_rad)},
+            "ellipsoid": {"centre_mm": [round(float(v) * 1000, 4) for v in self.ellipsoid_centre_m],
+                          "radii_mm": [round(float(v) * 1000, 4) for v in self.ellipsoid_radii_m],
+                          "radii_scale_fitted": round(float(self.ellipsoid_scale), 6),
+                          "max_abs_g_at_static_pose": float(self.constraint_abs)},
+            "residual_mm": {
+                "definition": "RMS over the calibration frames of |model point - marker|, calibrated model, "
+                              "constrained LS per frame",
+                "mean": float(res.mean()) if reg else None,
+                "max": float(res.max()) if reg else None,
+                "max_marker": worst,
+            },
+            "generic_offset_mm": {
+                "definition": "|registered - scaled generic model point| at the static pose "
+                              "(the scaled generic model's static residual)",
+                "mean": float(off.mean()) if reg else None,
+                "max": float(off.max()) if reg else None,
+            },
+            "markers": {
+                m.name: {
+                    "segment": m.segment,
+                    "point": m.point,
+                    "registered": m.registered,
+                    "residual_mm": None if not m.registered else round(float(m.residual_mm), 3),
+                    "generic_offset_mm": None if not m.registered else round(float(m.generic_offset_mm), 3),
+                    "fit_weight": round(float(m.fit_weight), 4),
+                    "local_position_mm": [round(float(v) * 1000, 4) for v in m.local_position_m],
+                }
+                for m in self.markers
+            },
+            "fit_iterations": self.fit_iterations,
+            "window_motion_mm": {k: round(float(v), 3) for k, v in self.window_motion_mm.items()},
+            "static_pose_at_limit_deg": {k: round(float(v), 3) for k, v in self.static_pose_at_limit_deg.items()},
+        }
+
+
+
+def format_report(report: CalibrationReport, /) -> str:
+    """A short text table of the calibration for the terminal."""
+    lines = [f"calibration of {report.source or 'trial'}, frames {report.frames[0]}:{report.frames[1]}"
+             + (" (still stretch found automatically)" if report.frames_chosen_automatically else "")]
+    lines.append("scale factors: " + ", ".join(f"{k} {v:.3f}" for k, v in report.scale_factors.items()))
+    lines.append(f"ellipsoid: centre {np.round(report.ellipsoid_centre_m * 1000, 1).tolist()} mm, radii "
+                 f"{np.round(report.ellipsoid_radii_m * 1000, 1).tolist()} mm, |g| at the static pose "
+                 f"{report.constraint_abs:.1e}")
+    lines.append(f"{'marker':<12} {'segment':<9} {'residual mm':>11} {'generic offset mm':>18} {'fit weight':>10}")
+    for m in report.markers:
+        if m.registered:
+            lines.append(f"{m.name:<12} {m.segment:<9} {m.residual_mm:>11.2f} {m.generic_offset_mm:>18.1f} {m.fit_weight:>10.2f}")
+        else:
+            lines.append(f"{m.name:<12} {m.segment:<9} {'not in the calibration frames: scaled generic position':>41}")
+    lines.append(f"calibration residual: mean {report.mean_residual_mm:.2f} mm (RMS over the calibration frames, "
+                 f"calibrated model, constrained LS per frame)")
+    return "\n".join(lines)
