@@ -90,6 +90,7 @@ __all__ = [
     "LUDEWIG_2009",
     "Motion",
     "SimulatedTrial",
+    "rhythm_poses",
     "rhythm_table",
     "scapula_isb_angles",
     "simulate_trial",
@@ -109,8 +110,12 @@ __all__ = [
 # X - upward rotation, Z + posterior tilt.
 LUDEWIG_HT_DEG = (30.0, 45.0, 60.0, 75.0, 90.0, 105.0, 120.0)
 LUDEWIG_2009: dict[str, dict[str, tuple[float, ...]]] = ludewig2009_at(
-    LUDEWIG_HT_DEG, ("SC_protraction", "SC_elevation", "SC_rotation", "ST_protraction", "ST_medRotation", "ST_tilt"))
-# frontal = coronal-plane abduction, sagittal = flexion; read from exubio/data/ludewig2009.csv
+    LUDEWIG_HT_DEG, ("SC_protraction", "SC_elevation", "SC_rotation", "ST_protraction", "ST_medRotation", "ST_tilt"),
+    planes=("frontal", "scapular", "sagittal"))
+# frontal = coronal-plane abduction, scapular = scapular-plane abduction (Ludewig: 40 deg anterior
+# to the coronal plane), sagittal = flexion; read from exubio/data/ludewig2009.csv
+SCAPULAR_PLANE_DEG = 40.0
+PLANE_OF = {"abduction": "frontal", "scaption": "scapular", "flexion": "sagittal", "sier": "frontal"}
 # model SC coordinate <- (Ludewig column, sign)
 _RHYTHM_MAP = {
     "sc_protraction": ("SC_protraction", +1.0),
@@ -146,11 +151,12 @@ _FITTED = "ac_posterior_tilt"  # the scapular rotation the constraints leave fre
 class Motion(str, enum.Enum):
     ABDUCTION = "abduction"  # coronal-plane elevation cycles
     FLEXION = "flexion"  # sagittal-plane elevation cycles
+    SCAPTION = "scaption"  # scapular-plane elevation cycles (40 deg anterior to the coronal plane)
     SIER = "sier"  # simulated internal-external rotation (paper)
 
     @classmethod
     def parse(cls, value: "Motion | str") -> "Motion":
-        """A Motion from itself or its name (case-insensitive, 'abduction', 'flexion', 'sier')."""
+        """A Motion from itself or its name (case-insensitive, 'abduction', 'flexion', 'scaption', 'sier')."""
         if isinstance(value, cls):
             return value
         text = str(value).strip().lower().replace("-", "_")
@@ -204,6 +210,17 @@ class _Signal:
             xd += a * w * np.cos(arg)
             xdd -= a * w * w * np.sin(arg)
         return x, xd, xdd
+
+
+def elevation_axis(motion: Motion) -> np.ndarray:
+    """The thorax-frame axis the humerus is elevated about: -X (coronal), +Z (sagittal), and for
+    the scapular plane the axis of the plane SCAPULAR_PLANE_DEG anterior to the coronal one."""
+    if motion is Motion.FLEXION:
+        return np.array([0.0, 0.0, 1.0])
+    if motion is Motion.SCAPTION:
+        a = np.radians(SCAPULAR_PLANE_DEG)
+        return np.array([-np.cos(a), 0.0, np.sin(a)])
+    return np.array([-1.0, 0.0, 0.0])
 
 
 def _cycle(low: float, high: float, w: float) -> _Signal:
@@ -348,6 +365,34 @@ def _girdle_calibration(kin: Kinematics, splines: dict[str, CubicSpline], free: 
             CubicSpline(grid, q[:, free[0]]), CubicSpline(grid, q[:, free[1]]), table)
 
 
+def rhythm_poses(model: Model, plane: str, ht_deg: np.ndarray, /) -> np.ndarray:
+    """Postures (n, m) of the shoulder girdle on Ludewig's rhythm in ``plane`` ('frontal',
+    'scapular', 'sagittal') at HT elevations ``ht_deg``, WITHOUT the ellipsoid constraint: the
+    clavicle turned by Ludewig's SC changes (as in the simulation) and the scapula by all three of
+    Ludewig's ST changes, applied to the model's reference ISB scapula frame (scapula_isb_angles).
+    Arm coordinates zero. The contact points of these postures are what a thorax ellipsoid must
+    carry (``exubio.calibration.ellipsoid.fit_ellipsoid_to_points``)."""
+    from exubio.angles import rotation_from_euler
+
+    kin = Kinematics(model)
+    splines = _sc_in_isb_frame(kin, _rhythm_splines(plane))
+    th = np.radians(np.asarray(ht_deg, dtype=float))
+    names = model.coordinate_names
+    q = np.zeros((th.size, len(names)))
+    for c in _RHYTHM_MAP:
+        q[:, names.index(c)] = splines[c](th)
+    ref = scapula_isb_angles(kin, np.zeros(len(names)))
+    A0 = rotation_from_euler(ref, "YXZ")  # ISB scapula frame at q = 0 (scapula axes = thorax axes)
+    delta = np.stack([splines[c](th) for c in _ST_COLUMNS], axis=-1)
+    R_scap = rotation_from_euler(ref + delta, "YXZ") @ A0.T
+    fr = kin.frames(q)
+    R_all = fr.R.copy()
+    R_all[:, model.segment_index("scapula")] = R_scap
+    ac = [names.index(c) for c in model.segment("scapula").joint.coordinates]
+    q[:, ac] = kin.coordinates_from_rotations(R_all)[:, ac]
+    return q
+
+
 RHYTHM_TABLE_COLUMNS = (
     "ht_elevation", "sc_protraction", "sc_elevation", "sc_posterior_rotation", "ac_protraction",
     "ac_upward_rotation", "ac_posterior_tilt", "model_st_internal_rotation", "model_st_x", "model_st_tilt",
@@ -361,7 +406,7 @@ def rhythm_table(model: Model, motion: Motion | str = Motion.ABDUCTION, /) -> tu
     ``*_st_*`` are changes from 0 deg of the ISB scapulothoracic angles (``scapula_isb_angles``;
     X negative = upward rotation) of the model and of Ludewig et al. 2009."""
     kin = Kinematics(model)
-    plane = "sagittal" if Motion.parse(motion) is Motion.FLEXION else "frontal"
+    plane = PLANE_OF[Motion.parse(motion).value]
     free = np.array([model.coordinate_names.index(c) for c in _FREE])
     return RHYTHM_TABLE_COLUMNS, _girdle_calibration(kin, _sc_in_isb_frame(kin, _rhythm_splines(plane)), free)[3]
 
@@ -405,7 +450,7 @@ def _true_motion(kin: Kinematics, motion: Motion, t: np.ndarray):
     q, qd, qdd = np.zeros((n, m)), np.zeros((n, m)), np.zeros((n, m))
     free = np.array([ix[c] for c in _FREE])
     w = 2.0 * np.pi / CYCLE_S
-    plane = "sagittal" if motion is Motion.FLEXION else "frontal"
+    plane = PLANE_OF[motion.value]
     splines = _sc_in_isb_frame(kin, _rhythm_splines(plane))
     fit_spline, f0_spline, f1_spline, _ = _girdle_calibration(kin, splines, free)
     d = np.radians
@@ -416,9 +461,9 @@ def _true_motion(kin: Kinematics, motion: Motion, t: np.ndarray):
         elev_axis = np.array([-1.0, 0.0, 0.0])
     else:
         th, thd, thdd = _cycle(d(ELEVATION_RANGE_DEG[0]), d(ELEVATION_RANGE_DEG[1]), w).eval(t)
-        ext = d(20.0) if motion is Motion.ABDUCTION else d(10.0)
+        ext = d(10.0) if motion is Motion.FLEXION else d(20.0)
         psi, psid, psidd = _cycle(0.0, -ext, w).eval(t)  # external axial rotation with elevation
-        elev_axis = np.array([-1.0, 0.0, 0.0]) if motion is Motion.ABDUCTION else np.array([0.0, 0.0, 1.0])
+        elev_axis = elevation_axis(motion)
 
     # shoulder girdle: rhythm splines of theta(t), chain rule
     for c, sp in [(c, splines[c]) for c in _RHYTHM_MAP] + [(_FITTED, fit_spline)]:

@@ -42,3 +42,38 @@ def fit_ellipsoid(ellipsoid: Ellipsoid, contacts_m: np.ndarray, /, *, tol: float
     return dataclasses.replace(ellipsoid, centre_m=c, radii_m=radii0 * math.exp(logk)), math.exp(logk)
 
 
+
+
+def fit_ellipsoid_to_points(points_m: np.ndarray, /, *, centre_z_m: float | None = 0.0) -> tuple[Ellipsoid, np.ndarray]:
+    """The thorax-axis-aligned ellipsoid through points (n, 3) in the least-squares sense of the
+    radial distance: for each point, |x - c| (1 - 1/sqrt(f)) with f = sum ((x - c)/r)^2 (the
+    distance from the surface along the ray from the centre). ``centre_z_m``: fixed lateral
+    position of the centre (0: on the mid-sagittal plane, a symmetric thorax); None: fitted.
+    Returns the ellipsoid (no contact points) and the residual distances (n,) in m.
+    Used to build the generic model's ellipsoid from the contact points of a published rhythm
+    (``exubio.simulate.rhythm_poses``) and on several static poses."""
+    from scipy.optimize import least_squares
+
+    x = np.asarray(points_m, dtype=float)
+    c0 = x.mean(axis=0)
+    r0 = np.maximum(np.abs(x - c0).max(axis=0), 0.05)
+    free_z = centre_z_m is None
+    if not free_z:
+        c0[2] = centre_z_m
+
+    def unpack(p):
+        c = np.array([p[0], p[1], p[2] if free_z else centre_z_m])
+        return c, np.exp(p[-3:])
+
+    def resid(p):
+        c, r = unpack(p)
+        d = x - c
+        f = np.sqrt(((d / r) ** 2).sum(axis=1))
+        return np.linalg.norm(d, axis=1) * (1.0 - 1.0 / f)
+
+    p0 = np.concatenate([c0[:3] if free_z else c0[:2], np.log(r0)])
+    sol = least_squares(resid, p0, xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=10000)
+    if not sol.success:
+        raise ModelError(f"the ellipsoid fit through {len(x)} points did not converge: {sol.message}")
+    c, r = unpack(sol.x)
+    return Ellipsoid(centre_m=c, radii_m=r, contact_points=()), resid(sol.x)
