@@ -124,7 +124,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     _, _, report = calibrate_file(args.static, protocol_path=args.protocol, model_path=args.model,
                                   body_mass_kg=args.body_mass, frames=parse_frames(args.static_frames),
-                                  out_path=args.out, overwrite=args.overwrite)
+                                  out_path=args.out, overwrite=args.overwrite, functional_path=args.functional)
     print(format_report(report))
     print(f"wrote {args.out}")
     return EXIT_OK
@@ -148,11 +148,14 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     from exubio.pipeline import calibrate_session
 
     model_path, extra = args.model, {}
+    if args.functional and not args.static:
+        raise InputError(f"--functional {args.functional}: a functional trial refines the calibration on a static "
+                         f"trial; give --static STATIC as well")
     if args.static:
         model_file, report, calibration = calibrate_session(args.static, args.out, Path(args.static).stem,
                                                            protocol_path=args.protocol, model_path=args.model,
                                                            body_mass_kg=args.body_mass, frames_text=args.static_frames,
-                                                           overwrite=args.overwrite)
+                                                           overwrite=args.overwrite, functional_path=args.functional)
         if not args.quiet:
             from exubio.calibration import format_report
 
@@ -316,6 +319,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--overwrite", action="store_true", help="replace earlier results in --out")
     r.add_argument("--no-report", action="store_true", help="skip the per-trial PDF/PNG report")
     r.add_argument("--static", help="static trial: calibrate the model to the subject first (once, for every trial)")
+    r.add_argument("--functional", metavar="TRIAL", help="movement trial of the same session (arm moved in several planes): glenohumeral centre by SCoRE "
+                        "(Ehrig et al. 2006) instead of from the generic model; not used, with the reason, if its "
+                        "motion does not determine it")
     r.add_argument("--static-frames", help="A:B frames used for the calibration (of --static, or of each trial "
                    "itself when there is no static trial)")
     r.add_argument("--gravity", action="store_true",
@@ -329,6 +335,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--model", help="generic model YAML (default: models/upper_extremity.yaml)")
     c.add_argument("--body-mass", type=float, help="body mass, kg")
     c.add_argument("--static-frames", help="A:B frames to use (default: the longest still stretch)")
+    c.add_argument("--functional", metavar="TRIAL", help="movement trial of the same session (arm moved in several planes): glenohumeral centre by SCoRE "
+                        "(Ehrig et al. 2006) instead of from the generic model; not used, with the reason, if its "
+                        "motion does not determine it")
     c.add_argument("--out", required=True, help="MODEL.yaml to write")
     c.add_argument("--overwrite", action="store_true", help="replace an existing MODEL.yaml")
     c.set_defaults(func=cmd_calibrate)

@@ -21,7 +21,7 @@ from exubio.io import results
 from exubio.io.trial import read_trial
 from exubio.model import DEFAULT_MODEL, load_model
 from exubio.preprocess import prepare_targets
-from exubio.protocol import load_protocol
+from exubio.protocol import check_landmarks, load_protocol
 from exubio.resources import shipped_file
 from exubio.types import MarkerTargets, Model, Protocol, Reconstruction, Trajectories
 
@@ -53,9 +53,10 @@ class TrialInputs:
 def protocol_for_model(model: Model, protocol_path: str | Path | None = None, /) -> Protocol:
     """Load a protocol against a model; a calibrated model rebinds the markers to the points the
     calibration registered for them."""
-    protocol = load_protocol(protocol_path or DEFAULT_PROTOCOL, segments=model.segment_names,
-                             model_points={s.name: dict(s.points) for s in model.segments},
+    points = {s.name: dict(s.points) for s in model.segments}
+    protocol = load_protocol(protocol_path or DEFAULT_PROTOCOL, segments=model.segment_names, model_points=points,
                              coordinates=model.coordinate_names)
+    check_landmarks(protocol, points)
     if model.metadata.get("calibration"):
         from exubio.calibration import calibrated_protocol
 
@@ -252,11 +253,13 @@ def static_checks(static_path: str | Path, /, *, protocol_path: str | Path | Non
 def calibrate_file(static_path: str | Path, /, *, protocol_path: str | Path | None = None,
                    model_path: str | Path | None = None, body_mass_kg: float | None = None,
                    frames: slice | None = None, out_path: str | Path | None = None,
-                   overwrite: bool = False):
+                   overwrite: bool = False, functional_path: str | Path | None = None):
     """Everything ``exubio calibrate`` does: read the trial, the generic model and the protocol,
     calibrate (``exubio.calibration.calibrate_model``, a pure step), and (with ``out_path``) write
     the calibrated model YAML. Returns (calibrated model, the protocol bound to it, the
-    CalibrationReport). An existing ``out_path`` is replaced only with ``overwrite``."""
+    CalibrationReport). An existing ``out_path`` is replaced only with ``overwrite``.
+    ``functional_path``: a movement trial of the same session for a functional (SCoRE)
+    glenohumeral centre."""
     from exubio.calibration import calibrate_model, calibrated_protocol
     from exubio.model import save_model
 
@@ -264,7 +267,10 @@ def calibrate_file(static_path: str | Path, /, *, protocol_path: str | Path | No
         raise InputError(f"{out_path}: the model file already exists; pass --overwrite to replace it")
     model, protocol = load_model_and_protocol(model_path=model_path, protocol_path=protocol_path,
                                               body_mass_kg=body_mass_kg)
-    calibrated, report = calibrate_model(model, protocol, read_trial(static_path), frames=frames)
+    functional = None
+    if functional_path is not None:
+        functional = prepare_targets(read_trial(functional_path), protocol)
+    calibrated, report = calibrate_model(model, protocol, read_trial(static_path), frames=frames, functional=functional)
     if out_path is not None:
         save_model(calibrated, out_path, calibration=report.to_dict())
     return calibrated, calibrated_protocol(protocol, calibrated), report
@@ -272,7 +278,8 @@ def calibrate_file(static_path: str | Path, /, *, protocol_path: str | Path | No
 
 def calibrate_into(source: str | Path, out_dir: str | Path, stem: str, /, *, protocol_path: str | Path | None = None,
                    model_path: str | Path | None = None, body_mass_kg: float | None = None,
-                   frames_text: str | None = None, overwrite: bool = False):
+                   frames_text: str | None = None, overwrite: bool = False,
+                   functional_path: str | Path | None = None):
     """Calibrate the model to ``source`` (a static trial, or frames of the trial itself) and write
     ``out_dir/<stem>.model.yaml``; returns (model file, CalibrationReport)."""
     from exubio.calibration import parse_frames
@@ -281,7 +288,8 @@ def calibrate_into(source: str | Path, out_dir: str | Path, stem: str, /, *, pro
     model_file = Path(out_dir) / f"{stem}.model.yaml"
     results.prepare_output_dir(out_dir, [model_file.name], overwrite=overwrite)
     model, _, report = calibrate_file(source, protocol_path=protocol_path, model_path=model_path,
-                                      body_mass_kg=body_mass_kg, frames=parse_frames(frames_text))
+                                      body_mass_kg=body_mass_kg, frames=parse_frames(frames_text),
+                                      functional_path=functional_path)
     save_model(model, model_file, calibration=report.to_dict())
     return model_file, report
 
@@ -289,7 +297,8 @@ def calibrate_into(source: str | Path, out_dir: str | Path, stem: str, /, *, pro
 def calibrate_session(source: str | Path, out_dir: str | Path, stem: str, /, *, protocol_path: str | Path | None = None,
                       model_path: str | Path | None = None, body_mass_kg: float | None = None,
                       frames_text: str | None = None, overwrite: bool = False,
-                      reference: bool = True) -> tuple[Path, Any, dict[str, Any]]:
+                      reference: bool = True, functional_path: str | Path | None = None
+                      ) -> tuple[Path, Any, dict[str, Any]]:
     """calibrate_into plus the static trial's label checks: (model file, report, the calibration
     summary for summary.json). With ``reference`` (a static trial apart from the task trials) the
     summary's private ``_reference`` holds the static's pair distances, which the session's trials
@@ -297,7 +306,8 @@ def calibrate_session(source: str | Path, out_dir: str | Path, stem: str, /, *, 
     from exubio.calibration import parse_frames
 
     model_file, report = calibrate_into(source, out_dir, stem, protocol_path=protocol_path, model_path=model_path,
-                                        body_mass_kg=body_mass_kg, frames_text=frames_text, overwrite=overwrite)
+                                        body_mass_kg=body_mass_kg, frames_text=frames_text, overwrite=overwrite,
+                                        functional_path=functional_path)
     frames = parse_frames(frames_text)
     findings, ref_distances = static_checks(source, protocol_path=protocol_path, model_path=model_path,
                                         frames=slice(*report.frames) if frames is not None else None)

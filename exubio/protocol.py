@@ -54,6 +54,8 @@ _MARKER_KEYS = (
     "stiffness_n_per_m",
     "damping_ns_per_m",
     "optional",
+    "landmark",
+    "cluster",
 )
 _FALLBACK_STIFFNESS = 1500.0
 _FALLBACK_DAMPING = 300.0
@@ -150,6 +152,17 @@ def load_protocol(
                     f"{src_of('thorax_frame')}: thorax_frame.{key} is '{label}', which is tracked marker "
                     f"'{tracked_labels[label]}' on segment '{seg}'; thorax landmarks must be on the thorax"
                 )
+
+    clusters: dict[str, list[MarkerSpec]] = {}
+    for m in tracked:
+        if m.cluster is not None:
+            clusters.setdefault(m.cluster, []).append(m)
+    for cname, members in clusters.items():
+        segs = sorted({m.segment for m in members})
+        if len(members) < 3 or len(segs) > 1:
+            raise ProtocolError(
+                f"{src_markers}: cluster '{cname}' has {[m.name for m in members]} on {segs}; a rigid cluster needs "
+                f"at least 3 markers, all on one segment")
 
     held = data.get("hold", []) or []
     if not isinstance(held, list) or not all(isinstance(h, str) for h in held):
@@ -403,6 +416,17 @@ def _parse_marker(
     optional = spec.get("optional", False)
     if not isinstance(optional, bool):
         raise ProtocolError(f"{src}: {where}.optional must be true or false, got {_kind(optional)}")
+    landmark = spec.get("landmark")
+    if landmark is not None:
+        if not isinstance(landmark, str) or not landmark:
+            raise ProtocolError(f"{src}: {where}.landmark must name a model point of '{segment}', got {_kind(landmark)}")
+    cluster = spec.get("cluster")
+    if cluster is not None and (not isinstance(cluster, str) or not cluster):
+        raise ProtocolError(f"{src}: {where}.cluster must be a name shared by the markers of one rigid cluster, "
+                            f"got {_kind(cluster)}")
+    if landmark is not None and cluster is not None:
+        raise ProtocolError(f"{src}: {where} is both a landmark and in cluster '{cluster}'; a cluster marker is "
+                            f"not placed over a landmark, give one of them")
 
     return MarkerSpec(
         name=name,
@@ -412,7 +436,19 @@ def _parse_marker(
         stiffness_n_per_m=stiffness,
         damping_ns_per_m=damping,
         optional=optional,
+        landmark=landmark,
+        cluster=cluster,
     )
+
+
+def check_landmarks(protocol: Protocol, model_points: Mapping[str, Mapping[str, Any]], /) -> None:
+    """ProtocolError naming the file and marker when a marker's ``landmark`` is not a point of its
+    segment in the model (checked against the model a protocol is used with)."""
+    for m in protocol.markers:
+        if m.landmark is not None and m.landmark not in model_points.get(m.segment, {}):
+            raise ProtocolError(f"{protocol.source or protocol.name}: markers.{m.name}.landmark '{m.landmark}' is not a "
+                                f"point of segment '{m.segment}' of the model; its points are "
+                                f"{sorted(model_points.get(m.segment, {}))}")
 
 
 def _model_point(

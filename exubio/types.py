@@ -239,6 +239,8 @@ class MarkerSpec:
     stiffness_n_per_m: float = 1500.0
     damping_ns_per_m: float = 300.0
     optional: bool = False
+    landmark: str | None = None  # the bony landmark (model point of ``segment``) the marker is placed over
+    cluster: str | None = None  # the rigid marker cluster it belongs to (e.g. an acromion cluster)
 
 
 @dataclass(frozen=True)

@@ -496,5 +496,5 @@ def test_read_protocol_mapping_merges_the_extends_chain(tmp_path):
     from exubio.protocol import read_protocol_mapping
 
     data = read_protocol_mapping(SESSION_EXAMPLE)
-    assert data["markers"]["RADIUS"] == {"segment": "radius", "point": "RADIUS"}
+    assert data["markers"]["RADIUS"] == {"segment": "radius", "point": "RADIUS", "landmark": "RS"}
     assert data["relabel"] == {"RADIUS": "ULNA", "ULNA": "RADIUS"} and "extends" not in data

@@ -65,6 +65,7 @@ from typing import Mapping
 import numpy as np
 
 from exubio.calibration.ellipsoid import fit_ellipsoid
+from exubio.calibration.joint_centres import functional_gh, gh_joint
 from exubio.calibration.posefit import (ARM_PRIOR_M2_PER_RAD2, GIRDLE_PRIOR_M2_PER_RAD2, GIRDLE_SEGMENTS,
     MAX_REWEIGHTING, ROBUST_SCALE_M, _Anchor, _at_limit, _fit_pose, _start_postures)
 from exubio.calibration.registration import _register, calibrated_protocol, marker_point_names
@@ -85,14 +86,100 @@ RESIDUAL_FRAMES = 60  # the calibration residual is measured on at most this man
 
 
 
+TECHNICAL_POSE_WEIGHT = 0.1
+"""Relative weight in the static-pose fit of a marker that is not placed over a bony landmark
+(protocol key ``landmark``), when the protocol declares landmarks: where such a marker sits on
+its segment varies between labs and subjects (the upper_limb_21 lab puts ARM and DELT 75 mm
+nearer the elbow on one subject than on another; ../shared/data bioMod against martin_statique),
+so it must not decide the pose; it only breaks ties where the landmarks leave the pose open.
+The members of a rigid cluster (key ``cluster``) share that weight, the cluster counting as one
+marker."""
+
+
+def pose_weights(protocol: Protocol, /) -> np.ndarray:
+    """Each protocol marker's relative weight in the static-pose fit: 1 for landmark markers,
+    TECHNICAL_POSE_WEIGHT for the others (split among a cluster's members); all 1 when the
+    protocol declares no landmark."""
+    markers = protocol.markers
+    if not any(m.landmark for m in markers):
+        return np.ones(len(markers))
+    size = {}
+    for m in markers:
+        if m.cluster:
+            size[m.cluster] = size.get(m.cluster, 0) + 1
+    return np.array([1.0 if m.landmark else TECHNICAL_POSE_WEIGHT / size.get(m.cluster, 1) for m in markers])
+
+
+def _robust_fit(anchor: _Anchor, q: np.ndarray, factors: dict[str, float], w: np.ndarray, static: np.ndarray,
+                src: str) -> tuple[np.ndarray, dict[str, float], np.ndarray, int]:
+    """Iteratively reweighted joint fit of pose and scales; the robust scale is annealed from
+    100 mm to ROBUST_SCALE_M so that the first, rough poses do not discard markers a better pose
+    would fit. Returns (q, factors, robust weights, iterations)."""
+    robust = np.ones(len(w))
+    it, change = 0, 0.0
+    for it in range(1, MAX_REWEIGHTING + 1):
+        q, factors, cost = anchor.fit(q, factors, w * robust)
+        kin, pts = anchor.points(factors)
+        d = np.linalg.norm(kin.points(q, pts) - np.where(np.isnan(static), 0, static), axis=1)
+        c = max(ROBUST_SCALE_M, 0.1 * 0.7 ** (it - 1))
+        new = 1.0 / (1.0 + (d / c) ** 2)
+        log.debug("calibration fit %d: cost %.4g, robust scale %.0f mm, scales %s", it, cost, c * 1000,
+                  {g: round(v, 4) for g, v in factors.items()})
+        change = float(np.abs(new - robust).max())
+        robust = new
+        if c == ROBUST_SCALE_M and change < 1e-3:
+            break
+    else:
+        log.warning("%s: the robust weights of the anatomical fit still changed by %.1e after %d iterations",
+                    src, change, MAX_REWEIGHTING)
+    return q, factors, robust, it
+
+
+def _use_functional_gh(anchor: _Anchor, model: Model, protocol: Protocol, functional: MarkerTargets,
+                       static: np.ndarray, q: np.ndarray, factors: dict[str, float], w: np.ndarray, src: str,
+                       robust: np.ndarray, it: int):
+    """Put the model's glenohumeral centre where SCoRE finds it in the functional trial (at the
+    static pose, relative to the scapula of the anatomical fit) and fit pose and scales again.
+    A functional trial whose motion does not determine the centre is reported and not used."""
+    fsrc = functional.source or "functional trial"
+    try:
+        gh_static, fc = functional_gh(model, protocol, functional, static)
+    except InputError as exc:
+        log.warning("%s", exc)
+        return q, factors, robust, it, anchor, model, {"gh": {"used": False, "trial": fsrc, "reason": str(exc)}}
+    humerus = gh_joint(model)
+    seg_factors = anchor.segment_factors(factors)
+    scaled = scale_model(model, seg_factors)
+    fr = Kinematics(scaled).frames(q)
+    ih, ip = model.segment_index(humerus), model.segment_index(model.segment(humerus).parent)
+    gh_fit = fr.p[ih].copy()
+    local = fr.R[ip].T @ (gh_static - fr.p[ip]) / seg_factors[model.segments[ip].name]
+    model = dataclasses.replace(model, segments=tuple(
+        dataclasses.replace(s, joint=dataclasses.replace(s.joint, centre_m=local)) if s.name == humerus else s
+        for s in model.segments))
+    anchor = dataclasses.replace(anchor, model=model)
+    q, factors, robust, it = _robust_fit(anchor, q, factors, w, static, src)
+    info = {"gh": {"used": True, "trial": fsrc, **fc.to_dict(),
+                   "centre_static_mm": [round(float(v) * 1000, 2) for v in gh_static],
+                   "shift_from_marker_fit_mm": round(float(np.linalg.norm(gh_static - gh_fit)) * 1000, 2)}}
+    log.info("%s: glenohumeral centre from SCoRE on %s, %.1f mm from the marker fit's", src, fsrc,
+             info["gh"]["shift_from_marker_fit_mm"])
+    return q, factors, robust, it, anchor, model, info
+
+
 def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories, /, *,
                     frames: slice | None = None, scale_groups: Mapping[str, str] = DEFAULT_SCALE_GROUPS,
-                    targets: MarkerTargets | None = None) -> tuple[Model, CalibrationReport]:
+                    targets: MarkerTargets | None = None, functional: MarkerTargets | None = None
+                    ) -> tuple[Model, CalibrationReport]:
     """Calibrate ``model`` (generic) to the subject of ``trajectories`` (see the module docstring).
 
     frames: the frames of the trial that hold the static pose (their mean is used); None = the
         longest still stretch. targets: the trial's prepared targets, if already computed with
-        ``prepare_targets(trajectories, protocol)``.
+        ``prepare_targets(trajectories, protocol)``. functional: the prepared targets of a
+        movement trial of the same session (same protocol): the glenohumeral centre is then
+        found by SCoRE (``exubio.calibration.joint_centres``) instead of from the generic
+        model's place relative to the scapula markers; a trial whose motion does not determine
+        it is reported (``report.functional``) and not used.
     Returns the calibrated model (its ``metadata["calibration"]`` holds ``report.to_dict()``) and
     the report. The protocol's markers must reference the model (segment names); reconstruct with
     ``calibrated_protocol(protocol, calibrated)`` or reload the protocol with the calibrated
@@ -128,7 +215,7 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
         if g not in carriers:
             fixed.setdefault(g, 1.0)
     local_generic = np.array([np.asarray(m.local_position_m, dtype=float) for m in protocol.markers])
-    w_protocol = np.where(present, protocol.weights, 0.0)
+    w_protocol = np.where(present, protocol.weights, 0.0) * pose_weights(protocol)
     coord_segment = Kinematics(model).coordinate_segment
     prior = np.array([GIRDLE_PRIOR_M2_PER_RAD2 if names[coord_segment[j]] in GIRDLE_SEGMENTS else ARM_PRIOR_M2_PER_RAD2
                       for j in range(model.n_coordinates)])
@@ -142,25 +229,12 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
     kin, pts = anchor.points(factors)
     qs, cost = _fit_pose(kin, pts, static, w_protocol, _start_postures(model), prior, limits=limits)
     q = qs[int(np.argmin(cost))]
-    # iteratively reweighted joint fit; the robust scale is annealed from 100 mm to ROBUST_SCALE_M so
-    # that the first, rough poses do not discard markers a better pose would fit
-    robust = np.ones(len(protocol.markers))
-    it = 0
-    for it in range(1, MAX_REWEIGHTING + 1):
-        q, factors, cost = anchor.fit(q, factors, w_protocol * robust)
-        kin, pts = anchor.points(factors)
-        d = np.linalg.norm(kin.points(q, pts) - np.where(np.isnan(static), 0, static), axis=1)
-        c = max(ROBUST_SCALE_M, 0.1 * 0.7 ** (it - 1))
-        new = 1.0 / (1.0 + (d / c) ** 2)
-        log.debug("calibration fit %d: cost %.4g, robust scale %.0f mm, scales %s", it, cost, c * 1000,
-                  {g: round(v, 4) for g, v in factors.items()})
-        change = float(np.abs(new - robust).max())
-        robust = new
-        if c == ROBUST_SCALE_M and change < 1e-3:
-            break
-    else:
-        log.warning("%s: the robust weights of the anatomical fit still changed by %.1e after %d iterations",
-                    src, change, MAX_REWEIGHTING)
+    q, factors, robust, it = _robust_fit(anchor, q, factors, w_protocol, static, src)
+    functional_info: dict = {}
+    if functional is not None:
+        q, factors, robust, it, anchor, model, functional_info = _use_functional_gh(
+            anchor, model, protocol, functional, static, q, factors, w_protocol, src, robust, it)
+    kin, pts = anchor.points(factors)
     seg_factors = anchor.segment_factors(factors)
     scaled = scale_model(model, seg_factors)
     generic_at_static = kin.points(q, pts)
@@ -200,7 +274,9 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
         ellipsoid_centre_m=np.array(ellipsoid.centre_m), ellipsoid_radii_m=np.array(ellipsoid.radii_m),
         ellipsoid_scale=k_ell, constraint_abs=g_abs, markers=tuple(markers), fit_iterations=it,
         window_motion_mm={m.name: float(spread[j] * 1000) for j, m in enumerate(protocol.markers) if present[j]},
-        static_pose_at_limit_deg=_at_limit(q, model))
+        static_pose_at_limit_deg=_at_limit(q, model),
+        functional=functional_info, joint_centres_mm=_joint_centres_mm(calibrated, q),
+        landmark_offsets_mm=_landmark_offsets_mm(calibrated, protocol, point_names, present))
     stem = Path(trajectories.source).stem if trajectories.source else "subject"
     calibrated = dataclasses.replace(
         calibrated, name=f"{model.name}_calibrated_{stem}",
@@ -210,6 +286,27 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
              src, window.start, window.stop, report.mean_residual_mm,
              float(np.mean(list(report.generic_offset_mm.values()))))
     return calibrated, report
+
+
+def _joint_centres_mm(model: Model, q: np.ndarray) -> dict[str, list[float]]:
+    """Every joint centre (named by its joint) in the thorax frame at the static pose (mm)."""
+    p = Kinematics(model).frames(q).p
+    return {s.joint.name: [round(float(v) * 1000, 2) for v in p[i]] for i, s in enumerate(model.segments)
+            if s.joint is not None}
+
+
+def _landmark_offsets_mm(model: Model, protocol: Protocol, point_names: Mapping[str, str],
+                         present: np.ndarray) -> dict[str, float]:
+    """Distance (mm) of each registered landmark marker from the landmark it is placed over, on the
+    calibrated model: skin, soft tissue and the marker's radius (about 10-20 mm), unless the
+    marker is misplaced or the static pose is wrong."""
+    out = {}
+    for j, m in enumerate(protocol.markers):
+        if m.landmark and present[j]:
+            pts = model.segment(m.segment).points
+            if m.landmark in pts and point_names[m.name] in pts:
+                out[m.name] = round(float(np.linalg.norm(np.asarray(pts[point_names[m.name]]) - pts[m.landmark])) * 1000, 2)
+    return out
 
 
 def _calibration_residuals(kin: Kinematics, protocol: Protocol, targets: MarkerTargets, idx: list[int],

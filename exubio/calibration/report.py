@@ -63,6 +63,10 @@ class CalibrationReport:
     # each marker about its mean over the calibration frames: a "static" window that moves
     static_pose_at_limit_deg: Mapping[str, float] = dataclasses.field(default_factory=dict)  # coordinate ->
     # its static value (deg) where that lies at (within AT_LIMIT_TOLERANCE_RAD of) or beyond its range
+    functional: Mapping[str, Any] = dataclasses.field(default_factory=dict)  # {"gh": SCoRE summary, or why unused}
+    joint_centres_mm: Mapping[str, list] = dataclasses.field(default_factory=dict)  # joint -> thorax frame, static
+    landmark_offsets_mm: Mapping[str, float] = dataclasses.field(default_factory=dict)  # landmark marker ->
+    # its distance from the landmark it is placed over, on the calibrated model
 
     @property
     def residual_mm(self) -> dict[str, float]:
@@ -129,6 +133,10 @@ class CalibrationReport:
             "fit_iterations": self.fit_iterations,
             "window_motion_mm": {k: round(float(v), 3) for k, v in self.window_motion_mm.items()},
             "static_pose_at_limit_deg": {k: round(float(v), 3) for k, v in self.static_pose_at_limit_deg.items()},
+            "functional": dict(self.functional),
+            "joint_centres_mm": {"definition": "joint centres in the thorax frame at the static pose",
+                                 **{k: list(v) for k, v in self.joint_centres_mm.items()}},
+            "landmark_offsets_mm": {k: round(float(v), 2) for k, v in self.landmark_offsets_mm.items()},
         }
 
 
@@ -149,4 +157,20 @@ def format_report(report: CalibrationReport, /) -> str:
             lines.append(f"{m.name:<12} {m.segment:<9} {'not in the calibration frames: scaled generic position':>41}")
     lines.append(f"calibration residual: mean {report.mean_residual_mm:.2f} mm (RMS over the calibration frames, "
                  f"calibrated model, constrained LS per frame)")
+    if report.joint_centres_mm:
+        lines.append("joint centres at the static pose (thorax frame, mm): " + "; ".join(
+            f"{k} {[round(v, 1) for v in p]}" for k, p in report.joint_centres_mm.items()))
+    if report.landmark_offsets_mm:
+        lines.append("landmark markers, distance from their landmark (mm): " + ", ".join(
+            f"{k} {v:.0f}" for k, v in report.landmark_offsets_mm.items()))
+    gh = (report.functional or {}).get("gh")
+    if gh:
+        if gh.get("used"):
+            lines.append(f"glenohumeral centre: SCoRE on {gh['trial']} ({gh.get('n_frames_used')} frames, rotation range "
+                         f"{gh.get('rotation_range_deg', float('nan')):.0f} deg, RMS {gh.get('rms_mm', float('nan')):.1f} mm), "
+                         f"{gh['shift_from_marker_fit_mm']:.1f} mm from the marker fit's")
+        else:
+            lines.append(f"glenohumeral centre: the functional trial was not used: {gh['reason']}")
+    pose = ", ".join(f"{n} {np.degrees(v):.0f}" for n, v in zip(report.coordinate_names, report.static_q_rad))
+    lines.append(f"static pose (deg): {pose}")
     return "\n".join(lines)
