@@ -185,7 +185,7 @@ def test_a_study_of_several_trials_runs_and_reports_each(tmp_path, trial, jobs, 
 
 @pytest.mark.parametrize("edit,key", [
     (("mass_fraction: 0.028\n", "mass_fraction: abc\n"), "mass_fraction"),
-    (("radii_mm: [100, 200, 160]", "radii_mm: [a, b, c]"), "radii_mm"),
+    (("radii_mm: [79.529541, 130.300894, 122.689519]", "radii_mm: [a, b, c]"), "radii_mm"),
     (("body_mass_kg: 75.0 ", "body_mass_kg: heavy "), "body_mass_kg"),
     (("body_mass_kg: 75.0 ", "body_mass_kg: .nan "), "body_mass_kg"),
     (("range_deg: [-15, 160]", "range_deg: [160, -15]"), "range_deg"),

@@ -221,6 +221,6 @@ def test_unobserved_segments_are_held_at_their_start_posture():
     ls = reconstruct(model, girdle_arm, targets, method="ls")
     for recon in (pf, ls):
         assert np.ptp(recon.q_rad[:, held], axis=0).max() < 1e-6  # PF: held by Exudyn's joint to its tolerance
-        assert np.abs(recon.qd_rad_s[:, held]).max() < 1e-5
+        assert np.abs(recon.qd_rad_s[:, held]).max() < 2e-5  # Exudyn's joint tolerance, under the girdle's loads
     gh = names.index("gh_abduction")
     assert np.sqrt(np.mean(np.rad2deg(pf.q_rad[:, gh] - ls.q_rad[:, gh]) ** 2)) < 0.5

@@ -89,14 +89,16 @@ def test_abduction_elevates_to_120_in_the_coronal_plane_and_the_scapula_moves(mo
     assert axis[top, 2] > 0.8  # lateral
     names = tr.coordinate_names
     span = dict(zip(names, np.degrees(np.ptp(tr.q_true, axis=0))))
-    assert span["sc_posterior_rotation"] > 20.0
-    assert span["sc_protraction"] > 15.0
-    # ac_upward_rotation itself only moves ~4 deg: the clavicle carries most of the scapula's
-    # rotation. The scapula's upward rotation relative to the thorax (ISB, from AA/TS/AI) is the
-    # least-squares fit to Ludewig's that the generic ellipsoid allows: ~16 deg over 10-120 deg
-    # (module docstring, rhythm_table)
+    assert span["sc_posterior_rotation"] > 10.0
+    assert span["sc_protraction"] > 10.0
+    # the clavicle's ISB posterior rotation follows Ludewig's (about 25 deg over 10-120 deg); the
+    # scapula's upward rotation relative to the thorax (ISB, from AA/TS/AI) too: Ludewig's 28 deg
+    # over 30-120 deg, about 36 deg over 10-120 (tests/test_rhythm_geometry.py checks both within 3 deg)
+    from exubio.angles import isb_angles
+
+    assert np.degrees(np.ptp(isb_angles(model, tr.q_true)["SC"][:, 2])) > 20.0
     st = np.degrees(scapula_isb_angles(kin, tr.q_true))
-    assert np.ptp(st[:, 1]) > 15.0
+    assert np.ptp(st[:, 1]) > 30.0
     assert st[top, 1] < st[0, 1]  # X' decreases = upward rotation
     # the scapula markers travel
     ia = tr.trajectories.marker("SCAP_IA")
