@@ -154,16 +154,21 @@ def test_simulate_command_writes_c3d_and_truth(tmp_path):
 @pytest.mark.skipif(not (SHARED / "data" / "c3d").is_dir(), reason="../shared/data absent")
 @pytest.mark.parametrize("name", ["bioptim_exo_martin_statique.c3d", "bioptim_exo_F0_boire_05.c3d"])
 def test_reconstruct_real_c3d_files(tmp_path, name, capsys):
-    """The generic model, not fitted to the subject, leaves markers 40-130 mm from their model
-    points: the result is written but its verdict is 'fail', named by marker, and the exit code 1."""
+    """The generic model, not fitted to the subject, leaves markers 20-130 mm from their model
+    points: the result is written but its verdict is not 'ok' ('fail' with exit code 1 on
+    martin_statique; 'check' on F0_boire_05, whose lab model the generic technical markers come
+    from: 33 mm mean), named by marker."""
     out = tmp_path / "real"
-    assert main(["-q", "reconstruct", str(SHARED / "data" / "c3d" / name), "--method", "ls", "--out", str(out)]) == 1
+    code = main(["-q", "reconstruct", str(SHARED / "data" / "c3d" / name), "--method", "ls", "--out", str(out)])
     summ = json.loads((out / f"{Path(name).stem}.ls.summary.json").read_text())
+    verdict = summ["quality"]["verdict"]
+    assert verdict in ("check", "fail")
+    assert code == (1 if verdict == "fail" else 0)
     assert summ["n_frames"] > 200
     assert summ["constraint_max_abs"] < 1e-8
-    assert summ["quality"]["verdict"] == "fail"
-    assert any(r["code"] == "marker_residual" and r["level"] == "fail" for r in summ["quality"]["reasons"])
-    assert "QUALITY: FAIL" in capsys.readouterr().out
+    assert summ["residual_mm"]["mean"] > 20.0
+    assert any(r["code"] == "marker_residual" and r["level"] == verdict for r in summ["quality"]["reasons"])
+    assert f"QUALITY: {verdict.upper()}" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("jobs", ["1", "2"])

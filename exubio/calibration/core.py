@@ -221,13 +221,14 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
                       for j in range(model.n_coordinates)])
 
     limits = Limits.of(model, protocol, DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD)
+    held = np.array([n in protocol.held_coordinates for n in model.coordinate_names], dtype=bool)
     anchor = _Anchor(model=model, seg_index=seg_index, local_generic=local_generic, target=static,
                      groups=list(dict.fromkeys(group_of.values())), group_of=group_of, fixed=fixed, prior_q=prior,
-                     limits=limits)
+                     limits=limits, held=held)
     factors = {g: fixed.get(g, 1.0) for g in anchor.groups}
     # start posture: several at once, pose only, generic scale factors
     kin, pts = anchor.points(factors)
-    qs, cost = _fit_pose(kin, pts, static, w_protocol, _start_postures(model), prior, limits=limits)
+    qs, cost = _fit_pose(kin, pts, static, w_protocol, _start_postures(model), prior, limits=limits, held=held)
     q = qs[int(np.argmin(cost))]
     q, factors, robust, it = _robust_fit(anchor, q, factors, w_protocol, static, src)
     functional_info: dict = {}

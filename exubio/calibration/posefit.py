@@ -42,7 +42,7 @@ def _start_postures(model: Model) -> np.ndarray:
 
 def _fit_pose(kin: Kinematics, points: PointSet, target: np.ndarray, w: np.ndarray, q_starts: np.ndarray,
               prior: np.ndarray, *, limits: Limits | None = None, max_iterations: int = 300,
-              tol: float = 1e-10) -> tuple[np.ndarray, np.ndarray]:
+              tol: float = 1e-10, held: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """min_q sum w_i |r_i(q) - m_i|^2 + sum_j prior_j q_j^2 + kappa sum_j v_j(q)^2 (the joint
     ranges, exubio.ranges) for every start (S, m) at once, Levenberg-Marquardt; returns (q (S, m),
     cost (S,))."""
@@ -62,6 +62,8 @@ def _fit_pose(kin: Kinematics, points: PointSet, target: np.ndarray, w: np.ndarr
         if a.size == 0:
             break
         J = kin.point_jacobian(q[a], points)  # (A, k, 3, m)
+        if held is not None:
+            J = J * ~held  # held coordinates stay at their start value
         Jw = J * w[None, :, None, None]
         H = np.einsum("akcm,akcn->amn", Jw, J) + np.eye(m) * prior
         grad = np.einsum("akcm,akc->am", Jw, e[a]) + prior * q[a]
@@ -109,6 +111,7 @@ class _Anchor:
     fixed: dict[str, float]  # groups whose factor is not fitted
     prior_q: np.ndarray  # (m,) m^2/rad^2
     limits: Limits | None = None  # the joint ranges (the static pose must respect them too)
+    held: np.ndarray | None = None  # (m,) bool: coordinates the protocol holds (kept at 0, as the methods do)
 
     def __post_init__(self) -> None:
         self.kin = Kinematics(self.model)
@@ -144,6 +147,8 @@ class _Anchor:
         pivots = (O @ s_all)[self.kin.coordinate_segment]  # (m, 3): each coordinate turns about its joint centre
         cols = np.cross(fr.axes[None, :, :], r[:, None, :] - pivots[None, :, :])  # (k, m, 3)
         Jq = np.swapaxes(cols * self.kin.affects[self.seg_index][:, :, None], 1, 2)
+        if self.held is not None:
+            Jq = Jq * ~self.held  # held coordinates stay where they are
         Js = V[:, :, [self.groups.index(g) for g in self.free]]
         return cost, e, np.concatenate([Jq, Js], axis=2)
 
