@@ -8,7 +8,7 @@ the session's RADIUS/ULNA relabelling). Both methods run; per trial it prints th
 the worst PF-LS RMSE over the determined coordinates and the verdicts.
 
 Usage:
-    python benchmarks/calibration_sessions.py [--only dent] [--first-frames 0:20] [--json]
+    python benchmarks/calibration_sessions.py [--only dent] [--first-frames 0:20] [--functional] [--json]
 """
 from __future__ import annotations
 
@@ -48,6 +48,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", default="", help="run the trials whose file name contains this")
     ap.add_argument("--first-frames", default="0:20", help="the trial's own calibration frames (default 0:20)")
     ap.add_argument("--json", action="store_true", help="one JSON line per trial on stdout")
+    ap.add_argument("--functional", action="store_true",
+                    help="also calibrate with the trial itself as the functional trial (SCoRE glenohumeral centre)")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.ERROR)
     if not SHARED.is_dir():
@@ -59,8 +61,10 @@ def main(argv: list[str] | None = None) -> int:
         for spec in pairs():
             if args.only and args.only not in spec["trial"].name:
                 continue
+            if args.functional:
+                spec = {**spec, "functional": spec["trial"]}
             a = _run(spec, Path(tmp) / "static")
-            b = _run({**spec, "static": None, "static_frames": args.first_frames}, Path(tmp) / "own")
+            b = _run({**spec, "static": None, "functional": None, "static_frames": args.first_frames}, Path(tmp) / "own")
             res = {k: (r["methods"]["pf"]["mean_residual_mm"], r["methods"]["ls"]["mean_residual_mm"]) for k, r in
                    (("static", a), ("own", b))}
             rec = {"trial": spec["trial"].name, "static": spec["static"].name, "first_frames": args.first_frames,

@@ -59,7 +59,8 @@ def run_one(spec: dict, work: Path) -> dict:
     extra, model_path = {}, None
     if spec.get("static"):  # the session's static trial: calibration, its label checks, the reference
         model_path, _, extra["calibration"] = calibrate_session(spec["static"], out_dir, "static",
-                                                                protocol_path=spec["protocol"])
+                                                                protocol_path=spec["protocol"],
+                                                                functional_path=spec.get("functional"))
     result = process_trial(spec["trial"], out_dir=out_dir, methods=["pf", "ls"], model_path=model_path,
                            protocol_path=spec["protocol"], static_frames=spec.get("static_frames"),
                            summary_extra=extra, report=False)

@@ -55,6 +55,12 @@ OFF_SEGMENT_MARGIN_M = 0.06
 """A marker registered farther than this (skin, soft tissue and marker base) outside the sphere
 that holds its segment's anatomical points cannot be on that segment: a mislabelled marker."""
 
+LANDMARK_OFFSET_MM = 40.0
+"""A marker declared over a bony landmark (protocol key ``landmark``) registered farther than this
+from the calibrated landmark: skin, soft tissue and the marker's radius put it 10-25 mm away, the
+generic landmark's place on a scaled segment up to ~15 mm more; beyond, the marker is misplaced,
+mislabelled, or the static pose is wrong."""
+
 GAP_NOTE_FRACTION = 0.05
 """A marker missing in more than this fraction of the frames is named on page 1 (a note: the
 gap is handled, its spring or LS term is off there, and the determinacy check says whether the
@@ -218,6 +224,11 @@ def calibration_reasons(cal: Mapping[str, Any] | None, *, scale_bounds: tuple[fl
         if motion[worst] > WINDOW_MOTION_MM:
             out.append(Reason("calibration_motion", "check", f"calibration ({src}): the static window moves: {worst} "
                               f"{motion[worst]:.1f} mm RMS about its mean (above {WINDOW_MOTION_MM:.0f} mm)"))
+    for name, d in ((cal.get("landmark_offsets_mm") or {}).items()):
+        if d > LANDMARK_OFFSET_MM:
+            out.append(Reason("calibration_landmark", "check", f"calibration ({src}): marker {name} is {d:.0f} mm from the "
+                              f"landmark it is declared over (above {LANDMARK_OFFSET_MM:.0f} mm): misplaced, mislabelled, "
+                              f"or a wrong static pose"))
     for name, d in (off_segment or {}).items():
         out.append(Reason("calibration_off_segment", "fail", f"calibration ({src}): marker {name} was registered "
                           f"{d * 1000:.0f} mm outside its segment: it is not on that segment (mislabelled?)"))

@@ -76,6 +76,19 @@ def test_a_moving_static_window_is_named(tmp_path, trajectories):
         assert _reasons(s, "calibration_motion"), s["quality"]
 
 
+def test_a_marker_far_from_its_landmark_is_named(tmp_path, trajectories):
+    """EPI_lat stuck 60 mm off the lateral epicondyle (its protocol landmark): the calibration keeps
+    the pose from the landmarks, registers EPI_lat where it is, and the verdict names it."""
+    pos = trajectories.positions_m.copy()
+    pos[:, list(trajectories.labels).index("EPI_lat")] += np.array([0.0, 0.06, 0.0])  # 60 mm along the lab Y
+    code, summ = _run(tmp_path, dataclasses.replace(trajectories, positions_m=pos), "far", "--static-frames", "0:20")
+    for s in summ.values():
+        assert s["quality"]["verdict"] in ("check", "fail")
+        far = _reasons(s, "calibration_landmark")
+        assert [r for r in far if "EPI_lat" in r["message"]], s["quality"]
+        assert not [r for r in far if "EPI_med" in r["message"] or "MET2" in r["message"]]
+
+
 def test_a_subject_the_model_cannot_scale_to_is_named(tmp_path):
     """Markers so far off that a scale factor hits its bound: a subject whose upper arm and forearm
     are 1.7 times the generic ones (exubio.calibration.SCALE_BOUNDS stops at 1.4). The verdict
