@@ -224,6 +224,10 @@ def calibration_reasons(cal: Mapping[str, Any] | None, *, scale_bounds: tuple[fl
         if motion[worst] > WINDOW_MOTION_MM:
             out.append(Reason("calibration_motion", "check", f"calibration ({src}): the static window moves: {worst} "
                               f"{motion[worst]:.1f} mm RMS about its mean (above {WINDOW_MOTION_MM:.0f} mm)"))
+    gh = (cal.get("functional") or {}).get("gh") or {}
+    if gh and not gh.get("used"):
+        out.append(Reason("calibration_functional", "note", f"calibration ({src}): functional glenohumeral centre "
+                          f"not used: {gh.get('reason')}"))
     for name, d in ((cal.get("landmark_offsets_mm") or {}).items()):
         if d > LANDMARK_OFFSET_MM:
             out.append(Reason("calibration_landmark", "check", f"calibration ({src}): marker {name} is {d:.0f} mm from the "

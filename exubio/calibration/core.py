@@ -96,6 +96,16 @@ The members of a rigid cluster (key ``cluster``) share that weight, the cluster 
 marker."""
 
 
+FUNCTIONAL_MAX_SHIFT_M = 0.03
+"""A functional (SCoRE) glenohumeral centre farther than this from the one the anatomical fit
+places from the scapula and humerus markers is not used (it is reported, with the reason). Each
+estimate is good to about 10-20 mm with skin markers (regressions and functional methods alike:
+the TRC subject's SCoRE centre is 3-9 mm from its own model's, the anatomical fit's 7-8 mm,
+benchmarks/calibration_trc_vs_tsm.py); 30 mm apart, one of them is wrong, and a functional centre
+from skin clusters that slide over the deltoid (SCoRE RMS 10 mm on martin_dynamique, 50 mm away)
+is the likelier one."""
+
+
 def pose_weights(protocol: Protocol, /) -> np.ndarray:
     """Each protocol marker's relative weight in the static-pose fit: 1 for landmark markers,
     TECHNICAL_POSE_WEIGHT for the others (split among a cluster's members); all 1 when the
@@ -153,6 +163,14 @@ def _use_functional_gh(anchor: _Anchor, model: Model, protocol: Protocol, functi
     fr = Kinematics(scaled).frames(q)
     ih, ip = model.segment_index(humerus), model.segment_index(model.segment(humerus).parent)
     gh_fit = fr.p[ih].copy()
+    shift = float(np.linalg.norm(gh_static - gh_fit))
+    if shift > FUNCTIONAL_MAX_SHIFT_M:
+        reason = (f"{fsrc}: SCoRE puts the glenohumeral centre {shift * 1000:.0f} mm from where the scapula and "
+                  f"humerus markers put it (more than {FUNCTIONAL_MAX_SHIFT_M * 1000:.0f} mm; SCoRE RMS "
+                  f"{fc.rms_m * 1000:.1f} mm): skin motion of the cluster markers, or too little motion; not used")
+        log.warning("%s", reason)
+        return q, factors, robust, it, anchor, model, {"gh": {"used": False, "trial": fsrc, "reason": reason,
+                                                              **fc.to_dict(), "shift_from_marker_fit_mm": round(shift * 1000, 2)}}
     local = fr.R[ip].T @ (gh_static - fr.p[ip]) / seg_factors[model.segments[ip].name]
     model = dataclasses.replace(model, segments=tuple(
         dataclasses.replace(s, joint=dataclasses.replace(s.joint, centre_m=local)) if s.name == humerus else s
