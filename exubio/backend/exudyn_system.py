@@ -59,11 +59,7 @@ range, or a quarter turn (cardan middle angle: an eighth) inside a one-sided lim
 without 30 deg to spare before the wrap, and a spherical joint's middle-angle limit at or beyond
 +-90 deg (that angle never gets there), get no element. Limits act on the principal branch of a
 spherical joint (|middle angle| <= 90 deg), the branch exubio.kinematics reports unless only the
-other one lies within the ranges; a spherical joint's element stays off while the joint is on the
-other branch (that one within the ranges, the principal one not: e.g. the glenohumeral joint at
-more than 90 deg of internal rotation in a palm-down T-pose) and within 20 deg of its gimbal lock
-(first and last angles not separable; W^-T unbounded). There LS still keeps its coordinates in
-range, so PF and LS may differ in those frames, which the determinacy check marks.
+other one lies within the ranges.
 
 Outside this module nothing knows about Exudyn: inputs and outputs are numpy arrays (SI units,
 time first) and the frozen dataclasses below. Segment indices are those of ``Model.segments``
@@ -87,7 +83,6 @@ from exudyn.rigidBodyUtilities import RotationMatrix2EulerParameters
 
 from exubio.errors import ModelError
 from exubio.kinematics import axis_rotation, Kinematics, PointSet
-from exubio.observability import GIMBAL_MARGIN_RAD
 from exubio.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD  # k_lim, shared with LS
 from exubio.types import JointKind, Model
 
@@ -104,13 +99,6 @@ _TIMER_FIELDS = (
 )  # fmt: skip
 DEFAULT_LIMIT_MAX_RATE_RAD_S = 10.0  # fastest joint-angle rate the switching of the limits allows for
 _LIMIT_MIN_COS = 1e-2  # spherical joints: 1 / cos(middle angle) capped at 100 (gimbal lock, |q2| > 89.4 deg)
-_LIMIT_GIMBAL_ZONE_RAD = GIMBAL_MARGIN_RAD  # a spherical joint's limits are off within this of its gimbal lock
-_LIMIT_BRANCH_RECHECK_RAD = 0.05  # on the other branch: look again after this much travel (5 ms at 10 rad/s)
-
-
-def _wrap_pi(x: float) -> float:
-    """x in (-pi, pi]."""
-    return math.pi - (math.pi - x) % (2.0 * math.pi)
 _LIMIT_WRAP_TOLERANCE_RAD = math.pi / 6  # a limit needs this much room beyond it before its angle wraps
 
 
@@ -635,8 +623,7 @@ class PFSystem:
             obj = mbs.AddObject(eii.ObjectConnectorRigidBodySpringDamper(
                 markerNumbers=[m0, m1], springForceTorqueUserFunction=uf, activeConnector=False,
                 visualization=eii.VObjectConnectorRigidBodySpringDamper(show=False)))
-            self._limits.append(_LimitElement(joint.name, obj, uf, [(ti, b[0], b[1]) for ti, b in enumerate(bounds) if b is not None],
-                                              gimbal=three))
+            self._limits.append(_LimitElement(joint.name, obj, uf, [(ti, b[0], b[1]) for ti, b in enumerate(bounds) if b is not None]))
 
     def _coordinates_for(self, q: np.ndarray) -> np.ndarray:
         """The system's ODE2 coordinates (relative to the reference posture q0) for posture q."""
@@ -778,7 +765,7 @@ class PFSystem:
             first = math.inf
             for e in limits:
                 if e.next_check <= t_start:
-                    d = e.distance(get_output(e.obj, rotation_output), margin)
+                    d = e.distance(get_output(e.obj, rotation_output))
                     if (d < margin) != e.active:
                         e.active = not e.active
                         set_parameter(e.obj, "activeConnector", e.active)
@@ -953,36 +940,16 @@ class _LimitElement:
     """The limit connector of one joint and its switching state. ``bounds``: (i, lower, upper)
     of every limited theta'_i (the connector's Tait-Bryan angle i, centred; +-inf = no side)."""
 
-    __slots__ = ("joint", "obj", "uf", "bounds", "scalar", "gimbal", "active", "next_check", "on_since", "active_s")
+    __slots__ = ("joint", "obj", "uf", "bounds", "scalar", "active", "next_check", "on_since", "active_s")
 
-    def __init__(self, joint: str, obj, uf, bounds, *, scalar: bool = False, gimbal: bool = False):
+    def __init__(self, joint: str, obj, uf, bounds, *, scalar: bool = False):
         self.joint, self.obj, self.uf, self.bounds, self.scalar = joint, obj, uf, bounds, scalar
-        self.gimbal = gimbal  # a spherical joint with three free angles: off near its gimbal lock
         self.active, self.next_check, self.on_since, self.active_s = False, -math.inf, 0.0, 0.0
 
-    def distance(self, theta, margin: float = 0.0) -> float:
+    def distance(self, theta) -> float:
         """Smallest distance (rad) of a limited angle to its nearest limit (< 0 beyond it);
-        ``theta``: the connector's Rotation output (a scalar for a torsional spring-damper).
-        Within _LIMIT_GIMBAL_ZONE_RAD of a spherical joint's gimbal lock the first and last angles
-        are not separable (exubio.observability reports those frames as undetermined and the
-        limit report ignores them) and W^-T grows without bound: the element stays off there, as
-        if ``margin`` + the distance to the zone's edge from every limit."""
+        ``theta``: the connector's Rotation output (a scalar for a torsional spring-damper)."""
         theta = (theta,) if self.scalar else theta.tolist()  # Python floats: 3x faster than numpy scalars
-        if self.gimbal:
-            inside = abs(theta[1]) - (0.5 * math.pi - _LIMIT_GIMBAL_ZONE_RAD)
-            if inside > 0.0:
-                return margin + inside
-            # the same rotation on the other branch (middle angle beyond +-90 deg): when that one
-            # lies within the ranges and the principal one does not, the joint is there (as
-            # exubio.kinematics reports it), and this element, which acts on principal angles, is off
-            other = [_wrap_pi(theta[0] + math.pi), math.copysign(math.pi, theta[1]) - theta[1],
-                     _wrap_pi(theta[2] + math.pi)]
-            d_other = self._distance(other)
-            if d_other > 0.0 and d_other > self._distance(theta):
-                return margin + _LIMIT_BRANCH_RECHECK_RAD
-        return self._distance(theta)
-
-    def _distance(self, theta) -> float:
         d = math.inf
         for i, lo, hi in self.bounds:
             x = theta[i]
