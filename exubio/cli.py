@@ -124,7 +124,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     _, _, report = calibrate_file(args.static, protocol_path=args.protocol, model_path=args.model,
                                   body_mass_kg=args.body_mass, frames=parse_frames(args.static_frames),
-                                  out_path=args.out, overwrite=args.overwrite, functional_path=args.functional)
+                                  out_path=args.out, overwrite=args.overwrite, functional_path=args.functional,
+                                  more_static_paths=tuple(args.also_static or ()))
     print(format_report(report))
     print(f"wrote {args.out}")
     return EXIT_OK
@@ -148,6 +149,9 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     from exubio.pipeline import calibrate_session
 
     model_path, extra = args.model, {}
+    if args.also_static and not args.static:
+        raise InputError(f"--also-static {args.also_static[0]}: further static poses refine the calibration on a static "
+                         f"trial; give --static STATIC as well")
     if args.functional and not args.static:
         raise InputError(f"--functional {args.functional}: a functional trial refines the calibration on a static "
                          f"trial; give --static STATIC as well")
@@ -155,7 +159,8 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         model_file, report, calibration = calibrate_session(args.static, args.out, Path(args.static).stem,
                                                            protocol_path=args.protocol, model_path=args.model,
                                                            body_mass_kg=args.body_mass, frames_text=args.static_frames,
-                                                           overwrite=args.overwrite, functional_path=args.functional)
+                                                           overwrite=args.overwrite, functional_path=args.functional,
+                                                           more_static_paths=tuple(args.also_static or ()))
         if not args.quiet:
             from exubio.calibration import format_report
 
@@ -319,6 +324,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--overwrite", action="store_true", help="replace earlier results in --out")
     r.add_argument("--no-report", action="store_true", help="skip the per-trial PDF/PNG report")
     r.add_argument("--static", help="static trial: calibrate the model to the subject first (once, for every trial)")
+    r.add_argument("--also-static", metavar="TRIAL", action="append", help="a further static pose of the session (e.g. arm raised; repeatable): the thorax ellipsoid is "
+                        "fitted through the scapula contact points of every static pose")
     r.add_argument("--functional", metavar="TRIAL", help="movement trial of the same session (arm moved in several planes): glenohumeral centre by SCoRE "
                         "(Ehrig et al. 2006) instead of from the generic model; not used, with the reason, if its "
                         "motion does not determine it")
@@ -335,6 +342,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--model", help="generic model YAML (default: models/upper_extremity.yaml)")
     c.add_argument("--body-mass", type=float, help="body mass, kg")
     c.add_argument("--static-frames", help="A:B frames to use (default: the longest still stretch)")
+    c.add_argument("--also-static", metavar="TRIAL", action="append", help="a further static pose of the session (e.g. arm raised; repeatable): the thorax ellipsoid is "
+                        "fitted through the scapula contact points of every static pose")
     c.add_argument("--functional", metavar="TRIAL", help="movement trial of the same session (arm moved in several planes): glenohumeral centre by SCoRE "
                         "(Ehrig et al. 2006) instead of from the generic model; not used, with the reason, if its "
                         "motion does not determine it")

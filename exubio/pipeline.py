@@ -253,13 +253,15 @@ def static_checks(static_path: str | Path, /, *, protocol_path: str | Path | Non
 def calibrate_file(static_path: str | Path, /, *, protocol_path: str | Path | None = None,
                    model_path: str | Path | None = None, body_mass_kg: float | None = None,
                    frames: slice | None = None, out_path: str | Path | None = None,
-                   overwrite: bool = False, functional_path: str | Path | None = None):
+                   overwrite: bool = False, functional_path: str | Path | None = None,
+                   more_static_paths: tuple[str | Path, ...] = ()):
     """Everything ``exubio calibrate`` does: read the trial, the generic model and the protocol,
     calibrate (``exubio.calibration.calibrate_model``, a pure step), and (with ``out_path``) write
     the calibrated model YAML. Returns (calibrated model, the protocol bound to it, the
     CalibrationReport). An existing ``out_path`` is replaced only with ``overwrite``.
     ``functional_path``: a movement trial of the same session for a functional (SCoRE)
-    glenohumeral centre."""
+    glenohumeral centre; ``more_static_paths``: further static poses (e.g. arm raised) the
+    thorax ellipsoid is fitted through as well."""
     from exubio.calibration import calibrate_model, calibrated_protocol
     from exubio.model import save_model
 
@@ -270,7 +272,9 @@ def calibrate_file(static_path: str | Path, /, *, protocol_path: str | Path | No
     functional = None
     if functional_path is not None:
         functional = prepare_targets(read_trial(functional_path), protocol)
-    calibrated, report = calibrate_model(model, protocol, read_trial(static_path), frames=frames, functional=functional)
+    more = tuple(prepare_targets(read_trial(p), protocol) for p in more_static_paths)
+    calibrated, report = calibrate_model(model, protocol, read_trial(static_path), frames=frames, functional=functional,
+                                         more_statics=more)
     if out_path is not None:
         save_model(calibrated, out_path, calibration=report.to_dict())
     return calibrated, calibrated_protocol(protocol, calibrated), report
@@ -279,7 +283,7 @@ def calibrate_file(static_path: str | Path, /, *, protocol_path: str | Path | No
 def calibrate_into(source: str | Path, out_dir: str | Path, stem: str, /, *, protocol_path: str | Path | None = None,
                    model_path: str | Path | None = None, body_mass_kg: float | None = None,
                    frames_text: str | None = None, overwrite: bool = False,
-                   functional_path: str | Path | None = None):
+                   functional_path: str | Path | None = None, more_static_paths: tuple[str | Path, ...] = ()):
     """Calibrate the model to ``source`` (a static trial, or frames of the trial itself) and write
     ``out_dir/<stem>.model.yaml``; returns (model file, CalibrationReport)."""
     from exubio.calibration import parse_frames
@@ -289,7 +293,7 @@ def calibrate_into(source: str | Path, out_dir: str | Path, stem: str, /, *, pro
     results.prepare_output_dir(out_dir, [model_file.name], overwrite=overwrite)
     model, _, report = calibrate_file(source, protocol_path=protocol_path, model_path=model_path,
                                       body_mass_kg=body_mass_kg, frames=parse_frames(frames_text),
-                                      functional_path=functional_path)
+                                      functional_path=functional_path, more_static_paths=more_static_paths)
     save_model(model, model_file, calibration=report.to_dict())
     return model_file, report
 
@@ -297,8 +301,8 @@ def calibrate_into(source: str | Path, out_dir: str | Path, stem: str, /, *, pro
 def calibrate_session(source: str | Path, out_dir: str | Path, stem: str, /, *, protocol_path: str | Path | None = None,
                       model_path: str | Path | None = None, body_mass_kg: float | None = None,
                       frames_text: str | None = None, overwrite: bool = False,
-                      reference: bool = True, functional_path: str | Path | None = None
-                      ) -> tuple[Path, Any, dict[str, Any]]:
+                      reference: bool = True, functional_path: str | Path | None = None,
+                      more_static_paths: tuple[str | Path, ...] = ()) -> tuple[Path, Any, dict[str, Any]]:
     """calibrate_into plus the static trial's label checks: (model file, report, the calibration
     summary for summary.json). With ``reference`` (a static trial apart from the task trials) the
     summary's private ``_reference`` holds the static's pair distances, which the session's trials
@@ -307,7 +311,7 @@ def calibrate_session(source: str | Path, out_dir: str | Path, stem: str, /, *, 
 
     model_file, report = calibrate_into(source, out_dir, stem, protocol_path=protocol_path, model_path=model_path,
                                         body_mass_kg=body_mass_kg, frames_text=frames_text, overwrite=overwrite,
-                                        functional_path=functional_path)
+                                        functional_path=functional_path, more_static_paths=more_static_paths)
     frames = parse_frames(frames_text)
     findings, ref_distances = static_checks(source, protocol_path=protocol_path, model_path=model_path,
                                         frames=slice(*report.frames) if frames is not None else None)

@@ -431,3 +431,35 @@ def test_functional_gh_centre_is_found_by_score_and_used(generic):
             assert gh["used"] and gh["rotation_range_deg"] > 20.0, gh
     assert errors["functional"] < 2.0, errors
     assert errors["static only"] > 5.0, errors  # the functional trial is what found it
+
+
+def test_a_second_static_pose_fits_the_ellipsoid_through_both(generic):
+    """A generic ellipsoid of the wrong shape (radii x 1.25, 0.85, 1.1): calibrated on the arm-down
+    static alone it passes through that pose's contact points only, and the subject's scapula at
+    120 deg of abduction lies off it; given the raised pose too (more_statics), the ellipsoid is
+    fitted through both poses' contact points and the subject's true contact points of both lie
+    close to it."""
+    from exubio.calibration.ellipsoid import surface_distance
+    from exubio.kinematics import Kinematics
+    from exubio.types import Trajectories
+
+    subject, protocol = generic
+    wrong = dataclasses.replace(subject, ellipsoid=dataclasses.replace(
+        subject.ellipsoid, radii_m=np.asarray(subject.ellipsoid.radii_m) * np.array([1.25, 0.85, 1.1])))
+    trial = simulate_trial(subject, "abduction", duration_s=5.0, rate_hz=100.0)
+    top = int(np.argmax(trial.q_true[:, subject.coordinate_names.index("gh_abduction")]))
+
+    def still(i, name):
+        tr = trial.trajectories
+        return Trajectories(labels=tr.labels, positions_m=np.repeat(tr.positions_m[i:i + 1], 40, axis=0),
+                            rate_hz=tr.rate_hz, time_s=np.arange(40) / tr.rate_hz, source=name)
+
+    kin = Kinematics(subject)
+    truth = {"down": kin.points(trial.q_true[0], kin.contacts), "raised": kin.points(trial.q_true[top], kin.contacts)}
+    off = {}
+    for label, extra in (("one static", ()), ("two statics", (prepare_targets(still(top, "raised"), protocol),))):
+        cal, report = calibrate_model(wrong, protocol, still(0, "down"), more_statics=extra)
+        off[label] = {k: float(np.abs(surface_distance(cal.ellipsoid, p)).max() * 1000) for k, p in truth.items()}
+        assert len(report.ellipsoid_poses_mm) == 1 + len(extra)
+    assert off["one static"]["down"] < 0.5 and off["one static"]["raised"] > 5.0, off
+    assert max(off["two statics"].values()) < 0.5 * off["one static"]["raised"], off

@@ -247,3 +247,14 @@ def test_isb_angles_file_per_method_with_what_is_measured(tmp_path, c3d):
     summ = json.loads((out / "abd.ls.summary.json").read_text())["isb_angles"]
     assert summ["measured"] == ["ST", "GH", "HT"] and summ["not_measured"] == ["SC", "AC"]
     assert summ["sequences"]["GH"] == "X-Z-Y" and summ["units"] == "deg"
+
+
+def test_functional_and_further_statics_need_a_static(tmp_path, trial, capsys):
+    """--functional and --also-static refine a calibration on --static: alone they are refused
+    (exit 2) before any work, naming the option."""
+    path = write_c3d(tmp_path / "t.c3d", trial.trajectories)
+    for option in ("--functional", "--also-static"):
+        code = main(["-q", "reconstruct", str(path), option, str(path), "--method", "ls", "--out", str(tmp_path / option[2:])])
+        assert code == 2
+        assert option in capsys.readouterr().err
+        assert not (tmp_path / option[2:]).exists()

@@ -61,11 +61,11 @@ import dataclasses
 import logging
 import math
 from pathlib import Path
-from typing import Mapping
+from typing import Mapping, Sequence
 
 import numpy as np
 
-from exubio.calibration.ellipsoid import fit_ellipsoid
+from exubio.calibration.ellipsoid import fit_ellipsoid, fit_ellipsoid_poses, surface_distance
 from exubio.calibration.joint_centres import functional_gh, gh_joint
 from exubio.calibration.posefit import (ARM_PRIOR_M2_PER_RAD2, GIRDLE_PRIOR_M2_PER_RAD2, GIRDLE_SEGMENTS,
     MAX_REWEIGHTING, ROBUST_SCALE_M, _Anchor, _at_limit, _fit_pose, _start_postures)
@@ -201,8 +201,8 @@ def _use_functional_gh(anchor: _Anchor, model: Model, protocol: Protocol, functi
 
 def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories, /, *,
                     frames: slice | None = None, scale_groups: Mapping[str, str] = DEFAULT_SCALE_GROUPS,
-                    targets: MarkerTargets | None = None, functional: MarkerTargets | None = None
-                    ) -> tuple[Model, CalibrationReport]:
+                    targets: MarkerTargets | None = None, functional: MarkerTargets | None = None,
+                    more_statics: Sequence[MarkerTargets] = ()) -> tuple[Model, CalibrationReport]:
     """Calibrate ``model`` (generic) to the subject of ``trajectories`` (see the module docstring).
 
     frames: the frames of the trial that hold the static pose (their mean is used); None = the
@@ -211,7 +211,11 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
         movement trial of the same session (same protocol): the glenohumeral centre is then
         found by SCoRE (``exubio.calibration.joint_centres``) instead of from the generic
         model's place relative to the scapula markers; a trial whose motion does not determine
-        it is reported (``report.functional``) and not used.
+        it is reported (``report.functional``) and not used. more_statics: the prepared targets of
+        further static poses of the session (e.g. arm raised; each one's longest still stretch is
+        used): the thorax ellipsoid is then fitted through the scapula contact points of every
+        pose (least squares) instead of through the main static's alone
+        (``report.ellipsoid_poses_mm``: each pose's largest contact-point distance from it).
     Returns the calibrated model (its ``metadata["calibration"]`` holds ``report.to_dict()``) and
     the report. The protocol's markers must reference the model (segment names); reconstruct with
     ``calibrated_protocol(protocol, calibrated)`` or reload the protocol with the calibrated
@@ -282,12 +286,22 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
 
     kin_c = Kinematics(calibrated)
     contacts = kin_c.points(q, kin_c.contacts)
-    ellipsoid, k_ell = fit_ellipsoid(calibrated.ellipsoid, contacts)
+    cal_protocol = calibrated_protocol(protocol, calibrated, point_names=point_names)
+    pose_contacts, pose_sources = [contacts], [src]
+    for extra in more_statics:
+        q_k = _extra_static_pose(kin_c, cal_protocol, extra, prior, limits, held)
+        pose_contacts.append(kin_c.points(q_k, kin_c.contacts))
+        pose_sources.append(extra.source or "static pose")
+    if len(pose_contacts) == 1:
+        ellipsoid, k_ell = fit_ellipsoid(calibrated.ellipsoid, contacts)
+    else:
+        ellipsoid, k_ell = fit_ellipsoid_poses(calibrated.ellipsoid, np.concatenate(pose_contacts))
     calibrated = dataclasses.replace(calibrated, ellipsoid=ellipsoid)
     kin_c = Kinematics(calibrated)
     g_abs = float(np.abs(kin_c.g(q)).max())
+    ellipsoid_poses = {name: round(float(np.abs(surface_distance(ellipsoid, c)).max() * 1000), 3)
+                       for name, c in zip(pose_sources, pose_contacts)}
 
-    cal_protocol = calibrated_protocol(protocol, calibrated, point_names=point_names)
     residual = _calibration_residuals(kin_c, cal_protocol, targets, idx, q)
     markers = []
     for j, m in enumerate(protocol.markers):
@@ -306,6 +320,7 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
         static_q_rad=q.copy(), coordinate_names=model.coordinate_names,
         ellipsoid_centre_m=np.array(ellipsoid.centre_m), ellipsoid_radii_m=np.array(ellipsoid.radii_m),
         ellipsoid_scale=k_ell, constraint_abs=g_abs, markers=tuple(markers), fit_iterations=it,
+        ellipsoid_poses_mm=ellipsoid_poses,
         window_motion_mm={m.name: float(spread[j] * 1000) for j, m in enumerate(protocol.markers) if present[j]},
         static_pose_at_limit_deg=_at_limit(q, model),
         functional=functional_info, joint_centres_mm=_joint_centres_mm(calibrated, q),
@@ -319,6 +334,22 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
              src, window.start, window.stop, report.mean_residual_mm,
              float(np.mean(list(report.generic_offset_mm.values()))))
     return calibrated, report
+
+
+def _extra_static_pose(kin: Kinematics, protocol: Protocol, targets: MarkerTargets, prior: np.ndarray,
+                       limits, held: np.ndarray) -> np.ndarray:
+    """The pose of a further static trial on the calibrated model (its registered points, no
+    ellipsoid constraint, inside the ranges, held coordinates at 0), from the usual start postures."""
+    window, _ = _window(targets, None)
+    static = _nanmean(targets.positions_m[list(window)], axis=0)
+    present = np.isfinite(static).all(axis=1)
+    if present.sum() < 5:
+        raise InputError(f"{targets.source or 'static pose'}: only {int(present.sum())} protocol markers in its still "
+                         f"frames; need at least 5")
+    w = np.where(present, protocol.weights, 0.0)
+    qs, cost = _fit_pose(kin, tracked_points(kin, protocol), static, w, _start_postures(kin.model), prior,
+                         limits=limits, held=held)
+    return qs[int(np.argmin(cost))]
 
 
 def _joint_centres_mm(model: Model, q: np.ndarray) -> dict[str, list[float]]:

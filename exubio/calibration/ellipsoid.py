@@ -77,3 +77,39 @@ def fit_ellipsoid_to_points(points_m: np.ndarray, /, *, centre_z_m: float | None
         raise ModelError(f"the ellipsoid fit through {len(x)} points did not converge: {sol.message}")
     c, r = unpack(sol.x)
     return Ellipsoid(centre_m=c, radii_m=r, contact_points=()), resid(sol.x)
+
+
+def surface_distance(ellipsoid: Ellipsoid, points_m: np.ndarray, /) -> np.ndarray:
+    """Signed distance (m) of points (..., 3) from the ellipsoid along the ray from its centre
+    (positive outside)."""
+    d = np.asarray(points_m, dtype=float) - np.asarray(ellipsoid.centre_m, dtype=float)
+    f = np.sqrt(((d / np.asarray(ellipsoid.radii_m, dtype=float)) ** 2).sum(axis=-1))
+    return np.linalg.norm(d, axis=-1) * (1.0 - 1.0 / f)
+
+
+def fit_ellipsoid_poses(ellipsoid: Ellipsoid, contacts_m: np.ndarray, /, *, prior: float = 1e-3
+                        ) -> tuple[Ellipsoid, float]:
+    """The least change of ``ellipsoid`` (centre in its sagittal plane, radii by a common factor k,
+    as fit_ellipsoid) that brings the contact points of several poses (n, 3) closest to its surface
+    in least squares of their distances (surface_distance); a weak prior (``prior`` times the
+    change, weighted as in fit_ellipsoid) keeps what the points leave open. Returns the ellipsoid
+    and k."""
+    from scipy.optimize import least_squares
+
+    x = np.asarray(contacts_m, dtype=float)
+    c0 = np.array(ellipsoid.centre_m, dtype=float)
+    r0 = np.asarray(ellipsoid.radii_m, dtype=float)
+
+    def build(p):
+        c = c0.copy()
+        c[0] += p[0]
+        c[1] += p[1]
+        return dataclasses.replace(ellipsoid, centre_m=c, radii_m=r0 * math.exp(p[2]))
+
+    def resid(p):
+        return np.concatenate([surface_distance(build(p), x), prior * np.array([p[0], p[1], ELLIPSOID_RADIUS_WEIGHT_M * p[2]])])
+
+    sol = least_squares(resid, np.zeros(3), xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    if not sol.success:
+        raise ModelError(f"no thorax ellipsoid fits the contact points of the static poses: {sol.message}")
+    return build(sol.x), math.exp(sol.x[2])

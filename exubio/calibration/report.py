@@ -64,6 +64,8 @@ class CalibrationReport:
     static_pose_at_limit_deg: Mapping[str, float] = dataclasses.field(default_factory=dict)  # coordinate ->
     # its static value (deg) where that lies at (within AT_LIMIT_TOLERANCE_RAD of) or beyond its range
     functional: Mapping[str, Any] = dataclasses.field(default_factory=dict)  # {"gh": SCoRE summary, or why unused}
+    ellipsoid_poses_mm: Mapping[str, float] = dataclasses.field(default_factory=dict)  # static pose -> largest
+    # distance of its contact points from the fitted ellipsoid (0 with one static: it passes through them)
     joint_centres_mm: Mapping[str, list] = dataclasses.field(default_factory=dict)  # joint -> thorax frame, static
     landmark_offsets_mm: Mapping[str, float] = dataclasses.field(default_factory=dict)  # landmark marker ->
     # its distance from the landmark it is placed over, on the calibrated model
@@ -134,6 +136,7 @@ class CalibrationReport:
             "window_motion_mm": {k: round(float(v), 3) for k, v in self.window_motion_mm.items()},
             "static_pose_at_limit_deg": {k: round(float(v), 3) for k, v in self.static_pose_at_limit_deg.items()},
             "functional": dict(self.functional),
+            "ellipsoid_poses_mm": {k: float(v) for k, v in self.ellipsoid_poses_mm.items()},
             "joint_centres_mm": {"definition": "joint centres in the thorax frame at the static pose",
                                  **{k: list(v) for k, v in self.joint_centres_mm.items()}},
             "landmark_offsets_mm": {k: round(float(v), 2) for k, v in self.landmark_offsets_mm.items()},
@@ -171,6 +174,9 @@ def format_report(report: CalibrationReport, /) -> str:
                          f"{gh['shift_from_marker_fit_mm']:.1f} mm from the marker fit's")
         else:
             lines.append(f"glenohumeral centre: the functional trial was not used: {gh['reason']}")
+    if len(report.ellipsoid_poses_mm) > 1:
+        lines.append("ellipsoid fitted through the contact points of " + ", ".join(
+            f"{k} (off by up to {v:.1f} mm)" for k, v in report.ellipsoid_poses_mm.items()))
     pose = ", ".join(f"{n} {np.degrees(v):.0f}" for n, v in zip(report.coordinate_names, report.static_q_rad))
     lines.append(f"static pose (deg): {pose}")
     return "\n".join(lines)

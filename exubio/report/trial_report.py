@@ -226,6 +226,10 @@ def calibration_page(meta: dict, summaries: dict[str, dict]) -> Figure | None:
     ell = rep.get("ellipsoid") or {}
     if ell:
         lines.append(f"thorax ellipsoid: centre {ell.get('centre_mm')} mm, radii {ell.get('radii_mm')} mm")
+    poses = rep.get("ellipsoid_poses_mm") or {}
+    if len(poses) > 1:
+        lines.append("ellipsoid through the contact points of several static poses: " + ", ".join(
+            f"{Path(str(k)).name} (up to {v:.1f} mm off)" for k, v in poses.items()))
     lines.append("")
     lines.append(f"{'marker':<12}{'segment':<10}{'residual mm':>12}{'generic offset mm':>19}{'from landmark mm':>18}"
                  f"{'fit weight':>12}")
