@@ -23,7 +23,6 @@ import numpy as np
 
 from exubio.calibration import calibrate_model
 from exubio.io.trial import read_trial
-from exubio.kinematics import Kinematics
 from exubio.pipeline import load_model_and_protocol
 from exubio.preprocess import prepare_targets
 
