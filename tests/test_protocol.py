@@ -498,3 +498,35 @@ def test_read_protocol_mapping_merges_the_extends_chain(tmp_path):
     data = read_protocol_mapping(SESSION_EXAMPLE)
     assert data["markers"]["RADIUS"] == {"segment": "radius", "point": "RADIUS", "landmark": "RS"}
     assert data["relabel"] == {"RADIUS": "ULNA", "ULNA": "RADIUS"} and "extends" not in data
+
+
+def test_landmark_and_cluster_keys_are_read_and_checked(tmp_path):
+    """landmark: names a model point of the marker's segment (checked against the model the
+    protocol is used with); cluster: at least 3 markers of one segment; a marker is not both."""
+    from exubio.protocol import check_landmarks
+
+    base = MINIMAL.replace("  ARM: {segment: humerus, local_position_mm: [10, -200, 30]}\n", "")
+    good = write(tmp_path, base + """\
+      EPI_lat: {segment: humerus, point: EPI_lat, landmark: EPI_lat}
+      SCAP_AC: {segment: scapula, point: SCAP_AC, cluster: acro}
+      SCAP_BACK: {segment: scapula, point: SCAP_BACK, cluster: acro}
+      SCAP_FRONT: {segment: scapula, point: SCAP_FRONT, cluster: acro}
+    """)
+    prot = load(good)
+    by = {m.name: m for m in prot.markers}
+    assert by["EPI_lat"].landmark == "EPI_lat" and by["EPI_lat"].cluster is None
+    assert {by[n].cluster for n in ("SCAP_AC", "SCAP_BACK", "SCAP_FRONT")} == {"acro"}
+    check_landmarks(prot, MODEL_POINTS)  # EPI_lat is a humerus point
+    with pytest.raises(ProtocolError, match=r"EPI_lat.landmark 'EPI_lat' is not a point of segment 'humerus'"):
+        check_landmarks(prot, {**MODEL_POINTS, "humerus": {"ARM": np.zeros(3)}})
+    small = write(tmp_path, base + """\
+      SCAP_AC: {segment: scapula, point: SCAP_AC, cluster: acro}
+      SCAP_BACK: {segment: scapula, point: SCAP_BACK, cluster: acro}
+    """, "small.yaml")
+    with pytest.raises(ProtocolError, match=r"small.yaml: cluster 'acro' .* at least 3 markers"):
+        load(small)
+    both = write(tmp_path, base + """\
+      EPI_lat: {segment: humerus, point: EPI_lat, landmark: EPI_lat, cluster: x}
+    """, "both.yaml")
+    with pytest.raises(ProtocolError, match=r"both a landmark and in cluster 'x'"):
+        load(both)
