@@ -346,3 +346,33 @@ def test_limits_that_cannot_act_build_no_element_and_bad_limits_are_rejected(kin
     with pytest.raises(ValueError, match="limit_stiffness"):
         PFSystem(kin.model, springs, q0=q[0], qd0=qd[0], kinematics=kin, limits_rad=limits, limit_stiffness_nm_per_rad=0.0)
 
+
+
+def test_a_joint_on_the_other_branch_of_its_sequence_keeps_its_limits_on_that_branch(kin, springs, points):
+    """The glenohumeral joint at 100-106 deg of internal rotation: its sequence's middle angle beyond
+    90 deg, the other branch, which lies inside the ranges (its principal angles do not: the first
+    and last are 180 deg away). The limit elements judge the branch and act on it, so nothing
+    pulls the joint (the run equals the run without limits); before, they acted on the principal
+    angles and Newton failed at the first frame, as on a real palm-down T-pose trial."""
+    names = kin.model.coordinate_names
+    n = 400
+    t = np.arange(n) / RATE_HZ
+    q = np.zeros((n, 13))
+    q[:, names.index("gh_abduction")] = np.radians(20.0)
+    q[:, names.index("gh_flexion")] = np.radians(20.0)
+    q[:, names.index("gh_internal_rotation")] = np.radians(-103.0 + 3.0 * np.sin(2 * np.pi * 0.5 * t))
+    q[:, names.index("elbow_flexion")] = np.radians(30.0)
+    q = np.array([on_manifold(kin, x) for x in q])
+    qd = np.gradient(q, 1 / RATE_HZ, axis=0)
+    pos = kin.points(q, points)
+    vel = np.einsum("nkcm,nm->nkc", kin.point_jacobian(q, points), qd)
+    limits = kin.model.coordinate_ranges_rad
+    assert np.all((q >= limits[:, 0]) & (q <= limits[:, 1]))  # inside the ranges on this branch
+    runs = []
+    for lim in (limits, None):
+        system = PFSystem(kin.model, springs, q0=q[0], qd0=qd[0], kinematics=kin, limits_rad=lim)
+        run = system.run(pos, vel, frame_dt_s=1 / RATE_HZ, options=IntegratorOptions(step_s=0.005, spectral_radius=0.5))
+        assert run.success, run.message
+        runs.append(run)
+    np.testing.assert_allclose(runs[0].rotations, runs[1].rotations, atol=1e-9)
+

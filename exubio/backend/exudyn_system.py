@@ -57,9 +57,14 @@ Principal angles wrap, so each element measures its angles from a centre (a join
 about the first axis on the parent's side, about the last on the child's): the middle of the
 range, or a quarter turn (cardan middle angle: an eighth) inside a one-sided limit; a limit
 without 30 deg to spare before the wrap, and a spherical joint's middle-angle limit at or beyond
-+-90 deg (that angle never gets there), get no element. Limits act on the principal branch of a
-spherical joint (|middle angle| <= 90 deg), the branch exubio.kinematics reports unless only the
-other one lies within the ranges.
++-90 deg (that angle never gets there), get no element. A spherical joint with three free
+angles may sit on either branch of its sequence (the principal one, |middle angle| <= 90 deg, or
+the other, (t0 + pi, +-pi - t1, t2 + pi)); the pre-step judges which one lies within the ranges of
+all three coordinates (or nearer them), as exubio.kinematics reports it, and tells the torque
+function through the connector's ``offset[0]`` (+1 / -1), which then measures the angles on that
+branch (the middle angle runs against the principal one there). E.g. the glenohumeral joint at
+more than 90 deg of internal rotation in a palm-down T-pose: before, its principal first and last
+angles, 180 deg outside their ranges, were pulled on and Newton failed at the first frame.
 
 Outside this module nothing knows about Exudyn: inputs and outputs are numpy arrays (SI units,
 time first) and the frozen dataclasses below. Segment indices are those of ``Model.segments``
@@ -100,6 +105,11 @@ _TIMER_FIELDS = (
 DEFAULT_LIMIT_MAX_RATE_RAD_S = 10.0  # fastest joint-angle rate the switching of the limits allows for
 _LIMIT_MIN_COS = 1e-2  # spherical joints: 1 / cos(middle angle) capped at 100 (gimbal lock, |q2| > 89.4 deg)
 _LIMIT_WRAP_TOLERANCE_RAD = math.pi / 6  # a limit needs this much room beyond it before its angle wraps
+
+
+def _wrap_pi(x: float) -> float:
+    """x in (-pi, pi]."""
+    return math.pi - (math.pi - x) % (2.0 * math.pi)
 
 
 # --------------------------------------------------------------------------------------------
@@ -622,8 +632,19 @@ class PFSystem:
                                             "springForceTorqueUserFunction", itemTypeName="ObjectConnectorRigidBodySpringDamper")
             obj = mbs.AddObject(eii.ObjectConnectorRigidBodySpringDamper(
                 markerNumbers=[m0, m1], springForceTorqueUserFunction=uf, activeConnector=False,
+                offset=[1.0, 0.0, 0.0, 0.0, 0.0, 0.0],  # the branch flag of _limit_torque
                 visualization=eii.VObjectConnectorRigidBodySpringDamper(show=False)))
-            self._limits.append(_LimitElement(joint.name, obj, uf, [(ti, b[0], b[1]) for ti, b in enumerate(bounds) if b is not None]))
+            # the other branch of a spherical joint's sequence is a choice only with all three angles
+            # free; which branch the joint is on is judged against the full ranges of its three
+            # coordinates (the middle one's included where no element can enforce it)
+            choice = None
+            if three:
+                choice = []
+                for ti, j, sign, kind in slots:
+                    lo, hi = (lim[j] if sign > 0 else -lim[j, ::-1])
+                    choice.append((ti, float(lo) - centre[ti], float(hi) - centre[ti]))
+            self._limits.append(_LimitElement(joint.name, obj, uf, [(ti, b[0], b[1]) for ti, b in enumerate(bounds) if b is not None],
+                                              branch_bounds=choice))
 
     def _coordinates_for(self, q: np.ndarray) -> np.ndarray:
         """The system's ODE2 coordinates (relative to the reference posture q0) for posture q."""
@@ -765,7 +786,10 @@ class PFSystem:
             first = math.inf
             for e in limits:
                 if e.next_check <= t_start:
+                    branch = e.branch
                     d = e.distance(get_output(e.obj, rotation_output))
+                    if e.branch != branch:
+                        set_parameter(e.obj, "offset", [e.branch, 0.0, 0.0, 0.0, 0.0, 0.0])
                     if (d < margin) != e.active:
                         e.active = not e.active
                         set_parameter(e.obj, "activeConnector", e.active)
@@ -781,6 +805,9 @@ class PFSystem:
         for e in limits:
             e.active, e.next_check, e.on_since, e.active_s = False, -math.inf, 0.0, 0.0
             set_parameter(e.obj, "activeConnector", False)
+            if e.branches is not None:
+                e.branch = 1.0
+                set_parameter(e.obj, "offset", [1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
         if limits:  # from the initial state, before the initial accelerations are computed
             sd.SetODE2Coordinates(sd.GetODE2Coordinates(configuration=exu.ConfigurationType.Initial),
                                   configuration=exu.ConfigurationType.Current)
@@ -940,18 +967,33 @@ class _LimitElement:
     """The limit connector of one joint and its switching state. ``bounds``: (i, lower, upper)
     of every limited theta'_i (the connector's Tait-Bryan angle i, centred; +-inf = no side)."""
 
-    __slots__ = ("joint", "obj", "uf", "bounds", "scalar", "active", "next_check", "on_since", "active_s")
+    __slots__ = ("joint", "obj", "uf", "bounds", "scalar", "branches", "branch", "active", "next_check", "on_since",
+                 "active_s")
 
-    def __init__(self, joint: str, obj, uf, bounds, *, scalar: bool = False):
+    def __init__(self, joint: str, obj, uf, bounds, *, scalar: bool = False, branch_bounds=None):
         self.joint, self.obj, self.uf, self.bounds, self.scalar = joint, obj, uf, bounds, scalar
+        # a spherical joint with three free angles: (i, lower, upper) of all three centred angles,
+        # to tell on which branch of the sequence it is; None: always the principal one
+        self.branches = branch_bounds
+        self.branch = 1.0  # +1 principal (|middle angle| <= 90 deg), -1 the other one
         self.active, self.next_check, self.on_since, self.active_s = False, -math.inf, 0.0, 0.0
 
     def distance(self, theta) -> float:
         """Smallest distance (rad) of a limited angle to its nearest limit (< 0 beyond it);
-        ``theta``: the connector's Rotation output (a scalar for a torsional spring-damper)."""
+        ``theta``: the connector's Rotation output (a scalar for a torsional spring-damper). A
+        spherical joint's angles are taken on the branch that lies within the ranges, or nearer
+        them, as exubio.kinematics reports them (``branch``, which the torque function reads)."""
         theta = (theta,) if self.scalar else theta.tolist()  # Python floats: 3x faster than numpy scalars
+        if not self.branches:
+            return self._distance(theta, self.bounds)
+        other = [_wrap_pi(theta[0] + math.pi), math.copysign(math.pi, theta[1]) - theta[1], _wrap_pi(theta[2] + math.pi)]
+        self.branch = -1.0 if self._distance(other, self.branches) > self._distance(theta, self.branches) else 1.0
+        return self._distance(theta if self.branch > 0 else other, self.bounds)
+
+    @staticmethod
+    def _distance(theta, bounds) -> float:
         d = math.inf
-        for i, lo, hi in self.bounds:
+        for i, lo, hi in bounds:
             x = theta[i]
             if x - lo < d:
                 d = x - lo
@@ -1021,16 +1063,28 @@ def _limit_torque(k_lim: float, bounds, three_angles: bool):
 
     def limit_torque(mbs, t, itemNumber, displacement, rotation, velocity, angularVelocity, stiffness, damping,
                      rotJ0, rotJ1, offset):
+        # offset[0] = +1: the joint is on the principal branch of its sequence; -1: on the other one
+        # (the pre-step sets it: _LimitElement.distance), whose angles are (t0 + pi, +-pi - t1,
+        # t2 + pi) and whose middle angle runs against the principal one (d t1'/d t1 = -1)
+        f = offset[0]
+        h = 0.5 * (1.0 + f)
         g = [None, None, None]
         for i in range(3):
             if bounds[i] is None:
                 continue
+            if i == 1:
+                alt = math.pi * esym.sign(rotation[1]) - rotation[1]
+            else:
+                alt = rotation[i] - math.pi * esym.sign(rotation[i])
+            x = h * rotation[i] + (1.0 - h) * alt
             lo, hi = bounds[i]
             if math.isfinite(hi):
-                g[i] = k_lim * esym.max(rotation[i] - hi, 0.0)
+                g[i] = k_lim * esym.max(x - hi, 0.0)
             if math.isfinite(lo):
-                below = k_lim * esym.min(rotation[i] - lo, 0.0)
+                below = k_lim * esym.min(x - lo, 0.0)
                 g[i] = below if g[i] is None else g[i] + below
+            if i == 1:
+                g[i] = f * g[i]
         zero = 0.0 * rotation[0]
         m = [None, None, None]
 
