@@ -130,6 +130,32 @@ def shared_data_dir() -> Path:
     return next((c for c in candidates if c.is_dir()), candidates[0])
 
 
+def portable_paths(obj: Any, /) -> Any:
+    """``obj`` (JSON-like) with every absolute path of this machine written relative: the shared
+    data folder as ``../shared/data`` (as ../shared/data/SOURCES.md and the README cite it) and the
+    checkout as ``.``, inside any string (error messages included). The validation outputs are
+    compared across machines and committed; they must not carry one machine's paths."""
+    prefixes = []
+    for path, rel in ((shared_data_dir(), "../shared/data"), (_CHECKOUT, ".")):
+        for form in {str(path), str(Path(path).resolve())}:
+            if form and form not in (".", "/"):
+                prefixes.append((form, rel))
+    prefixes.sort(key=lambda pr: -len(pr[0]))  # the longest (most specific) first
+
+    def fix(x: Any) -> Any:
+        if isinstance(x, str):
+            for form, rel in prefixes:
+                x = x.replace(form, rel)
+            return x
+        if isinstance(x, dict):
+            return {fix(k): fix(v) for k, v in x.items()}
+        if isinstance(x, (list, tuple)):
+            return [fix(v) for v in x]
+        return x
+
+    return fix(obj)
+
+
 def why_no_real_trial(name: str) -> str | None:
     """Why the real trial ``name`` cannot be used (missing file or module), or None."""
     trc = shared_data_dir() / "trc" / REAL_TRIALS[name]
@@ -710,8 +736,9 @@ def run_validation(out_dir: str | Path = "reports/validation", /, *, quick: bool
     tmp = out / "validation_data.tmp.npz"
     np.savez_compressed(tmp, **arrays)
     tmp.replace(out / "validation_data.npz")
-    _write_json(out / "table1.json", {"rows": runs["table1"], "paper": PAPER["table1"],
-                                      "units": {"wall_s": "s", "residuals": "mm"}})
+    runs = portable_paths(runs)
+    _write_json(out / "table1.json", portable_paths({"rows": runs["table1"], "paper": PAPER["table1"],
+                                                     "units": {"wall_s": "s", "residuals": "mm"}}))
     _write_json(out / "validation_runs.json", runs)
 
     say("building the report")

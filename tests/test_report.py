@@ -215,3 +215,32 @@ def test_a_calibrated_trial_report_has_a_calibration_page(tmp_path):
     for needle in ("scale factors: thorax", "joint centres at the static pose", "gh [", "static pose (deg)", "EPI_lat",
                    "SCAP_FRONT"):
         assert needle in text, needle
+
+
+
+def test_portable_paths_rewrites_this_machines_paths():
+    """Absolute paths of the shared data and of the checkout, inside any string of a JSON-like
+    object, become ../shared/data/... and ./...; other strings and numbers are left alone."""
+    from exubio.resources import _CHECKOUT
+    from exubio.validate import portable_paths
+
+    shared = shared_data_dir()
+    obj = {"data": {"abduction": {"source": str(shared / "trc" / "a.trc"), "frames": 10}},
+           "errors": [f"{shared.resolve() / 'trc' / 'b.trc'}: the PF solver stopped", "plain text"],
+           "model": str(_CHECKOUT / "models" / "upper_extremity.yaml")}
+    out = portable_paths(obj)
+    assert out["data"]["abduction"] == {"source": "../shared/data/trc/a.trc", "frames": 10}
+    assert out["errors"] == ["../shared/data/trc/b.trc: the PF solver stopped", "plain text"]
+    assert out["model"] == "./models/upper_extremity.yaml"
+
+
+def test_the_committed_validation_outputs_hold_no_absolute_path():
+    """reports/validation/*.json as committed: no path of the machine that wrote them (they are
+    compared across machines)."""
+    folder = Path(__file__).resolve().parents[1] / "reports" / "validation"
+    files = sorted(folder.glob("*.json"))
+    if not files:
+        pytest.skip(f"{folder} has no validation outputs")
+    for path in files:
+        for value in re.findall(r'"([^"]*)"', path.read_text()):
+            assert not re.search(r"(^|[\s'(])(/[A-Za-z]|[A-Za-z]:\\)", value), (path.name, value)
