@@ -67,9 +67,7 @@ def fit_ellipsoid_to_points(points_m: np.ndarray, /, *, centre_z_m: float | None
 
     def resid(p):
         c, r = unpack(p)
-        d = x - c
-        f = np.sqrt(((d / r) ** 2).sum(axis=1))
-        return np.linalg.norm(d, axis=1) * (1.0 - 1.0 / f)
+        return surface_distance(Ellipsoid(centre_m=c, radii_m=r, contact_points=()), x)
 
     p0 = np.concatenate([c0[:3] if free_z else c0[:2], np.log(r0)])
     sol = least_squares(resid, p0, xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=10000)

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from exubio.calibration import fit_ellipsoid
-from exubio.calibration.ellipsoid import fit_ellipsoid_to_points
+from exubio.calibration.ellipsoid import fit_ellipsoid_to_points, surface_distance
 from exubio.kinematics import Kinematics
 from exubio.model import load_model
 from exubio.simulate import rhythm_poses
@@ -42,9 +42,7 @@ def main(argv: list[str]) -> int:
           f"max {np.abs(r).max() * 1e3:.2f} mm")
     rest = kin.points(np.zeros(model.n_coordinates), kin.contacts)
     final, k = fit_ellipsoid(type(fitted)(fitted.centre_m, fitted.radii_m, model.ellipsoid.contact_points), rest)
-    d = pts.reshape(-1, 3) - final.centre_m
-    f = np.sqrt(((d / final.radii_m) ** 2).sum(axis=1))
-    rr = np.linalg.norm(d, axis=1) * (1 - 1 / f)
+    rr = surface_distance(final, pts.reshape(-1, 3))
     print(f"through the reference posture's TS and AI (radii x {k:.4f}): residual over the rhythm RMS "
           f"{np.sqrt(np.mean(rr ** 2)) * 1e3:.2f} mm, max {np.abs(rr).max() * 1e3:.2f} mm")
     for plane_i, plane in enumerate(PLANES):
