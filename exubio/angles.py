@@ -59,6 +59,7 @@ from typing import Mapping
 import numpy as np
 
 from exubio.errors import InputError, ModelError
+from exubio.frame_definitions import JOINT_SEGMENTS, FrameDefinition, JointDefinition, NotBuildable, build_frame
 from exubio.kinematics import Kinematics
 from exubio.types import Model
 
@@ -67,6 +68,8 @@ __all__ = [
     "ANGLE_NAMES",
     "ISB_COLUMNS",
     "isb_table",
+    "definition_frame",
+    "joint_angles",
     "measured_isb_joints",
     "anatomical_frames",
     "euler_angles",
@@ -99,13 +102,7 @@ ISB_COLUMNS: dict[str, tuple[str, str, str]] = {
 three columns spell its sequence), what the angle is; signs as in ANGLE_NAMES."""
 
 # (proximal frame, distal frame) of every joint angle set; "thorax" is the global frame
-_JOINTS: dict[str, tuple[str, str]] = {
-    "SC": ("thorax", "clavicle"),
-    "AC": ("clavicle", "scapula"),
-    "ST": ("thorax", "scapula"),
-    "GH": ("scapula", "humerus"),
-    "HT": ("thorax", "humerus"),
-}
+_JOINTS = JOINT_SEGMENTS
 
 _AXES = {"X": 0, "Y": 1, "Z": 2}
 
@@ -303,3 +300,49 @@ def measured_isb_joints(model: Model, not_solved: set[str] | frozenset[str], /) 
         own = set(seg.joint.coordinates) if seg.joint else set()
         measured[seg.name] = not (own & set(not_solved))
     return [joint for joint, (prox, dist) in _JOINTS.items() if measured.get(prox, False) and measured.get(dist, False)]
+
+
+# --------------------------------------------------------------------------------------------
+# Frames and angles of any study's definition (exubio.frame_definitions)
+# --------------------------------------------------------------------------------------------
+def _reference_landmarks(model: Model, segment: str) -> dict[str, np.ndarray]:
+    """Every landmark of the model in the reference posture (q = 0), in global coordinates; a
+    name on several segments resolves to ``segment``'s own, else to the first in model order."""
+    R, p = Kinematics(model).poses(np.zeros(model.n_coordinates))
+    out: dict[str, np.ndarray] = {}
+    order = [model.segment(segment)] + [s for s in model.segments if s.name != segment]
+    for seg in order:
+        i = model.segment_index(seg.name)
+        for name, local in seg.points.items():
+            out.setdefault(name, p[i] + R[i] @ np.asarray(local, dtype=float))
+    return out
+
+
+def definition_frame(model: Model, defn: FrameDefinition, /) -> np.ndarray:
+    """The frame of ``defn`` built on the model's landmarks in the reference posture (fixed to the
+    bone from then on, as a digitised static posture is), as a constant rotation A (3, 3) in the
+    segment's model frame: columns = the frame's x, y, z. Raises NotBuildable."""
+    seg = model.segment(defn.segment) if defn.segment in {s.name for s in model.segments} else None
+    if seg is None:
+        raise NotBuildable(f"the model has no segment '{defn.segment}'")
+    F = build_frame(defn, _reference_landmarks(model, defn.segment))
+    R, _ = Kinematics(model).poses(np.zeros(model.n_coordinates))
+    return R[model.segment_index(defn.segment)].T @ F
+
+
+def joint_angles(model: Model, q: np.ndarray, definition: JointDefinition, /, *,
+                 kinematics: Kinematics | None = None, unwrap: bool = True) -> np.ndarray:
+    """The three angles (radians, (n, 3) or (3,)) of ``definition`` at coordinates q: the
+    definition's distal frame relative to its proximal frame, decomposed in its intrinsic
+    sequence without any sign change (the raw Euler angles, as Spartacus stores each study's)."""
+    kin = kinematics if kinematics is not None else Kinematics(model)
+    frames = {"parent": definition_frame(model, definition.parent), "child": definition_frame(model, definition.child)}
+    q = np.asarray(q, dtype=float)
+    R, _ = kin.poses(q)
+    Rp = R[..., model.segment_index(definition.parent.segment), :, :] @ frames["parent"]
+    Rc = R[..., model.segment_index(definition.child.segment), :, :] @ frames["child"]
+    letters = definition.letters
+    ang = euler_angles(np.swapaxes(Rp, -1, -2) @ Rc, letters, negative_middle=(letters[0] == letters[2]))
+    if unwrap and ang.ndim == 2 and ang.shape[0] > 1:
+        ang = np.unwrap(ang, axis=0)
+    return ang
