@@ -44,11 +44,13 @@ from typing import Any, Callable
 import numpy as np
 
 import exubio
-from exubio.angles import humerothoracic_elevation, isb_angles
+from exubio.angles import isb_angles
 from exubio.errors import ExubioError, ReconstructionError
 from exubio.evaluate import per_frame_residuals_mm, residual_statistics
+from exubio.invivo import PLANE_TOLERANCE_DEG, RAISING_MIN_SPAN_DEG, compare_elevation, inferred_joints
+from exubio.io.trial import read_trial
 from exubio.kinematics import Kinematics
-from exubio.pipeline import load_model_and_protocol, reconstruct
+from exubio.pipeline import calibrate_file, load_model_and_protocol, reconstruct
 from exubio.preprocess import prepare_targets
 from exubio.reference import load_ludewig2009
 from exubio.resources import _CHECKOUT, shipped_file
@@ -61,21 +63,22 @@ __all__ = ["QUICK_SETTINGS", "ValidationSettings", "run_validation"]
 
 Progress = Callable[[str], None]
 
-# ISB angle sets shown in Fig. 5 and their Ludewig columns (same order as exubio.angles)
+# the issue's aims for the like-for-like comparison (Ludewig's frames)
+AIMS_DEVIATION_DEG = (("ST_medRotation_X", "ST upward rotation", 8.0), ("GH_abduction_X", "GH elevation", 8.0),
+                      ("ST_protraction_Y", "ST internal rotation", 10.0))
+AIMS_CORRIDOR = (("ST_medRotation_X", "ST upward rotation"), ("ST_protraction_Y", "ST internal rotation"),
+                 ("ST_tilt_Z", "ST tilt"), ("GH_abduction_X", "GH elevation"), ("GH_rotation_Y", "GH axial rotation"))
+AIM_SHARE_INSIDE = 0.8
+# joint-angle sets shown in Fig. 5
 FIG5_JOINTS = ("SC", "ST", "GH")
-LUDEWIG_COLUMNS = {
-    "SC": ("SC_protraction_Y", "SC_elevation_X", "SC_rotation_Z"),
-    "AC": ("AC_protraction_Y", "AC_medRotation_X", "AC_antRotation_Z"),
-    "ST": ("ST_protraction_Y", "ST_medRotation_X", "ST_tilt_Z"),
-    "GH": ("GH_abduction_X", "GH_flexion_Z", "GH_rotation_Y"),
-}
 LUDEWIG_PLANE = {"abduction": "frontal", "flexion": "sagittal"}  # the trials' planes of elevation
-HT_CHECK_DEG = (30.0, 60.0, 90.0, 120.0)
-HT_BIN_HALF_WIDTH_DEG = 2.5
-RAISING_MIN_RATE_DEG_S = 5.0  # humerothoracic elevation rate that counts as "raising the arm"
 PLOT_SAMPLES = 6000  # time series are stored decimated to about this many samples
 REAL_TRIALS = {"abduction": "tsm_rmr_ABD01.trc", "flexion": "tsm_rmr_FLX01.trc"}
 REAL_PROTOCOL = "thoracoscapular_9.yaml"
+# the 21-marker C3D task trials with the static trial of their session (../shared/data/SOURCES.md)
+C3D_TASKS = (("bioptim_exo_martin_dynamique.c3d", "bioptim_exo_martin_statique.c3d", None),
+             *((f"bioptim_exo_kinova_martin_{n}_f3_1.c3d", "bioptim_exo_kinova_martin_statique.c3d",
+                "examples/kinova_martin_session.yaml") for n in ("aisselle", "dent", "manger", "tete")))
 
 
 @dataclass(frozen=True)
@@ -96,12 +99,13 @@ class ValidationSettings:
     sier_realisations: int = 10  # extra SIER runs with other noise/STA seeds (0, 1, ...): how typical is Fig. 4?
     sier_realisation_rate_hz: float = 200.0
     real_trials: bool = True  # use the real TRC trials for abduction and flexion when available
+    c3d_tasks: bool = True  # compare the 21-marker C3D task trials where a plane of elevation matches
     quick: bool = False
 
 
 QUICK_SETTINGS = ValidationSettings(trial_duration_s=5.0, trial_rate_hz=40.0, sier_duration_s=4.0,
                                     sier_rate_hz=50.0, sier_realisations=2, sier_realisation_rate_hz=50.0,
-                                    real_trials=False, quick=True)
+                                    real_trials=False, c3d_tasks=False, quick=True)
 
 
 @dataclass
@@ -178,7 +182,6 @@ def _real_trial(name: str) -> tuple[Model, Protocol, MarkerTargets, dict[str, An
     if why_no_real_trial(name) is not None:
         return None
     from exubio.calibration import calibrate_model, calibrated_protocol
-    from exubio.io.trial import read_trial
 
     trc = shared_data_dir() / "trc" / REAL_TRIALS[name]
     protocol_path = shipped_file("exubio.protocols", REAL_PROTOCOL, "protocols")
@@ -260,36 +263,6 @@ def _with_springs(protocol: Protocol, stiffness: float, damping: float) -> Proto
                     for m in protocol.markers)
     return dataclasses.replace(protocol, markers=markers, default_stiffness_n_per_m=stiffness,
                                default_damping_ns_per_m=damping)
-
-
-RAISING_MIN_SPAN_DEG = 20.0  # a raising phase must cover at least this much HT elevation
-
-
-def _raising(ht_deg: np.ndarray, time_s: np.ndarray) -> np.ndarray:
-    """Frames where the arm is being raised: HT elevation rising faster than
-    RAISING_MIN_RATE_DEG_S, in runs that cover at least RAISING_MIN_SPAN_DEG."""
-    if ht_deg.size < 3:
-        return np.zeros(ht_deg.shape, dtype=bool)
-    rate = np.gradient(ht_deg, time_s)
-    mask = rate > RAISING_MIN_RATE_DEG_S
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(int), [0]])))
-    for start, stop in zip(edges[::2], edges[1::2]):
-        if np.ptp(ht_deg[start:stop]) < RAISING_MIN_SPAN_DEG:
-            mask[start:stop] = False
-    return mask
-
-
-def _at_ht(values: np.ndarray, ht_deg: np.ndarray, mask: np.ndarray, target: float) -> float:
-    sel = mask & (np.abs(ht_deg - target) <= HT_BIN_HALF_WIDTH_DEG)
-    return float(np.mean(values[sel])) if sel.any() else float("nan")
-
-
-def _slope(values: np.ndarray, ht_deg: np.ndarray, mask: np.ndarray) -> float:
-    """Least-squares slope (deg per deg of HT elevation) over raising frames with HT in 30-120."""
-    sel = mask & (ht_deg >= 30.0) & (ht_deg <= 120.0)
-    if sel.sum() < 3 or np.ptp(ht_deg[sel]) < 10.0:
-        return float("nan")
-    return float(np.polyfit(ht_deg[sel], values[sel], 1)[0])
 
 
 def _nan_to_none(obj: Any) -> Any:
@@ -459,47 +432,71 @@ def _sier_realisations(trial: _Trial, s: ValidationSettings, progress: Progress)
 
 
 def _invivo(trials: dict[str, _Trial], arrays: dict, ludewig: dict) -> dict[str, Any]:
+    """Fig. 5: every source of the abduction and flexion trials in Ludewig's definitions, against
+    his means and the corridor of comparable studies (exubio.invivo)."""
     out: dict[str, Any] = {}
     for plane, cols in ludewig.items():
         for col, v in cols.items():
             arrays[f"lud__{plane}__{col}"] = v
     for name in ("abduction", "flexion"):
         tr = trials[name]
-        plane = LUDEWIG_PLANE[name]
-        lud = ludewig[plane]
-        kin = Kinematics(tr.model)
-        stride = _stride(tr.targets.n_frames)
-        sources = {m: tr.recon.get(m) for m in ("pf", "ls")}
-        qs = {m: (r.q_rad if r is not None else None) for m, r in sources.items()}
+        qs = {m: (r.q_rad if r is not None else None) for m, r in ((m, tr.recon.get(m)) for m in ("pf", "ls"))}
         if tr.sim is not None:
             qs["truth"] = tr.sim.q_true
-        res: dict[str, Any] = {"plane": plane, "ht_check_deg": list(HT_CHECK_DEG)}
-        for src, q in qs.items():
-            if q is None:
-                continue
-            ang = {k: np.degrees(v) for k, v in isb_angles(tr.model, q, kinematics=kin).items()}
-            ht = np.degrees(humerothoracic_elevation(tr.model, q, kinematics=kin))
-            rising = _raising(ht, tr.targets.time_s)
-            arrays[f"iv__{name}__{src}__ht_deg"] = ht[::stride]
-            arrays[f"iv__{name}__{src}__raising"] = rising[::stride]
-            per_src: dict[str, Any] = {"ht_range_deg": [float(ht.min()), float(ht.max())]}
-            for joint in ("SC", "AC", "ST", "GH"):
-                arrays[f"iv__{name}__{src}__{joint}_deg"] = ang[joint][::stride]
-                for i, col in enumerate(LUDEWIG_COLUMNS[joint]):
-                    vals = [_at_ht(ang[joint][:, i], ht, rising, h) for h in HT_CHECK_DEG]
-                    ref = [float(np.interp(h, lud["ht_elevation_deg"], lud[col])) for h in HT_CHECK_DEG]
-                    dev = [a - b for a, b in zip(vals, ref)]
-                    trend = [(a - vals[0]) - (b - ref[0]) for a, b in zip(vals, ref)]
-                    lud_mask = (lud["ht_elevation_deg"] >= 30.0)
-                    per_src[col] = {
-                        "value_deg": vals, "ludewig_deg": ref, "deviation_deg": dev,
-                        "trend_deviation_deg": trend,  # change from 30 deg minus Ludewig's change
-                        "slope_deg_per_deg": _slope(ang[joint][:, i], ht, rising),
-                        "ludewig_slope_deg_per_deg": float(np.polyfit(lud["ht_elevation_deg"][lud_mask],
-                                                                      lud[col][lud_mask], 1)[0]),
-                    }
-            res[src] = per_src
+        res, arr = compare_elevation(tr.model, qs, tr.targets.time_s, LUDEWIG_PLANE[name],
+                                     undetermined=_undetermined_isb(_undetermined(tr)),
+                                     inferred=inferred_joints(tr.model, tr.protocol),
+                                     stride=_stride(tr.targets.n_frames))
+        arrays.update({f"iv__{name}__{k}": v for k, v in arr.items()})
         out[name] = res
+    return out
+
+
+def _c3d_tasks(s: ValidationSettings, progress: Progress) -> dict[str, Any]:
+    """The 21-marker C3D task trials (free movements, not planar elevations): each calibrated on its
+    session's static trial, PF and LS; compared with Ludewig and the corridor in every reference
+    plane where its raising frames (plane of elevation within exubio.invivo.PLANE_TOLERANCE_DEG)
+    cover at least RAISING_MIN_SPAN_DEG of HT elevation above 30 deg; otherwise the reason."""
+    if not s.c3d_tasks:
+        return {"skipped": "not run in this run (ValidationSettings.c3d_tasks is False)"}
+    c3d = shared_data_dir() / "c3d"
+    out: dict[str, Any] = {"plane_tolerance_deg": PLANE_TOLERANCE_DEG, "min_span_deg": RAISING_MIN_SPAN_DEG,
+                           "trials": {}}
+    for trial, static, protocol in C3D_TASKS:
+        if not (c3d / trial).is_file() or not (c3d / static).is_file():
+            out["trials"][trial] = {"skipped": f"{c3d / trial} or its static {static} is not available"}
+            continue
+        progress(f"C3D task {trial}: calibrating on {static}, PF and LS")
+        try:
+            proto_path = shipped_file("exubio.protocols", protocol, "protocols") if protocol else None
+            model, proto, _ = calibrate_file(c3d / static, protocol_path=proto_path)
+            targets = prepare_targets(read_trial(c3d / trial), proto)
+        except ExubioError as exc:
+            out["trials"][trial] = {"skipped": f"could not be prepared: {exc}"}
+            continue
+        tr = _Trial(trial, model, proto, targets, {"kind": "real"})
+        for method in ("pf", "ls"):
+            _run(tr, method, progress)
+        qs = {m: (r.q_rad if r is not None else None) for m, r in tr.recon.items()}
+        rec: dict[str, Any] = {"static": static, "protocol": proto.name, "frames": targets.n_frames,
+                               "errors": tr.errors, "matched": {}, "not_matched": {}}
+        und, inf = _undetermined_isb(_undetermined(tr)), inferred_joints(model, proto)
+        for plane in ("frontal", "scapular", "sagittal"):
+            res, _ = compare_elevation(model, qs, targets.time_s, plane, undetermined=und, inferred=inf,
+                                       plane_tolerance_deg=PLANE_TOLERANCE_DEG)
+            ref = res.get("ls") or res.get("pf") or {}
+            span = ref.get("raising_ht_range_deg")
+            lo = max(span[0], 30.0) if span else float("nan")
+            if span and span[1] - lo >= RAISING_MIN_SPAN_DEG:
+                res.pop("definitions", None)
+                rec["matched"][plane] = res
+            else:
+                rec["not_matched"][plane] = (
+                    f"HT elevation reaches {ref.get('ht_range_deg', [0, float('nan')])[1]:.0f} deg; raising frames within "
+                    f"{PLANE_TOLERANCE_DEG:g} deg of the {plane} plane cover "
+                    + (f"HT {span[0]:.0f}-{span[1]:.0f} deg, less than {RAISING_MIN_SPAN_DEG:g} deg above HT 30" if span
+                       else f"nothing: no raising phase (HT rising over at least {RAISING_MIN_SPAN_DEG:g} deg)"))
+        out["trials"][trial] = rec
     return out
 
 
@@ -685,6 +682,38 @@ def _checks(runs: dict[str, Any], paper: dict[str, Any]) -> list[dict[str, Any]]
     return out
 
 
+def _aims(runs: dict[str, Any]) -> list[dict[str, Any]]:
+    """The issue's aims for the like-for-like comparison, per trial and method (not checks of the
+    paper: the paper compared in ISB frames)."""
+    out = []
+    for name in ("abduction", "flexion"):
+        iv = runs["invivo"][name]
+        for method in ("pf", "ls"):
+            src = iv.get(method, {})
+            for key, label, limit in AIMS_DEVIATION_DEG:
+                if key in src:
+                    out.append({"what": f"{name}: {method.upper()} {label} within {limit:g} deg of Ludewig at HT "
+                                        f"30/60/90/120 (Ludewig's frames)",
+                                "value": src[key]["max_abs_deviation_deg"], "limit": limit, "unit": "deg",
+                                "kind": "aim", "passed": bool(np.isfinite(src[key]["max_abs_deviation_deg"])
+                                                              and src[key]["max_abs_deviation_deg"] <= limit)})
+            for key, label in AIMS_CORRIDOR:
+                e = src.get(key)
+                if e is None:
+                    continue
+                if not np.isfinite(e["share_inside_corridor"]):
+                    out.append({"what": f"{name}: {method.upper()} {label} inside the corridor over HT 30-120",
+                                "value": float("nan"), "limit": AIM_SHARE_INSIDE, "unit": "share", "kind": "aim_min",
+                                "passed": None, "note": f"not evaluable: {e['corridor_studies']} comparable study "
+                                                        f"in this plane, no corridor"})
+                    continue
+                out.append({"what": f"{name}: {method.upper()} {label} inside the corridor of "
+                                    f"{e['corridor_studies']} studies over HT 30-120 ({e['corridor_span_deg']:.0f} deg covered)",
+                            "value": e["share_inside_corridor"], "limit": AIM_SHARE_INSIDE, "unit": "share",
+                            "kind": "aim_min", "passed": bool(e["share_inside_corridor"] >= AIM_SHARE_INSIDE)})
+    return out
+
+
 def run_validation(out_dir: str | Path = "reports/validation", /, *, quick: bool = False,
                    progress: Progress | None = None,
                    settings: ValidationSettings | None = None) -> dict[str, Any]:
@@ -721,6 +750,7 @@ def run_validation(out_dir: str | Path = "reports/validation", /, *, quick: bool
     say("ISB angles against Ludewig et al. 2009")
     runs["invivo"] = _invivo(trials, arrays, load_ludewig2009())
     runs["agreement"] = _agreement(trials, arrays)
+    runs["c3d_tasks"] = _c3d_tasks(s, say)
     for name in ("abduction", "flexion"):
         runs["invivo"][name]["undetermined_isb_angles"] = runs["agreement"].get(name, {}).get(
             "undetermined_isb_angles", [])
@@ -731,6 +761,7 @@ def run_validation(out_dir: str | Path = "reports/validation", /, *, quick: bool
         for name, tr in trials.items() if tr.sim is not None}
     runs["paper"] = PAPER
     runs["checks"] = _checks(runs, PAPER)
+    runs["invivo_aims"] = _aims(runs)
     runs["total_wall_s"] = time.perf_counter() - t_start
 
     tmp = out / "validation_data.tmp.npz"

@@ -16,8 +16,8 @@ import pytest
 
 from exubio.reference import load_ludewig2009
 from exubio.report import FIGURES, REPORT_PAGES
+from exubio.invivo import ANGLE_KEYS as LUDEWIG_COLUMNS
 from exubio.validate import (
-    LUDEWIG_COLUMNS,
     run_validation,
     shared_data_dir,
     undetermined_coordinates,
@@ -86,6 +86,19 @@ def test_quick_run_content(quick):
     # Ludewig deviations at the four elevations
     dev = runs["invivo"]["abduction"]["pf"]["ST_medRotation_X"]
     assert len(dev["deviation_deg"]) == 4
+    # like for like: Ludewig's definitions stated, the ISB-frame deviation beside, the corridor
+    iv = runs["invivo"]["abduction"]
+    assert "TS>AC" in iv["definitions"]["ST"] and "xz'y''" in iv["definitions"]["GH"]
+    assert len(dev["isb_frame_deviation_deg"]) == 4
+    members = {m["study"] for m in iv["corridor"]["ST"]["members"]}
+    assert members == {"Ludewig et al. 2009", "Chu et al. 2012"}  # frontal plane, in vivo, buildable frames
+    assert 0.0 <= dev["share_inside_corridor"] <= 1.0 and dev["corridor_studies"] == 2
+    assert np.isnan(iv["pf"]["GH_abduction_X"]["share_inside_corridor"] or np.nan)  # Ludewig alone in the frontal plane
+    aims = runs["invivo_aims"]
+    assert any("ST upward rotation within 8 deg" in a["what"] for a in aims)
+    assert any(a["passed"] is None and "not evaluable" in a["note"] for a in aims)
+    with np.load(out / "validation_data.npz") as z:
+        assert z["iv__flexion__corridor__GH__lo"].shape == (181, 3)
 
 
 def test_report_rebuilds_from_files_without_the_solver(quick, tmp_path):

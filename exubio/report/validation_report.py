@@ -24,10 +24,12 @@ FIGURES = ("fig2_sensitivity.png", "fig3_residuals.png", "fig4_sier.png", "fig5_
            "fig6_pf_ls_agreement.png")
 REPORT_PAGES = ("summary", "fig2_sensitivity", "fig3_residuals", "table1", "fig4_sier", "sier_realisations",
                 "fig5_invivo", "ludewig_deviations", "fig6_pf_ls_agreement")
+"""Pages of validation.pdf in order; ludewig_deviations is two pages (numbers, corridor studies)."""
 
 A4 = (8.27, 11.69)
 A4_LANDSCAPE = (11.69, 8.27)
 C_PF, C_LS, C_TRUE, C_INPUT, C_REF = "black", "tab:red", "tab:blue", "tab:cyan", "tab:green"
+C_CORRIDOR = "#9bc59d"
 MOTION_LABEL = {"abduction": "abduction-adduction", "flexion": "flexion-extension",
                 "sier": "simulated internal-external rotation (SIER)"}
 ANGLE_TITLES = {
@@ -42,6 +44,8 @@ LUDEWIG_COLUMNS = {
 }
 LUDEWIG_CITATION = ("Ludewig et al. 2009, J Bone Joint Surg Am 91(2):378-389 (bone pins, n = 12, mean; "
                     "via the Spartacus dataset, Moissenet et al. 2024, doi 10.5281/zenodo.11455521)")
+CORPUS_NOTE = ("studies from the Spartacus shoulder kinematics dataset (Moissenet et al. 2025, "
+               "doi 10.1016/j.jbiomech.2025.112642), each cited on the numbers page")
 MESKERS_NOTE = ("Meskers et al. 1998 (electromagnetic tracking), the paper's second in vivo reference, could not "
                 "be included: no numeric table, regression or digitised curve of it was available to the project "
                 "(see ../shared/reference/reference_kinematics.md); its curves are not redrawn from the figure.")
@@ -232,55 +236,87 @@ def _masked(y: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return out
 
 
+def _definition_note(iv: dict) -> str:
+    return ("Angles in Ludewig et al. 2009's own definitions (from the Spartacus metadata, exubio.frame_definitions): "
+            "thorax and humerus as ISB; clavicle Z SC→AC; scapula Z TS→AC, X normal to AI-TS-AC (built on AC, not "
+            "ISB's AA); SC, AC, ST Y-X′-Z″, GH X-Z′-Y″, no sign change (raw Euler angles).")
+
+
 def fig_invivo(d: _Data) -> Figure:
-    fig = _new_figure((17.0, 10.0))
+    fig = _new_figure((17.0, 10.5))
     iv = d.runs["invivo"]
     axes = fig.subplots(3, 6, sharex=True)
     for m, name in enumerate(("abduction", "flexion")):
-        plane = iv[name]["plane"]
-        ht_ref = d.get(f"lud__{plane}__ht_elevation_deg")
+        res = iv[name]
+        plane = res["plane"]
+        ht_grid = d.get(f"iv__{name}__corridor__ht_deg")
         for r, joint in enumerate(("SC", "ST", "GH")):
+            cor = res.get("corridor", {}).get(joint, {})
+            members = cor.get("members", [])
             for i in range(3):
                 ax = axes[r, 3 * m + i]
+                key = LUDEWIG_COLUMNS[joint][i]
+                lo, hi = d.get(f"iv__{name}__corridor__{joint}__lo"), d.get(f"iv__{name}__corridor__{joint}__hi")
+                if lo is not None and np.isfinite(lo[:, i]).any():
+                    ax.fill_between(ht_grid, lo[:, i], hi[:, i], color=C_CORRIDOR, alpha=0.35, lw=0,
+                                    label=f"corridor ({len(members)} studies)")
+                for k, mem in enumerate(members):
+                    h = d.get(f"iv__{name}__corridor__{joint}__member{k}__ht_deg")
+                    y = d.get(f"iv__{name}__corridor__{joint}__member{k}__deg")
+                    if h is not None and not mem["study"].startswith("Ludewig"):
+                        ax.plot(h, y[:, i], ls=":", color="0.35", lw=0.9,
+                                label=mem["study"] + (" (converted)" if mem["converted"] else ""))
                 for src, color, ls_, lw, label in (("truth", C_TRUE, "--", 1.0, "simulated truth"),
-                                                   ("pf", C_PF, "-", 0.8, "PF"), ("ls", C_LS, "-", 0.6, "LS")):
+                                                   ("pf", C_PF, "-", 1.1, "PF"), ("ls", C_LS, (0, (4, 2)), 1.1, "LS")):
                     ht = d.get(f"iv__{name}__{src}__ht_deg")
                     if ht is None:
                         continue
                     rising = d.get(f"iv__{name}__{src}__raising")
                     y = d.get(f"iv__{name}__{src}__{joint}_deg")[:, i]
                     ax.plot(_masked(ht, rising), _masked(y, rising), color=color, ls=ls_, lw=lw, label=label)
-                ax.plot(ht_ref, d.get(f"lud__{plane}__{LUDEWIG_COLUMNS[joint][i]}"), "o-", color=C_REF, ms=2.5,
-                        lw=1.0, label="Ludewig 2009")
-                axis = {"SC": "YXZ", "ST": "YXZ", "GH": "XZY"}[joint][i]
+                ax.plot(d.get(f"lud__{plane}__ht_elevation_deg"), d.get(f"lud__{plane}__{key}"), "o-", color=C_REF,
+                        ms=2.5, lw=1.0, label="Ludewig 2009 (mean)", zorder=5)
                 title = ANGLE_TITLES[joint][i]
-                if f"{joint}_{axis}" in iv[name].get("undetermined_isb_angles", []):
+                e = res.get("pf", {}).get(key, {})
+                if e.get("undetermined"):
                     title += "\nNOT DETERMINED by this marker set"
+                    ax.set_facecolor("#eeeeee")
+                elif e.get("inferred"):
+                    title += "\nINFERRED from the model (no marker on the bone)"
                     ax.set_facecolor("#f4f4f4")
-                ax.set_title(title, fontsize=7.5)
+                share = e.get("share_inside_corridor")
+                if share is not None and np.isfinite(share):
+                    title += f"\nPF inside corridor {100 * share:.0f}% of HT 30-120"
+                ax.set_title(title, fontsize=7.2)
                 ax.grid(True, alpha=0.3)
                 ax.tick_params(labelsize=7)
                 if i == 0:
                     ax.set_ylabel(f"{joint} angle (deg)", fontsize=8)
                 if r == 2:
                     ax.set_xlabel("humerothoracic elevation (deg)", fontsize=8)
-    axes[0, 0].legend(fontsize=6.5, loc="best")
-    fig.suptitle("Fig. 5 — ISB joint angles during arm raising against humerothoracic elevation: exubio PF and LS "
-                 "vs in vivo bone-pin means (Ludewig et al. 2009)", fontsize=11, y=0.995)
+    handles, labels = {}, []
+    for ax in axes.flat:
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            if lab not in handles:
+                handles[lab] = h
+    fig.legend(list(handles.values()), list(handles), loc="lower center", ncol=min(8, len(handles)), fontsize=7.5,
+               bbox_to_anchor=(0.5, 0.035), frameon=False)
+    fig.suptitle("Fig. 5 — shoulder angles during arm raising in Ludewig et al. 2009's frames: exubio PF and LS vs "
+                 "Ludewig's bone-pin means and the corridor of comparable in vivo studies", fontsize=11, y=0.995)
     sim_note = ""
     if any(d.kind(n) == "simulated" for n in ("abduction", "flexion")):
-        sim_note = ("Simulated trials: the 'simulated truth' is the generic model's rhythm, which follows Ludewig only "
-                    "partly (see the summary page); PF/LS should match the truth, the truth need not match Ludewig. ")
-    _footer(fig, f"Reference: {LUDEWIG_CITATION}. Sequences: SC and ST Y-X′-Z″, GH X-Z′-Y″; HT elevation = angle "
-            f"between the humerus and thorax long axes; signs as Ludewig's (exubio.angles). Only raising phases "
-            f"(HT elevation increasing) are drawn. {sim_note}{MESKERS_NOTE} " + _data_footer(d))
-    fig.tight_layout(rect=(0, 0.05, 1, 0.93), h_pad=1.5)
+        sim_note = ("Simulated trials: the 'simulated truth' is the model's rhythm; PF/LS should match the truth, the "
+                    "truth need not match Ludewig. ")
+    _footer(fig, f"{_definition_note(iv)} Corridor: spread of the study means (≥ 2 studies) converted to these "
+            f"definitions on the model's bones (exubio.corridor); dotted: the other studies; {CORPUS_NOTE}. Only raising "
+            f"phases are drawn. {sim_note}" + _data_footer(d))
+    fig.tight_layout(rect=(0, 0.08, 1, 0.93), h_pad=1.2)
     for m, name in enumerate(("abduction", "flexion")):
         plane = iv[name]["plane"]
         left, right = axes[0, 3 * m].get_position(), axes[0, 3 * m + 2].get_position()
-        fig.text(0.5 * (left.x0 + right.x1), left.y1 + 0.035,
+        fig.text(0.5 * (left.x0 + right.x1), left.y1 + 0.045,
                  f"({'a' if m == 0 else 'b'}) {MOTION_LABEL[name]}: {d.source_label(name)}\n"
-                 f"Ludewig: {'coronal-plane abduction' if plane == 'frontal' else 'sagittal-plane flexion'}",
+                 f"compared with {plane}-plane elevation",
                  ha="center", va="bottom", fontsize=8.5, fontweight="bold")
     return fig
 
@@ -471,11 +507,12 @@ def summary_pages(d: _Data) -> list[Figure]:
         "marker-model point distances subject to the ellipsoid constraints (Gauss-Newton SQP). On each trial both "
         "use the same model, markers and 2 Hz zero-lag Butterworth-filtered targets (simulated trials: generic "
         "model, upper_limb_21 protocol, 18 tracked markers; real trials: subject-calibrated model, "
-        "thoracoscapular_9 protocol, 6 tracked markers). Joint angles for Fig. 5 are ISB angles (exubio.angles: "
-        "Wu et al. 2005 frames from the model's landmarks; SC and ST Y-X'-Z'', GH X-Z'-Y'', HT Y-X'-Y''), with "
-        "Ludewig's signs, verified on known rotations and the simulated abduction (tests/test_angles.py): "
-        "retraction, clavicle elevation, scapular upward rotation and GH elevation negative; posterior "
-        "clavicle rotation and posterior scapular tilt positive. "
+        "thoracoscapular_9 protocol, 6 tracked markers). Joint angles for Fig. 5 are computed in Ludewig et al. "
+        "2009's own frame definitions and sequences, read from the Spartacus metadata (exubio.frame_definitions, "
+        "exubio.angles.joint_angles; scapula built on AC, SC and ST Y-X'-Z'', GH X-Z'-Y''), raw Euler angles as "
+        "Spartacus stores Ludewig's: retraction, clavicle elevation, scapular upward rotation and GH elevation "
+        "negative; posterior clavicle rotation and posterior scapular tilt positive. The corridor behind them "
+        "holds the comparable studies of the Spartacus corpus converted to the same definitions (exubio.corridor). "
         "Wall times: one process on this machine "
         f"({r.get('processor', '')}); the paper's: SIMPACK PF and MATLAB fmincon LS on a 3.3 GHz desktop.")
     sim_sc = []
@@ -662,63 +699,146 @@ def sier_realisations_page(d: _Data) -> Figure:
     return fig
 
 
-def ludewig_page(d: _Data) -> Figure:
-    fig = _new_figure(A4_LANDSCAPE)
+COMPARED_ROWS = (("ST_medRotation_X", "ST upward rotation (X′, − = up)"), ("ST_protraction_Y", "ST internal rotation (Y)"),
+                 ("ST_tilt_Z", "ST posterior tilt (Z″)"), ("GH_abduction_X", "GH elevation (X, − = up)"),
+                 ("GH_flexion_Z", "GH flexion (Z′)"), ("GH_rotation_Y", "GH axial rotation (Y″)"),
+                 ("SC_elevation_X", "SC elevation (X′, − = up)"), ("SC_protraction_Y", "SC protraction (Y)"),
+                 ("SC_rotation_Z", "SC posterior rotation (Z″)"))
+
+
+def _share(e: dict) -> str:
+    v = e.get("share_inside_corridor")
+    if v is None or not np.isfinite(v):
+        return f"n/a ({e.get('corridor_studies', 0)} study)"
+    return f"{100 * v:.0f}% ({e['corridor_studies']})"
+
+
+def ludewig_page(d: _Data) -> list[Figure]:
     iv = d.runs["invivo"]
     hts = [int(h) for h in iv["abduction"]["ht_check_deg"]]
     h = "/".join(str(v) for v in hts)
-    src_label = {"pf": "PF", "ls": "LS", "truth": "sim. truth"}
-
-    def row(name, label, src, e, first):
-        return [name if first else "", label if first else "", src_label[src],
-                " / ".join(_fmt(v, ".1f") for v in e["ludewig_deg"]) if first else "",
-                " / ".join(_fmt(v, ".1f") for v in e["value_deg"]),
-                " / ".join(_fmt(v, "+.1f") for v in e["deviation_deg"]),
-                " / ".join(_fmt(v, "+.1f") for v in e["trend_deviation_deg"][1:]),
-                f"{_fmt(e['slope_deg_per_deg'], '+.3f')} vs {_fmt(e['ludewig_slope_deg_per_deg'], '+.3f')}"]
-
-    head = ["motion", "angle", "source", f"Ludewig at HT\n{h}° (deg)", f"exubio at HT\n{h}° (deg)",
-            f"deviation from Ludewig\nat {h}° (deg)",
-            f"change from 30° minus Ludewig's\nchange, at {'/'.join(str(v) for v in hts[1:])}° (deg)",
-            "slope over HT 30-120°\n(deg/deg) vs Ludewig's"]
-    widths = [0.08, 0.16, 0.07, 0.14, 0.14, 0.15, 0.15, 0.11]
-    main = []
+    fig = _new_figure(A4_LANDSCAPE)
+    head = ["motion", "angle", f"Ludewig at HT\n{h}° (deg)", f"PF − Ludewig\nat {h}° (deg)",
+            f"LS − Ludewig\nat {h}° (deg)", "PF / LS inside\ncorridor (studies)", f"PF − Ludewig in ISB\nframes (AA) (deg)",
+            "flag"]
+    widths = [0.07, 0.17, 0.14, 0.14, 0.14, 0.13, 0.14, 0.07]
+    rows = []
     for name in ("abduction", "flexion"):
-        for col, label in (("ST_medRotation_X", "ST upward rotation (X′, − = up)"),
-                           ("SC_elevation_X", "SC elevation (X′, − = up)")):
-            first = True
-            for src in ("pf", "ls", "truth"):
-                e = iv[name].get(src, {}).get(col)
-                if e is not None:
-                    main.append(row(name, label, src, e, first))
-                    first = False
-    others = []
+        for key, label in COMPARED_ROWS:
+            pf, ls = iv[name].get("pf", {}).get(key), iv[name].get("ls", {}).get(key)
+            if pf is None:
+                continue
+            flag = "not det." if pf.get("undetermined") else ("inferred" if pf.get("inferred") else "")
+            rows.append([name, label, " / ".join(_fmt(v, ".1f") for v in pf["ludewig_deg"]),
+                         " / ".join(_fmt(v, "+.1f") for v in pf["deviation_deg"]),
+                         " / ".join(_fmt(v, "+.1f") for v in ls["deviation_deg"]) if ls else "—",
+                         f"{_share(pf)} / {_share(ls).split(' ')[0] if ls else '—'}",
+                         " / ".join(_fmt(v, "+.1f") for v in pf["isb_frame_deviation_deg"])
+                         if "isb_frame_deviation_deg" in pf else "", flag])
+    fig.text(0.02, 0.965, f"Fig. 5 (numbers) — exubio vs Ludewig et al. 2009 in Ludewig's frames at HT elevation {h}°, "
+             f"and the share of HT 30-120° inside the corridor", fontsize=11.5, fontweight="bold", va="top")
+    ax = fig.add_axes((0.02, 0.33, 0.96, 0.6))
+    _table(ax, rows, head, col_widths=widths, fontsize=6.3, row_scale=1.1, header_lines=2)
+    aims = d.runs.get("invivo_aims", [])
+    lines = []
+    for c in aims:
+        if c.get("passed") is None:
+            lines.append(f"[n/a] {c['what']}: {c.get('note', '')}")
+        else:
+            val = f"{100 * c['value']:.0f}% (aim ≥ {100 * c['limit']:.0f}%)" if c["unit"] == "share" else \
+                f"{_fmt(c['value'], '.1f')} deg (aim ≤ {c['limit']:g})"
+            lines.append(f"[{'MET' if c['passed'] else 'NOT MET'}] {c['what']}: {val}")
+    fig.text(0.02, 0.315, "Aims (issue 10), per trial and method:", fontsize=8, va="top", fontweight="bold")
+    col = [lines[i::2] for i in range(2)]
+    for j, chunk in enumerate(col):
+        for k, line in enumerate(chunk):
+            fig.text(0.02 + 0.49 * j, 0.295 - k * 0.0125, textwrap.shorten(line, 125), fontsize=5.6, va="top")
+    note = (f"Values: mean over raising frames with HT within ±2.5° of each elevation (n/a = not reached). "
+            f"Deviation = exubio − Ludewig, both in Ludewig's definitions; the ISB column repeats the deviation with "
+            f"exubio's ISB frames (scapula on AA): the difference between the two columns is the frame definition "
+            f"alone. Corridor: studies (count in brackets) whose frames are built on the model; 'n/a (1 study)': "
+            f"Ludewig is the only comparable study in that plane. 'not det.': the marker set does not determine "
+            f"the angle; 'inferred': a bone of the joint carries no marker. {_definition_note(iv)} {LUDEWIG_CITATION}.")
+    for k, line in enumerate(textwrap.wrap(note, 230)):
+        fig.text(0.02, 0.075 - k * 0.0135, line, fontsize=6.3)
+    return [fig, _corridor_studies_page(d), _c3d_tasks_page(d)]
+
+
+def _c3d_tasks_page(d: _Data) -> Figure:
+    fig = _new_figure(A4_LANDSCAPE)
+    c3d = d.runs.get("c3d_tasks", {})
+    fig.text(0.02, 0.965, "Fig. 5 (C3D tasks) — the 21-marker C3D trials against Ludewig et al. 2009 where a plane of "
+             "elevation matches", fontsize=11.5, fontweight="bold", va="top")
+    if "skipped" in c3d:
+        fig.text(0.02, 0.9, f"Not run: {c3d['skipped']}", fontsize=9, va="top")
+        return fig
+    rows, reasons = [], []
+    for trial, rec in c3d.get("trials", {}).items():
+        if "skipped" in rec:
+            reasons.append(f"{trial}: skipped: {rec['skipped']}")
+            continue
+        for plane, res in rec["matched"].items():
+            for key, label in COMPARED_ROWS[:6]:
+                pf, ls = res.get("pf", {}).get(key), res.get("ls", {}).get(key)
+                if pf is None and ls is None:
+                    continue
+                e = pf or ls
+                span = e and (res.get("ls") or res.get("pf"))["raising_ht_range_deg"]
+                flag = "not det." if e.get("undetermined") else ("inferred" if e.get("inferred") else "")
+                rows.append([trial.replace("bioptim_exo_", ""), plane, f"{span[0]:.0f}-{span[1]:.0f}", label,
+                             " / ".join(_fmt(v, ".1f") for v in e["ludewig_deg"]),
+                             " / ".join(_fmt(v, "+.1f") for v in pf["deviation_deg"]) if pf else "—",
+                             " / ".join(_fmt(v, "+.1f") for v in ls["deviation_deg"]) if ls else "—",
+                             f"{_share(pf) if pf else '—'} / {_share(ls).split(' ')[0] if ls else '—'}", flag])
+        for plane, why in rec["not_matched"].items():
+            reasons.append(f"{trial} ({rec['static']}), {plane}: {why}")
+    head = ["trial", "plane", "HT range\n(deg)", "angle", "Ludewig at HT\n30/60/90/120 (deg)",
+            "PF − Ludewig\n(deg)", "LS − Ludewig\n(deg)", "PF / LS inside\ncorridor", "flag"]
+    widths = [0.16, 0.06, 0.06, 0.16, 0.13, 0.12, 0.12, 0.1, 0.06]
+    top = 0.93
+    if rows:
+        ax = fig.add_axes((0.02, top - 0.03 * (len(rows) + 2), 0.96, 0.03 * (len(rows) + 2)))
+        _table(ax, rows, head, col_widths=widths, fontsize=6.5, row_scale=1.1, header_lines=2)
+        top -= 0.03 * (len(rows) + 2) + 0.03
+    fig.text(0.02, top, "Planes not compared, and why:", fontsize=8, fontweight="bold", va="top")
+    for k, line in enumerate(reasons):
+        fig.text(0.03, top - 0.02 - k * 0.0135, textwrap.shorten(line, 215), fontsize=6.2, va="top")
+    _footer(fig, "The C3D trials are free tasks, not planar elevations: a frame counts as elevation in a reference plane "
+            f"when the arm is being raised and its plane of elevation (ISB HT Y angle) is within "
+            f"{c3d.get('plane_tolerance_deg', 15):g}° of the plane's (frontal 0°, scapular 40°, sagittal 90°); a plane is "
+            f"compared when those frames cover at least {c3d.get('min_span_deg', 20):g}° of HT elevation above 30°. "
+            "Each trial is calibrated on its session's static trial. Deviation: exubio − Ludewig in Ludewig's frames "
+            "(n/a = elevation not reached). " + _data_footer(d))
+    return fig
+
+
+def _corridor_studies_page(d: _Data) -> Figure:
+    fig = _new_figure(A4_LANDSCAPE)
+    iv = d.runs["invivo"]
+    fig.text(0.02, 0.965, "Fig. 5 (corridor) — which studies are in each corridor, and why the others are not",
+             fontsize=11.5, fontweight="bold", va="top")
+    y = 0.925
+    cited: dict[str, str] = {}
     for name in ("abduction", "flexion"):
-        for col, label in (("SC_protraction_Y", "SC protraction (Y)"), ("SC_rotation_Z", "SC posterior rotation (Z″)"),
-                           ("ST_protraction_Y", "ST internal rotation (Y)"), ("ST_tilt_Z", "ST posterior tilt (Z″)"),
-                           ("GH_abduction_X", "GH elevation (X, − = up)"), ("GH_flexion_Z", "GH flexion (Z′)"),
-                           ("GH_rotation_Y", "GH axial rotation (Y″)")):
-            e = iv[name].get("pf", {}).get(col)
-            if e is not None:
-                r = row(name, label, "pf", e, True)
-                r[0] = name
-                others.append(r)
-    fig.text(0.02, 0.965, f"Fig. 5 (numbers) — ISB angles during arm raising vs Ludewig et al. 2009 at "
-             f"HT elevation {h}°", fontsize=11.5, fontweight="bold", va="top")
-    fig.text(0.02, 0.925, "Scapular upward rotation and clavicle elevation (PF, LS and, for simulated trials, the "
-             "simulated truth)", fontsize=9, va="top")
-    ax = fig.add_axes((0.02, 0.555, 0.96, 0.36))
-    _table(ax, main, head, col_widths=widths, fontsize=6.5, row_scale=1.15, header_lines=2)
-    fig.text(0.02, 0.535, "The other SC, ST and GH angles (PF only)", fontsize=9, va="top")
-    ax = fig.add_axes((0.02, 0.1, 0.96, 0.42))
-    _table(ax, others, head, col_widths=widths, fontsize=6.5, row_scale=1.15, header_lines=2)
-    note = (f"Values: mean over raising frames (HT elevation increasing) with HT within ±2.5° of each elevation "
-            f"(n/a = not reached). Deviation = exubio − Ludewig; it includes constant offsets from anatomy and "
-            f"frame definitions, which the trend column removes (value at 30° subtracted from both). Abduction is "
-            f"compared with Ludewig's coronal-plane abduction, flexion with his sagittal-plane flexion. "
-            f"{LUDEWIG_CITATION}. {MESKERS_NOTE} " + _data_footer(d))
-    for k, line in enumerate(textwrap.wrap(note, 225)):
-        fig.text(0.02, 0.085 - k * 0.015, line, fontsize=6.6)
+        res = iv[name]
+        for joint in ("SC", "ST", "GH"):
+            cor = res.get("corridor", {}).get(joint, {})
+            mem = ", ".join(m["study"] + (" (converted)" if m["converted"] else "") for m in cor.get("members", []))
+            for m in cor.get("members", []):
+                cited[m["study"]] = m["citation"]
+            fig.text(0.02, y, f"{MOTION_LABEL[name]} ({res['plane']} plane), {joint}: in the corridor: {mem or 'none'}",
+                     fontsize=7.2, va="top", fontweight="bold")
+            y -= 0.018
+            for study, why in sorted(cor.get("excluded", {}).items()):
+                fig.text(0.04, y, textwrap.shorten(f"left out: {study}: {why}", 200), fontsize=6.4, va="top")
+                y -= 0.0145
+            y -= 0.006
+    y -= 0.01
+    fig.text(0.02, y, "Studies shown: " + "; ".join(cited[k] for k in sorted(cited)) + f". Corpus: {CORPUS_NOTE}.",
+             fontsize=6.4, va="top", wrap=True)
+    _footer(fig, "Converted: the study's three angles re-expressed in Ludewig's definitions with the constant frame "
+            "offsets between the two definitions on the model's bones (exubio.corridor.convert_angles); a study in "
+            "Ludewig's own definitions is taken as published. " + _data_footer(d))
     return fig
 
 
