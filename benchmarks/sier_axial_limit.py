@@ -195,19 +195,43 @@ def run_seed(seed: int, pf_decomposition: bool) -> dict:
     tau = np.einsum("nkc,nkc->nk", sta, t_hat)  # tangential STA (m)
     single = np.degrees(np.where(lever > 1e-3, tau / np.where(lever > 1e-3, lever, 1.0), 0.0))
     d_s = d_ir[idx]
+    seg_R = kin.frames(q).R  # (n, n_seg, 3, 3)
+    a_hum = np.asarray(model.segment("humerus").points["EJC"], dtype=float)
+    a_hum = a_hum / np.linalg.norm(a_hum)  # humeral long axis (GH -> elbow centre), humerus frame
     per_marker = {}
-    for k, name in enumerate(prot.marker_names):
-        peak = float(np.max(np.linalg.norm(sta[:, k], axis=1)) * 1000.0)
-        if peak < 1e-6:
-            per_marker[name] = {"peak_mm": 0.0, "lever_mm": float(np.mean(lever[:, k]) * 1000.0)}
+    for k, spec in enumerate(prot.markers):
+        name = spec.name
+        lever_mm = float(np.mean(lever[:, k]) * 1000.0)
+        local = np.einsum("nji,nj->ni", seg_R[:, pts.segment_index[k]], sta[:, k])  # STA in its segment's frame
+        amp = np.linalg.norm(local, axis=1)
+        if amp.max() < 1e-9:
+            per_marker[name] = {"peak_mm": 0.0, "lever_mm": lever_mm}
             continue
-        per_marker[name] = {
-            "peak_mm": peak,
-            "tau_peak_mm": float(np.max(np.abs(tau[:, k])) * 1000.0),
-            "lever_mm": float(np.mean(lever[:, k]) * 1000.0),
-            "single_gain_pct": float(100.0 * np.polyfit(d_s, single[:, k], 1)[0]) if np.mean(lever[:, k]) > 1e-3 else 0.0,
-            "corr_tau_rotation": float(np.corrcoef(tau[:, k], d_s)[0, 1]) if np.ptp(tau[:, k]) > 0 else 0.0,
-        }
+        u = local[np.argmax(amp)] / amp.max()  # the artefact's (fixed) direction on the segment
+        row = {"peak_mm": float(amp.max() * 1000.0), "lever_mm": lever_mm,
+               "corr_rotation": float(abs(np.corrcoef(local @ u, d_s)[0, 1])),
+               "tau_peak_mm": float(np.max(np.abs(tau[:, k])) * 1000.0)}
+        if spec.segment == "humerus":
+            p = np.asarray(spec.local_position_m, dtype=float)
+            radial = p - (p @ a_hum) * a_hum
+            radial /= np.linalg.norm(radial)
+            row["dir_axial_radial_tangential"] = [float(abs(u @ a_hum)), float(abs(u @ radial)),
+                                                  float(abs(u @ np.cross(a_hum, radial)))]
+            row["single_gain_pct"] = float(100.0 * np.polyfit(d_s, single[:, k], 1)[0])
+        per_marker[name] = row
+    # the elbow centre: where the humerus's STA-only error goes (the forearm markers pin the wrist)
+    rec = recs[("ls", "STA only")]
+    P = kin.point_set([("humerus", "GH"), ("humerus", "EJC"), ("ulna", "WJC")])
+    pt, pe = kin.points(q_true, P), kin.points(rec.q_rad, P)
+    ax = pt[:, 1] - pt[:, 0]
+    ax /= np.linalg.norm(ax, axis=1)[:, None]
+    axf = np.cross(ax, pt[:, 2] - pt[:, 1])  # how the forearm moves per rad of rotation about the humerus
+    L = np.linalg.norm(axf, axis=1)
+    shift = np.einsum("nc,nc->n", pe[:, 1] - pt[:, 1], axf / L[:, None])  # elbow-centre error across the forearm
+    elbow_pred = np.degrees(shift / L)
+    e_sta = np.degrees(rec.q_rad[:, ir] - q_true[:, ir])
+    out["elbow"] = {"shift_rms_mm": rms(shift) * 1000.0, "forearm_mm": float(np.mean(L) * 1000.0),
+                    "pred": error_stats(elbow_pred, d_ir), "corr": float(abs(np.corrcoef(elbow_pred, e_sta)[0, 1]))}
     preds = {}
     for cname, factors in candidates(S.noise_mm, S.sta_mm).items():
         if cname not in PF_CANDIDATES:
@@ -290,39 +314,52 @@ def main() -> None:
           f"{max(r['decomposition'][('ls', 'noise only')]['rmse'] for r in res):.3f}; filter only: max "
           f"{max(r['decomposition'][('ls', 'filter only')]['rmse'] for r in res):.3f}")
 
-    print("\n2. First-order prediction of the STA-only LS error (shipped weights)")
-    print(f"{'seed':>4} {'measured':>9} {'gain':>8} {'naive IR-axis fit':>18} {'gain':>8} {'full linearisation':>19} {'gain':>8}"
-          f"   largest marker shares (gain %)")
+    print("\n2. First-order predictions of the STA-only LS error (shipped weights): naive = a rotation about the "
+          "IR axis alone fitted to every marker's tangential STA (sum w l tau / sum w l^2); elbow = the estimated "
+          "elbow centre's shift across the forearm / the forearm's lever (|r| = correlation with the measured "
+          "error); linear = the constrained weighted LS linearised at the true pose")
+    print(f"{'seed':>4} {'measured':>9} {'gain':>8} {'naive':>7} {'gain':>8} {'elbow shift':>11} {'elbow':>7} {'|r|':>6} "
+          f"{'linear':>7} {'gain':>8}   largest marker shares of the linear gain (%)")
     for r in res:
         m = r["decomposition"][("ls", "STA only")]
         p = r["prediction"]["uniform (shipped)"]
+        el = r["elbow"]
         top = sorted(p["marker_gain_pct"].items(), key=lambda kv: -abs(kv[1]))[:4]
-        print(f"{r['seed']:>4} {m['rmse']:>9.3f} {m['gain_pct']:+7.2f}% {p['naive']['rmse']:>18.3f} {p['naive']['gain_pct']:+7.2f}% "
-              f"{p['linear']['rmse']:>19.3f} {p['linear']['gain_pct']:+7.2f}%   "
+        print(f"{r['seed']:>4} {m['rmse']:>9.3f} {m['gain_pct']:+7.2f}% {p['naive']['rmse']:>7.3f} {p['naive']['gain_pct']:+7.2f}% "
+              f"{el['shift_rms_mm']:>8.1f} mm {el['pred']['rmse']:>7.3f} {el['corr']:>6.3f} "
+              f"{p['linear']['rmse']:>7.3f} {p['linear']['gain_pct']:+7.2f}%   "
               + ", ".join(f"{n} {g:+.2f}" for n, g in top))
+    print(f"   forearm lever (elbow centre -> wrist centre, across the humeral axis): {res[0]['elbow']['forearm_mm']:.0f} mm")
     names = list(res[0]["per_marker"])
     print("   LS sensitivity |d q_IR / d marker| (deg per mm), mean over the trial, shipped -> inverse-variance weights:")
     print("   " + ", ".join(f"{n} {res[0]['prediction']['uniform (shipped)']['marker_sens_deg_per_mm'][n]:.3f}->"
                           f"{res[0]['prediction']['inverse-variance per segment']['marker_sens_deg_per_mm'][n]:.3f}"
                           for n in names))
-    print("   RMS over seeds of each marker's share of the error (gain %), shipped weights:")
-    print("   " + ", ".join(f"{n} {rms([r['prediction']['uniform (shipped)']['marker_gain_pct'][n] for r in res]):.2f}"
-                          for n in names))
+    for cname in PF_CANDIDATES:
+        print(f"   RMS over seeds of each marker's share of the linear gain (%), {cname} weights:")
+        print("   " + ", ".join(f"{n} {rms([r['prediction'][cname]['marker_gain_pct'][n] for r in res]):.2f}"
+                              for n in names))
 
-    print("\n3. STA of the markers that get one (in SIER only humerus and scapula markers: their driving "
-          "coordinates are the GH ones; forearm, hand and clavicle get none)")
-    print(f"   lever = distance from the IR axis (mm); tau = STA along the marker's IR motion; single = the rotation "
-          f"gain the marker alone would give (tau/lever over the true rotation, %)")
-    print(f"{'marker':>10} {'lever':>6} {'peak':>6} " + " ".join(f"{'s' + str(s) + ' tau/single':>18}" for s in seeds)
-          + f" {'RMS single':>10} {'|corr|':>6}")
+    print("\n3. STA of the markers that get one (SIER: humerus and scapula markers, driven by the GH coordinates; "
+          "forearm, hand and clavicle markers get none). lever = distance from the IR axis (mm); peak = peak |STA| "
+          "(mm); |corr| = smallest over seeds of |correlation| of the STA with the true rotation change; "
+          "ax/rad/tan = mean over seeds of |component| of the STA direction along the humeral axis, away from it, "
+          "tangential (a uniformly random direction gives 0.5 each); per seed: the rotation gain (%) the marker "
+          "alone would report (tangential STA / lever)")
+    print(f"{'marker':>10} {'lever':>6} {'peak':>6} {'|corr|':>6} {'ax/rad/tan':>15} "
+          + " ".join(f"{'s' + str(s):>6}" for s in seeds) + f" {'RMS':>6}")
     for n in names:
         pm = [r["per_marker"][n] for r in res]
         if all(x["peak_mm"] == 0.0 for x in pm):
             continue
-        cells = [f"{x.get('tau_peak_mm', 0):>6.1f}mm {x.get('single_gain_pct', 0):+7.1f}%" for x in pm]
-        corr = min(abs(x.get("corr_tau_rotation", 0)) for x in pm)
-        print(f"{n:>10} {pm[0]['lever_mm']:>6.0f} {pm[0]['peak_mm']:>6.1f} " + " ".join(f"{c:>18}" for c in cells)
-              + f" {rms([x.get('single_gain_pct', 0) for x in pm]):>9.1f}% {corr:>6.3f}")
+        corr = min(x.get("corr_rotation", 0.0) for x in pm)
+        if "single_gain_pct" in pm[0]:
+            d3 = np.mean([x["dir_axial_radial_tangential"] for x in pm], axis=0)
+            dirs = "/".join(f"{v:.2f}" for v in d3)
+            cells = " ".join(f"{x['single_gain_pct']:>+6.0f}" for x in pm) + f" {rms([x['single_gain_pct'] for x in pm]):>6.0f}"
+        else:
+            dirs, cells = "-", " ".join(f"{'-':>6}" for _ in pm)
+        print(f"{n:>10} {pm[0]['lever_mm']:>6.0f} {max(x['peak_mm'] for x in pm):>6.1f} {corr:>6.3f} {dirs:>15} {cells}")
     print("   markers without STA here, lever (mm): " + ", ".join(
         f"{n} {res[0]['per_marker'][n]['lever_mm']:.0f}" for n in names if res[0]['per_marker'][n]['peak_mm'] == 0.0))
 

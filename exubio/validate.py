@@ -18,8 +18,11 @@ Runs (paper section in brackets):
    the marker residuals over markers, the maxima and per-marker RMSE.
 3. SIER [Fig. 4]: simulated internal-external rotation with noise and soft-tissue artefact (STA):
    GH axial rotation and the GH marker (``ValidationSettings.gh_marker``) against the truth.
-4. in vivo [Fig. 5]: ISB SC, ST, GH angles against humerothoracic elevation beside Ludewig et al.
-   2009 (``exubio/data/ludewig2009.csv``), deviations at 30, 60, 90, 120 deg.
+4. in vivo [Fig. 5]: SC, ST, GH angles in Ludewig et al. 2009's own definitions (exubio.invivo)
+   against humerothoracic elevation, with Ludewig's means and the corridor of comparable studies of
+   the Spartacus corpus (exubio.corridor); deviations at 30, 60, 90, 120 deg, the share of HT
+   30-120 inside the corridor, the ISB-frame deviation beside; the same for the 21-marker C3D task
+   trials in every plane of elevation their raising phases match (``_c3d_tasks``), or why not.
 5. PF vs LS agreement [Fig. 6]: RMSE per coordinate and per marker, every motion.
 
 Abduction and flexion are the real TRC trials of ``../shared/data/trc`` when the subject
