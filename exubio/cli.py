@@ -235,7 +235,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     print(f"reconstructing it with the potential-field (pf) and least-squares (ls) methods -> {out}")
     outputs = reconstruct_file(c3d, out, methods=["pf", "ls"], overwrite=True,
                                progress_factory=_progress_factory(not args.quiet))
-    _, names, q_true = read_angles_csv(truth_csv)
+    t_true, names, q_true = read_angles_csv(truth_csv)
     from exubio.kinematics import Kinematics
     from exubio.model import load_model
 
@@ -265,9 +265,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
         agree = agreement_deg(outputs[0][0], outputs[1][0])
     worst = max(agree, key=agree.get)
     print(f"PF-LS agreement (determined coordinates): max RMSE {agree[worst]:.3f} deg ({worst})")
-    from exubio.report.trial_report import build_trial_report
+    from exubio.report.trial_report import Truth, build_trial_report
 
-    pdf, png = build_trial_report([paths["npz"] for _, paths, _ in outputs], out / "example_abduction.report.pdf")
+    pdf, png = build_trial_report([paths["npz"] for _, paths, _ in outputs], out / "example_abduction.report.pdf",
+                                  truth=Truth(t_true, names, q_true))
     print(f"report: {pdf} and {png}")
     print(f"results are in {out.resolve()}")
     return EXIT_OK
@@ -284,6 +285,17 @@ def cmd_validate(args: argparse.Namespace) -> int:
               f"(limit {c['limit']:.3g} {c['unit']})")
     print(f"wrote {Path(args.out) / 'validation.pdf'}, the figures and table1.json; "
           f"{sum(bool(c['passed']) for c in checks)}/{len(checks)} checks passed")
+    return EXIT_OK
+
+
+def cmd_export_model(args: argparse.Namespace) -> int:
+    from exubio.export import write_biomod, write_osim
+    from exubio.model import load_model
+
+    writer = write_osim if args.format == "osim" else write_biomod
+    path = writer(load_model(args.model), args.out, overwrite=args.overwrite)
+    print(f"wrote {path}: an open chain (the scapulothoracic ellipsoid cannot be expressed in this format; the file's "
+          f"header gives it); coordinates named as exubio's, so exubio's .mot plays on it")
     return EXIT_OK
 
 
@@ -355,6 +367,14 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--out", default="reports/validation", help="output folder (default reports/validation)")
     v.add_argument("--quick", action="store_true", help="short trials (a smoke run, not the report)")
     v.set_defaults(func=cmd_validate)
+
+    e = sub.add_parser("export-model", parents=[common],
+                       help="write a model YAML (generic or calibrated) as an OpenSim .osim or a biorbd .bioMod")
+    e.add_argument("model", help="model YAML (e.g. models/upper_extremity.yaml or one written by exubio calibrate)")
+    e.add_argument("--format", required=True, choices=["osim", "biomod"], help="osim: OpenSim 4; biomod: biorbd")
+    e.add_argument("--out", required=True, help="FILE.osim or FILE.bioMod to write")
+    e.add_argument("--overwrite", action="store_true", help="replace an existing FILE")
+    e.set_defaults(func=cmd_export_model)
 
     d = sub.add_parser("demo", parents=[common], help="reconstruct the shipped example trial with PF and LS, compare with its truth")
     d.add_argument("--out", default="exubio_demo", help="output folder (default ./exubio_demo)")

@@ -104,7 +104,8 @@ def output_stem(trial_path: str | Path, method: Method | str) -> str:
 def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
                   metadata: dict[str, Any], summary_data: dict[str, Any],
                   undetermined: np.ndarray | None = None,
-                  isb: tuple[tuple[str, ...], np.ndarray] | None = None) -> dict[str, Path]:
+                  isb: tuple[tuple[str, ...], np.ndarray] | None = None,
+                  isb_comments: tuple[str, ...] = ()) -> dict[str, Path]:
     """Write <stem>.csv, .mot, .npz and .summary.json into out_dir, each atomically, and with
     ``isb`` (column names, angles (n, 15) rad) the ISB angles as <stem>.isb.csv (degrees). Coordinates
     that are not measurements (held, locked, undetermined for the trial) are named in the .mot
@@ -128,7 +129,7 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
     results.write_angles_csv(paths["csv"], recon.time_s, recon.coordinate_names, recon.q_rad)
     if isb is not None:
         paths["isb"] = out / f"{stem}.isb.csv"
-        results.write_angles_csv(paths["isb"], recon.time_s, isb[0], isb[1])
+        results.write_angles_csv(paths["isb"], recon.time_s, isb[0], isb[1], comments=isb_comments)
     results.write_mot(paths["mot"], recon.time_s, recon.coordinate_names, recon.q_rad, name=stem, notes=notes)
     results.write_npz(paths["npz"], recon, metadata=metadata,
                       extra_arrays=None if undetermined is None else {"undetermined": undetermined})
@@ -200,7 +201,7 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
         measured = measured_isb_joints(inputs.model, set(assessment.not_solved))
         extra["isb_angles"] = {
             "file": f"{stem}.isb.csv", "units": "deg",
-            "sequences": {j: "-".join(s) for j, s in ISB_SEQUENCES.items()},
+            "sequences": {j: f"{s[0]}-{s[1]}'-{s[2]}''" for j, s in ISB_SEQUENCES.items()},
             "meaning": {j: list(v) for j, v in ANGLE_NAMES.items()},
             "measured": measured,
             "not_measured": [j for j in ISB_SEQUENCES if j not in measured],
@@ -208,9 +209,25 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
                           "GH X-Z'-Y'' (Phadke et al. 2011), HT Y-X'-Y'' (exubio.angles)"}
         summ = summary(recon, source=str(trial_path), extra=extra)
         paths = write_outputs(recon, out_dir, stem, metadata=meta, summary_data=summ,
-                              undetermined=assessment.determinacy[recon.method].undetermined, isb=isb)
+                              undetermined=assessment.determinacy[recon.method].undetermined, isb=isb,
+                              isb_comments=isb_header(extra["isb_angles"], Path(trial_path).name, method.value))
         out.append((recon, paths, summ))
     return out
+
+
+def isb_header(info: dict[str, Any], trial: str, method: str) -> tuple[str, ...]:
+    """Comment lines of ``<trial>.<method>.isb.csv``: what the angles are, their sequences and
+    signs, and which joints the markers do not measure."""
+    lines = [f"exubio ISB shoulder angles of {trial} ({method.upper()}), degrees; time in seconds",
+             f"definition: {info['definition']}"]
+    for joint, seq in info["sequences"].items():
+        lines.append(f"{joint}: sequence {seq} (intrinsic); angles: " + "; ".join(info["meaning"][joint]))
+    lines.append("right arm signs (Wu et al. 2005); a left arm is mirrored to the right before solving, so the same "
+                 "signs apply")
+    if info["not_measured"]:
+        lines.append("NOT MEASURED by this marker set (a segment's own joint is held or unobserved): "
+                     + ", ".join(info["not_measured"]))
+    return tuple(lines)
 
 
 def _unused(inputs: TrialInputs) -> list[str]:

@@ -246,7 +246,12 @@ def test_isb_angles_file_per_method_with_what_is_measured(tmp_path, c3d):
     assert names == ref_names and np.abs(np.degrees(ang - ref)).max() < 1e-5
     summ = json.loads((out / "abd.ls.summary.json").read_text())["isb_angles"]
     assert summ["measured"] == ["ST", "GH", "HT"] and summ["not_measured"] == ["SC", "AC"]
-    assert summ["sequences"]["GH"] == "X-Z-Y" and summ["units"] == "deg"
+    assert summ["sequences"]["GH"] == "X-Z'-Y''" and summ["units"] == "deg"
+    # the file says what it holds: units, the sequence of every joint, what is not measured
+    head = [ln for ln in (out / "abd.ls.isb.csv").read_text().splitlines() if ln.startswith("#")]
+    assert any("degrees" in ln for ln in head)
+    assert any(ln.startswith("# GH: sequence X-Z'-Y''") for ln in head)
+    assert any("NOT MEASURED" in ln and "SC, AC" in ln for ln in head)
 
 
 def test_functional_and_further_statics_need_a_static(tmp_path, trial, capsys):

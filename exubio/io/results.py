@@ -164,13 +164,16 @@ def _table_text(time: np.ndarray, q_deg: np.ndarray, sep: str) -> str:
 
 
 def write_angles_csv(
-    path: str | os.PathLike, time_s: np.ndarray, coordinate_names: Sequence[str], q_rad: np.ndarray, /
+    path: str | os.PathLike, time_s: np.ndarray, coordinate_names: Sequence[str], q_rad: np.ndarray, /, *,
+    comments: Sequence[str] = (),
 ) -> Path:
-    """Plain CSV: header ``time_s,<coordinate names as in the model>``, then one row per frame,
-    time in seconds and angles in DEGREES, ``%.6f``. NaN is written ``nan``."""
+    """Plain CSV: optional ``# comment`` lines (e.g. the Euler sequences of ISB angles), the header
+    ``time_s,<coordinate names as in the model>``, then one row per frame, time in seconds and
+    angles in DEGREES, ``%.6f``. NaN is written ``nan``."""
     path = Path(path)
     time, names, q = _check_angles(path, time_s, coordinate_names, q_rad)
-    text = ",".join(("time_s",) + names) + "\n" + _table_text(time, np.degrees(q), ",")
+    head = "".join(f"# {c}\n" for c in comments)
+    text = head + ",".join(("time_s",) + names) + "\n" + _table_text(time, np.degrees(q), ",")
     return _write_text(path, text)
 
 
@@ -178,11 +181,14 @@ def read_angles_csv(path: str | os.PathLike, /) -> tuple[np.ndarray, tuple[str, 
     """Read a file of ``write_angles_csv``: (time_s, coordinate names, q in radians)."""
     path = Path(path)
     lines = _read_lines(path)
+    skip = next((i for i, line in enumerate(lines) if not line.startswith("#")), len(lines))
+    lines = lines[skip:]
     if not lines or lines[0].split(",")[0].strip() != "time_s":
-        raise InputError(f"{path}: line 1: expected a header starting with 'time_s', got {lines[:1]}")
+        raise InputError(f"{path}: line {skip + 1}: expected a header starting with 'time_s', got {lines[:1]}")
     header = lines[0].split(",")
     names = tuple(h.strip() for h in header[1:])
-    rows = [_parse_row(path, i + 2, line.split(","), len(header)) for i, line in enumerate(lines[1:]) if line.strip()]
+    rows = [_parse_row(path, skip + i + 2, line.split(","), len(header)) for i, line in enumerate(lines[1:])
+            if line.strip()]
     table = np.array(rows, dtype=float).reshape(len(rows), len(header))
     return table[:, 0].copy(), names, np.radians(table[:, 1:])
 

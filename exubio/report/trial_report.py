@@ -2,14 +2,17 @@
 
 It reads the ``<trial>.<method>.npz`` results and their ``summary.json`` written by ``exubio
 reconstruct`` (through exubio.io.results) and never imports the solver. Page 1 (and the PNG): the
-quality verdict of every method with its reasons, the key figures, the worst markers, the label
-findings and the coordinates that are not measurements. Page 2: joint angles of every method
-against time, grouped by joint (degrees; coordinates not measured drawn grey). Page 3: marker
+quality verdict of every method with its reasons, the key figures, the worst markers, the
+comparison with the truth of a simulated trial, the label findings and the coordinates that are
+not measurements. Page 2: joint coordinates of every method against time (one colour per
+coordinate, PF solid, LS dashed, the truth dotted; not measured in grey). Page 3: the ISB shoulder
+angles (SC, ST, GH, HT with their sequences, from ``<trial>.<method>.isb.csv``). Page 4: marker
 residuals (mean ± SD over markers per frame, per-marker RMSE), constraint residuals and the gaps.
 """
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
@@ -17,9 +20,10 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 
 from exubio.evaluate import per_frame_residuals_mm, residual_statistics
-from exubio.io.results import atomic_write, read_npz, read_npz_metadata
+from exubio.io.results import atomic_write, read_angles_csv, read_npz, read_npz_metadata
 from exubio.types import Reconstruction
 
 _COLOURS = {"pf": "black", "ls": "tab:red"}
@@ -48,8 +52,10 @@ def _title(recons: Sequence[Reconstruction], meta: dict) -> str:
 _VERDICT_COLOURS = {"ok": "tab:green", "check": "tab:orange", "fail": "tab:red"}
 
 
-def verdict_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[str, dict]) -> Figure:
-    """Page 1: what a supervisor reads first."""
+def verdict_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[str, dict], *,
+                 truth: "Truth | None" = None) -> Figure:
+    """Page 1: what a supervisor reads first: the verdict of every method with its reasons, the key
+    figures, the worst markers, the comparison with the truth when it is known, the findings."""
     fig = _figure()
     fig.suptitle(_title(recons, meta), fontsize=9)
     y = 0.90
@@ -77,6 +83,14 @@ def verdict_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[s
         y -= 0.02
     first = summaries.get(recons[0].method, {})
     lines = []
+    if truth is not None:
+        skip = _not_measured(meta, summaries)
+        for r in recons:
+            rm = truth_rmse_deg(r, truth, skip)
+            if rm:
+                worst = max(rm, key=rm.get)
+                lines.append(f"{r.method.upper()} against the {truth.label}: joint RMSE mean {np.mean(list(rm.values())):.2f} "
+                             f"deg, max {rm[worst]:.2f} deg ({worst}) over the {len(rm)} measured coordinates")
     if meta.get("protocol_relabel"):
         lines.append("relabelled by the protocol (trial label -> read as): " + ", ".join(
             f"{a} -> {b}" for a, b in meta["protocol_relabel"].items()))
@@ -108,31 +122,122 @@ def verdict_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[s
     return fig
 
 
-def angles_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[str, dict] | None = None) -> Figure:
-    fig = _figure()
-    names = recons[0].coordinate_names
-    axes = fig.subplots(len(_JOINTS), 1, sharex=True)
+@dataclass(frozen=True)
+class Truth:
+    """Known true joint coordinates of a simulated trial (radians), drawn and compared with."""
+
+    time_s: np.ndarray
+    names: tuple[str, ...]
+    q_rad: np.ndarray
+    label: str = "simulated truth"
+
+
+def _not_measured(meta: dict, summaries: dict[str, dict] | None) -> set[str]:
     held = set(meta.get("held_coordinates", []))
     for s in (summaries or {}).values():
         held |= set(s.get("not_measured") or [])
         held |= set((s.get("determinacy") or {}).get("undetermined_for_trial") or [])
+    return held
+
+
+def truth_rmse_deg(recon: Reconstruction, truth: Truth, skip: set[str]) -> dict[str, float]:
+    """RMSE (deg) of every coordinate against the truth (interpolated onto the reconstruction's
+    times), coordinates in ``skip`` left out."""
+    out = {}
+    for i, name in enumerate(recon.coordinate_names):
+        if name in skip or name not in truth.names:
+            continue
+        ref = np.interp(recon.time_s, truth.time_s, truth.q_rad[:, truth.names.index(name)])
+        out[name] = float(np.degrees(np.sqrt(np.nanmean((recon.q_rad[:, i] - ref) ** 2))))
+    return out
+
+
+def angles_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[str, dict] | None = None,
+                truth: Truth | None = None) -> Figure:
+    """Joint coordinates against time: one colour per coordinate, PF solid and thick, LS dashed on
+    top (both visible where they agree), the truth dotted; coordinates the markers do not measure
+    in grey; legends outside the axes."""
+    fig = _figure()
+    names = recons[0].coordinate_names
+    axes = fig.subplots(len(_JOINTS), 1, sharex=True)
+    held = _not_measured(meta, summaries)
+    palette = ("tab:blue", "tab:orange", "tab:green")
+    method_style = {"pf": ("-", 2.0, 0.75), "ls": ((0, (4, 2)), 1.1, 1.0)}
     for ax, (label, prefix) in zip(axes, _JOINTS):
         idx = _members(names, prefix)
-        styles = ["-", "--", ":"]
-        for r in recons:
-            for k, i in enumerate(idx):
-                grey = names[i] in held
-                ax.plot(r.time_s, np.rad2deg(r.q_rad[:, i]), styles[k % 3],
-                        color="lightgrey" if grey else _COLOURS.get(r.method, None),
-                        lw=1.0, label=f"{names[i]} ({r.method.upper()})" + (" not measured" if grey else ""))
+        handles = {}
+        for k, i in enumerate(idx):
+            grey = names[i] in held
+            colour = "silver" if grey else palette[k % 3]
+            for r in recons:
+                ls_, lw, alpha = method_style.get(r.method, ("-", 1.0, 1.0))
+                (h,) = ax.plot(r.time_s, np.rad2deg(r.q_rad[:, i]), ls=ls_, lw=lw, alpha=alpha, color=colour)
+                handles.setdefault(f"{names[i]}" + (" (not measured)" if grey else ""), h)
+            if truth is not None and names[i] in truth.names:
+                ax.plot(truth.time_s, np.rad2deg(truth.q_rad[:, truth.names.index(names[i])]), ls=":", lw=1.2,
+                        color="black")
         ax.set_ylabel(f"{label}\n(deg)", fontsize=8)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=6, ncol=3, loc="upper right")
+        ax.legend(list(handles.values()), list(handles), fontsize=6, loc="upper left", bbox_to_anchor=(1.005, 1.0),
+                  frameon=False)
         ax.tick_params(labelsize=7)
     axes[-1].set_xlabel("time (s)")
+    key = [Line2D([], [], color="dimgrey", ls=method_style[r.method][0], lw=method_style[r.method][1],
+                  label=r.method.upper()) for r in recons if r.method in method_style]
+    if truth is not None:
+        key.append(Line2D([], [], color="black", ls=":", lw=1.2, label=truth.label))
+    fig.legend(handles=key, loc="upper right", ncol=len(key), fontsize=8, frameon=False)
     fig.suptitle(_title(recons, meta) + "\njoint coordinates of the model (intrinsic sequences as in the model "
                  "file; positive = the motion the name says)", fontsize=9)
-    fig.subplots_adjust(left=0.08, right=0.98, top=0.89, bottom=0.06, hspace=0.15)
+    fig.subplots_adjust(left=0.08, right=0.8, top=0.89, bottom=0.06, hspace=0.15)
+    return fig
+
+
+def isb_page(recons: Sequence[Reconstruction], npz_paths: Sequence[Path], meta: dict,
+             summaries: dict[str, dict]) -> Figure | None:
+    """ISB shoulder angles (SC, ST, GH, HT) of every method from ``<trial>.<method>.isb.csv``, with
+    their sequences; joints the markers do not measure marked."""
+    tables = {}
+    for p, r in zip(npz_paths, recons):
+        path = Path(str(p)[: -len(".npz")] + ".isb.csv")
+        if path.is_file():
+            tables[r.method] = read_angles_csv(path)
+    if not tables:
+        return None
+    info = next((s.get("isb_angles") for s in summaries.values() if s.get("isb_angles")), {}) or {}
+    not_measured = set(info.get("not_measured", []))
+    fig = _figure()
+    joints = ("SC", "ST", "GH", "HT")
+    axes = fig.subplots(len(joints), 3, sharex=True)
+    method_style = {"pf": ("-", 2.0, 0.75, "black"), "ls": ((0, (4, 2)), 1.1, 1.0, "tab:red")}
+    for row, joint in enumerate(joints):
+        for col in range(3):
+            ax = axes[row, col]
+            for method, (t, names, ang) in tables.items():
+                cols = [i for i, n in enumerate(names) if n.startswith(joint + "_")]
+                if len(cols) < 3:
+                    continue
+                ls_, lw, alpha, colour = method_style.get(method, ("-", 1.0, 1.0, "grey"))
+                ax.plot(t, np.degrees(ang[:, cols[col]]), ls=ls_, lw=lw, alpha=alpha, color=colour,
+                        label=method.upper())
+                title = names[cols[col]].replace("_", " ", 2)
+            seq = (info.get("sequences") or {}).get(joint, "")
+            meaning = (info.get("meaning") or {}).get(joint, ["", "", ""])[col]
+            txt = f"{joint} {seq}: {meaning}"
+            if joint in not_measured:
+                txt += "\nNOT MEASURED by this marker set"
+                ax.set_facecolor("#f0f0f0")
+            ax.set_title(txt, fontsize=7)
+            ax.grid(alpha=0.3)
+            ax.tick_params(labelsize=6.5)
+            if col == 0:
+                ax.set_ylabel("deg", fontsize=7)
+    for ax in axes[-1]:
+        ax.set_xlabel("time (s)", fontsize=7)
+    axes[0, 0].legend(fontsize=7, frameon=False)
+    fig.suptitle(_title(recons, meta) + "\nISB shoulder angles (Wu et al. 2005 frames from the model's landmarks, "
+                 "intrinsic sequences; files <trial>.<method>.isb.csv)", fontsize=9)
+    fig.subplots_adjust(left=0.07, right=0.98, top=0.88, bottom=0.06, hspace=0.45, wspace=0.2)
     return fig
 
 
@@ -258,8 +363,11 @@ def calibration_page(meta: dict, summaries: dict[str, dict]) -> Figure | None:
     return fig
 
 
-def build_trial_report(npz_paths: Sequence[str | Path], pdf_path: str | Path, /) -> tuple[Path, Path]:
-    """Write ``pdf_path`` and a PNG of its first page (the verdict) beside it (``.png``), atomically."""
+def build_trial_report(npz_paths: Sequence[str | Path], pdf_path: str | Path, /, *,
+                       truth: Truth | None = None) -> tuple[Path, Path]:
+    """Write ``pdf_path`` and a PNG of its first page (the verdict) beside it (``.png``), atomically.
+    ``truth``: the known joint coordinates of a simulated trial, compared on page 1 and drawn."""
+    npz_paths = [Path(p) for p in npz_paths]
     recons = [read_npz(p) for p in npz_paths]
     meta = read_npz_metadata(npz_paths[0])
     summaries = {}
@@ -267,8 +375,11 @@ def build_trial_report(npz_paths: Sequence[str | Path], pdf_path: str | Path, /)
         summary = Path(str(p)[: -len(".npz")] + ".summary.json")
         if summary.is_file():
             summaries[r.method] = json.loads(summary.read_text())
-    pages = [verdict_page(recons, meta, summaries), angles_page(recons, meta, summaries),
+    pages = [verdict_page(recons, meta, summaries, truth=truth), angles_page(recons, meta, summaries, truth),
              residuals_page(recons, meta, summaries)]
+    isb = isb_page(recons, npz_paths, meta, summaries)
+    if isb is not None:
+        pages.insert(2, isb)
     cal_page = calibration_page(meta, summaries)
     if cal_page is not None:
         pages.append(cal_page)
