@@ -146,6 +146,34 @@ def _run_trial(kwargs: dict) -> tuple[str, dict | None, int, str]:
 
 
 def cmd_reconstruct(args: argparse.Namespace) -> int:
+    protocols = args.protocol or [None]
+    if len(protocols) > 1:
+        return _reconstruct_arms(args, protocols)
+    args = argparse.Namespace(**{**vars(args), "protocol": protocols[0]})
+    return _reconstruct_one_protocol(args)
+
+
+def _reconstruct_arms(args: argparse.Namespace, protocols: list[str]) -> int:
+    """Both arms of one trial: one protocol per arm (``side: right`` and ``side: left``), each
+    reconstructed as its own chain into ``--out/<side>/`` (its calibration too, with --static)."""
+    from exubio.protocol import read_protocol_mapping
+
+    sides: dict[str, str] = {}
+    for path in protocols:
+        side = read_protocol_mapping(path).get("side", "right")
+        if side in sides:
+            raise InputError(f"--protocol {path} and --protocol {sides[side]} are both for the {side} arm; give one "
+                             f"protocol per arm (side: right / side: left)")
+        sides[side] = path
+    codes = []
+    for side, path in sides.items():
+        print(f"== {side} arm ({path})")
+        codes.append(_reconstruct_one_protocol(argparse.Namespace(**{**vars(args), "protocol": path,
+                                                                     "out": str(Path(args.out) / side)})))
+    return max(codes)
+
+
+def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
     from exubio.pipeline import calibrate_session
 
     model_path, extra = args.model, {}
@@ -326,7 +354,9 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("reconstruct", parents=[common], help="joint angles from a C3D/TRC trial")
     r.add_argument("trials", nargs="+", metavar="TRIAL", help="trial file(s) (.c3d or .trc); several = a study")
     r.add_argument("--jobs", type=int, default=1, help="trials reconstructed in parallel processes (default 1)")
-    r.add_argument("--protocol", help="protocol YAML (default: protocols/upper_limb_21.yaml)")
+    r.add_argument("--protocol", action="append",
+                   help="protocol YAML (default: protocols/upper_limb_21.yaml); give it twice, one per arm (side: right "
+                        "and side: left), to reconstruct both arms of the trial into --out/right and --out/left")
     r.add_argument("--model", help="model YAML (default: models/upper_extremity.yaml)")
     r.add_argument("--method", choices=["pf", "ls", "both"], default="pf",
                    help="pf: potential field on Exudyn; ls: constrained least squares per frame; both: the "

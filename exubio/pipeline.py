@@ -205,6 +205,7 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
             "meaning": {j: list(v) for j, v in ANGLE_NAMES.items()},
             "measured": measured,
             "not_measured": [j for j in ISB_SEQUENCES if j not in measured],
+            "side": inputs.protocol.side,
             "definition": "Wu et al. 2005 anatomical frames from the model's landmarks; intrinsic sequences; "
                           "GH X-Z'-Y'' (Phadke et al. 2011), HT Y-X'-Y'' (exubio.angles)"}
         summ = summary(recon, source=str(trial_path), extra=extra)
@@ -222,8 +223,11 @@ def isb_header(info: dict[str, Any], trial: str, method: str) -> tuple[str, ...]
              f"definition: {info['definition']}"]
     for joint, seq in info["sequences"].items():
         lines.append(f"{joint}: sequence {seq} (intrinsic); angles: " + "; ".join(info["meaning"][joint]))
-    lines.append("right arm signs (Wu et al. 2005); a left arm is mirrored to the right before solving, so the same "
-                 "signs apply")
+    if info.get("side") == "left":
+        lines.append("LEFT arm: its markers were mirrored through the thorax's sagittal plane (Z -> -Z of the ISB thorax "
+                     "frame) onto the right-arm model, so every angle carries the right arm's sign (Wu et al. 2005)")
+    else:
+        lines.append("right arm, signs of Wu et al. 2005")
     if info["not_measured"]:
         lines.append("NOT MEASURED by this marker set (a segment's own joint is held or unobserved): "
                      + ", ".join(info["not_measured"]))

@@ -541,6 +541,10 @@ def prepare_targets(
         except InputError as exc:
             raise InputError(f"{src}: {exc}") from None
         pos = to_thorax_frame(pos, rot, origin)
+    if protocol.side == "left":
+        # a left arm is mirrored through the thorax's sagittal plane (Z -> -Z of the ISB thorax
+        # frame) onto the right-arm model; its joint angles then carry the right arm's signs
+        pos = pos * np.array([1.0, 1.0, -1.0])
 
     for j, m in enumerate(protocol.markers):
         n_valid = int((~np.isnan(pos[:, j]).any(axis=1)).sum())

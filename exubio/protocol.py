@@ -41,7 +41,7 @@ SCHEMA_VERSION = 1
 THORAX_SEGMENT = "thorax"  # the fixed segment: its markers only build the thorax frame
 
 _TOP_KEYS = ("schema_version", "name", "description", "thorax_frame", "filter", "defaults", "markers", "hold",
-             "relabel", "extends")
+             "relabel", "extends", "side")
 _FRAME_KEYS = ("ij", "px", "c7", "t8")
 _MIDPOINT_FRAME_KEYS = ("ij", "ij_c7_midpoint", "px_t8_midpoint")
 _FILTER_KEYS = ("cutoff_hz", "order")
@@ -107,6 +107,9 @@ def load_protocol(
     cutoff, order = _parse_filter(data, src_of("filter"))
     stiffness0, damping0 = _parse_defaults(data, src_of("defaults"))
     relabel = _parse_relabel(data.get("relabel"), src_of("relabel"))
+    side = data.get("side", "right")
+    if side not in ("right", "left"):
+        raise ProtocolError(f"{src_of('side')}: side: expected 'right' or 'left', got {side!r}")
     src_markers = src_of("markers")
 
     raw_markers = data.get("markers")
@@ -184,6 +187,7 @@ def load_protocol(
         default_damping_ns_per_m=damping0,
         source=src,
         relabel=relabel,
+        side=side,
     )
 
 

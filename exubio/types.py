@@ -290,6 +290,7 @@ class Protocol:
     source: str = ""
     held_coordinates: tuple[str, ...] = ()  # not observable with this marker set: held at 0
     relabel: Mapping[str, str] = field(default_factory=dict)  # trial label -> label it is read as
+    side: Literal["right", "left"] = "right"  # left: markers mirrored onto the (right-arm) model
 
     @property
     def marker_names(self) -> tuple[str, ...]:
