@@ -327,6 +327,17 @@ def cmd_export_model(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_view(args: argparse.Namespace) -> int:
+    from exubio.viewer import write_view
+
+    if args.max_frames < 2:
+        raise InputError(f"--max-frames {args.max_frames}: expected at least 2 animation frames")
+    out = write_view([Path(p) for p in args.results], Path(args.out), overwrite=args.overwrite,
+                     model_path=args.model, max_frames=args.max_frames)
+    print(f"view: {out} (one HTML file, works offline; open it in a browser)")
+    return EXIT_OK
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="exubio", description="Upper-extremity joint kinematics from skin markers "
                                 "(potential-field and least-squares methods on Exudyn).")
@@ -405,6 +416,15 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--out", required=True, help="FILE.osim or FILE.bioMod to write")
     e.add_argument("--overwrite", action="store_true", help="replace an existing FILE")
     e.set_defaults(func=cmd_export_model)
+
+    w = sub.add_parser("view", parents=[common],
+                       help="write an interactive 3D view of a reconstruction (one self-contained, offline HTML file)")
+    w.add_argument("results", nargs="+", help="<trial>.<method>.npz (the trial's other method beside it is shown too)")
+    w.add_argument("--out", required=True, help="the HTML file to write")
+    w.add_argument("--overwrite", action="store_true", help="replace an existing file")
+    w.add_argument("--model", help="the model YAML, when the one the result names cannot be found")
+    w.add_argument("--max-frames", type=int, default=300, help="at most this many animation frames (default 300)")
+    w.set_defaults(func=cmd_view)
 
     d = sub.add_parser("demo", parents=[common], help="reconstruct the shipped example trial with PF and LS, compare with its truth")
     d.add_argument("--out", default="exubio_demo", help="output folder (default ./exubio_demo)")

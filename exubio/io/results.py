@@ -367,6 +367,9 @@ class _NpzReader:
             raise InputError(f"{self.path}: file not found") from None
         except (OSError, ValueError) as exc:
             raise InputError(f"{self.path}: not a readable .npz file ({exc})") from exc
+        if not isinstance(self.data, np.lib.npyio.NpzFile):  # a .npy array under an .npz name
+            raise InputError(f"{self.path}: not an .npz archive (a single array: a .npy file?); expected an exubio "
+                             f"result <trial>.<method>.npz")
         return self
 
     def __getitem__(self, key: str) -> np.ndarray:
