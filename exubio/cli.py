@@ -13,7 +13,7 @@ from exubio.errors import ExubioError, InputError, ModelError, ProtocolError, Re
 
 log = logging.getLogger("exubio")
 
-EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 
 
 def _progress_factory(enabled: bool) -> Callable[[str, int], Callable[[int], None]] | None:
@@ -327,6 +327,24 @@ def cmd_export_model(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_study(args: argparse.Namespace) -> int:
+    from exubio.study import load_study, run_study
+
+    spec = load_study(args.study)  # every key, path and glob checked before any work
+    if args.jobs < 1:
+        raise InputError(f"--jobs {args.jobs}: expected a whole number of processes >= 1")
+    outcomes = run_study(spec, args.out, jobs=args.jobs, scheduler=args.scheduler,
+                         progress=None if args.quiet else (lambda m: print(m, file=sys.stderr)))
+    failed = [o for o in outcomes if o.status == "failed"]
+    fails = [o for o in outcomes if "fail" in o.verdicts.values()]
+    print(f"study {spec.name}: {len(outcomes)} trial(s): {sum(o.status == 'done' for o in outcomes)} done, "
+          f"{sum(o.status.startswith('skipped') for o in outcomes)} already complete, {len(failed)} failed; "
+          f"table: {Path(args.out) / 'study.csv'}")
+    for o in failed:
+        print(f"failed: {o.subject}/{o.session}/{Path(o.trial).name}: {o.error}")
+    return EXIT_FAILED if failed or fails else EXIT_OK
+
+
 def cmd_view(args: argparse.Namespace) -> int:
     from exubio.viewer import write_view
 
@@ -417,6 +435,15 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--overwrite", action="store_true", help="replace an existing FILE")
     e.set_defaults(func=cmd_export_model)
 
+    st = sub.add_parser("study", parents=[common],
+                        help="run a study file (subjects x sessions x trials); re-running resumes it")
+    st.add_argument("study", help="STUDY.yaml (format: exubio/study.py)")
+    st.add_argument("--out", required=True, help="output folder: <subject>/<session>/<trial>/, study.csv, study.json")
+    st.add_argument("--jobs", type=int, default=1, help="trials in parallel local processes (default 1)")
+    st.add_argument("--scheduler", help="run the trials on Dask: local:N (a local cluster of N workers) or "
+                                        "tcp://HOST:PORT (a running scheduler)")
+    st.set_defaults(func=cmd_study)
+
     w = sub.add_parser("view", parents=[common],
                        help="write an interactive 3D view of a reconstruction (one self-contained, offline HTML file)")
     w.add_argument("results", nargs="+", help="<trial>.<method>.npz (the trial's other method beside it is shown too)")
@@ -439,6 +466,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                         format="%(levelname)s %(name)s: %(message)s")
     try:
         return int(args.func(args))
+    except KeyboardInterrupt:
+        print("exubio: interrupted; results that were not complete were not written (the next run cleans up)",
+              file=sys.stderr)
+        return EXIT_INTERRUPTED
     except (InputError, ProtocolError, ModelError) as exc:
         print(f"exubio: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT

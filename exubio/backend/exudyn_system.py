@@ -75,6 +75,8 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+import signal
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import Callable, Sequence, Mapping
@@ -813,7 +815,11 @@ class PFSystem:
                                   configuration=exu.ConfigurationType.Current)
             check_limits(0.0)
 
+        interrupted = [False]
+
         def pre_step(mbs, t):  # receives t_{n+1}: the end of the step about to be solved
+            if interrupted[0]:  # Ctrl-C: stop the solver here (False ends the simulation)
+                return False
             if limits:  # the current state is that of the step's start, the last accepted time
                 t_start = record_t[-1] if record_t else 0.0
                 if t_start >= next_limit_check[0]:
@@ -858,6 +864,7 @@ class PFSystem:
         exu.config.printToConsole = False  # Exudyn prints progress/warnings itself; we log instead
         message = ""
         t0 = time.perf_counter()
+        previous_handler = _catch_sigint(interrupted)
         try:
             success = bool(solver.InitializeSolver(mbs, settings))
             if success:
@@ -877,6 +884,10 @@ class PFSystem:
             exu.config.printToConsole = print_before
             mbs.SetPreStepUserFunction(0)
             mbs.SetPostStepUserFunction(0)
+            if previous_handler is not None:
+                signal.signal(signal.SIGINT, previous_handler)
+        if interrupted[0]:
+            raise KeyboardInterrupt
         wall = time.perf_counter() - t0
 
         X, Xt, Xtt, completed = _frames_from_steps(np.asarray(record_t), record, n, frame_dt_s, self._n_ode2)
@@ -1111,3 +1122,17 @@ def _limit_torque(k_lim: float, bounds, three_angles: bool):
         return [zero, zero, zero, m[0], m[1], m[2]]
 
     return limit_torque
+
+
+def _catch_sigint(flag: list[bool]):
+    """During a solve, Ctrl-C sets ``flag`` (the step function then stops the solver, and the run
+    raises KeyboardInterrupt once Exudyn has returned) instead of raising inside an Exudyn callback,
+    where Exudyn would catch it, print it and go on. Returns the previous handler (None when not
+    in the main thread, where handlers cannot be set)."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+
+    def handler(signum, frame):  # noqa: ARG001
+        flag[0] = True
+
+    return signal.signal(signal.SIGINT, handler)

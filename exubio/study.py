@@ -1,0 +1,482 @@
+"""Studies: subjects x sessions x trials from one study file, run locally or on Dask, resumable.
+
+A study file (YAML, paths relative to it)::
+
+    schema_version: 1
+    name: shoulder study            # optional
+    methods: [pf, ls]               # optional (default [pf, ls]); a session may override
+    report: true                    # optional: the per-trial PDF/PNG report (default true)
+    sessions:
+      - subject: S01
+        session: day1               # optional (default: s1, s2, ... in order)
+        protocol: protocols/upper_limb_21.yaml      # optional (default: the shipped 21-marker one)
+        model: subject01.yaml       # optional (default: the generic model)
+        static: S01/static.c3d      # optional: calibrate the session's model on it first
+        functional: S01/move.c3d    # optional, with static: SCoRE glenohumeral centre
+        static_frames: "0:50"       # optional, without static: each trial calibrated on its own frames
+        trials: ["S01/task_*.c3d"]  # globs
+
+Results: ``OUT/<subject>/<session>/<trial>/`` holds one trial's result set (the files of
+``exubio reconstruct``) and ``DONE.json`` (written last); the session's calibrated model is in
+``OUT/<subject>/<session>/calibration/``. Two trials can never collide: the folder names the
+subject, session and trial. A trial is processed in a hidden temporary folder beside its final one
+and renamed into place when complete, so a result set appears whole or not at all; leftovers of a
+killed run are removed by the next run, which skips the trials that are complete (resume).
+
+``OUT/study.csv`` and ``OUT/study.json``: one row per trial (verdict per method, frames, mean
+residual, PF-LS agreement, wall time, or the error); ``OUT/study.report.pdf``: the same table.
+
+Execution: a local process pool (``jobs``), or Dask (``scheduler``: ``"local:N"`` starts a local
+cluster of N workers, ``"tcp://HOST:PORT"`` uses a running scheduler). Workers are long-lived
+processes that import exubio once. A trial's exception never stops the study.
+"""
+from __future__ import annotations
+
+import csv
+import glob
+import io
+import json
+import logging
+import os
+import shutil
+import time
+import traceback
+from concurrent.futures import Future, ProcessPoolExecutor
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable
+
+from exubio.config import read_yaml
+from exubio.errors import ExubioError, InputError
+
+log = logging.getLogger(__name__)
+
+__all__ = ["StudySpec", "SessionSpec", "TrialTask", "TrialOutcome", "load_study", "run_study", "DONE_FILE",
+           "STUDY_COLUMNS"]
+
+DONE_FILE = "DONE.json"
+_TMP_PREFIX = ".tmp-"
+_STUDY_KEYS = {"schema_version", "name", "methods", "report", "sessions"}
+_SESSION_KEYS = {"subject", "session", "protocol", "model", "static", "functional", "static_frames", "trials",
+                 "methods"}
+STUDY_COLUMNS = ("subject", "session", "trial", "status", "pf_verdict", "ls_verdict", "frames", "pf_residual_mm",
+                 "ls_residual_mm", "pf_ls_max_rmse_deg", "wall_s", "folder", "error")
+
+
+@dataclass(frozen=True)
+class SessionSpec:
+    subject: str
+    session: str
+    trials: tuple[Path, ...]
+    protocol: Path | None = None
+    model: Path | None = None
+    static: Path | None = None
+    functional: Path | None = None
+    static_frames: str | None = None
+    methods: tuple[str, ...] = ("pf", "ls")
+
+
+@dataclass(frozen=True)
+class StudySpec:
+    name: str
+    source: Path
+    sessions: tuple[SessionSpec, ...]
+    report: bool = True
+
+
+@dataclass(frozen=True)
+class TrialTask:
+    """One trial to run: everything a worker needs, as plain picklable values."""
+
+    subject: str
+    session: str
+    trial: str
+    final_dir: str
+    methods: tuple[str, ...]
+    protocol: str | None
+    model: str | None
+    static_frames: str | None
+    report: bool
+    calibration: dict | None = None
+    static_reference: Any = None
+
+
+@dataclass
+class TrialOutcome:
+    subject: str
+    session: str
+    trial: str
+    folder: str
+    status: str  # "done", "skipped (complete)", "failed"
+    verdicts: dict[str, str] = field(default_factory=dict)
+    frames: int | None = None
+    residual_mm: dict[str, float] = field(default_factory=dict)
+    pf_ls_max_rmse_deg: float | None = None
+    wall_s: float | None = None
+    error: str = ""
+
+    def row(self) -> dict[str, Any]:
+        return {"subject": self.subject, "session": self.session, "trial": Path(self.trial).name,
+                "status": self.status, "pf_verdict": self.verdicts.get("pf", ""),
+                "ls_verdict": self.verdicts.get("ls", ""), "frames": self.frames,
+                "pf_residual_mm": self.residual_mm.get("pf"), "ls_residual_mm": self.residual_mm.get("ls"),
+                "pf_ls_max_rmse_deg": self.pf_ls_max_rmse_deg, "wall_s": self.wall_s, "folder": self.folder,
+                "error": self.error}
+
+
+# --------------------------------------------------------------------------------------------
+# The study file
+# --------------------------------------------------------------------------------------------
+def _path(value: Any, base: Path, where: str) -> Path | None:
+    if value is None:
+        return None
+    if not isinstance(value, str) or not value:
+        raise InputError(f"{where}: expected a file path, got {value!r}")
+    p = (base / value) if not Path(value).is_absolute() else Path(value)
+    if not p.exists():
+        raise InputError(f"{where}: {p} does not exist")
+    return p
+
+
+def _methods(value: Any, where: str) -> tuple[str, ...]:
+    if isinstance(value, str):
+        value = [value]
+    if not isinstance(value, list) or not value or any(m not in ("pf", "ls") for m in value):
+        raise InputError(f"{where}: methods must be a list of 'pf' and/or 'ls', got {value!r}")
+    return tuple(dict.fromkeys(value))
+
+
+def load_study(path: str | Path, /) -> StudySpec:
+    """Read and check a study file: every key, path and glob, before any work (InputError naming
+    the file and the key)."""
+    path = Path(path)
+    data = read_yaml(path, error=InputError)
+    src = str(path)
+    if not isinstance(data, dict):
+        raise InputError(f"{src}: a study file is a mapping with 'sessions'")
+    unknown = set(data) - _STUDY_KEYS
+    if unknown:
+        raise InputError(f"{src}: unknown key(s) {sorted(unknown)}; expected {sorted(_STUDY_KEYS)}")
+    if data.get("schema_version") != 1:
+        raise InputError(f"{src}: schema_version: expected 1, got {data.get('schema_version')!r}")
+    methods = _methods(data.get("methods", ["pf", "ls"]), f"{src}: methods")
+    report = data.get("report", True)
+    if not isinstance(report, bool):
+        raise InputError(f"{src}: report: expected true or false, got {report!r}")
+    raw = data.get("sessions")
+    if not isinstance(raw, list) or not raw:
+        raise InputError(f"{src}: sessions: expected a non-empty list of sessions")
+    base = path.parent
+    sessions, seen = [], set()
+    for k, s in enumerate(raw):
+        where = f"{src}: sessions[{k}]"
+        if not isinstance(s, dict):
+            raise InputError(f"{where}: expected a mapping with subject and trials")
+        unknown = set(s) - _SESSION_KEYS
+        if unknown:
+            raise InputError(f"{where}: unknown key(s) {sorted(unknown)}; expected {sorted(_SESSION_KEYS)}")
+        subject = s.get("subject")
+        if not isinstance(subject, str) or not subject or "/" in subject or subject.startswith("."):
+            raise InputError(f"{where}.subject: expected a name (no '/', not starting with '.'), got {subject!r}")
+        session = str(s.get("session", f"s{k + 1}"))
+        if "/" in session or session.startswith(".") or not session:
+            raise InputError(f"{where}.session: expected a name (no '/', not starting with '.'), got {session!r}")
+        if (subject, session) in seen:
+            raise InputError(f"{where}: subject {subject} session {session} appears twice; name the sessions")
+        seen.add((subject, session))
+        globs = s.get("trials")
+        if isinstance(globs, str):
+            globs = [globs]
+        if not isinstance(globs, list) or not globs:
+            raise InputError(f"{where}.trials: expected a list of file patterns, got {globs!r}")
+        trials: list[Path] = []
+        for g in globs:
+            hits = sorted(glob.glob(str(base / g)) if not Path(g).is_absolute() else glob.glob(g))
+            if not hits:
+                raise InputError(f"{where}.trials: '{g}' matches no file (relative to {base})")
+            trials += [Path(h) for h in hits if Path(h) not in trials]
+        stems = [t.stem for t in trials]
+        dup = sorted({x for x in stems if stems.count(x) > 1})
+        if dup:
+            raise InputError(f"{where}.trials: several trials named {dup} in one session; their results would share a "
+                             f"folder: split them into sessions")
+        static = _path(s.get("static"), base, f"{where}.static")
+        functional = _path(s.get("functional"), base, f"{where}.functional")
+        if functional is not None and static is None:
+            raise InputError(f"{where}.functional: a functional trial refines a calibration on a static trial; give "
+                             f"static as well")
+        frames = s.get("static_frames")
+        if frames is not None and static is not None:
+            raise InputError(f"{where}.static_frames: with a static trial the window is found in it; give one of the two")
+        sessions.append(SessionSpec(
+            subject=subject, session=session, trials=tuple(trials),
+            protocol=_path(s.get("protocol"), base, f"{where}.protocol"),
+            model=_path(s.get("model"), base, f"{where}.model"), static=static, functional=functional,
+            static_frames=None if frames is None else str(frames),
+            methods=_methods(s["methods"], f"{where}.methods") if "methods" in s else methods))
+    return StudySpec(name=str(data.get("name", path.stem)), source=path, sessions=tuple(sessions), report=report)
+
+
+# --------------------------------------------------------------------------------------------
+# One trial (runs in a worker)
+# --------------------------------------------------------------------------------------------
+def run_trial_task(task: TrialTask) -> TrialOutcome:
+    """Process one trial into a temporary folder beside its final one, write DONE.json last and
+    rename the folder into place; any exception becomes a failed outcome (the study goes on)."""
+    from exubio.pipeline import process_trial
+
+    final = Path(task.final_dir)
+    out = TrialOutcome(task.subject, task.session, task.trial, str(final), "failed")
+    tmp = final.parent / f"{_TMP_PREFIX}{final.name}-{os.getpid()}-{time.monotonic_ns()}"
+    t0 = time.perf_counter()
+    try:
+        tmp.mkdir(parents=True)
+        extra = {"calibration": task.calibration} if task.calibration else {}
+        result = process_trial(task.trial, out_dir=tmp, methods=list(task.methods), model_path=task.model,
+                               protocol_path=task.protocol, static_frames=task.static_frames, report=task.report,
+                               summary_extra=extra, static_reference=task.static_reference)
+        _fill(out, result)
+        out.status = "done"
+        out.wall_s = time.perf_counter() - t0
+        _write_done(tmp, out, result)
+        if final.exists():  # an incomplete set from an earlier run (no DONE.json): replaced
+            shutil.rmtree(final)
+        tmp.rename(final)
+    except BaseException as exc:  # noqa: BLE001 - one trial's failure of any kind is recorded
+        out.status = "failed"
+        out.error = f"{type(exc).__name__}: {exc}" if not isinstance(exc, ExubioError) else str(exc)
+        out.wall_s = time.perf_counter() - t0
+        if not isinstance(exc, ExubioError):
+            log.debug("%s", traceback.format_exc())
+        shutil.rmtree(tmp, ignore_errors=True)
+        if isinstance(exc, KeyboardInterrupt):
+            raise
+    return out
+
+
+def _fill(out: TrialOutcome, result: dict) -> None:
+    out.verdicts = dict(result.get("verdicts") or {})
+    for m in result.get("methods", []):
+        s = m["summary"]
+        out.frames = s.get("n_frames", out.frames)
+        out.residual_mm[m["method"]] = (s.get("residual_mm") or {}).get("mean")
+    agree = result.get("agreement_deg") or {}
+    out.pf_ls_max_rmse_deg = max(agree.values()) if agree else None
+
+
+def _write_done(folder: Path, out: TrialOutcome, result: dict) -> None:
+    from exubio.io.results import write_json
+
+    files = sorted(p.name for p in folder.iterdir())
+    write_json(folder / DONE_FILE, {"outcome": out.row(), "files": files,
+                                    "note": "written last: this folder's result set is complete"})
+
+
+# --------------------------------------------------------------------------------------------
+# The study
+# --------------------------------------------------------------------------------------------
+def clean_leftovers(out_dir: Path, /) -> list[Path]:
+    """Remove the temporary folders of killed runs (and result folders without DONE.json)."""
+    removed = []
+    for p in sorted(out_dir.rglob(f"{_TMP_PREFIX}*")):
+        if p.is_dir():
+            shutil.rmtree(p, ignore_errors=True)
+            removed.append(p)
+    for p in sorted(out_dir.rglob(".*.tmp*")):  # a file a killed writer left (atomic_write)
+        if p.is_file():
+            p.unlink(missing_ok=True)
+            removed.append(p)
+    return removed
+
+
+def _calibrate_session(s: SessionSpec, folder: Path) -> tuple[str | None, dict | None, Any, str]:
+    """(model file, calibration summary, static reference, error) of a session with a static trial."""
+    from exubio.pipeline import calibrate_session
+
+    if s.static is None:
+        return (str(s.model) if s.model else None), None, None, ""
+    cal_dir = folder / "calibration"
+    try:
+        tmp = folder / f"{_TMP_PREFIX}calibration-{os.getpid()}"
+        shutil.rmtree(tmp, ignore_errors=True)
+        tmp.mkdir(parents=True)
+        model_tmp, _, summary = calibrate_session(s.static, tmp, s.static.stem, protocol_path=s.protocol,
+                                                   model_path=s.model, functional_path=s.functional, overwrite=True)
+        ref = summary.pop("_reference", None)
+        from exubio.io.results import write_json
+
+        write_json(tmp / DONE_FILE, {"static": str(s.static), "model": Path(model_tmp).name})
+        if cal_dir.exists():
+            shutil.rmtree(cal_dir)
+        tmp.rename(cal_dir)
+        model_file = cal_dir / Path(model_tmp).name
+        summary["model_file"] = str(model_file)
+        return str(model_file), summary, ref, ""
+    except Exception as exc:  # noqa: BLE001 - the session's trials are reported failed with the reason
+        shutil.rmtree(folder / f"{_TMP_PREFIX}calibration-{os.getpid()}", ignore_errors=True)
+        return None, None, None, f"calibration on {s.static.name} failed: {exc}"
+
+
+def plan(spec: StudySpec, out_dir: Path) -> tuple[list[TrialTask], list[TrialOutcome]]:
+    """The trials to run and the ones already complete (skipped); sessions are calibrated here."""
+    tasks, skipped = [], []
+    for s in spec.sessions:
+        folder = out_dir / s.subject / s.session
+        trial_dirs = {t: folder / t.stem for t in s.trials}
+        pending = [t for t in s.trials if not (trial_dirs[t] / DONE_FILE).is_file()]
+        for t in s.trials:
+            if t not in pending:
+                done = json.loads((trial_dirs[t] / DONE_FILE).read_text()).get("outcome", {})
+                o = TrialOutcome(s.subject, s.session, str(t), str(trial_dirs[t]), "skipped (complete)",
+                                 verdicts={m: done.get(f"{m}_verdict") for m in ("pf", "ls") if done.get(f"{m}_verdict")},
+                                 frames=done.get("frames"), wall_s=done.get("wall_s"),
+                                 pf_ls_max_rmse_deg=done.get("pf_ls_max_rmse_deg"),
+                                 residual_mm={m: done.get(f"{m}_residual_mm") for m in ("pf", "ls")
+                                              if done.get(f"{m}_residual_mm") is not None})
+                skipped.append(o)
+        if not pending:
+            continue
+        folder.mkdir(parents=True, exist_ok=True)
+        model, cal, ref, err = _calibrate_session(s, folder)
+        for t in pending:
+            if err:
+                skipped.append(TrialOutcome(s.subject, s.session, str(t), str(trial_dirs[t]), "failed", error=err))
+                continue
+            tasks.append(TrialTask(subject=s.subject, session=s.session, trial=str(t), final_dir=str(trial_dirs[t]),
+                                   methods=s.methods, protocol=str(s.protocol) if s.protocol else None, model=model,
+                                   static_frames=s.static_frames, report=spec.report, calibration=cal,
+                                   static_reference=ref))
+    return tasks, skipped
+
+
+def _submit_local(tasks: list[TrialTask], jobs: int, on_done: Callable[[TrialOutcome], None]) -> list[TrialOutcome]:
+    if jobs == 1:
+        outs = []
+        for t in tasks:
+            outs.append(run_trial_task(t))
+            on_done(outs[-1])
+        return outs
+    pool = ProcessPoolExecutor(max_workers=jobs)
+    futures: list[Future] = [pool.submit(run_trial_task, t) for t in tasks]
+    try:
+        outs = []
+        for f, t in zip(futures, tasks):
+            outs.append(_result_or_failure(f, t))
+            on_done(outs[-1])
+        pool.shutdown(wait=True)
+        return outs
+    except KeyboardInterrupt:
+        pool.shutdown(wait=False, cancel_futures=True)
+        for proc in list(getattr(pool, "_processes", {}).values()):
+            proc.terminate()
+        raise
+
+
+def _result_or_failure(f, t: TrialTask) -> TrialOutcome:
+    try:
+        return f.result()
+    except Exception as exc:  # noqa: BLE001 - a worker that died (e.g. out of memory) fails only its trial
+        return TrialOutcome(t.subject, t.session, t.trial, t.final_dir, "failed", error=f"{type(exc).__name__}: {exc}")
+
+
+def _worker_setup() -> None:
+    """Imported once per Dask worker: exubio and its solvers stay loaded for every trial."""
+    import exubio.methods.ls  # noqa: F401
+    import exubio.methods.pf  # noqa: F401
+    import exubio.pipeline  # noqa: F401
+
+
+def _submit_dask(tasks: list[TrialTask], scheduler: str, on_done: Callable[[TrialOutcome], None]) -> list[TrialOutcome]:
+    try:
+        from distributed import Client, LocalCluster, as_completed
+    except ImportError as exc:  # pragma: no cover - a dependency of exubio
+        raise InputError(f"--scheduler {scheduler}: Dask distributed is not installed ({exc})") from None
+    for name in ("distributed", "bokeh", "tornado"):  # their INFO lines are not the user's business
+        logging.getLogger(name).setLevel(logging.ERROR)
+    cluster = None
+    if scheduler.startswith("local:"):
+        try:
+            n = int(scheduler.split(":", 1)[1])
+        except ValueError:
+            n = 0
+        if n < 1:
+            raise InputError(f"--scheduler {scheduler}: expected local:N with N >= 1 workers")
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
+        client = Client(cluster)
+    else:
+        try:
+            client = Client(scheduler, timeout=10)
+        except OSError as exc:
+            raise InputError(f"--scheduler {scheduler}: cannot reach a Dask scheduler there ({exc})") from None
+    try:
+        client.run(_worker_setup)
+        futures = {client.submit(run_trial_task, t, pure=False, key=f"exubio-{k}-{Path(t.trial).stem}"): t
+                   for k, t in enumerate(tasks)}
+        outs = []
+        for f in as_completed(list(futures)):
+            outs.append(_result_or_failure(f, futures[f]))
+            on_done(outs[-1])
+        return outs
+    except KeyboardInterrupt:
+        client.cancel(list(futures)) if "futures" in locals() else None
+        raise
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def write_table(out_dir: Path, spec: StudySpec, outcomes: Iterable[TrialOutcome]) -> tuple[Path, Path]:
+    """study.csv and study.json (atomic), one row per trial in study order."""
+    from exubio.io.results import atomic_write, write_json
+
+    order = {(s.subject, s.session, str(t)): k for k, (s, t) in
+             enumerate((s, t) for s in spec.sessions for t in s.trials)}
+    rows = [o.row() for o in sorted(outcomes, key=lambda o: order.get((o.subject, o.session, o.trial), 1 << 30))]
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=STUDY_COLUMNS, lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: ("" if r[k] is None else r[k]) for k in STUDY_COLUMNS})
+    csv_path = atomic_write(out_dir / "study.csv", lambda tmp: tmp.write_text(buf.getvalue()))
+    json_path = write_json(out_dir / "study.json", {
+        "study": spec.name, "source": str(spec.source), "trials": rows,
+        "counts": {st: sum(r["status"] == st for r in rows) for st in ("done", "skipped (complete)", "failed")},
+        "units": {"residual": "mm", "agreement": "deg", "wall": "s"}})
+    return csv_path, json_path
+
+
+def run_study(spec: StudySpec, out_dir: str | Path, /, *, jobs: int = 1, scheduler: str | None = None,
+              progress: Callable[[str], None] | None = None) -> list[TrialOutcome]:
+    """Run (or resume) a study into out_dir; returns every trial's outcome, writes the study table
+    and report. ``jobs``: local processes; ``scheduler``: Dask ("local:N" or "tcp://HOST:PORT")."""
+    say = progress or (lambda m: log.info("%s", m))
+    if jobs < 1:
+        raise InputError(f"--jobs {jobs}: expected a whole number of processes >= 1")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    removed = clean_leftovers(out)
+    if removed:
+        say(f"removed {len(removed)} leftover(s) of an interrupted run")
+    tasks, outcomes = plan(spec, out)
+    n_total = len(tasks) + len(outcomes)
+    say(f"study {spec.name}: {n_total} trial(s), {len(tasks)} to run, "
+        f"{sum(o.status.startswith('skipped') for o in outcomes)} complete already")
+
+    def on_done(o: TrialOutcome) -> None:
+        say(f"{o.subject}/{o.session}/{Path(o.trial).name}: {o.status}"
+            + (f" ({', '.join(f'{m} {v}' for m, v in o.verdicts.items())})" if o.verdicts else "")
+            + (f": {o.error}" if o.error else ""))
+
+    if tasks:
+        outcomes += (_submit_dask(tasks, scheduler, on_done) if scheduler else _submit_local(tasks, jobs, on_done))
+    write_table(out, spec, outcomes)
+    if spec.report:
+        from exubio.report.study_report import build_study_report
+
+        build_study_report(out / "study.json", out / "study.report.pdf")
+    return outcomes
+
+
+def outcome_dicts(outcomes: Iterable[TrialOutcome]) -> list[dict]:
+    return [asdict(o) for o in outcomes]

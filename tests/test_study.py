@@ -1,0 +1,184 @@
+"""Studies (exubio.study, `exubio study`): trials of the same name in two sessions never collide,
+a re-run resumes (complete trials skipped, incomplete ones redone, leftovers removed), a broken
+trial or session never stops the others, Dask gives the same files as a serial run, and SIGINT /
+SIGKILL leave every trial's result set complete or absent."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from exubio.cli import main
+from exubio.model import load_model
+from exubio.simulate import simulate_trial, write_simulated_trial
+from exubio.study import DONE_FILE, load_study
+
+MODEL = Path(__file__).resolve().parents[1] / "models" / "upper_extremity.yaml"
+
+
+def _trial(path: Path, motion: str = "abduction", seed: int = 1, duration: float = 2.0) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    sim = simulate_trial(load_model(), motion, duration_s=duration, rate_hz=50.0, noise_mm=0.5, seed=seed)
+    write_simulated_trial(sim, path)
+    return path
+
+
+def _study(tmp: Path, sessions: list[dict], **top) -> Path:
+    path = tmp / "study.yaml"
+    path.write_text(yaml.safe_dump({"schema_version": 1, "name": "t", "report": False, **top, "sessions": sessions}))
+    return path
+
+
+def _rows(out: Path) -> list[dict]:
+    return json.loads((out / "study.json").read_text())["trials"]
+
+
+def _complete_or_absent(out: Path) -> None:
+    """Every trial folder holds a complete result set with DONE.json; no half-written one."""
+    for d in out.rglob("*"):
+        if d.is_dir() and not d.name.startswith(".") and d.parent.parent.parent == out:
+            assert (d / DONE_FILE).is_file(), f"{d} has no {DONE_FILE}"
+            files = json.loads((d / DONE_FILE).read_text())["files"]
+            assert sorted(p.name for p in d.iterdir() if p.name != DONE_FILE) == sorted(files)
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("study_data")
+    _trial(tmp / "a" / "trial.c3d", "abduction", 1)
+    _trial(tmp / "b" / "trial.c3d", "flexion", 2)
+    _trial(tmp / "b" / "other.c3d", "abduction", 3)
+    return tmp
+
+
+def test_same_trial_name_in_two_sessions_and_resume(data, tmp_path):
+    study = _study(data, [{"subject": "S01", "session": "day1", "trials": ["a/*.c3d"], "methods": ["ls"]},
+                          {"subject": "S01", "session": "day2", "trials": ["b/*.c3d"], "methods": ["ls"]}])
+    out = tmp_path / "out"
+    assert main(["-q", "study", str(study), "--out", str(out)]) == 0
+    a, b = out / "S01" / "day1" / "trial" / "trial.ls.csv", out / "S01" / "day2" / "trial" / "trial.ls.csv"
+    assert a.is_file() and b.is_file() and a.read_bytes() != b.read_bytes()  # two trials, two result sets
+    rows = _rows(out)
+    assert [(r["session"], r["trial"], r["status"]) for r in rows] == [
+        ("day1", "trial.c3d", "done"), ("day2", "other.c3d", "done"), ("day2", "trial.c3d", "done")]
+    assert all(r["frames"] == 100 and r["ls_residual_mm"] > 0 and r["wall_s"] > 0 for r in rows)
+    assert (out / "study.csv").read_text().splitlines()[0].startswith("subject,session,trial,status")
+    _complete_or_absent(out)
+    # resume: nothing to redo; then an incomplete set (no DONE.json) and a killed run's leftover
+    before = a.stat().st_mtime_ns
+    assert main(["-q", "study", str(study), "--out", str(out)]) == 0
+    assert a.stat().st_mtime_ns == before and {r["status"] for r in _rows(out)} == {"skipped (complete)"}
+    (out / "S01" / "day2" / "other" / DONE_FILE).unlink()
+    (out / "S01" / "day1" / ".tmp-trial-1-2").mkdir()
+    assert main(["-q", "study", str(study), "--out", str(out)]) == 0
+    assert [r["status"] for r in _rows(out)] == ["skipped (complete)", "done", "skipped (complete)"]
+    assert not (out / "S01" / "day1" / ".tmp-trial-1-2").exists()
+    _complete_or_absent(out)
+
+
+def test_broken_trials_and_sessions_do_not_stop_the_study(data, tmp_path, capsys):
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    (bad / "corrupt.c3d").write_bytes(b"not a c3d file at all" * 10)
+    sim = simulate_trial(load_model(), "abduction", duration_s=1.0, rate_hz=50.0, seed=4)
+    from exubio.io.c3d import write_c3d
+    from exubio.types import Trajectories
+
+    keep = [i for i, lb in enumerate(sim.trajectories.labels) if lb != "EPI_lat"]
+    t = sim.trajectories
+    write_c3d(bad / "no_epicondyle.c3d", Trajectories(labels=tuple(t.labels[i] for i in keep),
+                                                      positions_m=t.positions_m[:, keep], rate_hz=t.rate_hz,
+                                                      time_s=t.time_s, source="x", units_in_file="m"))
+    model = yaml.safe_load(MODEL.read_text())
+    model["segments"][1]["mass_fraction"] = "abc"
+    (tmp_path / "broken_model.yaml").write_text(yaml.safe_dump(model))
+    study = tmp_path / "study.yaml"
+    study.write_text(yaml.safe_dump({"schema_version": 1, "report": False, "methods": ["ls"], "sessions": [
+        {"subject": "S01", "trials": [str(data / "a" / "trial.c3d")]},
+        {"subject": "S02", "trials": [str(bad / "corrupt.c3d"), str(bad / "no_epicondyle.c3d")]},
+        {"subject": "S03", "model": str(tmp_path / "broken_model.yaml"), "trials": [str(data / "b" / "other.c3d")]},
+        {"subject": "S04", "trials": [str(data / "b" / "trial.c3d")]},
+    ]}))
+    out = tmp_path / "out"
+    assert main(["-q", "study", str(study), "--out", str(out)]) == 1  # some trials failed
+    rows = {(r["subject"], r["trial"]): r for r in _rows(out)}
+    assert rows[("S01", "trial.c3d")]["status"] == "done" and rows[("S04", "trial.c3d")]["status"] == "done"
+    assert rows[("S02", "corrupt.c3d")]["status"] == "failed" and "corrupt.c3d" in rows[("S02", "corrupt.c3d")]["error"]
+    assert "EPI_lat" in rows[("S02", "no_epicondyle.c3d")]["error"]
+    assert rows[("S03", "other.c3d")]["status"] == "failed" and "mass_fraction" in rows[("S03", "other.c3d")]["error"]
+    _complete_or_absent(out)
+    assert "failed: S02" in capsys.readouterr().out
+
+
+def test_study_file_errors_are_refused_before_any_work(tmp_path, data, capsys):
+    cases = {
+        "unknown key": {"schema_version": 1, "sessions": [{"subject": "S", "trials": ["a/*.c3d"], "speed": 2}]},
+        "no match": {"schema_version": 1, "sessions": [{"subject": "S", "trials": ["nothing/*.c3d"]}]},
+        "same session": {"schema_version": 1, "sessions": [{"subject": "S", "session": "x", "trials": ["a/*.c3d"]},
+                                                           {"subject": "S", "session": "x", "trials": ["b/*.c3d"]}]},
+        "bad method": {"schema_version": 1, "methods": ["kalman"], "sessions": [{"subject": "S", "trials": ["a/*"]}]},
+    }
+    for what, content in cases.items():
+        path = data / f"bad_{what.replace(' ', '_')}.yaml"
+        path.write_text(yaml.safe_dump(content))
+        out = tmp_path / what.replace(" ", "_")
+        assert main(["-q", "study", str(path), "--out", str(out)]) == 2, what
+        assert str(path) in capsys.readouterr().err, what
+        assert not out.exists(), what
+
+
+def test_dask_local_cluster_gives_the_same_files_as_a_serial_run(data, tmp_path):
+    pytest.importorskip("distributed")
+    study = _study(data, [{"subject": "S01", "session": "day2", "trials": ["b/*.c3d"]}])
+    serial, dask = tmp_path / "serial", tmp_path / "dask"
+    assert main(["-q", "study", str(study), "--out", str(serial)]) == 0
+    assert main(["-q", "study", str(study), "--out", str(dask), "--scheduler", "local:2"]) == 0
+    names = sorted(p.relative_to(serial) for p in serial.rglob("*") if p.suffix in (".csv", ".mot") and
+                   p.name != "study.csv")
+    assert len(names) >= 8
+    for rel in names:
+        assert (serial / rel).read_bytes() == (dask / rel).read_bytes(), rel
+    assert [r["status"] for r in _rows(dask)] == ["done", "done"]
+
+
+def test_two_trials_of_one_name_in_one_session_are_refused(data):
+    from exubio.errors import InputError
+
+    study = _study(data, [{"subject": "S01", "trials": ["b/*.c3d", "a/trial.c3d"]}])
+    with pytest.raises(InputError, match="several trials named"):
+        load_study(study)
+    spec = load_study(_study(data, [{"subject": "S01", "trials": ["b/*.c3d"]}]))
+    assert [t.name for t in spec.sessions[0].trials] == ["other.c3d", "trial.c3d"]
+    assert all(t.is_absolute() or t.exists() for t in spec.sessions[0].trials)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL])
+def test_interrupted_study_leaves_complete_sets_and_the_next_run_finishes(tmp_path, sig):
+    for k in range(4):
+        _trial(tmp_path / "d" / f"t{k}.c3d", "abduction", 10 + k, duration=6.0)
+    study = _study(tmp_path, [{"subject": "S01", "trials": ["d/*.c3d"], "methods": ["pf", "ls"]}])
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "exubio.cli", "-q", "study", str(study), "--out", str(out)]
+    for delay in (4.0, 9.0):
+        p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        time.sleep(delay)
+        t0 = time.perf_counter()
+        p.send_signal(sig)
+        _, err = p.communicate(timeout=60)
+        stopped = time.perf_counter() - t0
+        if sig == signal.SIGINT and p.returncode != 0:  # 0: it had finished before the signal
+            assert p.returncode == 130 and "interrupted" in err.splitlines()[-1]
+            assert stopped < 5.0  # about a second on an idle machine; CI machines are slower
+        _complete_or_absent(out)
+    assert subprocess.run(cmd, capture_output=True, text=True, timeout=300).returncode == 0
+    _complete_or_absent(out)
+    assert [r["status"] for r in _rows(out)] and all(r["status"] != "failed" for r in _rows(out))
+    assert not list(out.rglob(".tmp-*"))
