@@ -86,7 +86,7 @@ class ReferenceCurve:
 
 def _read(name: str) -> list[dict[str, str]]:
     path = shipped_file("exubio.data", f"spartacus/{name}", "exubio/data")
-    with path.open(newline="") as f:
+    with path.open(newline="", encoding="utf-8") as f:
         return list(csv.DictReader(f))
 
 
@@ -152,7 +152,7 @@ def load_ludewig2009() -> dict[str, dict[str, np.ndarray]]:
     """Ludewig et al. 2009 mean curves from ``exubio/data/ludewig2009.csv``:
     {plane: {"ht_elevation_deg": (n,), "<column>": (n,) deg}}."""
     path = shipped_file("exubio.data", "ludewig2009.csv", "exubio/data")
-    lines = [ln for ln in path.read_text().splitlines() if ln and not ln.startswith("#")]
+    lines = [ln for ln in path.read_text(encoding="utf-8").splitlines() if ln and not ln.startswith("#")]
     header = lines[0].split(",")
     rows = [ln.split(",") for ln in lines[1:]]
     out: dict[str, dict[str, np.ndarray]] = {}

@@ -326,7 +326,7 @@ def plan(spec: StudySpec, out_dir: Path) -> tuple[list[TrialTask], list[TrialOut
         pending = [t for t in s.trials if not (trial_dirs[t] / DONE_FILE).is_file()]
         for t in s.trials:
             if t not in pending:
-                done = json.loads((trial_dirs[t] / DONE_FILE).read_text()).get("outcome", {})
+                done = json.loads((trial_dirs[t] / DONE_FILE).read_text(encoding="utf-8")).get("outcome", {})
                 o = TrialOutcome(s.subject, s.session, str(t), str(trial_dirs[t]), "skipped (complete)",
                                  verdicts={m: done.get(f"{m}_verdict") for m in ("pf", "ls") if done.get(f"{m}_verdict")},
                                  frames=done.get("frames"), wall_s=done.get("wall_s"),
@@ -438,7 +438,7 @@ def write_table(out_dir: Path, spec: StudySpec, outcomes: Iterable[TrialOutcome]
     w.writeheader()
     for r in rows:
         w.writerow({k: ("" if r[k] is None else r[k]) for k in STUDY_COLUMNS})
-    csv_path = atomic_write(out_dir / "study.csv", lambda tmp: tmp.write_text(buf.getvalue()))
+    csv_path = atomic_write(out_dir / "study.csv", lambda tmp: tmp.write_text(buf.getvalue(), encoding="utf-8"))
     json_path = write_json(out_dir / "study.json", {
         "study": spec.name, "source": str(spec.source), "trials": rows,
         "counts": {st: sum(r["status"] == st for r in rows) for st in ("done", "skipped (complete)", "failed")},

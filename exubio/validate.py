@@ -284,7 +284,7 @@ def _nan_to_none(obj: Any) -> Any:
 
 def _write_json(path: Path, data: Any) -> None:
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(_nan_to_none(data), indent=2, allow_nan=False) + "\n")
+    tmp.write_text(json.dumps(_nan_to_none(data), indent=2, allow_nan=False) + "\n", encoding="utf-8")
     tmp.replace(path)
 
 

@@ -16,7 +16,7 @@ README = Path(__file__).resolve().parents[1] / "README.md"
 
 
 def _example() -> str:
-    text = README.read_text()
+    text = README.read_text(encoding="utf-8")
     m = re.search(r"<!-- api-example -->\s*```python\n(.*?)```", text, re.S)
     assert m, "README has no API example block"
     return m.group(1)

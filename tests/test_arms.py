@@ -33,7 +33,7 @@ def _arm_protocol(tmp_path, side: str, prefix: str):
         if prefix and spec.get("segment") != "thorax":
             spec["aliases"] = [prefix + name] + [prefix + a for a in spec.get("aliases", [])]
     path = tmp_path / f"{side}.yaml"
-    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    path.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
     return path
 
 
@@ -94,7 +94,7 @@ def test_two_arm_trial_recovers_both_truths(tmp_path):
         err = np.degrees(np.abs(q - sim.q_true))
         measured = [i for i, n in enumerate(names) if not n.startswith(("sc_", "ac_"))]  # SC/AC split: held
         assert err[:, measured].max() < 0.5, (side, names[int(np.argmax(err.max(axis=0)))])
-        isb_head = (out / side / "both.ls.isb.csv").read_text().splitlines()
+        isb_head = (out / side / "both.ls.isb.csv").read_text(encoding="utf-8").splitlines()
         assert any(("LEFT arm" in ln) == (side == "left") for ln in isb_head if "arm" in ln)
 
 
@@ -112,6 +112,6 @@ def test_side_must_be_right_or_left(tmp_path):
     data = read_protocol_mapping(BASE)
     data["side"] = "both"
     path = tmp_path / "bad.yaml"
-    path.write_text(yaml.safe_dump(data))
+    path.write_text(yaml.safe_dump(data), encoding="utf-8")
     with pytest.raises(ProtocolError, match="side"):
         protocol_for_model(load_model(), path)

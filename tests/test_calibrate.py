@@ -316,10 +316,10 @@ def test_a_protocol_marker_that_never_appears(tmp_path, generic):
     with pytest.raises(InputError, match="SEML"):
         reconstruct_file(trial, tmp_path / "out", methods=["ls"])
     # unless the protocol marks it optional (ELB already is)
-    text = shipped_file("exubio.protocols", "upper_limb_21.yaml", "protocols").read_text()
+    text = shipped_file("exubio.protocols", "upper_limb_21.yaml", "protocols").read_text(encoding="utf-8")
     text = text.replace("SEML:       {segment: hand, point: SEML}", "SEML:       {segment: hand, point: SEML, optional: true}")
     custom = tmp_path / "optional_seml.yaml"
-    custom.write_text(text)
+    custom.write_text(text, encoding="utf-8")
     trial = tmp_path / "no_seml_elb.c3d"
     _messy_trial(model, trial, drop=("SEML", "ELB"))
     (recon, _, summ), = reconstruct_file(trial, tmp_path / "out2", methods=["ls"], protocol_path=custom)
@@ -344,7 +344,7 @@ def test_written_inertia_keys_are_checked(tmp_path, calibrated):
 
     cal, report, _ = calibrated
     path = save_model(cal, tmp_path / "m.yaml", calibration=None)
-    text = path.read_text()
+    text = path.read_text(encoding="utf-8")
     assert "com_mm" in text and "com_between" not in text
     both = text.replace("    com_mm:", "    com_between: [GH, EJC]\n    com_mm:", 1)
     with pytest.raises(ModelError, match="com_mm"):
@@ -356,7 +356,7 @@ def test_written_inertia_keys_are_checked(tmp_path, calibrated):
 
 def _write(folder, name, text):
     p = folder / name
-    p.write_text(text)
+    p.write_text(text, encoding="utf-8")
     return p
 
 

@@ -36,7 +36,7 @@ def test_reconstruct_writes_all_outputs_with_consistent_content(tmp_path, c3d, t
     assert names2 == names and np.abs(q2 - q).max() < 1e-7
     recon = read_npz(out / "abd.ls.npz")
     assert np.abs(np.rad2deg(recon.q_rad) - np.rad2deg(q)).max() < 1e-5  # CSV holds 6 decimals of degrees
-    summ = json.loads((out / "abd.ls.summary.json").read_text())
+    summ = json.loads((out / "abd.ls.summary.json").read_text(encoding="utf-8"))
     for key in ("method", "n_frames", "wall_time_s", "ms_per_frame", "residual_mm", "constraint_max_abs"):
         assert key in summ
     assert summ["n_frames"] == trial.time_s.size
@@ -52,13 +52,13 @@ def test_existing_result_is_refused_and_left_intact(tmp_path, c3d, capsys):
     out = tmp_path / "out"
     out.mkdir()
     earlier = out / "abd.ls.csv"
-    earlier.write_text("earlier result\n")
+    earlier.write_text("earlier result\n", encoding="utf-8")
     assert main(["-q", "reconstruct", str(c3d), "--method", "ls", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert "abd.ls.csv" in err and "--overwrite" in err
-    assert earlier.read_text() == "earlier result\n"
+    assert earlier.read_text(encoding="utf-8") == "earlier result\n"
     assert main(["-q", "reconstruct", str(c3d), "--method", "ls", "--out", str(out), "--overwrite"]) == 0
-    assert earlier.read_text().startswith("time_s,")
+    assert earlier.read_text(encoding="utf-8").startswith("time_s,")
 
 
 def test_missing_trial_file(tmp_path, capsys):
@@ -73,7 +73,7 @@ def test_truncated_and_non_c3d_files(tmp_path, c3d, capsys):
     assert main(["reconstruct", str(bad), "--out", str(tmp_path / "o1")]) == 2
     assert "truncated.c3d" in capsys.readouterr().err
     text = tmp_path / "notes.c3d"
-    text.write_text("this is not a c3d file\n" * 50)
+    text.write_text("this is not a c3d file\n" * 50, encoding="utf-8")
     assert main(["reconstruct", str(text), "--out", str(tmp_path / "o2")]) == 2
     assert "notes.c3d" in capsys.readouterr().err
 
@@ -101,7 +101,7 @@ def test_gap_is_handled_and_reported(tmp_path, trial, capsys):
     path = write_c3d(tmp_path / "gap.c3d", replace(trial.trajectories, positions_m=pos))
     out = tmp_path / "o"
     assert main(["-q", "reconstruct", str(path), "--method", "ls", "--out", str(out)]) == 0
-    summ = json.loads((out / "gap.ls.summary.json").read_text())
+    summ = json.loads((out / "gap.ls.summary.json").read_text(encoding="utf-8"))
     gaps = [g for g in summ["gaps"] if g["marker"] == "ARM"]
     assert gaps and gaps[0]["start_frame"] == 50 and gaps[0]["stop_frame"] == 80
     assert "ARM" in capsys.readouterr().out
@@ -115,9 +115,9 @@ def test_gap_is_handled_and_reported(tmp_path, trial, capsys):
     (lambda s: s.replace("segment: humerus", "segment: humerous", 1), "humerous"),
 ])
 def test_bad_protocol_yaml_names_the_key(tmp_path, c3d, capsys, edit, named):
-    text = PROTOCOL.read_text()
+    text = PROTOCOL.read_text(encoding="utf-8")
     bad = tmp_path / "bad.yaml"
-    bad.write_text(edit(text))
+    bad.write_text(edit(text), encoding="utf-8")
     assert edit(text) != text
     assert main(["reconstruct", str(c3d), "--protocol", str(bad), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
@@ -160,7 +160,7 @@ def test_reconstruct_real_c3d_files(tmp_path, name, capsys):
     from: 33 mm mean), named by marker."""
     out = tmp_path / "real"
     code = main(["-q", "reconstruct", str(SHARED / "data" / "c3d" / name), "--method", "ls", "--out", str(out)])
-    summ = json.loads((out / f"{Path(name).stem}.ls.summary.json").read_text())
+    summ = json.loads((out / f"{Path(name).stem}.ls.summary.json").read_text(encoding="utf-8"))
     verdict = summ["quality"]["verdict"]
     assert verdict in ("check", "fail")
     assert code == (1 if verdict == "fail" else 0)
@@ -196,10 +196,10 @@ def test_a_study_of_several_trials_runs_and_reports_each(tmp_path, trial, jobs, 
     (("range_deg: [-15, 160]", "range_deg: [160, -15]"), "range_deg"),
 ])
 def test_a_malformed_number_in_the_model_is_exit_2_naming_the_key(tmp_path, c3d, capsys, edit, key):
-    text = (Path(__file__).resolve().parents[1] / "models" / "upper_extremity.yaml").read_text()
+    text = (Path(__file__).resolve().parents[1] / "models" / "upper_extremity.yaml").read_text(encoding="utf-8")
     assert edit[0] in text
     bad = tmp_path / "bad.yaml"
-    bad.write_text(text.replace(edit[0], edit[1], 1))
+    bad.write_text(text.replace(edit[0], edit[1], 1), encoding="utf-8")
     assert main(["-q", "reconstruct", str(c3d), "--model", str(bad), "--method", "ls", "--out",
                  str(tmp_path / "o"), "--no-report"]) == 2
     err = capsys.readouterr().err
@@ -244,11 +244,11 @@ def test_isb_angles_file_per_method_with_what_is_measured(tmp_path, c3d):
     recon = read_npz(out / "abd.ls.npz")
     ref_names, ref = isb_table(load_model(), recon.q_rad)
     assert names == ref_names and np.abs(np.degrees(ang - ref)).max() < 1e-5
-    summ = json.loads((out / "abd.ls.summary.json").read_text())["isb_angles"]
+    summ = json.loads((out / "abd.ls.summary.json").read_text(encoding="utf-8"))["isb_angles"]
     assert summ["measured"] == ["ST", "GH", "HT"] and summ["not_measured"] == ["SC", "AC"]
     assert summ["sequences"]["GH"] == "X-Z'-Y''" and summ["units"] == "deg"
     # the file says what it holds: units, the sequence of every joint, what is not measured
-    head = [ln for ln in (out / "abd.ls.isb.csv").read_text().splitlines() if ln.startswith("#")]
+    head = [ln for ln in (out / "abd.ls.isb.csv").read_text(encoding="utf-8").splitlines() if ln.startswith("#")]
     assert any("degrees" in ln for ln in head)
     assert any(ln.startswith("# GH: sequence X-Z'-Y''") for ln in head)
     assert any("NOT MEASURED" in ln and "SC, AC" in ln for ln in head)

@@ -3,6 +3,7 @@ packages, put every model point where exubio's kinematics puts it (<= 1e-6 m) fo
 postures, keep names, ranges, masses and inertias exactly, and replay a reconstruction; for the
 generic model and a model calibrated the way `exubio calibrate` does."""
 import dataclasses
+import locale
 
 import numpy as np
 import pytest
@@ -14,6 +15,15 @@ from exubio.kinematics import Kinematics
 from exubio.model import load_model
 from exubio.pipeline import calibrate_file, protocol_for_model, reconstruct_file
 from exubio.resources import shipped_file
+
+@pytest.fixture(autouse=True)
+def _keep_the_locale():
+    """biorbd.Model() sets the C locale of the whole process (LC_ALL=C: Python's default text
+    encoding becomes ASCII); put the user's back after each test so later tests are unaffected."""
+    before = locale.setlocale(locale.LC_ALL)
+    yield
+    locale.setlocale(locale.LC_ALL, before)
+
 
 EXAMPLE = shipped_file("exubio.data", "example_abduction.c3d", "exubio/data")
 MODEL_PATH = shipped_file("exubio.models", "upper_extremity.yaml", "models")

@@ -81,18 +81,18 @@ def assert_same_reconstruction(a: Reconstruction, b: Reconstruction) -> None:
 # ------------------------------------------------------------------------- atomic writing
 def test_atomic_write_replaces_the_file(tmp_path):
     path = tmp_path / "a.txt"
-    path.write_text("old")
-    atomic_write(path, lambda tmp: tmp.write_text("new"))
-    assert path.read_text() == "new"
+    path.write_text("old", encoding="utf-8")
+    atomic_write(path, lambda tmp: tmp.write_text("new", encoding="utf-8"))
+    assert path.read_text(encoding="utf-8") == "new"
     assert [p.name for p in tmp_path.iterdir()] == ["a.txt"]
 
 
 def test_failing_writer_leaves_the_old_file_intact(tmp_path):
     path = tmp_path / "angles.csv"
-    path.write_text("old,complete\n")
+    path.write_text("old,complete\n", encoding="utf-8")
 
     def half_then_crash(tmp: Path) -> None:
-        with open(tmp, "w") as fh:
+        with open(tmp, "w", encoding="utf-8") as fh:
             fh.write("time_s,half")
             fh.flush()
             assert tmp.stat().st_size > 0  # the half file really exists on disk
@@ -100,7 +100,7 @@ def test_failing_writer_leaves_the_old_file_intact(tmp_path):
 
     with pytest.raises(RuntimeError, match="disk on fire"):
         atomic_write(path, half_then_crash)
-    assert path.read_text() == "old,complete\n"
+    assert path.read_text(encoding="utf-8") == "old,complete\n"
     assert [p.name for p in tmp_path.iterdir()] == ["angles.csv"]
 
 
@@ -114,14 +114,14 @@ def test_temporary_file_is_in_the_target_folder_with_the_target_suffix(tmp_path)
 
 def test_atomic_write_gives_normal_permissions(tmp_path):
     reference = tmp_path / "ref"
-    reference.write_text("x")
-    path = atomic_write(tmp_path / "new.txt", lambda tmp: tmp.write_text("x"))
+    reference.write_text("x", encoding="utf-8")
+    path = atomic_write(tmp_path / "new.txt", lambda tmp: tmp.write_text("x", encoding="utf-8"))
     assert path.stat().st_mode & 0o777 == reference.stat().st_mode & 0o777
 
 
 def test_atomic_write_into_missing_folder(tmp_path):
     with pytest.raises(InputError, match="does not exist"):
-        atomic_write(tmp_path / "no" / "x.txt", lambda tmp: tmp.write_text("x"))
+        atomic_write(tmp_path / "no" / "x.txt", lambda tmp: tmp.write_text("x", encoding="utf-8"))
 
 
 def test_os_errors_become_input_errors_naming_the_path(tmp_path):
@@ -140,24 +140,24 @@ def test_prepare_output_dir_creates_nested_folders(tmp_path):
 
 
 def test_prepare_output_dir_refuses_existing_results(tmp_path):
-    (tmp_path / "P01_pf.csv").write_text("keep me")
-    (tmp_path / "P01_pfx.csv").write_text("unrelated")
+    (tmp_path / "P01_pf.csv").write_text("keep me", encoding="utf-8")
+    (tmp_path / "P01_pfx.csv").write_text("unrelated", encoding="utf-8")
     with pytest.raises(InputError, match=r"P01_pf\.csv.*already exists.*--overwrite.*another output folder"):
         prepare_output_dir(tmp_path, ["P01_pf", "summary.json"], overwrite=False)
     prepare_output_dir(tmp_path, ["P01_pfx.mot", "P01_ls"], overwrite=False)  # no clash
-    (tmp_path / "summary.json").write_text("{}")
+    (tmp_path / "summary.json").write_text("{}", encoding="utf-8")
     with pytest.raises(InputError, match=r"summary\.json"):
         prepare_output_dir(tmp_path, ["summary.json"], overwrite=False)
 
 
 def test_prepare_output_dir_with_overwrite_deletes_nothing(tmp_path):
-    (tmp_path / "P01_pf.csv").write_text("keep me")
+    (tmp_path / "P01_pf.csv").write_text("keep me", encoding="utf-8")
     prepare_output_dir(tmp_path, ["P01_pf"], overwrite=True)
-    assert (tmp_path / "P01_pf.csv").read_text() == "keep me"
+    assert (tmp_path / "P01_pf.csv").read_text(encoding="utf-8") == "keep me"
 
 
 def test_prepare_output_dir_refuses_a_file(tmp_path):
-    (tmp_path / "out").write_text("")
+    (tmp_path / "out").write_text("", encoding="utf-8")
     with pytest.raises(InputError, match="existing file"):
         prepare_output_dir(tmp_path / "out", ["x"], overwrite=True)
 
@@ -177,7 +177,7 @@ def test_csv_is_plain_with_degrees(tmp_path):
     time = np.array([0.0, 0.01])
     q = np.radians([[90.0, -45.5], [1.25, 0.0]])
     path = write_angles_csv(tmp_path / "a.csv", time, ("GH_elev", "EL_x"), q)
-    assert path.read_text().splitlines() == [
+    assert path.read_text(encoding="utf-8").splitlines() == [
         "time_s,GH_elev,EL_x",
         "0.000000,90.000000,-45.500000",
         "0.010000,1.250000,0.000000",
@@ -200,10 +200,10 @@ def test_csv_refuses_inconsistent_input(tmp_path, names, q_shape, message):
 
 def test_read_csv_errors_name_file_and_line(tmp_path):
     path = tmp_path / "bad.csv"
-    path.write_text("time_s,a\n0,1\n0.01,2,3\n")
+    path.write_text("time_s,a\n0,1\n0.01,2,3\n", encoding="utf-8")
     with pytest.raises(InputError, match=r"bad\.csv: line 3: 3 columns, expected 2"):
         read_angles_csv(path)
-    path.write_text("t,a\n0,1\n")
+    path.write_text("t,a\n0,1\n", encoding="utf-8")
     with pytest.raises(InputError, match=r"bad\.csv: line 1: expected a header starting with 'time_s'"):
         read_angles_csv(path)
 
@@ -212,7 +212,7 @@ def test_read_csv_errors_name_file_and_line(tmp_path):
 def test_mot_round_trip_and_header(tmp_path):
     time, q = angles()
     path = write_mot(tmp_path / "a.mot", time, NAMES, q, name="P01_ABD01_pf")
-    lines = path.read_text().splitlines()
+    lines = path.read_text(encoding="utf-8").splitlines()
     assert lines[:7] == [
         "P01_ABD01_pf", "version=1", "nRows=25", f"nColumns={len(NAMES) + 1}", "inDegrees=yes", "endheader",
         "time\t" + "\t".join(NAMES),
@@ -226,14 +226,14 @@ def test_mot_round_trip_and_header(tmp_path):
 
 def test_read_mot_in_radians_and_count_check(tmp_path):
     path = tmp_path / "r.mot"
-    path.write_text("x\nversion=1\nnRows=2\nnColumns=2\ninDegrees=no\nendheader\ntime\ta\n0\t1.5\n0.1\t-2\n")
+    path.write_text("x\nversion=1\nnRows=2\nnColumns=2\ninDegrees=no\nendheader\ntime\ta\n0\t1.5\n0.1\t-2\n", encoding="utf-8")
     t, names, q = read_mot(path)
     assert names == ("a",)
     np.testing.assert_array_equal(q[:, 0], [1.5, -2.0])
-    path.write_text("x\nnRows=3\nendheader\ntime\ta\n0\t1.5\n")
+    path.write_text("x\nnRows=3\nendheader\ntime\ta\n0\t1.5\n", encoding="utf-8")
     with pytest.raises(InputError, match=r"r\.mot: header says nrows=3 but the table has 1"):
         read_mot(path)
-    path.write_text("x\ntime\ta\n")
+    path.write_text("x\ntime\ta\n", encoding="utf-8")
     with pytest.raises(InputError, match=r"r\.mot: not a \.mot file: no 'endheader'"):
         read_mot(path)
 
@@ -275,7 +275,7 @@ def test_read_npz_errors(tmp_path):
     with pytest.raises(InputError, match=r"other\.npz: no entry '.*' \(not an exubio result\?\)"):
         read_npz(other)
     junk = tmp_path / "junk.npz"
-    junk.write_text("not a zip")
+    junk.write_text("not a zip", encoding="utf-8")
     with pytest.raises(InputError, match=r"junk\.npz: not a readable \.npz"):
         read_npz(junk)
 
@@ -291,7 +291,7 @@ def test_write_json_is_strict_and_converts_numpy(tmp_path):
         "status": FrameStatus.NOT_CONVERGED,
     }
     path = write_json(tmp_path / "summary.json", data)
-    text = path.read_text()
+    text = path.read_text(encoding="utf-8")
 
     def refuse(constant):
         raise AssertionError(f"non-standard JSON constant {constant}")
@@ -304,8 +304,8 @@ def test_write_json_is_strict_and_converts_numpy(tmp_path):
 
 def test_write_json_refuses_unknown_types_without_touching_the_file(tmp_path):
     path = tmp_path / "summary.json"
-    path.write_text("{}")
+    path.write_text("{}", encoding="utf-8")
     with pytest.raises(TypeError, match="object"):
         write_json(path, {"x": object()})
-    assert path.read_text() == "{}"
+    assert path.read_text(encoding="utf-8") == "{}"
     assert os.listdir(tmp_path) == ["summary.json"]

@@ -38,7 +38,7 @@ def shared(name: str) -> Path:
 
 def small_trc(tmp_path: Path, *, rows=ROWS, units="mm", rate="4", n_frames=3, header=HEADER) -> Path:
     path = tmp_path / "small.trc"
-    path.write_text(header.format(rate=rate, n_frames=n_frames, units=units) + rows)
+    path.write_text(header.format(rate=rate, n_frames=n_frames, units=units) + rows, encoding="utf-8")
     return path
 
 
@@ -111,7 +111,7 @@ def test_round_trip_to_the_printed_precision(tmp_path, units):
 def test_written_file_layout(tmp_path):
     traj = random_trajectories(n_frames=12, labels=("a", "b", "c"))
     path = write_trc(tmp_path / "layout.trc", traj)
-    lines = path.read_text().splitlines()
+    lines = path.read_text(encoding="utf-8").splitlines()
     assert lines[0] == "PathFileType\t4\t(X/Y/Z)\tlayout.trc"
     assert lines[1].split("\t")[:5] == ["DataRate", "CameraRate", "NumFrames", "NumMarkers", "Units"]
     assert lines[2].split("\t")[:5] == ["120", "120", "12", "3", "mm"]
@@ -166,7 +166,7 @@ def test_malformed_files_name_file_and_line(tmp_path, kwargs, message):
 
 def test_too_short_header(tmp_path):
     path = tmp_path / "short.trc"
-    path.write_text("PathFileType\t4\n")
+    path.write_text("PathFileType\t4\n", encoding="utf-8")
     with pytest.raises(InputError, match=r"short\.trc: not a TRC file"):
         read_trc(path)
 
@@ -188,7 +188,7 @@ def test_read_trial_dispatches_on_suffix_case_insensitively(tmp_path):
 
 def test_read_trial_refuses_other_suffixes_listing_the_accepted_ones(tmp_path):
     path = tmp_path / "trial.csv"
-    path.write_text("time,x\n")
+    path.write_text("time,x\n", encoding="utf-8")
     with pytest.raises(InputError, match=r"trial\.csv: unsupported.*'\.csv'.*\['\.c3d', '\.trc'\]"):
         read_trial(path)
 

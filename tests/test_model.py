@@ -29,18 +29,18 @@ def test_reference_posture_contact_points_lie_on_the_ellipsoid():
 
 def _write(tmp_path, text):
     p = tmp_path / "m.yaml"
-    p.write_text(text)
+    p.write_text(text, encoding="utf-8")
     return p
 
 
 def test_unknown_key_is_named(tmp_path):
-    text = DEFAULT_MODEL.read_text().replace("  radii_mm:", "  radius_mm:")
+    text = DEFAULT_MODEL.read_text(encoding="utf-8").replace("  radii_mm:", "  radius_mm:")
     with pytest.raises(ModelError, match="radius_mm"):
         load_model(_write(tmp_path, text))
 
 
 def test_unknown_joint_type_lists_valid_types(tmp_path):
-    text = DEFAULT_MODEL.read_text().replace("type: cardan", "type: hinge")
+    text = DEFAULT_MODEL.read_text(encoding="utf-8").replace("type: cardan", "type: hinge")
     with pytest.raises(ModelError, match="hinge.*spherical"):
         load_model(_write(tmp_path, text))
 

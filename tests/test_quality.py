@@ -32,7 +32,7 @@ def _run(tmp_path, traj, name, *extra):
     path = write_c3d(tmp_path / f"{name}.c3d", traj)
     out = tmp_path / name
     code = main(["-q", "reconstruct", str(path), "--method", "both", "--out", str(out), "--no-report", *extra])
-    summaries = {m: json.loads((out / f"{name}.{m}.summary.json").read_text()) for m in ("pf", "ls")}
+    summaries = {m: json.loads((out / f"{name}.{m}.summary.json").read_text(encoding="utf-8")) for m in ("pf", "ls")}
     return code, summaries
 
 
@@ -113,7 +113,7 @@ def test_another_subjects_static_is_named(tmp_path):
     out = tmp_path / "other"
     code = main(["-q", "reconstruct", str(trial), "--static", str(static), "--static-frames", "0:20",
                  "--method", "ls", "--out", str(out), "--no-report"])
-    s = json.loads((out / "bioptim_exo_martin_dynamique.ls.summary.json").read_text())
+    s = json.loads((out / "bioptim_exo_martin_dynamique.ls.summary.json").read_text(encoding="utf-8"))
     assert s["quality"]["verdict"] in ("check", "fail")
     kinds = {f["kind"] for f in s["labels"]} | {r["code"] for r in s["quality"]["reasons"]}
     assert kinds & {"other_subject", "distance", "marker_residual", "residual"}, s["quality"]
@@ -146,7 +146,7 @@ def test_kinova_session_swap_is_named_and_the_session_protocol_fixes_it(tmp_path
                                    / "kinova_martin_session.yaml")]
     code = main(args)
     stem = trial.stem
-    summ = {m: json.loads((out / f"{stem}.{m}.summary.json").read_text()) for m in ("pf", "ls")}
+    summ = {m: json.loads((out / f"{stem}.{m}.summary.json").read_text(encoding="utf-8")) for m in ("pf", "ls")}
     if protocol == "shipped":
         assert code == 1
         for s in summ.values():
@@ -174,7 +174,7 @@ def test_correctly_labelled_real_trials_agree_and_stay_in_range(tmp_path, trial,
     main(["-q", "reconstruct", str(SHARED / trial), *calibration, "--method", "both", "--out", str(out),
           "--no-report"])
     stem = Path(trial).stem
-    summ = {m: json.loads((out / f"{stem}.{m}.summary.json").read_text()) for m in ("pf", "ls")}
+    summ = {m: json.loads((out / f"{stem}.{m}.summary.json").read_text(encoding="utf-8")) for m in ("pf", "ls")}
     agree = [v for v in summ["pf"]["pf_ls_agreement_deg"].values() if isinstance(v, float)]
     assert max(agree) <= 2.0
     for s in summ.values():

@@ -23,7 +23,7 @@ def _unbounded(model):
 def test_every_coordinate_has_a_finite_cited_range(model):
     rng = np.degrees(model.coordinate_ranges_rad)
     assert rng.shape == (13, 2) and np.isfinite(rng).all() and (rng[:, 0] < 0).all() and (rng[:, 1] > 0).all()
-    text = (load_model().source and open(load_model().source).read())
+    text = (load_model().source and open(load_model().source, encoding="utf-8").read())
     assert text.count("range_deg: [-") == 13 and "Greene WB, Heckman JD" in text and "Ludewig PM" in text
 
 

@@ -69,7 +69,7 @@ def test_quick_run_content(quick):
         assert z["res__sier__pf__mean_mm"].ndim == 1
         assert z["iv__abduction__pf__ST_deg"].shape[1] == 3
     # Table 1 rows with both methods and the paper's numbers beside them
-    table = json.loads((out / "table1.json").read_text())
+    table = json.loads((out / "table1.json").read_text(encoding="utf-8"))
     assert set(table["rows"]) == {"abduction", "flexion", "sier"}
     for row in table["rows"].values():
         for method in ("pf", "ls"):
@@ -120,7 +120,7 @@ def test_report_rebuilds_from_files_without_the_solver(quick, tmp_path):
 
 
 def _imports(path: Path) -> set[str]:
-    tree = ast.parse(path.read_text())
+    tree = ast.parse(path.read_text(encoding="utf-8"))
     names = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
@@ -150,7 +150,7 @@ def test_only_the_report_package_imports_matplotlib():
 # --------------------------------------------------------------------------------------------
 def test_ludewig_data_file_is_cited_and_complete():
     path = PACKAGE / "data" / "ludewig2009.csv"
-    header = "".join(line for line in path.read_text().splitlines(keepends=True) if line.startswith("#"))
+    header = "".join(line for line in path.read_text(encoding="utf-8").splitlines(keepends=True) if line.startswith("#"))
     for needle in ("Ludewig PM", "J Bone Joint Surg Am 91(2):378-389", "10.2106/JBJS.G.01483", "Spartacus",
                    "10.5281/zenodo.11455521"):
         assert needle in header
@@ -221,7 +221,7 @@ def test_a_calibrated_trial_report_has_a_calibration_page(tmp_path):
         out = tmp_path / f"out{pages}"
         main(["-q", "reconstruct", str(path), "--method", "ls", "--out", str(out), *extra])
         assert _pdf_pages(out / "t.report.pdf") == pages
-    summary = json.loads((tmp_path / "out5" / "t.ls.summary.json").read_text())
+    summary = json.loads((tmp_path / "out5" / "t.ls.summary.json").read_text(encoding="utf-8"))
     from exubio.report.trial_report import calibration_page
 
     fig = calibration_page({}, {"ls": summary})
@@ -256,5 +256,5 @@ def test_the_committed_validation_outputs_hold_no_absolute_path():
     if not files:
         pytest.skip(f"{folder} has no validation outputs")
     for path in files:
-        for value in re.findall(r'"([^"]*)"', path.read_text()):
+        for value in re.findall(r'"([^"]*)"', path.read_text(encoding="utf-8")):
             assert not re.search(r"(^|[\s'(])(/[A-Za-z]|[A-Za-z]:\\)", value), (path.name, value)

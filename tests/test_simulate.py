@@ -266,7 +266,7 @@ def test_write_c3d_and_truth_csv(tmp_path, abduction):
     assert back.rate_hz == pytest.approx(100.0)
     assert back.units_in_file.startswith("mm")
     np.testing.assert_allclose(back.positions_m, abduction.trajectories.positions_m, atol=1e-6)
-    header = csv_path.read_text().splitlines()[0]
+    header = csv_path.read_text(encoding="utf-8").splitlines()[0]
     assert header == ",".join(("time_s",) + abduction.coordinate_names)
     time_s, names, q = results.read_angles_csv(csv_path)
     assert names == abduction.coordinate_names

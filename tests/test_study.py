@@ -32,12 +32,12 @@ def _trial(path: Path, motion: str = "abduction", seed: int = 1, duration: float
 
 def _study(tmp: Path, sessions: list[dict], **top) -> Path:
     path = tmp / "study.yaml"
-    path.write_text(yaml.safe_dump({"schema_version": 1, "name": "t", "report": False, **top, "sessions": sessions}))
+    path.write_text(yaml.safe_dump({"schema_version": 1, "name": "t", "report": False, **top, "sessions": sessions}), encoding="utf-8")
     return path
 
 
 def _rows(out: Path) -> list[dict]:
-    return json.loads((out / "study.json").read_text())["trials"]
+    return json.loads((out / "study.json").read_text(encoding="utf-8"))["trials"]
 
 
 def _complete_or_absent(out: Path) -> None:
@@ -45,7 +45,7 @@ def _complete_or_absent(out: Path) -> None:
     for d in out.rglob("*"):
         if d.is_dir() and not d.name.startswith(".") and d.parent.parent.parent == out:
             assert (d / DONE_FILE).is_file(), f"{d} has no {DONE_FILE}"
-            files = json.loads((d / DONE_FILE).read_text())["files"]
+            files = json.loads((d / DONE_FILE).read_text(encoding="utf-8"))["files"]
             assert sorted(p.name for p in d.iterdir() if p.name != DONE_FILE) == sorted(files)
 
 
@@ -69,7 +69,7 @@ def test_same_trial_name_in_two_sessions_and_resume(data, tmp_path):
     assert [(r["session"], r["trial"], r["status"]) for r in rows] == [
         ("day1", "trial.c3d", "done"), ("day2", "other.c3d", "done"), ("day2", "trial.c3d", "done")]
     assert all(r["frames"] == 100 and r["ls_residual_mm"] > 0 and r["wall_s"] > 0 for r in rows)
-    assert (out / "study.csv").read_text().splitlines()[0].startswith("subject,session,trial,status")
+    assert (out / "study.csv").read_text(encoding="utf-8").splitlines()[0].startswith("subject,session,trial,status")
     _complete_or_absent(out)
     # resume: nothing to redo; then an incomplete set (no DONE.json) and a killed run's leftover
     before = a.stat().st_mtime_ns
@@ -96,16 +96,16 @@ def test_broken_trials_and_sessions_do_not_stop_the_study(data, tmp_path, capsys
     write_c3d(bad / "no_epicondyle.c3d", Trajectories(labels=tuple(t.labels[i] for i in keep),
                                                       positions_m=t.positions_m[:, keep], rate_hz=t.rate_hz,
                                                       time_s=t.time_s, source="x", units_in_file="m"))
-    model = yaml.safe_load(MODEL.read_text())
+    model = yaml.safe_load(MODEL.read_text(encoding="utf-8"))
     model["segments"][1]["mass_fraction"] = "abc"
-    (tmp_path / "broken_model.yaml").write_text(yaml.safe_dump(model))
+    (tmp_path / "broken_model.yaml").write_text(yaml.safe_dump(model), encoding="utf-8")
     study = tmp_path / "study.yaml"
     study.write_text(yaml.safe_dump({"schema_version": 1, "report": False, "methods": ["ls"], "sessions": [
         {"subject": "S01", "trials": [str(data / "a" / "trial.c3d")]},
         {"subject": "S02", "trials": [str(bad / "corrupt.c3d"), str(bad / "no_epicondyle.c3d")]},
         {"subject": "S03", "model": str(tmp_path / "broken_model.yaml"), "trials": [str(data / "b" / "other.c3d")]},
         {"subject": "S04", "trials": [str(data / "b" / "trial.c3d")]},
-    ]}))
+    ]}), encoding="utf-8")
     out = tmp_path / "out"
     assert main(["-q", "study", str(study), "--out", str(out)]) == 1  # some trials failed
     rows = {(r["subject"], r["trial"]): r for r in _rows(out)}
@@ -127,7 +127,7 @@ def test_study_file_errors_are_refused_before_any_work(tmp_path, data, capsys):
     }
     for what, content in cases.items():
         path = data / f"bad_{what.replace(' ', '_')}.yaml"
-        path.write_text(yaml.safe_dump(content))
+        path.write_text(yaml.safe_dump(content), encoding="utf-8")
         out = tmp_path / what.replace(" ", "_")
         assert main(["-q", "study", str(path), "--out", str(out)]) == 2, what
         assert str(path) in capsys.readouterr().err, what
@@ -167,7 +167,7 @@ def test_interrupted_study_leaves_complete_sets_and_the_next_run_finishes(tmp_pa
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "exubio.cli", "-q", "study", str(study), "--out", str(out)]
     for delay in (4.0, 9.0):
-        p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, encoding="utf-8",
                              env={**os.environ, "PYTHONUNBUFFERED": "1"})
         time.sleep(delay)
         t0 = time.perf_counter()
@@ -178,7 +178,7 @@ def test_interrupted_study_leaves_complete_sets_and_the_next_run_finishes(tmp_pa
             assert p.returncode == 130 and "interrupted" in err.splitlines()[-1]
             assert stopped < 5.0  # about a second on an idle machine; CI machines are slower
         _complete_or_absent(out)
-    assert subprocess.run(cmd, capture_output=True, text=True, timeout=300).returncode == 0
+    assert subprocess.run(cmd, capture_output=True, text=True, encoding="utf-8", timeout=300).returncode == 0
     _complete_or_absent(out)
     assert [r["status"] for r in _rows(out)] and all(r["status"] != "failed" for r in _rows(out))
     assert not list(out.rglob(".tmp-*"))

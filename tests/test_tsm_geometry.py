@@ -35,7 +35,7 @@ def tsm():
 
 def read_trc_first_frame(path: Path) -> dict[str, np.ndarray]:
     """Minimal independent TRC reader (tab separated, labels on line 4, data from line 6), mm."""
-    lines = path.read_text().splitlines()
+    lines = path.read_text(encoding="utf-8").splitlines()
     labels = [t.strip() for t in lines[3].split("\t")[2:] if t.strip()]
     row = next(l for l in lines[5:] if l.strip())
     vals = np.array([float(c) for c in row.split("\t")[2:2 + 3 * len(labels)]])
@@ -261,7 +261,7 @@ def test_written_json_matches_the_current_computation(tsm):
     path = REPO / "models" / "sources" / "tsm_landmarks.json"
     if not path.is_file():
         pytest.skip("tsm_landmarks.json not generated")
-    stored = json.loads(path.read_text())
+    stored = json.loads(path.read_text(encoding="utf-8"))
     assert "Seth" in stored["source"]["citation"]
     X = tg.thorax_frame_of(tg.marker_positions(tsm))
     pts = tg.marker_positions(tsm, tg.assemble(tsm))

@@ -90,7 +90,7 @@ def test_page_data_frames_markers_methods_verdicts(results, page):
     text = html_path.read_text(encoding="utf-8")
     data = page_data(text)
     pf, ls = read_npz(results / "example_abduction.pf.npz"), read_npz(results / "example_abduction.ls.npz")
-    summaries = {m: json.loads((results / f"example_abduction.{m}.summary.json").read_text()) for m in ("pf", "ls")}
+    summaries = {m: json.loads((results / f"example_abduction.{m}.summary.json").read_text(encoding="utf-8")) for m in ("pf", "ls")}
 
     assert data["methods"] == ["pf", "ls"]  # the LS result beside the PF one was found
     assert data["verdicts"] == {m: s["quality"]["verdict"] for m, s in summaries.items()}
@@ -152,7 +152,7 @@ def test_page_data_frames_markers_methods_verdicts(results, page):
 
 def test_given_the_ls_result_shows_pf_first_and_same_page(results, tmp_path):
     out = write_view([results / "example_abduction.ls.npz"], tmp_path / "v.html")
-    assert page_data(out.read_text())["methods"] == ["pf", "ls"]
+    assert page_data(out.read_text(encoding="utf-8"))["methods"] == ["pf", "ls"]
     assert find_results([results / "example_abduction.ls.npz"]) == [
         results / "example_abduction.pf.npz", results / "example_abduction.ls.npz"]
 
@@ -161,24 +161,24 @@ def test_one_method_alone_and_verdict_from_metadata(results, tmp_path):
     src = results / "example_abduction.pf.npz"
     # no summary.json beside it: verdict unknown, said on the page
     lone = copy_result(src, tmp_path / "lone")
-    data = page_data(write_view([lone], tmp_path / "lone.html").read_text())
+    data = page_data(write_view([lone], tmp_path / "lone.html").read_text(encoding="utf-8"))
     assert data["methods"] == ["pf"] and data["verdicts"] == {"pf": "unknown"}
-    _, layout, frames = plotly_call((tmp_path / "lone.html").read_text())
+    _, layout, frames = plotly_call((tmp_path / "lone.html").read_text(encoding="utf-8"))
     assert "scene2" not in layout and len(frames[0]["data"]) == 4
     # a verdict in the npz metadata is used when there is no summary.json
     meta = {**read_npz_metadata(src), "quality": {"verdict": "check", "reasons": ["because"]}}
     tagged = copy_result(src, tmp_path / "tagged", metadata=meta)
-    data = page_data(write_view([tagged], tmp_path / "tagged.html").read_text())
+    data = page_data(write_view([tagged], tmp_path / "tagged.html").read_text(encoding="utf-8"))
     assert data["verdicts"] == {"pf": "check"} and data["verdict_reasons"] == {"pf": ["because"]}
 
 
 def test_long_trials_are_decimated(results, tmp_path):
     out = write_view([results / "example_abduction.pf.npz"], tmp_path / "d.html", max_frames=7)
-    data = page_data(out.read_text())
-    _, layout, frames = plotly_call(out.read_text())
+    data = page_data(out.read_text(encoding="utf-8"))
+    _, layout, frames = plotly_call(out.read_text(encoding="utf-8"))
     assert data["frame_step"] == 143 and data["n_frames_shown"] == len(frames) == 7
     assert len(layout["sliders"][0]["steps"]) == 7
-    assert "one frame in 143 is shown (7 of 1000 frames" in out.read_text()
+    assert "one frame in 143 is shown (7 of 1000 frames" in out.read_text(encoding="utf-8")
 
 
 def test_overwrite_is_refused_unless_asked(results, tmp_path):
@@ -189,7 +189,7 @@ def test_overwrite_is_refused_unless_asked(results, tmp_path):
         write_view([results / "example_abduction.pf.npz"], target, max_frames=4)
     assert target.read_bytes() == before
     write_view([results / "example_abduction.pf.npz"], target, max_frames=4, overwrite=True)
-    assert page_data(target.read_text())["n_frames_shown"] == 4
+    assert page_data(target.read_text(encoding="utf-8"))["n_frames_shown"] == 4
     assert not list(target.parent.glob(".*tmp*"))  # atomic write left nothing behind
 
 
@@ -198,7 +198,7 @@ def test_bad_input_names_the_file(tmp_path):
     with pytest.raises(InputError, match=re.escape(str(missing))):
         write_view([missing], tmp_path / "v.html")
     text = tmp_path / "text.pf.npz"
-    text.write_text("not a zip")
+    text.write_text("not a zip", encoding="utf-8")
     with pytest.raises(InputError, match=re.escape(str(text))):
         write_view([text], tmp_path / "v.html")
     foreign = tmp_path / "foreign.pf.npz"
@@ -219,13 +219,13 @@ def test_model_is_recovered_or_asked_for(results, tmp_path):
     meta = read_npz_metadata(src)
     # the shipped generic model, named by a path of another installation
     moved = copy_result(src, tmp_path / "a", metadata={**meta, "model": "/elsewhere/models/upper_extremity.yaml"})
-    assert page_data(write_view([moved], tmp_path / "a.html").read_text())["model"] == str(DEFAULT_MODEL)
+    assert page_data(write_view([moved], tmp_path / "a.html").read_text(encoding="utf-8"))["model"] == str(DEFAULT_MODEL)
     # an unknown model file that cannot be found: an InputError that says how to give it
     lost = copy_result(src, tmp_path / "b", metadata={**meta, "model": "/elsewhere/subject.yaml"})
     with pytest.raises(InputError, match=r"subject\.yaml.*model_path"):
         write_view([lost], tmp_path / "b.html")
     out = write_view([lost], tmp_path / "b.html", model_path=DEFAULT_MODEL)
-    assert page_data(out.read_text())["model"] == str(DEFAULT_MODEL)
+    assert page_data(out.read_text(encoding="utf-8"))["model"] == str(DEFAULT_MODEL)
 
 
 def test_subject_model_beside_moved_results_and_a_wrong_model_is_flagged(tmp_path):
@@ -242,11 +242,11 @@ def test_subject_model_beside_moved_results_and_a_wrong_model_is_flagged(tmp_pat
     moved = tmp_path / "moved"
     shutil.move(str(run), str(moved))
     out = write_view([moved / "example_abduction.ls.npz"], tmp_path / "v.html")
-    data = page_data(out.read_text())
+    data = page_data(out.read_text(encoding="utf-8"))
     assert data["model"] == str(moved / "subject.model.yaml") and data["methods"] == ["ls"]
     assert data["model_constraint_mismatch"]["ls"] < 1e-9 and not any("WARNING" in n for n in data["notes"])
     out = write_view([moved / "example_abduction.ls.npz"], tmp_path / "w.html", model_path=DEFAULT_MODEL)
-    data = page_data(out.read_text())
+    data = page_data(out.read_text(encoding="utf-8"))
     assert data["model_constraint_mismatch"]["ls"] > 1e-3
     assert any("WARNING" in n and "not the model of the run" in n for n in data["notes"])
 
@@ -272,7 +272,7 @@ def run_chromium(html_path: Path, png: Path) -> tuple[str, float]:
            f"--screenshot={png}", "--window-size=1200,800", "--virtual-time-budget=10000", "--dump-dom",
            html_path.resolve().as_uri()]
     t0 = time.perf_counter()
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
+    proc = subprocess.run(cmd, capture_output=True, text=True, encoding="utf-8", errors="replace", timeout=180)
     seconds = time.perf_counter() - t0
     assert proc.returncode == 0, proc.stderr[-2000:]
     return proc.stdout, seconds
@@ -289,7 +289,7 @@ def test_page_renders_in_headless_chromium(page, tmp_path):
     status = re.search(r'<p id="exubio-status"([^>]*)>([^<]*)</p>', dom)
     assert status, "status paragraph missing"
     attrs = dict(re.findall(r'data-([a-z]+)="([^"]*)"', status.group(1)))
-    data = page_data(html_path.read_text())
+    data = page_data(html_path.read_text(encoding="utf-8"))
     assert int(attrs["frames"]) == data["n_frames_shown"] == 250  # the live plot holds every frame
     assert int(attrs["traces"]) == 10 and int(attrs["canvases"]) >= 2  # 5 traces x 2 WebGL scenes
     assert attrs["external"] == ""  # nothing was loaded from the network: it works offline
@@ -327,7 +327,7 @@ def test_cli_view_writes_the_page_and_refuses_bad_input(results, tmp_path, capsy
     npz = results / "example_abduction.pf.npz"
     out = tmp_path / "v.html"
     assert main(["-q", "view", str(npz), "--out", str(out)]) == 0
-    assert page_data(out.read_text())["methods"]
+    assert page_data(out.read_text(encoding="utf-8"))["methods"]
     assert main(["-q", "view", str(npz), "--out", str(out)]) == 2
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"not a zip")

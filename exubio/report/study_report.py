@@ -55,7 +55,7 @@ def _page(title: str, rows: list[dict], counts: dict, page: int, pages: int) -> 
 
 
 def build_study_report(study_json: str | Path, pdf_path: str | Path, /) -> Path:
-    data = json.loads(Path(study_json).read_text())
+    data = json.loads(Path(study_json).read_text(encoding="utf-8"))
     rows = data["trials"]
     pages = max(1, -(-len(rows) // ROWS_PER_PAGE))
     figs = [_page(f"exubio study: {data['study']}", rows[k * ROWS_PER_PAGE:(k + 1) * ROWS_PER_PAGE], data["counts"],

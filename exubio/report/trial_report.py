@@ -37,6 +37,28 @@ def _figure(size=(11.69, 8.27)) -> Figure:
     return fig
 
 
+PLOT_POINTS = 1500
+"""Time series are drawn with at most about this many points per curve (an A4 page is ~1100 px
+wide): each bin of samples keeps its minimum and maximum, so spikes stay visible."""
+
+
+def _envelope(t: np.ndarray, *ys: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(t, y...) reduced to the samples holding each bin's minimum and maximum of the first y."""
+    n = len(t)
+    if n <= PLOT_POINTS:
+        return (t, *ys)
+    k = int(np.ceil(n / (PLOT_POINTS // 2)))
+    m = (n // k) * k
+    y0 = np.asarray(ys[0], dtype=float)
+    blocks = np.where(np.isfinite(y0[:m]), y0[:m], np.nan).reshape(-1, k)
+    finite = np.isfinite(blocks).any(axis=1)
+    lo = np.where(finite, np.nanargmin(np.where(np.isfinite(blocks), blocks, np.inf), axis=1), 0)
+    hi = np.where(finite, np.nanargmax(np.where(np.isfinite(blocks), blocks, -np.inf), axis=1), 0)
+    base = np.arange(blocks.shape[0]) * k
+    idx = np.unique(np.concatenate([base + lo, base + hi, np.arange(m, n)]))
+    return (t[idx], *(np.asarray(y)[idx] for y in ys))
+
+
 def _members(names: Sequence[str], prefix) -> list[int]:
     prefixes = (prefix,) if isinstance(prefix, str) else prefix
     return [i for i, n in enumerate(names) if n.startswith(prefixes)]
@@ -171,10 +193,11 @@ def angles_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[st
             colour = "silver" if grey else palette[k % 3]
             for r in recons:
                 ls_, lw, alpha = method_style.get(r.method, ("-", 1.0, 1.0))
-                (h,) = ax.plot(r.time_s, np.rad2deg(r.q_rad[:, i]), ls=ls_, lw=lw, alpha=alpha, color=colour)
+                (h,) = ax.plot(*_envelope(r.time_s, np.rad2deg(r.q_rad[:, i])), ls=ls_, lw=lw, alpha=alpha,
+                               color=colour)
                 handles.setdefault(f"{names[i]}" + (" (not measured)" if grey else ""), h)
             if truth is not None and names[i] in truth.names:
-                ax.plot(truth.time_s, np.rad2deg(truth.q_rad[:, truth.names.index(names[i])]), ls=":", lw=1.2,
+                ax.plot(*_envelope(truth.time_s, np.rad2deg(truth.q_rad[:, truth.names.index(names[i])])), ls=":", lw=1.2,
                         color="black")
         ax.set_ylabel(f"{label}\n(deg)", fontsize=8)
         ax.grid(alpha=0.3)
@@ -218,7 +241,7 @@ def isb_page(recons: Sequence[Reconstruction], npz_paths: Sequence[Path], meta: 
                 if len(cols) < 3:
                     continue
                 ls_, lw, alpha, colour = method_style.get(method, ("-", 1.0, 1.0, "grey"))
-                ax.plot(t, np.degrees(ang[:, cols[col]]), ls=ls_, lw=lw, alpha=alpha, color=colour,
+                ax.plot(*_envelope(t, np.degrees(ang[:, cols[col]])), ls=ls_, lw=lw, alpha=alpha, color=colour,
                         label=method.upper())
                 title = names[cols[col]].replace("_", " ", 2)
             seq = (info.get("sequences") or {}).get(joint, "")
@@ -252,8 +275,9 @@ def residuals_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict
     for k, r in enumerate(recons):
         mean, sd = per_frame_residuals_mm(r)
         c = _COLOURS.get(r.method, None)
-        ax_t.plot(r.time_s, mean, color=c, lw=1.0, label=f"{r.method.upper()} mean over markers")
-        ax_t.fill_between(r.time_s, mean - sd, mean + sd, color=c, alpha=0.12, lw=0, label=f"{r.method.upper()} ± SD")
+        t_d, mean_d, sd_d = _envelope(r.time_s, mean, sd)
+        ax_t.plot(t_d, mean_d, color=c, lw=1.0, label=f"{r.method.upper()} mean over markers")
+        ax_t.fill_between(t_d, mean_d - sd_d, mean_d + sd_d, color=c, alpha=0.12, lw=0, label=f"{r.method.upper()} ± SD")
         stats = residual_statistics(r)
         rmse = [stats["per_marker_rmse"].get(m) or np.nan for m in markers]
         ax_m.bar(np.arange(len(markers)) + k * width, rmse, width, color=c, label=r.method.upper())
@@ -374,7 +398,7 @@ def build_trial_report(npz_paths: Sequence[str | Path], pdf_path: str | Path, /,
     for p, r in zip(npz_paths, recons):
         summary = Path(str(p)[: -len(".npz")] + ".summary.json")
         if summary.is_file():
-            summaries[r.method] = json.loads(summary.read_text())
+            summaries[r.method] = json.loads(summary.read_text(encoding="utf-8"))
     pages = [verdict_page(recons, meta, summaries, truth=truth), angles_page(recons, meta, summaries, truth),
              residuals_page(recons, meta, summaries)]
     isb = isb_page(recons, npz_paths, meta, summaries)

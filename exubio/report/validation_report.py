@@ -58,8 +58,8 @@ class _Data:
     def __init__(self, folder: Path):
         with np.load(folder / "validation_data.npz", allow_pickle=False) as z:
             self.a = {k: z[k] for k in z.files}
-        self.runs = json.loads((folder / "validation_runs.json").read_text())
-        self.table1 = json.loads((folder / "table1.json").read_text())
+        self.runs = json.loads((folder / "validation_runs.json").read_text(encoding="utf-8"))
+        self.table1 = json.loads((folder / "table1.json").read_text(encoding="utf-8"))
 
     def get(self, key: str):
         return self.a.get(key)

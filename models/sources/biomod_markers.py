@@ -429,7 +429,7 @@ def load_biomod(path) -> BioModel:
 def commented_out_markers(path_or_text, model: BioModel) -> dict[str, Marker]:
     """Markers written inside ``/* ... */`` blocks (not part of the model biorbd builds). Takes a
     ``pathlib.Path`` or the bioMod text itself."""
-    text = path_or_text.read_text() if isinstance(path_or_text, Path) else str(path_or_text)
+    text = path_or_text.read_text(encoding="utf-8") if isinstance(path_or_text, Path) else str(path_or_text)
     out: dict[str, Marker] = {}
     for toks in block_comments(text):
         t = _Tokens(toks, {})
@@ -928,7 +928,7 @@ def main(argv=None) -> int:
             res["trial_comparison"][name + " (RADIUS<->ULNA swapped)"] = compare_with_trial(
                 model, tp, commented, swap={"RADIUS": "ULNA", "ULNA": "RADIUS"})
     print_report(res)
-    OUT_JSON.write_text(json.dumps(res, indent=1) + "\n")
+    OUT_JSON.write_text(json.dumps(res, indent=1) + "\n", encoding="utf-8")
     print(f"\nwritten {OUT_JSON}")
     return 0
 

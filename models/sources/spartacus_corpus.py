@@ -42,7 +42,7 @@ def main(src: Path) -> None:
         w.writerow(["folder", "file", "ht_deg", "value_deg"])
         skipped = 0
         for folder, name in wanted:
-            for line in (src / "data" / folder / name).read_text().splitlines():
+            for line in (src / "data" / folder / name).read_text(encoding="utf-8").splitlines():
                 fields = [v.strip().strip("\x00") for v in line.split(",")[:2]]
                 try:
                     ht, val = (float(v) for v in fields)
@@ -54,7 +54,7 @@ def main(src: Path) -> None:
         w = csv.writer(f, lineterminator="\n")
         w.writerow(["folder", "file", "factor"])
         for path in sorted((src / "data").glob("*/corrections.csv")):
-            for line in path.read_text().splitlines():
+            for line in path.read_text(encoding="utf-8").splitlines():
                 if line.strip():
                     name, factor = line.split(",")[:2]
                     w.writerow([path.parent.name, name.strip(), factor.strip()])

@@ -580,7 +580,7 @@ def in_frame(X: Transform, pts: dict[str, np.ndarray], scale: float = 1000.0) ->
 # --------------------------------------------------------------------------- TRC and fitting
 def read_trc(path: str | Path) -> tuple[list[str], np.ndarray, str]:
     """(labels, positions (frames, markers, 3) in file units, units) of a tab-separated TRC."""
-    lines = Path(path).read_text().splitlines()
+    lines = Path(path).read_text(encoding="utf-8").splitlines()
     units = lines[2].split("\t")[lines[1].split("\t").index("Units")].strip()
     labels = [t.strip() for t in lines[3].split("\t")[2:] if t.strip()]
     rows = []
@@ -879,7 +879,7 @@ def main(argv: list[str] | None = None) -> int:
         print("    coordinates (deg): " + ", ".join(f"{k} {math.degrees(v):.1f}"
                                                     for k, v in ik["coordinates_rad"].items()))
 
-    DEFAULT_JSON.write_text(json.dumps(_round(G), indent=1) + "\n")
+    DEFAULT_JSON.write_text(json.dumps(_round(G), indent=1) + "\n", encoding="utf-8")
     print(f"\nwrote {DEFAULT_JSON}")
     return 0
 
