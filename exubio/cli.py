@@ -115,13 +115,31 @@ def _trial_code(result: dict) -> int:
     return EXIT_FAILED if "fail" in (result.get("verdicts") or {}).values() else EXIT_OK
 
 
+def _check_output_folder(folder: Path, out: str) -> None:
+    """Refuse (exit 2) before any work an --out whose folder is a file, cannot be created or cannot
+    be written: create the folder, then create and remove a temporary file in it."""
+    import tempfile
+
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"--out {out}: {folder} is an existing file, not a folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"--out {out}: cannot create the folder {folder} ({exc.strerror or exc})") from None
+    try:
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=".exubio-write-test-"):
+            pass
+    except OSError as exc:
+        raise InputError(f"--out {out}: cannot write in the folder {folder} ({exc.strerror or exc})") from None
+
+
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from exubio.calibration import format_report, parse_frames
     from exubio.pipeline import calibrate_file
 
     if Path(args.out).suffix.lower() not in (".yaml", ".yml"):
         raise InputError(f"--out {args.out}: expected a model file ending in .yaml")
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    _check_output_folder(Path(args.out).parent, args.out)
     _, _, report = calibrate_file(args.static, protocol_path=args.protocol, model_path=args.model,
                                   body_mass_kg=args.body_mass, frames=parse_frames(args.static_frames),
                                   out_path=args.out, overwrite=args.overwrite, functional_path=args.functional,
@@ -183,6 +201,15 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
     if args.functional and not args.static:
         raise InputError(f"--functional {args.functional}: a functional trial refines the calibration on a static "
                          f"trial; give --static STATIC as well")
+    if args.jobs < 1:
+        raise InputError(f"--jobs {args.jobs}: expected a whole number of processes >= 1")
+    stems: dict[str, str] = {}
+    for t in args.trials:  # results are named after the trial file: two of one name would mix
+        other = stems.setdefault(Path(t).stem, str(t))
+        if other != str(t):
+            raise InputError(f"{t} and {other} have the same file name: their results in {args.out} would be mixed; "
+                             f"reconstruct them into different --out folders")
+    _check_output_folder(Path(args.out), args.out)
     if args.static:
         model_file, report, calibration = calibrate_session(args.static, args.out, Path(args.static).stem,
                                                            protocol_path=args.protocol, model_path=args.model,
@@ -203,14 +230,6 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
                   method_options={"pf": {"gravity": args.gravity}}, summary_extra=extra,
                   static_frames=None if args.static else args.static_frames, report=not args.no_report)
     jobs = [dict(common, trial=t) for t in args.trials]
-    if args.jobs < 1:
-        raise InputError(f"--jobs {args.jobs}: expected a whole number of processes >= 1")
-    stems: dict[str, str] = {}
-    for t in args.trials:  # results are named after the trial file: two of one name would mix
-        other = stems.setdefault(Path(t).stem, str(t))
-        if other != str(t):
-            raise InputError(f"{t} and {other} have the same file name: their results in {args.out} would be mixed; "
-                             f"reconstruct them into different --out folders")
     if len(jobs) == 1:  # errors propagate to main(): one message, one exit code
         from exubio.pipeline import process_trial
 
@@ -333,6 +352,7 @@ def cmd_study(args: argparse.Namespace) -> int:
     spec = load_study(args.study)  # every key, path and glob checked before any work
     if args.jobs < 1:
         raise InputError(f"--jobs {args.jobs}: expected a whole number of processes >= 1")
+    _check_output_folder(Path(args.out), args.out)
     outcomes = run_study(spec, args.out, jobs=args.jobs, scheduler=args.scheduler,
                          progress=None if args.quiet else (lambda m: print(m, file=sys.stderr)))
     failed = [o for o in outcomes if o.status == "failed"]

@@ -3,6 +3,7 @@ loader (protocols, models) applies."""
 from __future__ import annotations
 
 import difflib
+import math
 import os
 from pathlib import Path
 from typing import Any, Iterable, Mapping
@@ -74,6 +75,18 @@ def check_keys(
                 f"{source}: unknown key '{path}'{did}; valid keys"
                 f"{' of ' + where if where else ''} are {list(valid)}"
             )
+
+
+def finite_float(value: Any, /) -> float | None:
+    """``value`` as a float when it is a finite real number (YAML int or float; not a bool, a
+    string, ``.nan``, ``.inf`` or an integer too large for a float), else None."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    try:
+        number = float(value)
+    except OverflowError:
+        return None
+    return number if math.isfinite(number) else None
 
 
 def _kind(value: Any) -> str:

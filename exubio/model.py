@@ -13,7 +13,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from exubio.config import check_keys as _check_keys
-from exubio.config import read_yaml
+from exubio.config import finite_float, read_yaml
 from exubio.resources import shipped_file
 from exubio.errors import ModelError
 from exubio.types import Ellipsoid, Joint, JointKind, Model, Segment
@@ -56,20 +56,23 @@ def check_keys(mapping: Any, allowed: set[str], where: str, *, error: type[Excep
 
 def _number(value: Any, where: str, *, positive: bool = False) -> float:
     """A finite number from a YAML value (True/False are not numbers); ModelError naming the key."""
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
-    if not ok or (positive and not value > 0):
+    number = finite_float(value)
+    if number is None or (positive and not number > 0):
         raise ModelError(f"{where}: expected a finite number{' > 0' if positive else ''}, got {value!r}")
-    return float(value)
+    return number
 
 
-def _vec3(value: Any, where: str) -> np.ndarray:
-    try:
-        arr = np.asarray(value, dtype=float) if isinstance(value, (list, tuple)) else None
-    except (TypeError, ValueError):
-        arr = None
-    if arr is None or arr.shape != (3,) or not np.all(np.isfinite(arr)):
-        raise ModelError(f"{where}: expected three finite numbers, got {value!r}")
-    return arr
+def _vec3(value: Any, where: str, *, positive: bool = False) -> np.ndarray:
+    numbers = [finite_float(v) for v in value] if isinstance(value, (list, tuple)) else []
+    if len(numbers) != 3 or None in numbers or (positive and not all(x > 0 for x in numbers)):
+        raise ModelError(f"{where}: expected three finite numbers{' > 0' if positive else ''}, got {value!r}")
+    return np.array(numbers)
+
+
+def _point_pair(value: Any, where: str) -> tuple[str, str]:
+    if not (isinstance(value, (list, tuple)) and len(value) == 2 and all(isinstance(v, str) for v in value)):
+        raise ModelError(f"{where}: expected two point names [A, B], got {value!r}")
+    return value[0], value[1]
 
 
 def load_model(path: str | Path = DEFAULT_MODEL, /, *, body_mass_kg: float | None = None) -> Model:
@@ -78,7 +81,7 @@ def load_model(path: str | Path = DEFAULT_MODEL, /, *, body_mass_kg: float | Non
     data = read_yaml(path, error=ModelError)
     src = str(path)
     check_keys(data, _TOP_KEYS, src, error=ModelError, required={"schema_version", "segments", "ellipsoid"})
-    if data["schema_version"] != SCHEMA_VERSION:
+    if isinstance(data["schema_version"], bool) or data["schema_version"] != SCHEMA_VERSION:
         raise ModelError(f"{src}: schema_version {data['schema_version']!r} is not supported (expected {SCHEMA_VERSION})")
     if body_mass_kg is not None:
         mass = _number(body_mass_kg, "--body-mass (kg)", positive=True)
@@ -134,6 +137,9 @@ def load_model(path: str | Path = DEFAULT_MODEL, /, *, body_mass_kg: float | Non
 
     ell = data["ellipsoid"]
     check_keys(ell, _ELLIPSOID_KEYS, f"{src}: ellipsoid", error=ModelError, required=_ELLIPSOID_KEYS)
+    if not isinstance(ell["contact_points"], list):
+        raise ModelError(f"{src}: ellipsoid.contact_points: expected a list of [segment, point], "
+                         f"got {ell['contact_points']!r}")
     contacts = []
     for j, cp in enumerate(ell["contact_points"]):
         if not (isinstance(cp, (list, tuple)) and len(cp) == 2):
@@ -145,11 +151,12 @@ def load_model(path: str | Path = DEFAULT_MODEL, /, *, body_mass_kg: float | Non
         if pt_name not in seg.points:
             raise ModelError(f"{src}: ellipsoid.contact_points[{j}]: segment '{seg_name}' has no point '{pt_name}'; it has {sorted(seg.points)}")
         contacts.append((seg_name, pt_name))
-    radii = _vec3(ell["radii_mm"], f"{src}: ellipsoid.radii_mm") / 1000.0
-    if np.any(radii <= 0):
-        raise ModelError(f"{src}: ellipsoid.radii_mm must be > 0, got {ell['radii_mm']}")
+    radii = _vec3(ell["radii_mm"], f"{src}: ellipsoid.radii_mm", positive=True) / 1000.0
     ellipsoid = Ellipsoid(centre_m=_vec3(ell["centre_mm"], f"{src}: ellipsoid.centre_mm") / 1000.0,
                           radii_m=radii, contact_points=tuple(contacts))
+    if not isinstance(data.get("calibration") or {}, Mapping):
+        raise ModelError(f"{src}: calibration: expected a mapping (what a calibration recorded), "
+                         f"got {type(data['calibration']).__name__}")
     metadata = {"side": data.get("side", "right"), "calibration": data.get("calibration")}
     return Model(name=str(data.get("name", path.stem)), segments=tuple(segments), ellipsoid=ellipsoid,
                  body_mass_kg=mass, source=src, metadata=metadata)
@@ -200,13 +207,12 @@ def _parse_range(value: Any, where: str) -> tuple[float, float]:
         return (-np.inf, np.inf)
     ok = isinstance(value, (list, tuple)) and len(value) == 2
     if ok:
-        try:
-            lo = -np.inf if value[0] is None else float(value[0])
-            hi = np.inf if value[1] is None else float(value[1])
-        except (TypeError, ValueError):
-            ok = False
-    if not ok or np.isnan(lo) or np.isnan(hi) or not lo < hi:
-        raise ModelError(f"{where}: expected [lower, upper] in degrees with lower < upper (null: no limit), got {value!r}")
+        lo, hi = (finite_float(v) for v in value)
+        ok = (lo is not None or value[0] is None) and (hi is not None or value[1] is None)
+        lo, hi = (-np.inf if lo is None else lo), (np.inf if hi is None else hi)
+    if not ok or not lo < hi:
+        raise ModelError(f"{where}: expected [lower, upper], finite degrees with lower < upper (null: no limit on "
+                         f"that side), got {value!r}")
     return (lo, hi)
 
 
@@ -224,26 +230,27 @@ def _parse_inertia(raw: Any, where: str, body_mass: float, origin: np.ndarray, f
         missing = sorted({"com_between", "com_fraction"} - set(raw))
         if missing:
             raise ModelError(f"{where}: missing required key(s) {missing} (or give 'com_mm')")
-        a_name, b_name = raw["com_between"]
+        a_name, b_name = _point_pair(raw["com_between"], f"{where}.com_between")
         a, b = find_point(a_name, where), find_point(b_name, where)
         com_global = a + _number(raw["com_fraction"], f"{where}.com_fraction") * (b - a)
     if "inertia_kgm2_per_kg" in raw:  # full 3x3 about the centre of mass, per kg of segment mass
-        try:
-            tensor = np.asarray(raw["inertia_kgm2_per_kg"], dtype=float)
-        except (TypeError, ValueError):
-            tensor = np.full(1, np.nan)
-        if (tensor.shape != (3, 3) or not np.all(np.isfinite(tensor))
-                or np.abs(tensor - tensor.T).max() > 1e-12 * max(np.abs(tensor).max(), 1e-300)):
-            raise ModelError(f"{where}.inertia_kgm2_per_kg: expected a symmetric 3x3 matrix of finite numbers, "
-                             f"got {raw['inertia_kgm2_per_kg']!r}")
+        rows = raw["inertia_kgm2_per_kg"]
+        square = isinstance(rows, list) and len(rows) == 3 and all(isinstance(r, list) and len(r) == 3 for r in rows)
+        values = [finite_float(x) for r in rows for x in r] if square else [None]
+        tensor = np.array(values if None not in values else [np.nan] * 9, dtype=float).reshape(3, 3)
+        if (not np.all(np.isfinite(tensor))
+                or np.abs(tensor - tensor.T).max() > 1e-12 * max(np.abs(tensor).max(), 1e-300)
+                or np.linalg.eigvalsh(tensor).min() <= 0):
+            raise ModelError(f"{where}.inertia_kgm2_per_kg: expected a symmetric, positive definite 3x3 matrix of "
+                             f"finite numbers, got {raw['inertia_kgm2_per_kg']!r}")
         inertia = tensor * mass
     elif "principal_kgm2_per_kg" in raw:
-        inertia = np.diag(_vec3(raw["principal_kgm2_per_kg"], f"{where}.principal_kgm2_per_kg")) * mass
+        inertia = np.diag(_vec3(raw["principal_kgm2_per_kg"], f"{where}.principal_kgm2_per_kg", positive=True)) * mass
     else:
         for key in ("radius_of_gyration_fraction", "axial_radius_of_gyration_fraction", "long_axis"):
             if key not in raw:
                 raise ModelError(f"{where}: needs 'principal_kgm2_per_kg' or '{key}'")
-        p, d = (find_point(n, where) for n in raw["long_axis"])
+        p, d = (find_point(n, where) for n in _point_pair(raw["long_axis"], f"{where}.long_axis"))
         length = float(np.linalg.norm(d - p))
         u = (d - p) / length
         k_t = _number(raw["radius_of_gyration_fraction"], f"{where}.radius_of_gyration_fraction", positive=True) * length

@@ -7,7 +7,6 @@ the top of ``protocols/upper_limb_21.yaml``.
 from __future__ import annotations
 
 import logging
-import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +18,7 @@ import difflib
 
 from types import MappingProxyType
 
-from exubio.config import _kind, check_keys, read_yaml
+from exubio.config import _kind, check_keys, finite_float, read_yaml
 from exubio.errors import InputError, ProtocolError
 from exubio.resources import shipped_file
 from exubio.types import MarkerSpec, Protocol, ThoraxFrameSpec
@@ -338,7 +337,7 @@ def _parse_cutoff(value: Any, src: str) -> float | str:
         if value.strip().lower() == "auto":
             return "auto"
         raise ProtocolError(f"{src}: filter.cutoff_hz is '{value}'; {expected}")
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+    if finite_float(value) is None:
         raise ProtocolError(f"{src}: filter.cutoff_hz is {_kind(value)}; {expected}")
     if value <= 0:
         raise ProtocolError(f"{src}: filter.cutoff_hz is {value}; {expected}")
@@ -491,18 +490,17 @@ def _model_point(
 
 
 def _local_position(raw: Any, where: str, src: str) -> np.ndarray:
-    ok = isinstance(raw, list) and len(raw) == 3 and all(
-        isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in raw
-    )
+    ok = isinstance(raw, list) and len(raw) == 3 and all(finite_float(v) is not None for v in raw)
     if not ok:
         raise ProtocolError(
-            f"{src}: {where}.local_position_mm must be a list of 3 numbers [x, y, z] in mm, got {_kind(raw)}"
+            f"{src}: {where}.local_position_mm must be a list of 3 numbers [x, y, z] in mm, finite, got "
+            f"{repr(raw) if isinstance(raw, list) else _kind(raw)}"
         )
     return np.array(raw, dtype=float) / 1000.0
 
 
 def _number(value: Any, where: str, src: str, *, minimum: float, strict: bool) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+    if finite_float(value) is None:
         raise ProtocolError(f"{src}: {where} must be a finite number, got {_kind(value)}")
     if (strict and value <= minimum) or (not strict and value < minimum):
         need = f"> {minimum:g}" if strict else f">= {minimum:g}"

@@ -10,6 +10,12 @@ ezc3d silently stops at the end of a truncated file (it returns the frames it co
 rewrites the header to match), so the frame count declared in the raw 512-byte header is checked
 against what was read.
 
+Long trials: the header counts frames in 16 bits, and ezc3d reads at most 65535 frames. A file
+whose header says 65535 is read whole here (the point block, with numpy) when POINT:LONG_FRAMES,
+TRIAL:ACTUAL_START_FIELD/ACTUAL_END_FIELD or a POINT:FRAMES above 65535 give more frames; with
+none of these over a data block that holds more frames, it is refused (the count is unknown).
+Writing such a trial stores POINT:LONG_FRAMES and the TRIAL fields, where readers look.
+
 Writing stores 32-bit floats (C3D "float" format): a position of magnitude x metres comes back
 within about 6e-8 * x (well under 1e-6 m for any lab volume).
 """
@@ -33,6 +39,7 @@ logger = logging.getLogger(__name__)
 METRES_PER_UNIT = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
 _UNLABELLED = re.compile(r"^\*\d+$")
 _HEADER_CLIPPED = 0xFFFF  # a 16-bit header frame number: long trials store the real count elsewhere
+_DEC, _MIPS = 85, 86  # processor type byte of the parameter section (84: Intel)
 
 
 # --------------------------------------------------------------------------------------------
@@ -43,12 +50,17 @@ def read_c3d(path: str | os.PathLike, /) -> Trajectories:
     path = Path(path)
     c3d = _open(path)
     points = c3d["data"]["points"]  # (4, n_markers, n_frames), file units
-    _check_not_truncated(path, points.shape[2])
+    residuals = c3d["data"]["meta_points"]["residuals"]
+    n_long = _long_frame_count(path, c3d)
+    if n_long is None:
+        _check_not_truncated(path, points.shape[2])
+    else:  # more frames than the 16-bit header, and so ezc3d, counts
+        points, residuals = _read_point_block(path, c3d, n_long)
     params = c3d["parameters"]["POINT"]
     unit = _units(path, params)
     rate = _rate(path, params, c3d["header"]["points"]["frame_rate"])
     raw_labels = _labels(path, params, points.shape[1])
-    positions = _positions(points, c3d["data"]["meta_points"]["residuals"]) * METRES_PER_UNIT[unit.split()[0]]
+    positions = _positions(points, residuals) * METRES_PER_UNIT[unit.split()[0]]
     keep, labels, ignored = _select_markers(path, raw_labels)
     n_frames = positions.shape[0]
     return Trajectories(
@@ -84,20 +96,88 @@ def _check_not_truncated(path: Path, n_read: int) -> None:
         )
 
 
-def _declared_frame_count(path: Path) -> int | None:
-    """Frames declared by the raw header (last - first + 1), None when it cannot say."""
+def _raw_header(path: Path) -> tuple[str, int, bytes]:
+    """(struct byte order, processor type byte, the raw 512-byte header) of a C3D file."""
     with open(path, "rb") as fh:
         header = fh.read(512)
-        param_block = header[0]
-        fh.seek(max(param_block - 1, 0) * 512 + 3)
+        fh.seek(max(header[0] - 1, 0) * 512 + 3 if header else 0)
         processor = fh.read(1)
+    kind = processor[0] if processor else 0
+    return (">" if kind == _MIPS else "<"), kind, header  # MIPS big-endian; Intel, DEC little
+
+
+def _declared_frame_count(path: Path) -> int | None:
+    """Frames declared by the raw header (last - first + 1), None when it cannot say."""
+    byte_order, _, header = _raw_header(path)
     if len(header) < 10:
         return None
-    byte_order = ">" if processor == b"\x56" else "<"  # 86 = MIPS (big-endian); Intel, DEC little
     first, last = struct.unpack(byte_order + "2H", header[6:10])
     if last == _HEADER_CLIPPED or last < first:
         return None
     return last - first + 1
+
+
+def _long_frame_count(path: Path, c3d: Any) -> int | None:
+    """The frame count of a file whose header's last frame is clipped at 65535, when its
+    parameters give more frames than ezc3d read; None for every other file. A clipped file with
+    no such count whose data block holds more frames is refused."""
+    byte_order, _, header = _raw_header(path)
+    if len(header) < 10 or struct.unpack(byte_order + "H", header[8:10])[0] != _HEADER_CLIPPED:
+        return None
+    point, trial = c3d["parameters"]["POINT"], c3d["parameters"].get("TRIAL", {})
+    long_frames, frames = _value(point, "LONG_FRAMES"), _value(point, "FRAMES")
+    start, end = _value(trial, "ACTUAL_START_FIELD"), _value(trial, "ACTUAL_END_FIELD")
+    if long_frames:
+        count = round(float(long_frames[0]))
+    elif len(start) == 2 and len(end) == 2:  # 32-bit frame numbers as two 16-bit words, low first
+        first, last = ((int(v[1]) & 0xFFFF) << 16 | (int(v[0]) & 0xFFFF) for v in (start, end))
+        count = last - first + 1
+    elif frames and float(frames[0]) > _HEADER_CLIPPED:  # a floating-point POINT:FRAMES (the C3D manual's advice)
+        count = round(float(frames[0]))
+    else:
+        count = None
+    n_read = c3d["data"]["points"].shape[2]
+    if count is None:
+        offset, dtype, words, _ = _point_block_layout(path, c3d)
+        spare = path.stat().st_size - offset - n_read * words * dtype.itemsize
+        if spare >= 512 + words * dtype.itemsize:  # more than the padding of the last 512-byte block
+            raise InputError(
+                f"{path}: not a readable C3D file (its header counts frames in 16 bits and says 65535, its data "
+                f"block holds more, and no POINT:LONG_FRAMES or TRIAL:ACTUAL_START_FIELD/ACTUAL_END_FIELD says how "
+                f"many frames there are)")
+    return count if count is not None and count > n_read else None
+
+
+def _point_block_layout(path: Path, c3d: Any) -> tuple[int, np.dtype, int, float]:
+    """(byte offset of the data block, word dtype, words per frame, point scale) as ezc3d reads
+    them: data start from the header, float words when POINT:SCALE < 0, else int16 scaled."""
+    byte_order, processor, header = _raw_header(path)
+    if processor == _DEC:
+        raise InputError(f"{path}: a C3D file in DEC (VAX) format with more than 65535 frames is not supported; "
+                         f"save it in Intel format")
+    data_start = struct.unpack(byte_order + "H", header[16:18])[0]
+    scale = ([float(v) for v in _value(c3d["parameters"]["POINT"], "SCALE")]
+             or [struct.unpack(byte_order + "f", header[12:16])[0]])[0]
+    points, analogs = c3d["data"]["points"], c3d["data"]["analogs"]
+    analog_words = analogs.shape[1] * (analogs.shape[2] // points.shape[2]) if points.shape[2] else 0
+    dtype = np.dtype(byte_order + ("f4" if scale < 0 else "i2"))
+    return (data_start - 1) * 512, dtype, 4 * points.shape[1] + analog_words, abs(scale)
+
+
+def _read_point_block(path: Path, c3d: Any, n_frames: int) -> tuple[np.ndarray, np.ndarray]:
+    """Points (4, n_markers, n_frames) and their residual words (1, n_markers, n_frames; negative:
+    missing) of all ``n_frames`` frames, read from the data block (analog samples skipped)."""
+    offset, dtype, words, scale = _point_block_layout(path, c3d)
+    available = (path.stat().st_size - offset) // (words * dtype.itemsize)
+    if available < n_frames:
+        raise InputError(f"{path}: not a readable C3D file (truncated: its parameters declare {n_frames} frames, "
+                         f"the data block holds only {available})")
+    n_markers = c3d["data"]["points"].shape[1]
+    block = np.fromfile(path, dtype=dtype, count=n_frames * words, offset=offset).reshape(n_frames, words)
+    xyzr = block[:, : 4 * n_markers].reshape(n_frames, n_markers, 4).astype(float)
+    if dtype.kind == "i":  # integer format: coordinates in units of POINT:SCALE
+        xyzr[..., :3] *= scale
+    return xyzr.transpose(2, 1, 0), xyzr[..., 3].T[None]
 
 
 def _units(path: Path, params: dict) -> str:
@@ -210,4 +290,13 @@ def _build_c3d(traj: Trajectories, units: str) -> Any:
     residuals = np.where(missing, -1.0, 0.0).T[None, :, :]
     c3d["data"]["points"] = points
     c3d["data"]["meta_points"]["residuals"] = residuals
+    if traj.n_frames > _HEADER_CLIPPED:  # the header and POINT:FRAMES stop at 65535: the count where readers look
+        from ezc3d import ezc3d as swig
+
+        n = traj.n_frames
+        c3d.add_parameter("POINT", "LONG_FRAMES", np.array([float(n)]))
+        words = {"ACTUAL_START_FIELD": [1, 0], "ACTUAL_END_FIELD": [n & 0xFFFF, n >> 16]}  # low word first
+        c3d["parameters"]["TRIAL"] = {"__METADATA__": {"DESCRIPTION": "", "IS_LOCKED": False}, **{
+            name: {"type": swig.INT, "value": np.array(v), "description": "", "is_locked": False}
+            for name, v in words.items()}}
     return c3d

@@ -10,7 +10,9 @@ Layout (1-based line numbers)::
        data rows (blank lines skipped): frame, time (s), x y z per marker in the Units of line 3;
        an empty cell or NaN is a missing sample.
 
-Reading converts to metres and takes the sample times from the Time column. Writing prints
+Reading converts to metres and takes the sample times from the Time column, which must be finite,
+increasing and on the DataRate of line 3 (row i at the first time + i / DataRate, within half a
+sample); anything else is refused naming the line. Writing prints
 positions with a resolution of 1e-9 m whatever the unit (mm: 6 decimals) and times with 10
 significant digits; missing samples become empty cells.
 """
@@ -46,9 +48,10 @@ def read_trc(path: str | os.PathLike, /) -> Trajectories:
     header = _header(path, lines)
     unit, rate, n_frames, n_markers = _header_values(path, header)
     labels = _marker_labels(path, lines[3], n_markers)
-    time, coords = _data(path, lines, n_markers)
+    time, coords, line_nos = _data(path, lines, n_markers)
     if time.shape[0] != n_frames:
         raise InputError(f"{path}: line 3: NumFrames is {n_frames} but the file has {time.shape[0]} data rows")
+    _check_rate(path, time, line_nos, rate)
     return Trajectories(
         labels=tuple(labels),
         positions_m=coords.reshape(-1, n_markers, 3) * METRES_PER_UNIT[unit],
@@ -118,11 +121,13 @@ def _marker_labels(path: Path, line: str, n_markers: int) -> list[str]:
     return labels
 
 
-def _data(path: Path, lines: list[str], n_markers: int) -> tuple[np.ndarray, np.ndarray]:
-    """Time column (n_frames,) and coordinates (n_frames, 3 n_markers) in file units."""
+def _data(path: Path, lines: list[str], n_markers: int) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """Time column (n_frames,), coordinates (n_frames, 3 n_markers) in file units and the line
+    number of each row. Times must be finite and increasing; coordinates finite or missing."""
     n_columns = 2 + 3 * n_markers
     times: list[float] = []
     rows: list[list[float]] = []
+    line_nos: list[int] = []
     for line_no, line in enumerate(lines[_FIRST_DATA_LINE - 1 :], start=_FIRST_DATA_LINE):
         if not line.strip():
             continue
@@ -131,11 +136,35 @@ def _data(path: Path, lines: list[str], n_markers: int) -> tuple[np.ndarray, np.
             n_found = len(cells) if len(cells) < n_columns else max(i + 1 for i, c in enumerate(cells) if c)
             raise InputError(f"{path}: line {line_no}: {n_found} columns, expected {n_columns} (2 + 3 x {n_markers} markers)")
         values = _floats(path, line_no, cells[1:n_columns])
-        if math.isnan(values[0]):
+        if not cells[1]:
             raise InputError(f"{path}: line {line_no}: the Time cell is empty")
+        if not math.isfinite(values[0]):
+            raise InputError(f"{path}: line {line_no}: Time is '{cells[1]}'; expected a finite number of seconds")
+        if times and not values[0] > times[-1]:
+            raise InputError(f"{path}: line {line_no}: Time {cells[1]} s is not after {times[-1]:g} s on line "
+                             f"{line_nos[-1]}; the Time column must increase")
+        bad = next((c for c, v in zip(cells[2:n_columns], values[1:]) if math.isinf(v)), None)
+        if bad is not None:
+            raise InputError(f"{path}: line {line_no}: coordinate '{bad}' is not finite; a missing sample is an "
+                             f"empty cell or NaN")
         times.append(values[0])
         rows.append(values[1:])
-    return np.array(times, dtype=float), np.array(rows, dtype=float).reshape(len(rows), 3 * n_markers)
+        line_nos.append(line_no)
+    return np.array(times, dtype=float), np.array(rows, dtype=float).reshape(len(rows), 3 * n_markers), line_nos
+
+
+def _check_rate(path: Path, time: np.ndarray, line_nos: list[int], rate: float) -> None:
+    """Row i must be at time[0] + i / DataRate within half a sample: a DataRate the Time column
+    contradicts (or rows missing or repeated) is refused, naming the first line off the grid."""
+    expected = time[0] + np.arange(time.shape[0]) / rate if time.size else time
+    off = np.flatnonzero(np.abs(time - expected) > 0.5 / rate)
+    if off.size:
+        i = int(off[0])
+        raise InputError(
+            f"{path}: line {line_nos[i]}: Time is {time[i]:g} s, but line 3's DataRate {rate:g} Hz puts data row "
+            f"{i + 1} at {expected[i]:g} s (a step of {1 / rate:g} s); the DataRate and the Time column disagree "
+            f"(a wrong DataRate, or rows missing)"
+        )
 
 
 def _floats(path: Path, line_no: int, cells: list[str]) -> list[float]:

@@ -1,0 +1,247 @@
+"""Bad inputs are refused before any work: exit code 2, one message naming the file and the key,
+line or option and what was expected, no traceback, nothing written to --out.
+
+Every test here runs with exubio.pipeline.reconstruct replaced by a failure, so a refusal that
+comes only after (or instead of) a reconstruction fails the test.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+import exubio.pipeline
+from exubio.cli import main
+from exubio.errors import InputError
+from exubio.io.c3d import read_c3d, write_c3d
+from exubio.io.trc import write_trc
+from exubio.model import DEFAULT_MODEL, load_model
+from exubio.pipeline import DEFAULT_PROTOCOL
+from exubio.simulate import Motion, simulate_trial
+from exubio.types import Trajectories
+
+HUGE = 10**400  # a YAML integer no float holds
+
+
+@pytest.fixture(autouse=True)
+def no_reconstruction(monkeypatch):
+    def refuse(*args, **kwargs):
+        pytest.fail("a reconstruction started: the bad input was not refused before the work")
+
+    monkeypatch.setattr(exubio.pipeline, "reconstruct", refuse)
+
+
+@pytest.fixture(scope="module")
+def trajectories():
+    return simulate_trial(load_model(), Motion.ABDUCTION, duration_s=1.0, rate_hz=50.0, seed=2).trajectories
+
+
+@pytest.fixture()
+def c3d(tmp_path, trajectories):
+    return write_c3d(tmp_path / "trial.c3d", trajectories)
+
+
+def refused(capsys, argv: list[str], out: Path, *needles: str) -> str:
+    """main(argv) exits 2 with one message holding every needle, no traceback, and --out holds no file."""
+    code = main(["-q", *argv])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert "Traceback" not in err and err.count("exubio: error:") == 1, err
+    for needle in needles:
+        assert needle in err, (needle, err)
+    assert not out.exists() or not [p for p in out.rglob("*") if p.is_file()], list(out.rglob("*"))
+    return err
+
+
+def reconstruct(trial: Path, out: Path, *extra: str) -> list[str]:
+    return ["reconstruct", str(trial), "--method", "ls", "--no-report", "--out", str(out), *extra]
+
+
+# ------------------------------------------------------------------------------------ model YAML
+def _segment(data: dict, name: str) -> dict:
+    return next(s for s in data["segments"] if s["name"] == name)
+
+
+def _set_range(data, value):
+    _segment(data, "clavicle")["joint"]["coordinates"][0]["range_deg"] = value
+
+
+MODEL_EDITS = {
+    # key named in the message: edit of the generic model's data
+    "mass_fraction": lambda d: _segment(d, "clavicle")["inertia"].update(mass_fraction="abc"),
+    "radii_mm": lambda d: d["ellipsoid"].update(radii_mm=["a", "b", "c"]),
+    "body_mass_kg": lambda d: d.update(body_mass_kg="heavy"),
+    "com_fraction": lambda d: _segment(d, "humerus")["inertia"].update(com_fraction=math.nan),
+    "range_deg": lambda d: _set_range(d, [-50, math.inf]),
+    "points_mm.AC": lambda d: _segment(d, "clavicle")["points_mm"].update(AC=[HUGE, 0, 0]),
+    "principal_kgm2_per_kg": lambda d: _segment(d, "clavicle")["inertia"].update(
+        principal_kgm2_per_kg=[-1e-3, 1e-3, 1e-4]),
+    "com_between": lambda d: _segment(d, "scapula")["inertia"].update(com_between=["AC"]),
+    "long_axis": lambda d: _segment(d, "humerus")["inertia"].update(long_axis=5),
+    "contact_points": lambda d: d["ellipsoid"].update(contact_points=5),
+    "calibration": lambda d: d.update(calibration="yes"),
+    "radius_of_gyration_fraction": lambda d: _segment(d, "ulna")["inertia"].update(radius_of_gyration_fraction=HUGE),
+}
+
+
+@pytest.mark.parametrize("key", list(MODEL_EDITS))
+def test_model_number_refused_naming_file_and_key(tmp_path, c3d, capsys, key):
+    data = yaml.safe_load(Path(DEFAULT_MODEL).read_text(encoding="utf-8"))
+    MODEL_EDITS[key](data)
+    bad = tmp_path / "bad_model.yaml"
+    bad.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(c3d, out, "--model", str(bad)), out, "bad_model.yaml", key)
+
+
+# --------------------------------------------------------------------------------- protocol YAML
+PROTOCOL_EDITS = {
+    "defaults.stiffness_n_per_m": lambda d: d["defaults"].update(stiffness_n_per_m=HUGE),
+    "defaults.damping_ns_per_m": lambda d: d["defaults"].update(damping_ns_per_m=math.nan),
+    "filter.cutoff_hz": lambda d: d["filter"].update(cutoff_hz=HUGE),
+    "markers.ARM.local_position_mm": lambda d: d["markers"]["ARM"].update(local_position_mm=[0, HUGE, 0]),
+    "markers.ARM.stiffness_n_per_m": lambda d: d["markers"]["ARM"].update(stiffness_n_per_m=math.inf),
+}
+
+
+@pytest.mark.parametrize("key", list(PROTOCOL_EDITS))
+def test_protocol_number_refused_naming_file_and_key(tmp_path, c3d, capsys, key):
+    data = yaml.safe_load(Path(DEFAULT_PROTOCOL).read_text(encoding="utf-8"))
+    if key.endswith("local_position_mm"):
+        data["markers"]["ARM"].pop("point")
+    PROTOCOL_EDITS[key](data)
+    bad = tmp_path / "bad_protocol.yaml"
+    bad.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(c3d, out, "--protocol", str(bad)), out, "bad_protocol.yaml", key)
+
+
+# ------------------------------------------------------------------------------------------- TRC
+def _trc_with(tmp_path: Path, trajectories: Trajectories, edit) -> Path:
+    """The trial as a TRC file (rate 50 Hz, data from line 7) with ``edit(lines)`` applied."""
+    path = write_trc(tmp_path / "trial.trc", trajectories)
+    lines = path.read_text(encoding="utf-8").splitlines()
+    assert lines[5] == "" and lines[6].startswith("1\t0\t")
+    edit(lines)
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+def _set_time(lines: list[str], index: int, value: str) -> None:
+    cells = lines[index].split("\t")
+    cells[1] = value
+    lines[index] = "\t".join(cells)
+
+
+def test_trc_last_time_inf_refused_naming_the_line(tmp_path, trajectories, capsys):
+    trc = _trc_with(tmp_path, trajectories, lambda lines: _set_time(lines, len(lines) - 1, "inf"))
+    out = tmp_path / "out"
+    n_lines = 6 + trajectories.n_frames
+    refused(capsys, reconstruct(trc, out), out, "trial.trc", f"line {n_lines}", "Time", "'inf'")
+
+
+def test_trc_time_going_back_refused_naming_both_lines(tmp_path, trajectories, capsys):
+    trc = _trc_with(tmp_path, trajectories, lambda lines: _set_time(lines, 20, "0.1"))
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(trc, out), out, "trial.trc", "line 21", "line 20", "increase")
+
+
+def test_trc_data_rate_contradicting_the_time_column_refused(tmp_path, trajectories, capsys):
+    def halve_times(lines):  # header 50 Hz, time steps of 0.01 s
+        for i in range(6, len(lines)):
+            _set_time(lines, i, f"{(i - 6) * 0.01:.10g}")
+
+    trc = _trc_with(tmp_path, trajectories, halve_times)
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(trc, out), out, "trial.trc", "line 9", "DataRate 50 Hz", "Time is 0.02 s")
+
+
+# ------------------------------------------------------------------------------------------- C3D
+def test_c3d_over_65535_frames_round_trips_whole(tmp_path):
+    """The header counts frames in 16 bits (ezc3d reads 65535 of them): write_c3d stores the count
+    in POINT:LONG_FRAMES and TRIAL:ACTUAL_*_FIELD, and read_c3d reads every frame."""
+    n = 70_000
+    rng = np.random.default_rng(3)
+    pos = rng.uniform(-1.0, 1.0, size=(n, 2, 3))
+    pos[10, 0] = np.nan
+    pos[n - 3, 1] = np.nan  # a gap beyond frame 65535
+    traj = Trajectories(("A", "B"), pos, 100.0, np.arange(n) / 100.0)
+    got = read_c3d(write_c3d(tmp_path / "long.c3d", traj))
+    assert got.n_frames == n and got.labels == ("A", "B")
+    assert np.array_equal(np.isnan(got.positions_m), np.isnan(pos))
+    assert np.nanmax(np.abs(got.positions_m - pos)) < 1e-6
+    assert got.time_s[-1] == pytest.approx((n - 1) / 100.0)
+
+
+def _long_c3d_without_count(path: Path, n: int) -> Path:
+    """A C3D of n > 65535 frames as ezc3d alone writes it: header and POINT:FRAMES say 65535."""
+    import ezc3d
+
+    c3d = ezc3d.c3d()
+    c3d["parameters"]["POINT"]["RATE"]["value"] = np.array([100.0])
+    c3d["parameters"]["POINT"]["LABELS"]["value"] = ("A", "B")
+    c3d["parameters"]["POINT"]["UNITS"]["value"] = ["mm"]
+    points = np.ones((4, 2, n))
+    c3d["data"]["points"] = points
+    c3d["data"]["meta_points"]["residuals"] = np.zeros((1, 2, n))
+    c3d.write(str(path))
+    return path
+
+
+def test_c3d_over_65535_frames_without_a_count_refused(tmp_path):
+    path = _long_c3d_without_count(tmp_path / "nocount.c3d", 70_000)
+    with pytest.raises(InputError, match=r"nocount\.c3d: .*65535.*POINT:LONG_FRAMES"):
+        read_c3d(path)
+
+
+def test_c3d_over_65535_frames_truncated_refused(tmp_path):
+    traj = Trajectories(("A", "B"), np.zeros((70_000, 2, 3)), 100.0, np.arange(70_000) / 100.0)
+    path = write_c3d(tmp_path / "cut.c3d", traj)
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) - 40_000])
+    with pytest.raises(InputError, match=r"cut\.c3d: .*truncated.*70000 frames"):
+        read_c3d(path)
+
+
+# ---------------------------------------------------------------------------------- CLI options
+def test_static_frames_past_the_end_refused_naming_window_and_frame_count(tmp_path, c3d, capsys):
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(c3d, out, "--static-frames", "40:80"), out, "trial.c3d", "40:80", "50 frames")
+    refused(capsys, reconstruct(c3d, out, "--static", str(c3d), "--static-frames", "10:60"), out,
+            "trial.c3d", "10:60", "50 frames")
+
+
+@pytest.mark.parametrize("jobs", ["0", "-1"])
+def test_jobs_below_one_refused_before_any_calibration(tmp_path, c3d, capsys, monkeypatch, jobs):
+    monkeypatch.setattr(exubio.pipeline, "read_trial", lambda *a, **k: pytest.fail("a trial was read"))
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(c3d, out, "--jobs", jobs), out, f"--jobs {jobs}", ">= 1")
+    refused(capsys, reconstruct(c3d, out, "--jobs", jobs, "--static", str(c3d)), out, f"--jobs {jobs}")
+
+
+def _unwritable_folder() -> Path:
+    """An existing folder no file can be created in, even by root (procfs), else skip."""
+    folder = Path("/proc")
+    try:
+        (folder / "exubio-probe").write_text("")
+    except OSError:
+        return folder
+    pytest.skip("no unwritable folder on this system")
+
+
+@pytest.mark.parametrize("where", ["unwritable", "file", "under-a-file", "not-creatable"])
+def test_output_folder_checked_before_reading_anything(tmp_path, c3d, capsys, monkeypatch, where):
+    monkeypatch.setattr(exubio.pipeline, "read_trial", lambda *a, **k: pytest.fail("a trial was read"))
+    (tmp_path / "a_file").write_text("not a folder")
+    out = {"unwritable": _unwritable_folder, "file": lambda: tmp_path / "a_file",
+           "under-a-file": lambda: tmp_path / "a_file" / "results",
+           "not-creatable": lambda: _unwritable_folder() / "results"}[where]()
+    nothing_in = tmp_path / "nothing"  # the folders refused here cannot hold anything written
+    refused(capsys, reconstruct(c3d, out), nothing_in, str(out))
+    refused(capsys, reconstruct(c3d, out, "--static", str(c3d)), nothing_in, str(out))
+    model_out = out / "subject.yaml"
+    refused(capsys, ["calibrate", str(c3d), "--out", str(model_out)], nothing_in, str(out))
+    assert (tmp_path / "a_file").read_text() == "not a folder"
