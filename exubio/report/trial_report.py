@@ -37,9 +37,9 @@ def _figure(size=(11.69, 8.27)) -> Figure:
     return fig
 
 
-PLOT_POINTS = 1500
-"""Time series are drawn with at most about this many points per curve (an A4 page is ~1100 px
-wide): each bin of samples keeps its minimum and maximum, so spikes stay visible."""
+PLOT_POINTS = 800
+"""Time series are drawn with at most about this many points per curve (an A4 panel is ~1000 px
+wide, so 400 bins of min and max): each bin keeps its minimum and maximum, so spikes stay visible."""
 
 
 def _envelope(t: np.ndarray, *ys: np.ndarray) -> tuple[np.ndarray, ...]:
