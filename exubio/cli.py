@@ -153,6 +153,7 @@ def _run_trial(kwargs: dict) -> tuple[str, dict | None, int, str]:
     """One trial in a worker process: (trial, result, exit code, error message)."""
     from exubio.pipeline import process_trial
 
+    kwargs = dict(kwargs)
     trial = kwargs.pop("trial")
     try:
         result = process_trial(trial, **kwargs)
@@ -230,14 +231,19 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
                   method_options={"pf": {"gravity": args.gravity}}, summary_extra=extra,
                   static_frames=None if args.static else args.static_frames, report=not args.no_report)
     jobs = [dict(common, trial=t) for t in args.trials]
-    if len(jobs) == 1:  # errors propagate to main(): one message, one exit code
+    if len(jobs) == 1 and not args.scheduler:  # errors propagate to main(): one message, one exit code
         from exubio.pipeline import process_trial
 
         result = process_trial(args.trials[0], **dict(common, progress_factory=_progress_factory(not args.quiet)))
         _print_trial(result, args.quiet)
         return _trial_code(result)
     codes = []
-    if args.jobs > 1:
+    if args.scheduler:
+        from exubio.study import map_on_scheduler
+
+        done = map_on_scheduler(_run_trial, jobs, args.scheduler,
+                                on_error=lambda job, exc: (job["trial"], None, EXIT_FAILED, f"{type(exc).__name__}: {exc}"))
+    elif args.jobs > 1:
         from concurrent.futures import ProcessPoolExecutor
 
         with ProcessPoolExecutor(max_workers=args.jobs) as pool:
@@ -403,6 +409,8 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("reconstruct", parents=[common], help="joint angles from a C3D/TRC trial")
     r.add_argument("trials", nargs="+", metavar="TRIAL", help="trial file(s) (.c3d or .trc); several = a study")
     r.add_argument("--jobs", type=int, default=1, help="trials reconstructed in parallel processes (default 1)")
+    r.add_argument("--scheduler", help="reconstruct the trials on Dask: local:N (a local cluster of N workers) or "
+                                       "tcp://HOST:PORT (a running scheduler); the files are those of a local run")
     r.add_argument("--protocol", action="append",
                    help="protocol YAML (default: protocols/upper_limb_21.yaml); give it twice, one per arm (side: right "
                         "and side: left), to reconstruct both arms of the trial into --out/right and --out/left")

@@ -386,7 +386,13 @@ def _worker_setup() -> None:
     import exubio.pipeline  # noqa: F401
 
 
-def _submit_dask(tasks: list[TrialTask], scheduler: str, on_done: Callable[[TrialOutcome], None]) -> list[TrialOutcome]:
+def map_on_scheduler(fn: Callable, items: list, scheduler: str, /, *,
+                     on_error: Callable[[Any, BaseException], Any],
+                     on_done: Callable[[Any], None] | None = None) -> list:
+    """``[fn(item) for item in items]`` on Dask: ``scheduler`` is "local:N" (a local cluster of N
+    single-threaded worker processes, started and closed here) or "tcp://HOST:PORT" (a running
+    scheduler). Workers import exubio once (``_worker_setup``) and keep it. A failed item gives
+    ``on_error(item, exception)`` in its place; results come back in the items' order."""
     try:
         from distributed import Client, LocalCluster, as_completed
     except ImportError as exc:  # pragma: no cover - a dependency of exubio
@@ -403,27 +409,41 @@ def _submit_dask(tasks: list[TrialTask], scheduler: str, on_done: Callable[[Tria
             raise InputError(f"--scheduler {scheduler}: expected local:N with N >= 1 workers")
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
         client = Client(cluster)
-    else:
+    elif scheduler.startswith("tcp://"):
         try:
             client = Client(scheduler, timeout=10)
         except OSError as exc:
             raise InputError(f"--scheduler {scheduler}: cannot reach a Dask scheduler there ({exc})") from None
+    else:
+        raise InputError(f"--scheduler {scheduler}: expected local:N or tcp://HOST:PORT")
+    futures: dict = {}
     try:
         client.run(_worker_setup)
-        futures = {client.submit(run_trial_task, t, pure=False, key=f"exubio-{k}-{Path(t.trial).stem}"): t
-                   for k, t in enumerate(tasks)}
-        outs = []
+        futures = {client.submit(fn, item, pure=False): k for k, item in enumerate(items)}
+        out: list = [None] * len(items)
         for f in as_completed(list(futures)):
-            outs.append(_result_or_failure(f, futures[f]))
-            on_done(outs[-1])
-        return outs
+            k = futures[f]
+            try:
+                out[k] = f.result()
+            except Exception as exc:  # noqa: BLE001 - a worker that died fails only its item
+                out[k] = on_error(items[k], exc)
+            if on_done is not None:
+                on_done(out[k])
+        return out
     except KeyboardInterrupt:
-        client.cancel(list(futures)) if "futures" in locals() else None
+        client.cancel(list(futures))
         raise
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def _submit_dask(tasks: list[TrialTask], scheduler: str, on_done: Callable[[TrialOutcome], None]) -> list[TrialOutcome]:
+    def failed(t: TrialTask, exc: BaseException) -> TrialOutcome:
+        return TrialOutcome(t.subject, t.session, t.trial, t.final_dir, "failed", error=f"{type(exc).__name__}: {exc}")
+
+    return map_on_scheduler(run_trial_task, tasks, scheduler, on_error=failed, on_done=on_done)
 
 
 def write_table(out_dir: Path, spec: StudySpec, outcomes: Iterable[TrialOutcome]) -> tuple[Path, Path]:

@@ -182,3 +182,18 @@ def test_interrupted_study_leaves_complete_sets_and_the_next_run_finishes(tmp_pa
     _complete_or_absent(out)
     assert [r["status"] for r in _rows(out)] and all(r["status"] != "failed" for r in _rows(out))
     assert not list(out.rglob(".tmp-*"))
+
+
+def test_reconstruct_on_dask_writes_the_files_of_a_local_run(data, tmp_path):
+    pytest.importorskip("distributed")
+    trials = [str(data / "b" / "trial.c3d"), str(data / "b" / "other.c3d")]
+    local, dask = tmp_path / "local", tmp_path / "dask"
+    assert main(["-q", "reconstruct", *trials, "--method", "ls", "--no-report", "--out", str(local)]) == 0
+    assert main(["-q", "reconstruct", *trials, "--method", "ls", "--no-report", "--out", str(dask),
+                 "--scheduler", "local:2"]) == 0
+    files = sorted(p.name for p in local.iterdir() if p.suffix in (".csv", ".mot"))
+    assert len(files) == 6
+    for name in files:
+        assert (local / name).read_bytes() == (dask / name).read_bytes(), name
+    assert main(["-q", "reconstruct", *trials, "--method", "ls", "--out", str(tmp_path / "x"),
+                 "--scheduler", "nowhere"]) == 2
