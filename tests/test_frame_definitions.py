@@ -11,7 +11,6 @@ from exubio.angles import anatomical_frames, definition_frame, isb_angles, joint
 from exubio.corridor import build_corridor, convert_angles, share_inside, target_definition, HT_GRID_DEG
 from exubio.frame_definitions import (ISB_WU2005, FrameDefinition, JointDefinition, NotBuildable, build_frame,
                                       sequence_letters)
-from exubio.kinematics import Kinematics
 from exubio.reference import load_corpus, load_ludewig2009
 
 LUDEWIG_SCAPULA = FrameDefinition("scapula", x="vec(AI>TS)^vec(AI>AC)", y="z^x", z="vec(TS>AC)", origin="AC")

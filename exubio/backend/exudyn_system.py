@@ -642,7 +642,7 @@ class PFSystem:
             choice = None
             if three:
                 choice = []
-                for ti, j, sign, kind in slots:
+                for ti, j, sign, _kind in slots:
                     lo, hi = (lim[j] if sign > 0 else -lim[j, ::-1])
                     choice.append((ti, float(lo) - centre[ti], float(hi) - centre[ti]))
             self._limits.append(_LimitElement(joint.name, obj, uf, [(ti, b[0], b[1]) for ti, b in enumerate(bounds) if b is not None],

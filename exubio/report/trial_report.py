@@ -243,7 +243,6 @@ def isb_page(recons: Sequence[Reconstruction], npz_paths: Sequence[Path], meta: 
                 ls_, lw, alpha, colour = method_style.get(method, ("-", 1.0, 1.0, "grey"))
                 ax.plot(*_envelope(t, np.degrees(ang[:, cols[col]])), ls=ls_, lw=lw, alpha=alpha, color=colour,
                         label=method.upper())
-                title = names[cols[col]].replace("_", " ", 2)
             seq = (info.get("sequences") or {}).get(joint, "")
             meaning = (info.get("meaning") or {}).get(joint, ["", "", ""])[col]
             txt = f"{joint} {seq}: {meaning}"

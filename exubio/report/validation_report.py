@@ -294,7 +294,7 @@ def fig_invivo(d: _Data) -> Figure:
                     ax.set_ylabel(f"{joint} angle (deg)", fontsize=8)
                 if r == 2:
                     ax.set_xlabel("humerothoracic elevation (deg)", fontsize=8)
-    handles, labels = {}, []
+    handles = {}
     for ax in axes.flat:
         for h, lab in zip(*ax.get_legend_handles_labels()):
             if lab not in handles:
@@ -696,7 +696,9 @@ def sier_realisations_page(d: _Data) -> Figure:
         line = [label]
         for method in ("pf", "ls"):
             sm = summ.get(method) or {}
-            g = lambda n: (sm.get(n) or {}).get(key)  # noqa: E731
+            def g(n, sm=sm, key=key):
+                return (sm.get(n) or {}).get(key)
+
             line += [_fmt(g("gh_axial_rotation_rmse_deg")),
                      f"X {_fmt(g('gh_marker_x_rmse_mm'))}, Z {_fmt(g('gh_marker_z_rmse_mm'))}", ""]
         cells.append(line)
@@ -742,7 +744,7 @@ def ludewig_page(d: _Data) -> list[Figure]:
     h = "/".join(str(v) for v in hts)
     fig = _new_figure(A4_LANDSCAPE)
     head = ["motion", "angle", f"Ludewig at HT\n{h}° (deg)", f"PF − Ludewig\nat {h}° (deg)",
-            f"LS − Ludewig\nat {h}° (deg)", "PF / LS inside\ncorridor (studies)", f"PF − Ludewig in ISB\nframes (AA) (deg)",
+            f"LS − Ludewig\nat {h}° (deg)", "PF / LS inside\ncorridor (studies)", "PF − Ludewig in ISB\nframes (AA) (deg)",
             "flag"]
     widths = [0.07, 0.17, 0.14, 0.14, 0.14, 0.13, 0.14, 0.07]
     rows = []
