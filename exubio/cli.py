@@ -117,20 +117,10 @@ def _trial_code(result: dict) -> int:
 
 def _check_output_folder(folder: Path, out: str) -> None:
     """Refuse (exit 2) before any work an --out whose folder is a file, cannot be created or cannot
-    be written: create the folder, then create and remove a temporary file in it."""
-    import tempfile
+    be written (exubio.io.results.writable_folder)."""
+    from exubio.io.results import writable_folder
 
-    if folder.exists() and not folder.is_dir():
-        raise InputError(f"--out {out}: {folder} is an existing file, not a folder")
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"--out {out}: cannot create the folder {folder} ({exc.strerror or exc})") from None
-    try:
-        with tempfile.NamedTemporaryFile(dir=folder, prefix=".exubio-write-test-"):
-            pass
-    except OSError as exc:
-        raise InputError(f"--out {out}: cannot write in the folder {folder} ({exc.strerror or exc})") from None
+    writable_folder(folder, label=f"--out {out}")
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:

@@ -90,6 +90,28 @@ def _write_text(path: str | os.PathLike, text: str) -> Path:
     return atomic_write(path, writer)
 
 
+def writable_folder(folder: str | os.PathLike, /, *, label: str | None = None) -> Path:
+    """Create ``folder`` (with parents) and check that a file can be created in it (a temporary one,
+    removed at once): an existing file, a folder that cannot be created or written is an InputError
+    named ``label`` (default: the folder), found before any work."""
+    import tempfile
+
+    folder = Path(folder)
+    label = label or str(folder)
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"{label}: {folder} is an existing file, not a folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{label}: cannot create the folder {folder} ({exc.strerror or exc})") from None
+    try:
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=".exubio-write-test-"):
+            pass
+    except OSError as exc:
+        raise InputError(f"{label}: cannot write in the folder {folder} ({exc.strerror or exc})") from None
+    return folder
+
+
 def prepare_output_dir(out_dir: str | os.PathLike, stems: Sequence[str], /, *, overwrite: bool) -> Path:
     """Create ``out_dir`` (with parents) and check that no result of this run exists there yet.
 
@@ -98,13 +120,7 @@ def prepare_output_dir(out_dir: str | os.PathLike, stems: Sequence[str], /, *, o
     file exists and ``overwrite`` is False, an InputError names it. With ``overwrite=True`` nothing
     is deleted here: old files are replaced only by the writers' atomic renames.
     """
-    folder = Path(out_dir)
-    if folder.exists() and not folder.is_dir():
-        raise InputError(f"{folder}: output folder expected, but this is an existing file")
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"{folder}: cannot create the output folder ({exc})") from exc
+    folder = writable_folder(out_dir)
     existing = _existing_targets(folder, stems)
     if existing and not overwrite:
         names = ", ".join(str(p) for p in existing)
