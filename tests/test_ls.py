@@ -148,3 +148,18 @@ def test_ls_velocities_and_accelerations_are_consistent(model_protocol):
     assert np.abs(recon.qd_rad_s - trial.qd_true).max() < 1e-6
     assert np.abs(recon.qdd_rad_s2 - trial.qdd_true).max() < 1e-4
     assert np.abs(recon.constraint_velocity).max() < 1e-9
+
+
+def test_rates_in_blocks_equal_one_pass(model_protocol, monkeypatch):
+    """q̇ and q̈ are solved per frame, in blocks that bound memory on long trials: the block size
+    changes nothing (bit for bit)."""
+    import exubio.methods.ls as ls
+
+    model, protocol = model_protocol
+    trial = simulate_trial(model, "abduction", duration_s=2.0, rate_hz=100.0, noise_mm=1.0, seed=9)
+    targets = prepare_targets(trial.trajectories, protocol)
+    monkeypatch.setattr(ls, "RATES_BLOCK_FRAMES", 10**9)
+    whole = reconstruct_ls(model, protocol, targets)
+    monkeypatch.setattr(ls, "RATES_BLOCK_FRAMES", 37)
+    blocks = reconstruct_ls(model, protocol, targets)
+    assert np.array_equal(whole.qd_rad_s, blocks.qd_rad_s) and np.array_equal(whole.qdd_rad_s2, blocks.qdd_rad_s2)

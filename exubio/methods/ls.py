@@ -229,11 +229,28 @@ def solve_positions(kin: Kinematics, points: PointSet, targets_m: np.ndarray, we
     return q_out, iters, converged
 
 
+RATES_BLOCK_FRAMES = 4096
+"""solve_rates works through the frames in blocks of this many (each frame is independent): the
+per-frame Jacobians and KKT matrices of a whole 20-minute trial would take ~12 GB at once."""
+
+
 def solve_rates(kin: Kinematics, points: PointSet, q: np.ndarray, vel: np.ndarray, acc: np.ndarray,
                 weights: np.ndarray, mu: float, held: np.ndarray | None = None, limits: Limits | None = None):
     """Consistent q̇, q̈ (n, m) from marker velocities/accelerations (weighted LS + constraints);
     a coordinate beyond its limit adds the limit potential's stiffness kappa to its diagonal (the
-    time derivative of the optimality conditions)."""
+    time derivative of the optimality conditions). Frames in blocks of RATES_BLOCK_FRAMES."""
+    n = q.shape[0]
+    if n > RATES_BLOCK_FRAMES:
+        qd, qdd = np.empty_like(q), np.empty_like(q)
+        for a in range(0, n, RATES_BLOCK_FRAMES):
+            b = min(a + RATES_BLOCK_FRAMES, n)
+            qd[a:b], qdd[a:b] = _solve_rates_block(kin, points, q[a:b], vel[a:b], acc[a:b], weights, mu, held, limits)
+        return qd, qdd
+    return _solve_rates_block(kin, points, q, vel, acc, weights, mu, held, limits)
+
+
+def _solve_rates_block(kin: Kinematics, points: PointSet, q: np.ndarray, vel: np.ndarray, acc: np.ndarray,
+                       weights: np.ndarray, mu: float, held: np.ndarray | None, limits: Limits | None):
     n, m = q.shape
     present = ~np.isnan(vel).any(axis=2) & ~np.isnan(acc).any(axis=2)
     w = np.where(present, weights[None, :], 0.0)
