@@ -163,3 +163,24 @@ def test_rates_in_blocks_equal_one_pass(model_protocol, monkeypatch):
     monkeypatch.setattr(ls, "RATES_BLOCK_FRAMES", 37)
     blocks = reconstruct_ls(model, protocol, targets)
     assert np.array_equal(whole.qd_rad_s, blocks.qd_rad_s) and np.array_equal(whole.qdd_rad_s2, blocks.qdd_rad_s2)
+
+
+@pytest.mark.parametrize("method", ["pf", "ls"])
+def test_per_frame_steps_in_blocks_equal_one_pass(model_protocol, monkeypatch, method):
+    """The constraint projection and the assembly of the result run in blocks of frames to bound
+    memory on long trials; the block size changes nothing (bit for bit), PF and LS."""
+    import exubio.methods.common as common
+    import exubio.methods.constraints as constraints
+    from exubio.pipeline import reconstruct
+
+    model, protocol = model_protocol
+    trial = simulate_trial(model, "flexion", duration_s=2.0, rate_hz=100.0, noise_mm=1.0, seed=8)
+    targets = prepare_targets(trial.trajectories, protocol)
+    runs = []
+    for block in (10**9, 29):
+        monkeypatch.setattr(constraints, "BLOCK_FRAMES", block)
+        monkeypatch.setattr(common, "BLOCK_FRAMES", block)
+        runs.append(reconstruct(model, protocol, targets, method=method))
+    a, b = runs
+    for name in ("q_rad", "qd_rad_s", "qdd_rad_s2", "model_points_m", "constraint", "constraint_velocity"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name

@@ -19,15 +19,23 @@ def tracked_points(kin: Kinematics, protocol: Protocol, /) -> PointSet:
     )
 
 
+BLOCK_FRAMES = 8192  # frames per block of the per-frame computations
+
+
 def assemble(kin: Kinematics, points: PointSet, targets: MarkerTargets, /, *, method: str, q: np.ndarray,
              qd: np.ndarray, qdd: np.ndarray, status: np.ndarray, timings_s: Mapping[str, float],
              info: Mapping[str, Any], gaps: tuple[Gap, ...] = ()) -> Reconstruction:
     """Build the Reconstruction: model points at q, residuals |R_i - M_i| (NaN in gaps), g and G q̇."""
-    fr = kin.frames(q)
-    model_points = kin.points(q, points, frames=fr)
+    n = q.shape[0]
+    model_points = np.empty((n, len(points.names), 3))
+    constraint, constraint_velocity = np.empty((n, 2)), np.empty((n, 2))
+    for a in range(0, n, BLOCK_FRAMES):  # blocks bound the temporaries on long trials
+        s = slice(a, min(a + BLOCK_FRAMES, n))
+        fr = kin.frames(q[s])
+        model_points[s] = kin.points(q[s], points, frames=fr)
+        constraint[s] = kin.g(q[s], frames=fr)
+        constraint_velocity[s] = np.einsum("nkm,nm->nk", kin.G(q[s], frames=fr), qd[s])
     residuals = np.linalg.norm(model_points - targets.positions_m, axis=2)  # NaN where missing
-    constraint = kin.g(q, frames=fr)
-    constraint_velocity = np.einsum("nkm,nm->nk", kin.G(q, frames=fr), qd)
     return Reconstruction(
         method=method,
         time_s=np.asarray(targets.time_s, dtype=float),

@@ -43,9 +43,32 @@ def _pinv_apply(G: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     return np.einsum("...km,...k->...m", G, np.linalg.solve(GGt, rhs[..., None])[..., 0])
 
 
+BLOCK_FRAMES = 8192
+"""Frames are projected in blocks of this many (each frame is independent): all frames of a long
+trial at once held ~4 kB of temporaries per frame."""
+
+
 def project_on_constraints(kin: Kinematics, q: np.ndarray, qd: np.ndarray | None = None,
                            qdd: np.ndarray | None = None, /, *, tol: float = 1e-13, max_iterations: int = 4,
                            held: np.ndarray | None = None):
+    """Project (q, q̇, q̈) on the constraints (``_project_block``), BLOCK_FRAMES frames at a time."""
+    n = q.shape[0]
+    if n <= BLOCK_FRAMES:
+        return _project_block(kin, q, qd, qdd, tol=tol, max_iterations=max_iterations, held=held)
+    parts = [_project_block(kin, q[a:a + BLOCK_FRAMES], None if qd is None else qd[a:a + BLOCK_FRAMES],
+                            None if qdd is None else qdd[a:a + BLOCK_FRAMES], tol=tol, max_iterations=max_iterations,
+                            held=held) for a in range(0, n, BLOCK_FRAMES)]
+    befores = [p[3] for p in parts]
+    before = tuple(float(np.nanmax([b[i] for b in befores])) if any(np.isfinite(b[i]) for b in befores)
+                   else float("nan") for i in range(2))
+    qd_out = None if qd is None else np.concatenate([p[1] for p in parts])
+    qdd_out = None if qdd is None else np.concatenate([p[2] for p in parts])
+    return np.concatenate([p[0] for p in parts]), qd_out, qdd_out, before
+
+
+def _project_block(kin: Kinematics, q: np.ndarray, qd: np.ndarray | None = None,
+                   qdd: np.ndarray | None = None, /, *, tol: float = 1e-13, max_iterations: int = 4,
+                   held: np.ndarray | None = None):
     """Project (q, q̇, q̈) on g = 0, G q̇ = 0, G q̈ + eta = 0 (least-norm corrections in coordinate
     space, every frame at once; only the coordinates g depends on change; ``held`` coordinates are
     not corrected). Without q̇ and q̈ only q is projected. Frames with non-finite values are left
