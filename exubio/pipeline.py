@@ -87,14 +87,11 @@ def load_inputs(trial_path: str | Path, /, *, model_path: str | Path | None = No
 def reconstruct(model: Model, protocol: Protocol, targets: MarkerTargets, /, *, method: Method | str = Method.PF,
                 progress: Callable[[int], None] | None = None, **options: Any) -> Reconstruction:
     """Run one method. ``options`` go to the method's options dataclass (e.g. step_s for PF)."""
-    method = Method.parse(method)
-    if method is Method.LS:
-        from exubio.methods.ls import LSOptions, reconstruct_ls
+    from exubio.methods import method_spec
 
-        return reconstruct_ls(model, protocol, targets, options=LSOptions(**options), progress=progress)
-    from exubio.methods.pf import PFOptions, reconstruct_pf
-
-    return reconstruct_pf(model, protocol, targets, options=PFOptions(**options), progress=progress)
+    spec = method_spec(Method.parse(method).value)  # exubio.methods.REGISTRY
+    _, run = spec.load()
+    return run(model, protocol, targets, options=spec.make_options(options), progress=progress)
 
 
 def output_stem(trial_path: str | Path, method: Method | str) -> str:

@@ -68,3 +68,20 @@ def test_calibrate_returns_a_bound_model_and_protocol():
     assert model.metadata.get("calibration") is not None or report.frames == (0, 20)
     rec = exubio.reconstruct(trial, model, protocol, method="ls")
     assert np.nanmean(rec.residuals_m) < 0.01
+
+
+def test_methods_come_from_one_registry_and_options_are_checked():
+    """Every method of the registry runs through the same entry point; a misspelt option is one
+    InputError naming it and the method's options (not a TypeError from deep inside)."""
+    from exubio.methods import REGISTRY
+    from exubio.pipeline import Method
+    from exubio.resources import shipped_file
+
+    assert set(REGISTRY) == {m.value for m in Method}
+    trial = exubio.read_trial(shipped_file("exubio.data", "example_abduction.c3d", "exubio/data"))
+    with pytest.raises(exubio.InputError, match=r"unknown option\(s\) \['tol'\].*tol_rad"):
+        exubio.reconstruct(trial, method="ls", tol=1e-6)
+    with pytest.raises(exubio.InputError, match="valid methods"):
+        exubio.reconstruct(trial, method="kalman")
+    rec = exubio.reconstruct(trial, method="ls", tol_rad=1e-6)
+    assert rec.method == "ls"
