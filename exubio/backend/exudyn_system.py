@@ -286,15 +286,39 @@ def _quintic(x0, v0, a0, x1, v1, a1, s, h):
     return x, v, a
 
 
-def _frames_from_steps(t_steps: np.ndarray, states: list, n: int, frame_dt_s: float, n_ode2: int):
+class _StateRecord:
+    """The states (q, q̇, q̈ of the system coordinates) of the accepted steps, in preallocated rows
+    that grow by doubling: a list of small arrays cost ~1.4 kB per step in object overhead on long
+    trials."""
+
+    def __init__(self, width: int, capacity: int):
+        self._a = [np.empty((max(capacity, 16), width)) for _ in range(3)]
+        self.n = 0
+
+    def append(self, q, qd, qdd) -> None:
+        if self.n == self._a[0].shape[0]:
+            self._a = [np.concatenate([a, np.empty_like(a)]) for a in self._a]
+        for a, v in zip(self._a, (q, qd, qdd)):
+            a[self.n] = v
+        self.n += 1
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return tuple(a[:self.n] for a in self._a)
+
+    def release(self) -> None:
+        self._a, self.n = [np.empty((0, a.shape[1])) for a in self._a], 0
+
+
+def _frames_from_steps(t_steps: np.ndarray, states: tuple[np.ndarray, np.ndarray, np.ndarray], n: int,
+                       frame_dt_s: float, n_ode2: int):
     """System coordinates, velocities and accelerations at the frame times i * frame_dt_s from the
-    states of the accepted steps (times t_steps): taken where a step ends on a frame, quintic
-    Hermite interpolation inside a step otherwise. Frames after the last step are NaN.
-    Returns (X, Xt, Xtt, completed frames)."""
+    states (q, q̇, q̈ rows) of the accepted steps (times t_steps): taken where a step ends on a
+    frame, quintic Hermite interpolation inside a step otherwise. Frames after the last step are
+    NaN. Returns (X, Xt, Xtt, completed frames)."""
     X, Xt, Xtt = (np.full((n, n_ode2), np.nan) for _ in range(3))
-    if len(states) == 0:
+    if states[0].shape[0] == 0:
         return X, Xt, Xtt, 0
-    S = np.asarray([st[0] for st in states]), np.asarray([st[1] for st in states]), np.asarray([st[2] for st in states])
+    S = states
     tf = np.arange(n) * frame_dt_s
     eps = 1e-6 * frame_dt_s
     completed = int(np.searchsorted(tf, t_steps[-1] + eps, side="right"))
@@ -772,7 +796,7 @@ class PFSystem:
 
         sd = mbs.systemData
         record_t: list[float] = []  # times of the recorded states: t = 0, then every accepted step
-        record: list[tuple] = []
+        record = _StateRecord(self._n_ode2, capacity=n_steps + 16)
 
         # range-of-motion limits: a joint's limit element is on while one of its angles is within
         # `margin` (one step of travel at the largest rate) of a limit or beyond it, judged from the
@@ -848,7 +872,7 @@ class PFSystem:
 
         def post_step(mbs, t):  # every accepted step, and once at t = 0 after the initial accelerations
             record_t.append(t)
-            record.append((sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t(), sd.GetODE2Coordinates_tt()))
+            record.append(sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t(), sd.GetODE2Coordinates_tt())
             if progress is not None:
                 frame = int(t / frame_dt_s + 0.5)
                 if frame - reported[0] >= report_every:
@@ -890,7 +914,8 @@ class PFSystem:
             raise KeyboardInterrupt
         wall = time.perf_counter() - t0
 
-        X, Xt, Xtt, completed = _frames_from_steps(np.asarray(record_t), record, n, frame_dt_s, self._n_ode2)
+        X, Xt, Xtt, completed = _frames_from_steps(np.asarray(record_t), record.arrays(), n, frame_dt_s, self._n_ode2)
+        record.release()  # the per-step states are not needed once the frames are interpolated
         success = success and completed == n
         if not success:
             log.warning("PF integration stopped at frame %d of %d: %s", completed, n, message)
