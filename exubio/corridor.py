@@ -172,12 +172,13 @@ def build_corridor(model: Model, joint: str, plane: str, target: JointDefinition
 
 
 def share_inside(corridor: Corridor, ht_deg: np.ndarray, values_deg: np.ndarray, dof: int, /, *,
-                 ht_range: tuple[float, float] = (30.0, 120.0)) -> tuple[float, float]:
+                 ht_range: tuple[float, float] = (30.0, 120.0),
+                 envelope: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> tuple[float, float]:
     """Fraction of ``ht_range`` (1-deg steps) at which the curve (values against ht, binned by
     mean per degree) lies inside the corridor of angle ``dof``, over the elevations where both the
     curve and a corridor (>= CORRIDOR_MIN_STUDIES studies) exist; and the covered span in degrees.
-    (nan, 0) when they never overlap."""
-    lo, hi, _ = corridor.envelope()
+    (nan, 0) when they never overlap. ``envelope``: corridor.envelope(), when the caller has it."""
+    lo, hi, _ = envelope if envelope is not None else corridor.envelope()
     sel = (HT_GRID_DEG >= ht_range[0]) & (HT_GRID_DEG <= ht_range[1])
     binned = np.full(HT_GRID_DEG.size, np.nan)
     idx = np.round(np.asarray(ht_deg, dtype=float)).astype(int)

@@ -133,8 +133,10 @@ def compare_elevation(model: Model, q_by_source: Mapping[str, np.ndarray], time_
         "definitions": {j: d.describe() for j, d in defs.items()},
         "undetermined_angles": sorted(undetermined), "inferred_joints": inferred,
         "corridor": {}}
+    envelopes = {j: cor.envelope() for j, cor in cors.items()}  # (lo, hi, n), once per joint
+    in_range = (HT_GRID_DEG >= CORRIDOR_RANGE_DEG[0]) & (HT_GRID_DEG <= CORRIDOR_RANGE_DEG[1])
     for j, cor in cors.items():
-        lo, hi, n = cor.envelope()
+        lo, hi, n = envelopes[j]
         arrays[f"corridor__{j}__lo"], arrays[f"corridor__{j}__hi"], arrays[f"corridor__{j}__n"] = lo, hi, n
         result["corridor"][j] = {"members": [{"study": m.study.label, "citation": m.study.citation,
                                               "converted": m.converted} for m in cor.members],
@@ -166,8 +168,9 @@ def compare_elevation(model: Model, q_by_source: Mapping[str, np.ndarray], time_
                 vals = [at_ht(ang[:, i], ht, rising, h) for h in HT_CHECK_DEG]
                 lud = [float(np.interp(h, ref_ht, ref[:, i])) for h in HT_CHECK_DEG]
                 dev = [a - b for a, b in zip(vals, lud)]
-                share, span = share_inside(cors[j], ht[sel], ang[sel, i], i, ht_range=CORRIDOR_RANGE_DEG)
-                n_studies = int(cors[j].envelope()[2][(HT_GRID_DEG >= 30) & (HT_GRID_DEG <= 120), i].max(initial=0))
+                share, span = share_inside(cors[j], ht[sel], ang[sel, i], i, ht_range=CORRIDOR_RANGE_DEG,
+                                           envelope=envelopes[j])
+                n_studies = int(envelopes[j][2][in_range, i].max(initial=0))
                 entry = {
                     "value_deg": vals, "ludewig_deg": lud, "deviation_deg": dev,
                     "max_abs_deviation_deg": float(np.nanmax(np.abs(dev))) if np.isfinite(dev).any() else float("nan"),

@@ -42,7 +42,7 @@ import shutil
 import time
 import traceback
 from concurrent.futures import Future, ProcessPoolExecutor
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
@@ -497,6 +497,3 @@ def run_study(spec: StudySpec, out_dir: str | Path, /, *, jobs: int = 1, schedul
         build_study_report(out / "study.json", out / "study.report.pdf")
     return outcomes
 
-
-def outcome_dicts(outcomes: Iterable[TrialOutcome]) -> list[dict]:
-    return [asdict(o) for o in outcomes]

@@ -52,7 +52,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from exubio.errors import ExubioError, InputError
-from exubio.io.results import atomic_write, read_npz, read_npz_metadata
+from exubio.io.results import atomic_write, read_npz, read_npz_metadata, writable_folder
 from exubio.types import Model, Reconstruction
 
 log = logging.getLogger(__name__)
@@ -107,10 +107,7 @@ def write_view(result_paths: Sequence[str | os.PathLike], out_html: str | os.Pat
     results = [_load_result(p) for p in paths]
     model, model_file = _load_model(results[0], model_path)
     page, _ = _build_page(results, model, model_file, max_frames=max_frames)
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"{out}: cannot create the folder '{out.parent}' ({exc})") from exc
+    writable_folder(out.parent, label=str(out))
 
     def writer(tmp: Path) -> None:
         with open(tmp, "w", encoding="utf-8", newline="\n") as fh:
@@ -181,14 +178,7 @@ def _siblings(path: Path) -> list[Path]:
 
 
 def _load_result(path: Path) -> _Result:
-    try:
-        with open(path, "rb") as fh:
-            magic = fh.read(4)
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read ({exc})") from exc
-    if magic != b"PK\x03\x04":  # an .npz is a zip archive (a .npy or a text file is not)
-        raise InputError(f"{path}: not an exubio result (not an .npz archive; expected <trial>.<method>.npz)")
-    try:
+    try:  # read_npz names the file for a missing, unreadable or non-.npz file
         recon = read_npz(path)
         meta = read_npz_metadata(path)
     except InputError:
