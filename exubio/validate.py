@@ -540,15 +540,36 @@ def _undetermined(tr: _Trial) -> list[str]:
         return []
     idx = np.linspace(0, rec.n_frames - 1, 5).round().astype(int)
     share = undetermined_coordinates(tr.model, tr.protocol, rec.q_rad[idx])
-    return [n for n, v in share.items() if v > UNDETERMINED_SHARE]
+    blind = [n for n, v in share.items() if v > UNDETERMINED_SHARE]
+    return blind + [n for n in _weakly_determined(tr, rec) if n not in blind]
+
+
+def _weakly_determined(tr: _Trial, rec: Reconstruction) -> list[str]:
+    """Coordinates the trial's own verdict calls undetermined (exubio.observability: noise gain
+    above its threshold in most frames), so that Fig. 5 and the PF-LS comparison use the same
+    criterion as the quality verdict of a reconstruction."""
+    from exubio.methods.common import tracked_points
+    from exubio.observability import determinacy
+
+    kin = Kinematics(tr.model)
+    names = tr.model.coordinate_names
+    unseen = set(unobserved_segments(tr.model, tr.protocol))
+    excluded = np.array([n in tr.protocol.held_coordinates or
+                         tr.model.segments[kin.coordinate_segment[i]].name in unseen for i, n in enumerate(names)])
+    det = determinacy(kin, tracked_points(kin, tr.protocol), rec.q_rad, tr.targets.present, tr.protocol.weights,
+                      excluded=excluded, every=max(1, rec.n_frames // 200))
+    return det.trial_undetermined()
 
 
 def _undetermined_isb(undetermined: list[str]) -> list[str]:
     """ISB angles not determined by the markers: the clavicle's axial rotation (SC Z'', and hence
-    every AC angle) when a clavicle coordinate is undetermined while the scapula is seen."""
+    every AC angle) when a clavicle coordinate is undetermined while the scapula is seen; the GH
+    angle a GH coordinate mainly moves (internal rotation: Y'', abduction: X, flexion: Z')."""
+    out = []
     if any(c.startswith("sc_") or c.startswith("ac_") for c in undetermined):
-        return ["SC_Z", "AC_Y", "AC_X", "AC_Z"]
-    return []
+        out += ["SC_Z", "AC_Y", "AC_X", "AC_Z"]
+    gh = {"gh_internal_rotation": "GH_Y", "gh_abduction": "GH_X", "gh_flexion": "GH_Z"}
+    return out + [gh[c] for c in undetermined if c in gh]
 
 
 def unobserved_segments(model: Model, protocol: Protocol, /) -> list[str]:
