@@ -24,7 +24,7 @@ from typing import Callable
 import numpy as np
 
 from exubio.kinematics import Kinematics, PointSet
-from exubio.methods.common import assemble, tracked_points
+from exubio.methods.common import CHUNK_FRAMES, ChunkSink, Collector, assemble, chunk_bounds, target_chunk, tracked_points
 from exubio.methods.constraints import project_on_constraints
 from exubio.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD, penalty_weight, violation
 from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Reconstruction
@@ -155,8 +155,11 @@ def _start_postures(kin: Kinematics, q_start: np.ndarray) -> np.ndarray:
 def solve_positions(kin: Kinematics, points: PointSet, targets_m: np.ndarray, weights: np.ndarray, /, *,
                     q_start: np.ndarray, options: LSOptions, frame_dt: float,
                     progress: Callable[[int], None] | None = None, held: np.ndarray | None = None,
-                    limits: Limits | None = None):
-    """q (n, m) per frame, iterations (n,), converged (n,) bool."""
+                    limits: Limits | None = None, q_previous: np.ndarray | None = None):
+    """q (n, m) per frame, iterations (n,), converged (n,) bool. The first frame is solved from
+    several start postures around ``q_start``; with ``q_previous`` (the solution of the frame
+    before these, when a trial is solved in chunks) every frame is warm-started like the frames
+    after the first, so that chunks starting at 1 + a multiple of the block give the one-pass result."""
     n = targets_m.shape[0]
     m = kin.n_coordinates
     present = ~np.isnan(targets_m).any(axis=2)
@@ -205,16 +208,19 @@ def solve_positions(kin: Kinematics, points: PointSet, targets_m: np.ndarray, we
             active[a[finished | stuck]] = False
         return q, it, done
 
-    # first frame: several start postures (arm down, abducted, flexed), many iterations, best kept
-    starts = _start_postures(kin, q_start)
-    q0, it0, ok0 = run(np.zeros(len(starts), dtype=int), starts, options.max_iterations * 10)
-    cost0 = np.array([_linearise(kin, points, q0[i:i + 1], tgt_all[:1], w_all[:1], limits).cost[0] for i in range(len(starts))])
-    best = int(np.argmin(np.where(ok0, cost0, cost0 + 1e9)))
-    q_out[0], iters[0], converged[0] = q0[best], it0.sum(), ok0[best]
-    prev = q_out[0]
-    start = 1
-    if progress:
-        progress(1)
+    if q_previous is not None:
+        prev, start = np.asarray(q_previous, dtype=float), 0
+    else:  # first frame: several start postures (arm down, abducted, flexed), many iterations, best kept
+        starts = _start_postures(kin, q_start)
+        q0, it0, ok0 = run(np.zeros(len(starts), dtype=int), starts, options.max_iterations * 10)
+        cost0 = np.array([_linearise(kin, points, q0[i:i + 1], tgt_all[:1], w_all[:1], limits).cost[0]
+                          for i in range(len(starts))])
+        best = int(np.argmin(np.where(ok0, cost0, cost0 + 1e9)))
+        q_out[0], iters[0], converged[0] = q0[best], it0.sum(), ok0[best]
+        prev = q_out[0]
+        start = 1
+        if progress:
+            progress(1)
     while start < n:
         stop = min(n, start + block)
         guess = np.repeat(prev[None], stop - start, axis=0)  # warm start: the previous solution
@@ -285,29 +291,57 @@ def reconstruct_ls(model: Model, protocol: Protocol, targets: MarkerTargets, /, 
                    options: LSOptions = LSOptions(), q_start: np.ndarray | None = None,
                    progress: Callable[[int], None] | None = None) -> Reconstruction:
     """Reconstruct a trial with the constrained least-squares method."""
+    chunks = Collector()
+    timings, info = stream_ls(model, protocol, targets, chunks, options=options, q_start=q_start, progress=progress,
+                              chunk_frames=max(targets.n_frames, 1))
+    return chunks.reconstruction(targets, timings_s=timings, info=info)
+
+
+def stream_ls(model: Model, protocol: Protocol, targets: MarkerTargets, sink: ChunkSink, /, *,
+              options: LSOptions = LSOptions(), q_start: np.ndarray | None = None,
+              progress: Callable[[int], None] | None = None,
+              chunk_frames: int = CHUNK_FRAMES) -> tuple[dict[str, float], dict]:
+    """Reconstruct a trial with the constrained least-squares method, handing the result to ``sink``
+    in chunks of about ``chunk_frames`` frames (exubio.methods.common); each chunk starts from the
+    last solution of the one before (the warm start of one pass). Returns (timings_s, info)."""
     t0 = time.perf_counter()
     kin = Kinematics(model)
     points = tracked_points(kin, protocol)
     weights = protocol.weights
     dt = float(np.median(np.diff(targets.time_s))) if targets.n_frames > 1 else 1.0
     q0 = np.zeros(kin.n_coordinates) if q_start is None else np.asarray(q_start, dtype=float)
-    t1 = time.perf_counter()
     held = held_mask(model, protocol)
     q0[held] = 0.0
     limits = Limits.of(model, protocol, options.limit_stiffness_nm_per_rad)
-    q, iters, converged = solve_positions(kin, points, targets.positions_m, weights, q_start=q0,
-                                          options=options, frame_dt=dt, progress=progress, held=held, limits=limits)
-    t2 = time.perf_counter()
-    qd, qdd = solve_rates(kin, points, q, targets.velocities_m_s, targets.accelerations_m_s2, weights,
-                          RATES_REGULARISATION, held, limits)
-    t3 = time.perf_counter()
-    n_present = targets.present.sum(axis=1)
-    status = np.where(converged, FrameStatus.CONVERGED, FrameStatus.NOT_CONVERGED)
-    status = np.where(n_present < MIN_MARKERS, FrameStatus.TOO_FEW_MARKERS, status)
-    if (~converged).any():
-        log.warning("LS: %d of %d frames did not converge", int((~converged).sum()), len(converged))
-    timings = {"setup": t1 - t0, "positions": t2 - t1, "rates": t3 - t2, "total": t3 - t0}
-    info = {"iterations_mean": float(iters.mean()), "iterations_max": int(iters.max()),
-            "frames_not_converged": int((~converged).sum()), "options": options.__dict__}
-    return assemble(kin, points, targets, method="ls", q=q, qd=qd, qdd=qdd, status=status,
-                    timings_s=timings, info=info)
+    block = max(1, int(round(options.block_s / dt)))
+    size = max(block, int(chunk_frames) // block * block)  # chunks end where one pass's blocks end
+    t_pos = t_rates = t_sink = 0.0
+    iters_sum, iters_max, not_converged, prev = 0, 0, 0, None
+    t1 = time.perf_counter()
+    for a, b in chunk_bounds(targets.n_frames, size, first=1):
+        part = target_chunk(targets, a, b)
+        ta = time.perf_counter()
+        q, iters, converged = solve_positions(kin, points, part.positions_m, weights, q_start=q0, options=options,
+                                              frame_dt=dt, progress=progress, held=held, limits=limits,
+                                              q_previous=prev)
+        tb = time.perf_counter()
+        qd, qdd = solve_rates(kin, points, q, part.velocities_m_s, part.accelerations_m_s2, weights,
+                              RATES_REGULARISATION, held, limits)
+        t_pos, t_rates = t_pos + tb - ta, t_rates + time.perf_counter() - tb
+        n_present = part.present.sum(axis=1)
+        status = np.where(converged, FrameStatus.CONVERGED, FrameStatus.NOT_CONVERGED)
+        status = np.where(n_present < MIN_MARKERS, FrameStatus.TOO_FEW_MARKERS, status)
+        iters_sum, iters_max = iters_sum + int(iters.sum()), max(iters_max, int(iters.max()))
+        not_converged += int((~converged).sum())
+        prev = q[-1]
+        chunk = assemble(kin, points, part, method="ls", q=q, qd=qd, qdd=qdd, status=status, timings_s={}, info={})
+        tc = time.perf_counter()
+        sink(chunk)
+        t_sink += time.perf_counter() - tc
+    if not_converged:
+        log.warning("LS: %d of %d frames did not converge", not_converged, targets.n_frames)
+    total = time.perf_counter() - t0 - t_sink  # the method's own time: what the sink does with the chunks is not
+    timings = {"setup": t1 - t0, "positions": t_pos, "rates": t_rates, "total": total}
+    info = {"iterations_mean": iters_sum / max(targets.n_frames, 1), "iterations_max": iters_max,
+            "frames_not_converged": not_converged, "options": options.__dict__}
+    return timings, info
