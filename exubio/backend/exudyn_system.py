@@ -88,6 +88,8 @@ import exudyn.itemInterface as eii
 from exudyn.advancedUtilities import CreateSymbolicUserFunction
 from exudyn.rigidBodyUtilities import RotationMatrix2EulerParameters
 
+from exubio.backend.pf_numerics import (LimitElement, StateRecord, ep_G, ep_rotation, frame_with_z, frames_from_steps,
+                                       hermite, limit_window)
 from exubio.errors import ModelError
 from exubio.kinematics import axis_rotation, Kinematics, PointSet
 from exubio.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD  # k_lim, shared with LS
@@ -100,18 +102,13 @@ log = logging.getLogger(__name__)
 GRAVITY_M_S2 = np.array([0.0, -9.81, 0.0])  # thorax frame: Y up
 _SYMBOLIC_SPRINGS = False  # benchmarks only: force the symbolic spring force (the former design)
 _AUX_MASS_KG = 1e-3  # mass of each auxiliary ellipsoid point (numerically needed, physically negligible)
+_ROW_BLOCK = 4096  # spring targets of this many step ends are made at a time
 _TIMER_FIELDS = (
     "total", "factorization", "newtonIncrement", "integrationFormula", "ODE2RHS", "AERHS",
     "totalJacobian", "massMatrix", "reactionForces", "python", "postNewton", "writeSolution", "overhead",
 )  # fmt: skip
 DEFAULT_LIMIT_MAX_RATE_RAD_S = 10.0  # fastest joint-angle rate the switching of the limits allows for
 _LIMIT_MIN_COS = 1e-2  # spherical joints: 1 / cos(middle angle) capped at 100 (gimbal lock, |q2| > 89.4 deg)
-_LIMIT_WRAP_TOLERANCE_RAD = math.pi / 6  # a limit needs this much room beyond it before its angle wraps
-
-
-def _wrap_pi(x: float) -> float:
-    """x in (-pi, pi]."""
-    return math.pi - (math.pi - x) % (2.0 * math.pi)
 
 
 # --------------------------------------------------------------------------------------------
@@ -228,116 +225,6 @@ class PFRun:
 
 
 # --------------------------------------------------------------------------------------------
-# Euler-parameter helpers (numpy, vectorised over leading axes)
-# --------------------------------------------------------------------------------------------
-def _ep_rotation(ep: np.ndarray) -> np.ndarray:
-    """Rotation matrices (..., 3, 3) of Euler parameters (..., 4) = [e0, e1, e2, e3] (normalised here)."""
-    ep = ep / np.linalg.norm(ep, axis=-1, keepdims=True)
-    e0, e1, e2, e3 = np.moveaxis(ep, -1, 0)
-    return np.stack([
-        np.stack([1 - 2 * (e2 * e2 + e3 * e3), 2 * (e1 * e2 - e0 * e3), 2 * (e1 * e3 + e0 * e2)], -1),
-        np.stack([2 * (e1 * e2 + e0 * e3), 1 - 2 * (e1 * e1 + e3 * e3), 2 * (e2 * e3 - e0 * e1)], -1),
-        np.stack([2 * (e1 * e3 - e0 * e2), 2 * (e2 * e3 + e0 * e1), 1 - 2 * (e1 * e1 + e2 * e2)], -1),
-    ], -2)  # fmt: skip
-
-
-def _ep_G(ep: np.ndarray) -> np.ndarray:
-    """G (..., 3, 4) with omega_global = G ep_t (and alpha_global = G ep_tt, since G_t ep_t = 0)."""
-    e0, e1, e2, e3 = np.moveaxis(ep, -1, 0)
-    return 2.0 * np.stack([
-        np.stack([-e1, e0, -e3, e2], -1),
-        np.stack([-e2, e3, e0, -e1], -1),
-        np.stack([-e3, -e2, e1, e0], -1),
-    ], -2)  # fmt: skip
-
-
-def _frame_with_z(axis: np.ndarray) -> np.ndarray:
-    """A rotation matrix whose third column is the unit vector ``axis``."""
-    a = np.asarray(axis, dtype=float)
-    a = a / np.linalg.norm(a)
-    helper = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    x = np.cross(helper, a)
-    x /= np.linalg.norm(x)
-    return np.column_stack([x, np.cross(a, x), a])
-
-
-def _hermite(p0, v0, p1, v1, s, dt):
-    """Cubic Hermite position and velocity at fraction s in [0, 1] of an interval dt."""
-    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
-    d00, d10, d01, d11 = 6 * s**2 - 6 * s, 3 * s**2 - 4 * s + 1, -6 * s**2 + 6 * s, 3 * s**2 - 2 * s
-    pos = h00 * p0 + h10 * dt * v0 + h01 * p1 + h11 * dt * v1
-    vel = (d00 * p0 + d01 * p1) / dt + d10 * v0 + d11 * v1
-    return pos, vel
-
-
-def _quintic(x0, v0, a0, x1, v1, a1, s, h):
-    """Quintic Hermite position, velocity and acceleration at fraction s in [0, 1] of an interval h
-    from positions, velocities and accelerations at both ends (one polynomial: all three consistent)."""
-    s2, s3, s4, s5 = s * s, s**3, s**4, s**5
-    h0, h1, h2 = 1 - 10 * s3 + 15 * s4 - 6 * s5, s - 6 * s3 + 8 * s4 - 3 * s5, 0.5 * (s2 - 3 * s3 + 3 * s4 - s5)
-    h3, h4, h5 = 0.5 * (s3 - 2 * s4 + s5), -4 * s3 + 7 * s4 - 3 * s5, 10 * s3 - 15 * s4 + 6 * s5
-    d0, d1, d2 = -30 * s2 + 60 * s3 - 30 * s4, 1 - 18 * s2 + 32 * s3 - 15 * s4, 0.5 * (2 * s - 9 * s2 + 12 * s3 - 5 * s4)
-    d3, d4, d5 = 0.5 * (3 * s2 - 8 * s3 + 5 * s4), -12 * s2 + 28 * s3 - 15 * s4, 30 * s2 - 60 * s3 + 30 * s4
-    e0, e1, e2 = -60 * s + 180 * s2 - 120 * s3, -36 * s + 96 * s2 - 60 * s3, 0.5 * (2 - 18 * s + 36 * s2 - 20 * s3)
-    e3, e4, e5 = 0.5 * (6 * s - 24 * s2 + 20 * s3), -24 * s + 84 * s2 - 60 * s3, 60 * s - 180 * s2 + 120 * s3
-    x = h0 * x0 + h1 * h * v0 + h2 * h * h * a0 + h3 * h * h * a1 + h4 * h * v1 + h5 * x1
-    v = (d0 * x0 + d5 * x1) / h + d1 * v0 + d4 * v1 + (d2 * a0 + d3 * a1) * h
-    a = (e0 * x0 + e5 * x1) / (h * h) + (e1 * v0 + e4 * v1) / h + e2 * a0 + e3 * a1
-    return x, v, a
-
-
-class _StateRecord:
-    """The states (q, q̇, q̈ of the system coordinates) of the accepted steps, in preallocated rows
-    that grow by doubling: a list of small arrays cost ~1.4 kB per step in object overhead on long
-    trials."""
-
-    def __init__(self, width: int, capacity: int):
-        self._a = [np.empty((max(capacity, 16), width)) for _ in range(3)]
-        self.n = 0
-
-    def append(self, q, qd, qdd) -> None:
-        if self.n == self._a[0].shape[0]:
-            self._a = [np.concatenate([a, np.empty_like(a)]) for a in self._a]
-        for a, v in zip(self._a, (q, qd, qdd)):
-            a[self.n] = v
-        self.n += 1
-
-    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return tuple(a[:self.n] for a in self._a)
-
-    def release(self) -> None:
-        self._a, self.n = [np.empty((0, a.shape[1])) for a in self._a], 0
-
-
-def _frames_from_steps(t_steps: np.ndarray, states: tuple[np.ndarray, np.ndarray, np.ndarray], n: int,
-                       frame_dt_s: float, n_ode2: int):
-    """System coordinates, velocities and accelerations at the frame times i * frame_dt_s from the
-    states (q, q̇, q̈ rows) of the accepted steps (times t_steps): taken where a step ends on a
-    frame, quintic Hermite interpolation inside a step otherwise. Frames after the last step are
-    NaN. Returns (X, Xt, Xtt, completed frames)."""
-    X, Xt, Xtt = (np.full((n, n_ode2), np.nan) for _ in range(3))
-    if states[0].shape[0] == 0:
-        return X, Xt, Xtt, 0
-    S = states
-    tf = np.arange(n) * frame_dt_s
-    eps = 1e-6 * frame_dt_s
-    completed = int(np.searchsorted(tf, t_steps[-1] + eps, side="right"))
-    tf = tf[:completed]
-    b = np.minimum(np.searchsorted(t_steps, tf - eps, side="left"), len(t_steps) - 1)
-    on = np.abs(t_steps[b] - tf) <= eps
-    X[:completed][on], Xt[:completed][on], Xtt[:completed][on] = S[0][b[on]], S[1][b[on]], S[2][b[on]]
-    inside = np.flatnonzero(~on)
-    if inside.size:
-        bb = b[inside]
-        aa = bb - 1
-        h = (t_steps[bb] - t_steps[aa])[:, None]
-        s = (tf[inside][:, None] - t_steps[aa][:, None]) / h
-        x, v, a = _quintic(S[0][aa], S[1][aa], S[2][aa], S[0][bb], S[1][bb], S[2][bb], s, h)
-        X[inside], Xt[inside], Xtt[inside] = x, v, a
-    return X, Xt, Xtt, completed
-
-
-# --------------------------------------------------------------------------------------------
 # The system
 # --------------------------------------------------------------------------------------------
 class PFSystem:
@@ -415,7 +302,7 @@ class PFSystem:
         self._p_ref = np.zeros((n_seg, 3))
         for i, seg in enumerate(model.segments[1:], start=1):
             ep = np.asarray(RotationMatrix2EulerParameters(R0[i]), dtype=float)
-            ep_t = 0.25 * _ep_G(ep).T @ w0[i]
+            ep_t = 0.25 * ep_G(ep).T @ w0[i]
             self._ep_ref[i], self._p_ref[i] = ep, p0[i]
             node = mbs.AddNode(eii.NodeRigidBodyEP(
                 referenceCoordinates=list(p0[i]) + list(ep), initialVelocities=list(v0[i]) + list(ep_t),
@@ -451,7 +338,7 @@ class PFSystem:
                     self._add_joint_last_held(seg, parent, child, float(q0[idx[-1]]))
                 else:
                     self._add_joint(seg, parent, child)
-        self._limits: list[_LimitElement] = []
+        self._limits: list[LimitElement] = []
         if limits_rad is not None:
             self._add_limits(limits_rad, float(limit_stiffness_nm_per_rad))
         self.limit_max_rate_rad_s = float(limit_max_rate_rad_s)
@@ -539,14 +426,14 @@ class PFSystem:
         offset = axis_rotation(axes[-1], np.array(value)).T  # child-frame coordinates of the free axes
         if joint.kind is JointKind.SPHERICAL:
             a1, a2 = axes[0], axes[1]
-            J0 = _frame_with_z(a1)[:, [1, 2, 0]]
-            J1 = offset @ _frame_with_z(a2)
+            J0 = frame_with_z(a1)[:, [1, 2, 0]]
+            J1 = offset @ frame_with_z(a2)
             m0 = mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=parent_body, localHT=exu.HT(rotation=J0, translation=centre)))
             m1 = mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=child_body, localHT=exu.HT(rotation=J1, translation=[0.0, 0.0, 0.0])))
             mbs.AddObject(eii.ObjectJointGeneric(markerNumbers=[m0, m1], constrainedAxes=[1, 1, 1, 1, 0, 0],
                                                  visualization=eii.VObjectJointGeneric(show=False)))
         elif joint.kind is JointKind.CARDAN:
-            J = _frame_with_z(axes[0])
+            J = frame_with_z(axes[0])
             m0 = mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=parent_body, localHT=exu.HT(rotation=J, translation=centre)))
             m1 = mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=child_body, localHT=exu.HT(rotation=offset @ J, translation=[0.0, 0.0, 0.0])))
             mbs.AddObject(eii.ObjectJointRevoluteZ(markerNumbers=[m0, m1], visualization=eii.VObjectJointRevoluteZ(show=False)))
@@ -563,7 +450,7 @@ class PFSystem:
             mbs.AddObject(eii.ObjectJointSpherical(markerNumbers=[m0, m1], visualization=eii.VObjectJointSpherical(show=False)))
         elif joint.kind is JointKind.REVOLUTE:
             # parent and child frames coincide at q = 0, so the axis is the same local vector on both
-            J = _frame_with_z(joint.axes[0])
+            J = frame_with_z(joint.axes[0])
             m0 = mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=parent_body, localHT=exu.HT(rotation=J, translation=centre)))
             m1 = mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=child_body, localHT=exu.HT(rotation=J, translation=[0.0, 0.0, 0.0])))
             mbs.AddObject(eii.ObjectJointRevoluteZ(markerNumbers=[m0, m1], visualization=eii.VObjectJointRevoluteZ(show=False)))
@@ -573,8 +460,8 @@ class PFSystem:
                 raise ModelError(f"{self.model.source or self.model.name}: cardan joint '{joint.name}' needs perpendicular axes")
             # ObjectJointGeneric with only rotation x constrained imposes t_y0 . t_z1 = 0:
             # y of the parent's joint frame = a1 (fixed in the parent), z of the child's = a2.
-            J0 = _frame_with_z(a1)[:, [1, 2, 0]]
-            J1 = _frame_with_z(a2)
+            J0 = frame_with_z(a1)[:, [1, 2, 0]]
+            J1 = frame_with_z(a2)
             m0 = mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=parent_body, localHT=exu.HT(rotation=J0, translation=centre)))
             m1 = mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=child_body, localHT=exu.HT(rotation=J1, translation=[0.0, 0.0, 0.0])))
             mbs.AddObject(eii.ObjectJointGeneric(markerNumbers=[m0, m1], constrainedAxes=[1, 1, 1, 1, 0, 0],
@@ -603,7 +490,7 @@ class PFSystem:
             idx = [int(j) for j in self.kin.joint_coordinate_indices(i)]
             axes = [np.asarray(a, dtype=float) for a in joint.axes]
             if joint.kind is JointKind.REVOLUTE:
-                B = _frame_with_z(axes[0])[:, [2, 0, 1]]  # x = the axis: R_rel = B Rx(q) B^T
+                B = frame_with_z(axes[0])[:, [2, 0, 1]]  # x = the axis: R_rel = B Rx(q) B^T
                 slots = [(0, idx[0], 1.0, "periodic")]
             else:
                 B = np.column_stack([axes[0], axes[1], np.cross(axes[0], axes[1])])  # Rx(q1) Ry(q2) [Rz(s q3)]
@@ -617,7 +504,7 @@ class PFSystem:
                 if j in self.held_coordinates:
                     continue
                 lo, hi = (lim[j] if sign > 0 else -lim[j, ::-1])  # range of theta_i = sign * q_j
-                lo, hi, c = _limit_window(float(lo), float(hi), kind, half)
+                lo, hi, c = limit_window(float(lo), float(hi), kind, half)
                 if lo is None:
                     if np.isfinite(lim[j]).any():
                         log.info("joint '%s': the range of '%s' cannot be enforced (too wide to tell its ends apart)",
@@ -645,7 +532,7 @@ class PFSystem:
                 obj = mbs.AddObject(eii.ObjectConnectorTorsionalSpringDamper(
                     markerNumbers=[m0, m1], springTorqueUserFunction=uf, activeConnector=False,
                     visualization=eii.VObjectConnectorTorsionalSpringDamper(show=False)))
-                self._limits.append(_LimitElement(joint.name, obj, uf, [(0, *bounds[0])], scalar=True))
+                self._limits.append(LimitElement(joint.name, obj, uf, [(0, *bounds[0])], scalar=True))
                 continue
             if joint.kind is JointKind.SPHERICAL:
                 J1 = B @ axis_rotation(ez, np.array(-centre[2]))
@@ -669,7 +556,7 @@ class PFSystem:
                 for ti, j, sign, _kind in slots:
                     lo, hi = (lim[j] if sign > 0 else -lim[j, ::-1])
                     choice.append((ti, float(lo) - centre[ti], float(hi) - centre[ti]))
-            self._limits.append(_LimitElement(joint.name, obj, uf, [(ti, b[0], b[1]) for ti, b in enumerate(bounds) if b is not None],
+            self._limits.append(LimitElement(joint.name, obj, uf, [(ti, b[0], b[1]) for ti, b in enumerate(bounds) if b is not None],
                                               branch_bounds=choice))
 
     def _coordinates_for(self, q: np.ndarray) -> np.ndarray:
@@ -707,7 +594,8 @@ class PFSystem:
     # ---------------------------------------------------------------- run
     def run(self, targets_pos: np.ndarray, targets_vel: np.ndarray, active: np.ndarray | None = None, /, *,
             frame_dt_s: float, options: IntegratorOptions = IntegratorOptions(),
-            progress: Callable[[int], None] | None = None) -> PFRun:
+            progress: Callable[[int], None] | None = None,
+            on_frames: Callable[[PFRun], None] | None = None, chunk_frames: int = 8000) -> PFRun:
         """Integrate the PF system through the measured marker trajectories.
 
         targets_pos, targets_vel: (n, k, 3) marker positions (m) and velocities (m/s) at the frame
@@ -721,6 +609,13 @@ class PFSystem:
         velocities; longer: a whole number of frames per step (the springs see the frames the
         steps end on; the frames inside a step are quintic Hermite interpolations of the step
         states q, q̇, q̈), the last step shortened to end on the last frame.
+
+        Streaming: with ``on_frames`` the frames go there as soon as the steps reach them, as
+        PFRuns of ``chunk_frames`` consecutive frames (``time_s`` says which; the last chunk may
+        be shorter, and ends at the last frame the solver reached), computed exactly as in one
+        pass; the solver keeps only the steps still needed, and the PFRun returned carries the
+        statistics with no frames. An exception raised by ``on_frames`` stops the solver and is
+        raised from here. Without it, the PFRun returned holds every frame.
         """
         pos = np.asarray(targets_pos, dtype=float)
         vel = np.asarray(targets_vel, dtype=float)
@@ -757,25 +652,41 @@ class PFSystem:
             if (n - 1) % per and not options.adaptive_step:
                 raise ValueError(f"run: {n - 1} frame intervals are not a multiple of {per} frames per step "
                                  f"(needs adaptive_step=True for the shorter last step)")
-        pos = np.where(act[..., None], pos, 0.0)
-        vel = np.where(act[..., None], vel, 0.0)
         d_over_c = np.divide(self.springs.damping_ns_per_m, self.springs.stiffness_n_per_m,
                              out=np.zeros(k), where=self.springs.stiffness_n_per_m > 0)[:, None]
 
         def rows_of(p, v):  # what the springs are set to: native offset r_M + (d/c) v_M, or [r_M, v_M]
             return (p + d_over_c * v).tolist() if self._native else np.concatenate([p, v], axis=-1).tolist()
 
-        # the rows of the frames the steps end on (nested lists: fast setters); others on demand
+        def measured(i):  # positions and velocities of frame(s) i, zero where a marker is missing
+            a = act[i][..., None]
+            return np.where(a, pos[i], 0.0), np.where(a, vel[i], 0.0)
+
+        # the rows of the frames the steps end on (nested lists: fast setters), made a block at a
+        # time; other frames on demand
         ends = np.unique(np.r_[np.arange(0, n, max(int(round(per_frame)), 1)), n - 1])
-        frame_rows = dict(zip(ends.tolist(), rows_of(pos[ends], vel[ends])))
+        frame_rows: dict[int, list] = {}
+
+        def frame_row(i):
+            row = frame_rows.get(i)
+            if row is None:
+                e = int(np.searchsorted(ends, i))
+                if e == len(ends) or ends[e] != i:  # a reduced step that ends on another frame
+                    return rows_of(*measured(i))
+                block = ends[e:e + _ROW_BLOCK]
+                frame_rows.clear()
+                frame_rows.update(zip(block.tolist(), rows_of(*measured(block))))
+                row = frame_rows[i]
+            return row
 
         def rows_between(x):  # a step that ends between frames (sub-steps, reduced steps): cubic Hermite
             i = min(max(int(math.floor(x + 1e-9)), 0), n - 2)
-            p, v = _hermite(pos[i], vel[i], pos[i + 1], vel[i + 1], x - i, frame_dt_s)
+            (p0, p1), (v0, v1) = measured(np.array([i, i + 1]))
+            p, v = hermite(p0, v0, p1, v1, x - i, frame_dt_s)
             return rows_of(p, v)
 
         # a step uses a spring only if its marker is present in every frame the step touches
-        cmiss = np.vstack([np.zeros((1, k), dtype=int), np.cumsum(~act, axis=0)])
+        cmiss = np.vstack([np.zeros((1, k), dtype=np.int32), np.cumsum(~act, axis=0, dtype=np.int32)])
         any_missing = bool(cmiss[-1].any())
         mbs = self._mbs
         springs = self._spring_objects
@@ -790,13 +701,36 @@ class PFSystem:
                     symbolic_targets[j].SetVector(row[j])
 
         state = act[0].copy()
-        set_targets(frame_rows[0])
+        set_targets(frame_row(0))
         for j in range(k):
             mbs.SetObjectParameter(springs[j], "activeConnector", bool(state[j]))
 
         sd = mbs.systemData
         record_t: list[float] = []  # times of the recorded states: t = 0, then every accepted step
-        record = _StateRecord(self._n_ode2, capacity=n_steps + 16)
+        chunk = n if on_frames is None else max(int(chunk_frames), 1)
+        record = StateRecord(self._n_ode2, capacity=min(n_steps, int(math.ceil(chunk / per_frame)) + 2) + 16)
+        eps = 1e-6 * frame_dt_s
+        flushed, accepted, failure = [0], [0], [None]
+        parts: list[PFRun] = []  # without on_frames: every frame, joined at the end
+
+        def flush(upto: int) -> None:
+            """Frames [flushed, upto) that the recorded steps reach go on; steps no later frame needs
+            are dropped."""
+            first = flushed[0]
+            t_steps = np.asarray(record_t)
+            X, Xt, Xtt, done = frames_from_steps(t_steps, record.arrays(), upto - first, frame_dt_s, self._n_ode2,
+                                                 first=first)
+            if done == 0:
+                return
+            part = self._decode(X[:done], Xt[:done], Xtt[:done], frame_dt_s, first=first)
+            flushed[0] = first + done
+            keep_from = max(int(np.searchsorted(t_steps, flushed[0] * frame_dt_s - eps, side="left")) - 1, 0)
+            record.drop_first(keep_from)
+            del record_t[:keep_from]
+            if on_frames is None:
+                parts.append(part)
+            else:
+                on_frames(part)
 
         # range-of-motion limits: a joint's limit element is on while one of its angles is within
         # `margin` (one step of travel at the largest rate) of a limit or beyond it, judged from the
@@ -842,7 +776,7 @@ class PFSystem:
         interrupted = [False]
 
         def pre_step(mbs, t):  # receives t_{n+1}: the end of the step about to be solved
-            if interrupted[0]:  # Ctrl-C: stop the solver here (False ends the simulation)
+            if interrupted[0] or failure[0] is not None:  # Ctrl-C, or on_frames failed: stop the solver here
                 return False
             if limits:  # the current state is that of the step's start, the last accepted time
                 t_start = record_t[-1] if record_t else 0.0
@@ -859,9 +793,7 @@ class PFSystem:
                     mbs.SetObjectParameter(springs[j], "activeConnector", bool(now[j]))
                 state[:] = now
             if abs(x - i) < 1e-6:
-                row = frame_rows.get(i)
-                if row is None:  # a reduced step that ends on another frame
-                    row = rows_of(pos[i], vel[i])
+                row = frame_row(i)
             else:
                 row = rows_between(x)
             set_targets(row)
@@ -873,6 +805,14 @@ class PFSystem:
         def post_step(mbs, t):  # every accepted step, and once at t = 0 after the initial accelerations
             record_t.append(t)
             record.append(sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t(), sd.GetODE2Coordinates_tt())
+            if t > 0.0:
+                accepted[0] += 1
+            upto = min(flushed[0] + chunk, n)
+            if upto < n and t >= (upto - 1) * frame_dt_s - eps and failure[0] is None:
+                try:
+                    flush(upto)
+                except BaseException as exc:  # raised from run() once Exudyn has returned
+                    failure[0] = exc
             if progress is not None:
                 frame = int(t / frame_dt_s + 0.5)
                 if frame - reported[0] >= report_every:
@@ -914,8 +854,11 @@ class PFSystem:
             raise KeyboardInterrupt
         wall = time.perf_counter() - t0
 
-        X, Xt, Xtt, completed = _frames_from_steps(np.asarray(record_t), record.arrays(), n, frame_dt_s, self._n_ode2)
-        record.release()  # the per-step states are not needed once the frames are interpolated
+        if failure[0] is not None:
+            raise failure[0]
+        wall = time.perf_counter() - t0
+        flush(n)  # the frames after the last full chunk, up to the last the solver reached
+        completed = flushed[0]
         success = success and completed == n
         if not success:
             log.warning("PF integration stopped at frame %d of %d: %s", completed, n, message)
@@ -923,13 +866,14 @@ class PFSystem:
         timer = solver.timer
         times = {name: float(getattr(timer, name)) for name in _TIMER_FIELDS if hasattr(timer, name)} if options.timing_breakdown else {}
         it = solver.it
-        run = self._decode(
-            X, Xt, Xtt, frame_dt_s, completed=completed, success=success, message=message, wall=wall, times=times,
-            newton=int(it.newtonStepsCount), jacobians=int(it.newtonJacobiCount), steps=sum(1 for t in record_t if t > 0.0),
-            step=per_frame * frame_dt_s)
         t_end = record_t[-1] if record_t else 0.0
         active_s = {e.joint: e.active_s + (t_end - e.on_since if e.active else 0.0) for e in limits}
-        return dataclasses.replace(run, limit_active_s=active_s)
+        frames = _join(parts, n, frame_dt_s, len(self.model.segments)) if on_frames is None else self._decode(
+            *(np.zeros((0, self._n_ode2)) for _ in range(3)), frame_dt_s, first=completed)
+        return dataclasses.replace(
+            frames, completed_frames=int(completed), success=bool(success), message=message, wall_time_s=float(wall),
+            solver_times_s=times, newton_iterations=int(it.newtonStepsCount), jacobian_updates=int(it.newtonJacobiCount),
+            steps=accepted[0], step_s=float(per_frame * frame_dt_s), limit_active_s=active_s)
 
     def _settings(self, n_steps: int, end_time: float, options: IntegratorOptions):
         s = exu.SimulationSettings()
@@ -958,8 +902,8 @@ class PFSystem:
         s.show.statistics = False
         return s
 
-    def _decode(self, X, Xt, Xtt, frame_dt_s, *, completed, success, message, wall, times, newton, jacobians, steps,
-                step) -> PFRun:
+    def _decode(self, X, Xt, Xtt, frame_dt_s, *, first: int = 0) -> PFRun:
+        """The segment motion of frames first ... first + len(X) - 1 from the system coordinates."""
         n = X.shape[0]
         n_seg = len(self.model.segments)
         R = np.zeros((n, n_seg, 3, 3))
@@ -969,20 +913,30 @@ class PFSystem:
             ltg = self._ltg[i]
             x, xt, xtt = X[:, ltg], Xt[:, ltg], Xtt[:, ltg]
             ep = x[:, 3:] + self._ep_ref[i]
-            G = _ep_G(ep / np.linalg.norm(ep, axis=-1, keepdims=True))
-            R[:, i] = _ep_rotation(ep)
+            G = ep_G(ep / np.linalg.norm(ep, axis=-1, keepdims=True))
+            R[:, i] = ep_rotation(ep)
             p[:, i] = x[:, :3] + self._p_ref[i]
             v[:, i], a[:, i] = xt[:, :3], xtt[:, :3]
             w[:, i] = np.einsum("nij,nj->ni", G, xt[:, 3:])
             al[:, i] = np.einsum("nij,nj->ni", G, xtt[:, 3:])
-        if completed < n:
-            for arr in (R, p, v, a, w, al):
-                arr[completed:] = np.nan
         return PFRun(
-            time_s=np.arange(n) * frame_dt_s, rotations=R, origins_m=p, velocities_m_s=v, accelerations_m_s2=a,
-            angular_velocities_rad_s=w, angular_accelerations_rad_s2=al, completed_frames=int(completed),
-            success=bool(success), message=message, wall_time_s=float(wall), solver_times_s=times,
-            newton_iterations=newton, jacobian_updates=jacobians, steps=steps, step_s=float(step))
+            time_s=(first + np.arange(n)) * frame_dt_s, rotations=R, origins_m=p, velocities_m_s=v,
+            accelerations_m_s2=a, angular_velocities_rad_s=w, angular_accelerations_rad_s2=al, completed_frames=n,
+            success=True, message="", wall_time_s=0.0)
+
+
+def _join(parts: Sequence[PFRun], n: int, frame_dt_s: float, n_seg: int) -> PFRun:
+    """One PFRun of n frames from consecutive parts; frames no part reached are NaN."""
+    shapes = {"rotations": (n_seg, 3, 3), "origins_m": (n_seg, 3), "velocities_m_s": (n_seg, 3),
+              "accelerations_m_s2": (n_seg, 3), "angular_velocities_rad_s": (n_seg, 3),
+              "angular_accelerations_rad_s2": (n_seg, 3)}
+    done = sum(p.n_frames for p in parts)
+    out = {}
+    for name, shape in shapes.items():
+        arrays = [getattr(p, name) for p in parts] + ([np.full((n - done,) + shape, np.nan)] if done < n else [])
+        out[name] = np.concatenate(arrays) if len(arrays) > 1 else arrays[0]
+    return PFRun(time_s=np.arange(n) * frame_dt_s, completed_frames=done, success=done == n, message="",
+                 wall_time_s=0.0, **out)
 
 
 def _spring_force(target):
@@ -999,72 +953,6 @@ def _spring_force(target):
 # --------------------------------------------------------------------------------------------
 # Range-of-motion limits
 # --------------------------------------------------------------------------------------------
-class _LimitElement:
-    """The limit connector of one joint and its switching state. ``bounds``: (i, lower, upper)
-    of every limited theta'_i (the connector's Tait-Bryan angle i, centred; +-inf = no side)."""
-
-    __slots__ = ("joint", "obj", "uf", "bounds", "scalar", "branches", "branch", "active", "next_check", "on_since",
-                 "active_s")
-
-    def __init__(self, joint: str, obj, uf, bounds, *, scalar: bool = False, branch_bounds=None):
-        self.joint, self.obj, self.uf, self.bounds, self.scalar = joint, obj, uf, bounds, scalar
-        # a spherical joint with three free angles: (i, lower, upper) of all three centred angles,
-        # to tell on which branch of the sequence it is; None: always the principal one
-        self.branches = branch_bounds
-        self.branch = 1.0  # +1 principal (|middle angle| <= 90 deg), -1 the other one
-        self.active, self.next_check, self.on_since, self.active_s = False, -math.inf, 0.0, 0.0
-
-    def distance(self, theta) -> float:
-        """Smallest distance (rad) of a limited angle to its nearest limit (< 0 beyond it);
-        ``theta``: the connector's Rotation output (a scalar for a torsional spring-damper). A
-        spherical joint's angles are taken on the branch that lies within the ranges, or nearer
-        them, as exubio.kinematics reports them (``branch``, which the torque function reads)."""
-        theta = (theta,) if self.scalar else theta.tolist()  # Python floats: 3x faster than numpy scalars
-        if not self.branches:
-            return self._distance(theta, self.bounds)
-        other = [_wrap_pi(theta[0] + math.pi), math.copysign(math.pi, theta[1]) - theta[1], _wrap_pi(theta[2] + math.pi)]
-        self.branch = -1.0 if self._distance(other, self.branches) > self._distance(theta, self.branches) else 1.0
-        return self._distance(theta if self.branch > 0 else other, self.bounds)
-
-    @staticmethod
-    def _distance(theta, bounds) -> float:
-        d = math.inf
-        for i, lo, hi in bounds:
-            x = theta[i]
-            if x - lo < d:
-                d = x - lo
-            if hi - x < d:
-                d = hi - x
-        return d
-
-
-def _limit_window(lo: float, hi: float, kind: str, half: float):
-    """(lower, upper, centre) of a range [lo, hi] of a connector angle measured from ``centre``,
-    or (None, None, 0) if it cannot be enforced. Exudyn's angles are principal values: the first
-    and last (``periodic``) in (-pi, pi], a spherical joint's middle angle (``middle``) in
-    [-pi/2, pi/2] (the branch exubio.kinematics reports), a cardan joint's middle angle
-    (``window``, shiftable) within pi/2 of its centre. The centre is the middle of the range, or a
-    quarter window inside a one-sided limit, so the angle wraps as far as possible beyond the
-    limits; a range that leaves less than _LIMIT_WRAP_TOLERANCE_RAD beyond either end is not
-    enforced (nor is a middle-angle limit at or beyond +-90 deg, which that angle never reaches)."""
-    if kind == "middle":
-        lo = lo if lo > -half else -math.inf
-        hi = hi if hi < half else math.inf
-        return (lo, hi, 0.0) if (math.isfinite(lo) or math.isfinite(hi)) else (None, None, 0.0)
-    window = 4.0 * half if kind == "periodic" else 2.0 * half
-    if math.isfinite(lo) and math.isfinite(hi):
-        if hi - lo > window - 2.0 * _LIMIT_WRAP_TOLERANCE_RAD:
-            return None, None, 0.0
-        c = 0.5 * (lo + hi)
-    elif math.isfinite(hi):
-        c = hi - 0.25 * window
-    elif math.isfinite(lo):
-        c = lo + 0.25 * window
-    else:
-        return None, None, 0.0
-    return lo - c, hi - c, c
-
-
 def _limit_torque_1d(k_lim: float, lower: float, upper: float):
     """Symbolic springTorqueUserFunction of a torsional limit spring: k_lim times the angle's
     excursion beyond [lower, upper] (a spring torque: Exudyn applies -torque about the axis to the
@@ -1100,7 +988,7 @@ def _limit_torque(k_lim: float, bounds, three_angles: bool):
     def limit_torque(mbs, t, itemNumber, displacement, rotation, velocity, angularVelocity, stiffness, damping,
                      rotJ0, rotJ1, offset):
         # offset[0] = +1: the joint is on the principal branch of its sequence; -1: on the other one
-        # (the pre-step sets it: _LimitElement.distance), whose angles are (t0 + pi, +-pi - t1,
+        # (the pre-step sets it: LimitElement.distance), whose angles are (t0 + pi, +-pi - t1,
         # t2 + pi) and whose middle angle runs against the principal one (d t1'/d t1 = -1)
         f = offset[0]
         h = 0.5 * (1.0 + f)

@@ -31,7 +31,6 @@ ReconstructionError naming the time and the worst marker.
 """
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 import time
@@ -43,7 +42,7 @@ import numpy as np
 from exubio.backend.exudyn_system import IntegratorOptions, PFSystem, SpringSet
 from exubio.errors import ReconstructionError
 from exubio.kinematics import Kinematics
-from exubio.methods.common import assemble, tracked_points
+from exubio.methods.common import CHUNK_FRAMES, ChunkSink, Collector, assemble, target_chunk, tracked_points
 from exubio.methods.constraints import project_on_constraints
 from exubio.methods.ls import RATES_REGULARISATION, Limits, LSOptions, held_mask, solve_positions, solve_rates
 from exubio.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD
@@ -152,6 +151,18 @@ def reconstruct_pf(model: Model, protocol: Protocol, targets: MarkerTargets, /, 
                    options: PFOptions = PFOptions(),
                    progress: Callable[[int], None] | None = None) -> Reconstruction:
     """Reconstruct a trial with the potential-field method."""
+    chunks = Collector()
+    timings, info = stream_pf(model, protocol, targets, chunks, options=options, progress=progress)
+    return chunks.reconstruction(targets, timings_s=timings, info=info)
+
+
+def stream_pf(model: Model, protocol: Protocol, targets: MarkerTargets, sink: ChunkSink, /, *,
+              options: PFOptions = PFOptions(), progress: Callable[[int], None] | None = None,
+              chunk_frames: int = CHUNK_FRAMES) -> tuple[dict[str, float], dict]:
+    """Reconstruct a trial with the potential-field method, handing the result to ``sink`` in chunks
+    of ``chunk_frames`` frames as the integration reaches them (one integration through the whole
+    trial; exubio.methods.common). A divergence is raised as soon as a chunk shows it. Returns
+    (timings_s, info)."""
     t0 = time.perf_counter()
     if targets.n_frames < 2:
         raise ReconstructionError(f"{targets.source or 'trial'}: the PF method needs at least 2 frames")
@@ -188,44 +199,89 @@ def reconstruct_pf(model: Model, protocol: Protocol, targets: MarkerTargets, /, 
         if progress:
             progress(n)
 
+    frames = _Frames(kin, points, targets, q0, held, options, sink, dt)
     run = system.run(targets.positions_m, targets.velocities_m_s, targets.present, frame_dt_s=dt, options=integ,
-                     progress=tick)
-    t3 = time.perf_counter()
+                     progress=tick, on_frames=frames, chunk_frames=chunk_frames)
     if progress and run.completed_frames > done[0]:
         progress(run.completed_frames - done[0])
     if not run.success:
-        _raise_failure(kin, points, targets, run)
-    q = kin.coordinates_from_rotations(run.rotations)
-    q = np.unwrap(q, axis=0)
-    q -= 2.0 * np.pi * np.round((q[0] - q0) / (2.0 * np.pi))  # same branch as the start posture
-    qd, qdd = kin.coordinate_rates(q, run.angular_velocities_rad_s, run.angular_accelerations_rad_s2)
-    raw_g = raw_gqd = float("nan")
-    if options.project_constraints:
-        q, qd, qdd, (raw_g, raw_gqd) = project_on_constraints(kin, q, qd, qdd, held=held)
-    t4 = time.perf_counter()
-    recon = assemble(kin, points, targets, method="pf", q=q, qd=qd, qdd=qdd,
-                     status=np.full(targets.n_frames, FrameStatus.CONVERGED), timings_s={}, info={})
-    _check_divergence(recon, options.divergence_deflection_m, targets)
-    t5 = time.perf_counter()
-    timings = {"equilibrium": t1 - t0, "build": t2 - t1, "integration": t3 - t2, "recovery": t4 - t3,
-               "residuals": t5 - t4, "total": t5 - t0}
-    with np.errstate(all="ignore"):
-        mean_defl = float(np.nanmean(recon.residuals_m))
+        _raise_failure(kin, points, targets, run, frames.last_q)
+    total = time.perf_counter() - t0 - frames.sink_s  # the method's own time, not the sink's
+    timings = {"equilibrium": t1 - t0, "build": t2 - t1, "integration": total - (t2 - t0) - frames.busy_s,
+               "recovery": frames.recovery_s, "residuals": frames.residuals_s, "total": total}
     info = {
-        "mean_spring_deflection_mm": mean_defl * 1000.0,
+        "mean_spring_deflection_mm": frames.mean_deflection_m() * 1000.0,
         "steps": run.steps,
         "newton_iterations_per_step": run.newton_iterations / max(run.steps, 1),
         "jacobian_updates_per_step": run.jacobian_updates / max(run.steps, 1),
         "exudyn_cpu_times_s": dict(run.solver_times_s),
         "gravity": options.gravity,
         "step_s": run.step_s,
-        "exudyn_max_abs_g": raw_g,  # before the final projection (NaN without it)
-        "exudyn_max_abs_G_qd": raw_gqd,
+        "exudyn_max_abs_g": frames.raw_g,  # before the final projection (NaN without it)
+        "exudyn_max_abs_G_qd": frames.raw_gqd,
         "options": options.__dict__,
         "initial_q_rad": q0.tolist(),
         "limit_active_s": dict(run.limit_active_s),  # per joint with a range: time its limit element was on
     }
-    return dataclasses.replace(recon, timings_s=timings, info=info)
+    return timings, info
+
+
+class _Frames:
+    """Receives the segment motion from PFSystem.run chunk by chunk and hands the Reconstruction
+    chunks to the sink: joint coordinates on the start posture's branch (unwrapped across chunks),
+    their rates, the projection on the constraints, model points and residuals, the divergence check."""
+
+    def __init__(self, kin: Kinematics, points, targets: MarkerTargets, q0: np.ndarray, held: np.ndarray,
+                 options: PFOptions, sink: ChunkSink, dt: float):
+        self.kin, self.points, self.targets, self.q0, self.held, self.dt = kin, points, targets, q0, held, dt
+        self.options, self.sink = options, sink
+        self.last_raw = self.last_q = self.shift = None
+        self.raw_g = self.raw_gqd = float("nan")
+        self.sum_res, self.n_res = 0.0, 0
+        self.sink_s = self.recovery_s = self.residuals_s = 0.0
+
+    @property
+    def busy_s(self) -> float:
+        return self.recovery_s + self.residuals_s
+
+    def __call__(self, run) -> None:
+        ta = time.perf_counter()
+        kin = self.kin
+        raw = kin.coordinates_from_rotations(run.rotations)
+        if self.last_raw is None:
+            q = np.unwrap(raw, axis=0)
+            self.shift = 2.0 * np.pi * np.round((q[0] - self.q0) / (2.0 * np.pi))  # same branch as the start posture
+        else:  # continue the unwrapping of the frames before
+            q = np.unwrap(np.vstack([self.last_raw[None], raw]), axis=0)[1:] + (self.last_unwrapped - self.last_raw)
+        self.last_raw, self.last_unwrapped = raw[-1], q[-1]
+        q = q - self.shift
+        qd, qdd = kin.coordinate_rates(q, run.angular_velocities_rad_s, run.angular_accelerations_rad_s2)
+        if self.options.project_constraints:
+            q, qd, qdd, (g, gqd) = project_on_constraints(kin, q, qd, qdd, held=self.held)
+            self.raw_g, self.raw_gqd = _nanmax(self.raw_g, g), _nanmax(self.raw_gqd, gqd)
+        tb = time.perf_counter()
+        start = int(round(run.time_s[0] / self.dt))  # the chunk's first frame
+        part = target_chunk(self.targets, start, start + run.n_frames)
+        recon = assemble(kin, self.points, part, method="pf", q=q, qd=qd, qdd=qdd,
+                         status=np.full(part.n_frames, FrameStatus.CONVERGED), timings_s={}, info={})
+        _check_divergence(recon, self.options.divergence_deflection_m, part)
+        with np.errstate(all="ignore"):
+            ok = ~np.isnan(recon.residuals_m)
+            self.sum_res += float(recon.residuals_m[ok].sum())
+            self.n_res += int(ok.sum())
+        self.last_q = q[-1]
+        tc = time.perf_counter()
+        self.sink(recon)
+        self.recovery_s += tb - ta
+        self.residuals_s += tc - tb
+        self.sink_s += time.perf_counter() - tc
+
+    def mean_deflection_m(self) -> float:
+        return self.sum_res / self.n_res if self.n_res else float("nan")
+
+
+def _nanmax(a: float, b: float) -> float:
+    return b if not np.isfinite(a) else (a if not np.isfinite(b) else max(a, b))
 
 
 def _worst(kin: Kinematics, points, targets: MarkerTargets, q: np.ndarray, frame: int) -> tuple[str, float]:
@@ -237,10 +293,9 @@ def _worst(kin: Kinematics, points, targets: MarkerTargets, q: np.ndarray, frame
     return points.names[j], float(d[j])
 
 
-def _raise_failure(kin, points, targets, run) -> None:
+def _raise_failure(kin, points, targets, run, q_last: np.ndarray | None) -> None:
     last = max(run.completed_frames - 1, 0)
-    q_last = kin.coordinates_from_rotations(run.rotations[last])
-    name, defl = _worst(kin, points, targets, q_last, last)
+    name, defl = _worst(kin, points, targets, q_last, last) if q_last is not None else ("none", float("nan"))
     raise ReconstructionError(
         f"{targets.source or 'trial'}: the PF solver stopped at t = {targets.time_s[min(last + 1, targets.n_frames - 1)]:.3f} s "
         f"(frame {last + 1} of {targets.n_frames}): {run.message.strip() or 'no convergence'}; worst marker {name} "
