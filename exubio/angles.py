@@ -283,10 +283,25 @@ def humerothoracic_elevation(model: Model, q: np.ndarray, /, *, kinematics: Kine
 
 def isb_table(model: Model, q: np.ndarray, /, *, kinematics: Kinematics | None = None
               ) -> tuple[tuple[str, ...], np.ndarray]:
-    """The ISB angles of q (n, m) as one table: (column names of ISB_COLUMNS, angles (n, 15) rad)."""
-    ang = isb_angles(model, q, kinematics=kinematics)
+    """The ISB angles of q (n, m) as one table: (column names of ISB_COLUMNS, angles (n, 15) rad),
+    unwrapped along the frames; computed ISB_BLOCK_FRAMES frames at a time (the segment frames of a
+    whole long trial would take ~2 kB per frame)."""
     names = tuple(c for joint in _JOINTS for c in ISB_COLUMNS[joint])
-    return names, np.concatenate([ang[joint] for joint in _JOINTS], axis=-1)
+    q = np.asarray(q, dtype=float)
+    if q.ndim == 1:
+        ang = isb_angles(model, q, kinematics=kinematics)
+        return names, np.concatenate([ang[joint] for joint in _JOINTS], axis=-1)
+    kin = kinematics or Kinematics(model)
+    table = np.empty((q.shape[0], len(names)))
+    for a in range(0, q.shape[0], ISB_BLOCK_FRAMES):
+        ang = isb_angles(model, q[a:a + ISB_BLOCK_FRAMES], kinematics=kin, unwrap=False)
+        table[a:a + ISB_BLOCK_FRAMES] = np.concatenate([ang[joint] for joint in _JOINTS], axis=-1)
+    if q.shape[0] > 1:  # each joint's angles, as isb_angles unwraps them
+        table = np.unwrap(table, axis=0)
+    return names, table
+
+
+ISB_BLOCK_FRAMES = 8192
 
 
 def measured_isb_joints(model: Model, not_solved: set[str] | frozenset[str], /) -> list[str]:

@@ -103,35 +103,9 @@ def determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present: np.nd
     qs = q[sel]
     ok = np.isfinite(qs).all(axis=1)
     gain = np.full((len(sel), m), np.nan)
-    if ok.any():
-        qf = qs[ok]
-        w = np.where(present[sel][ok], weights[None, :], 0.0)  # (b, k)
-        J = kin.point_jacobian(qf, points)[..., free]  # (b, k, 3, f)
-        b, k = w.shape
-        J = J.reshape(b, 3 * k, len(free))
-        w3 = np.repeat(w, 3, axis=1)
-        G = kin.G(qf)[..., free]  # (b, 2, f)
-        _, _, Vt = np.linalg.svd(G)
-        N = np.swapaxes(Vt[:, G.shape[1]:, :], 1, 2)  # (b, f, f - 2): null space of G
-        A = J @ N
-        M = np.swapaxes(A, 1, 2) @ (A * w3[..., None])
-        S = np.swapaxes(A, 1, 2) @ (A * (w3**2)[..., None])
-        Minv = np.linalg.pinv(M, rcond=1e-12, hermitian=True)
-        cov = N @ Minv @ S @ Minv @ np.swapaxes(N, 1, 2)
-        diag = np.einsum("bii->bi", cov)
-        # pinv drops directions no marker sees: those coordinates are undetermined (infinite gain)
-        rank = np.linalg.matrix_rank(M, hermitian=True, rtol=1e-12)
-        blind = rank < M.shape[-1]
-        g = np.degrees(np.sqrt(np.maximum(diag, 0.0))) / 1000.0
-        if blind.any():
-            # the coordinates the null direction of M moves
-            evals, evecs = np.linalg.eigh(M[blind])
-            null = evals <= 1e-12 * evals[..., -1:]  # (nb, f-2): directions no marker sees
-            moved = (np.abs(np.einsum("bfr,brs->bfs", N[blind], evecs)) * null[:, None, :]).max(axis=2) > 1e-6
-            g[blind] = np.where(moved, np.inf, g[blind])
-        full = np.full((int(ok.sum()), m), np.nan)
-        full[:, free] = g
-        gain[ok] = full
+    for a in range(0, len(sel), BLOCK_FRAMES):  # blocks bound the per-frame matrices on long trials
+        part = slice(a, a + BLOCK_FRAMES)
+        gain[part] = _gains(kin, points, qs[part], ok[part], present[sel[part]], weights, free, m)
     # spread to every frame (nearest computed frame)
     idx = np.clip(np.round(np.arange(n) / max(int(every), 1)).astype(int), 0, len(sel) - 1)
     gain_all = gain[idx]
@@ -145,3 +119,44 @@ def determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present: np.nd
             gimbal[:, idx[0]] |= near
             gimbal[:, idx[2]] |= near
     return Determinacy(tuple(names), gain_all, und, tuple(names[j] for j in np.flatnonzero(excl)), gimbal)
+
+
+BLOCK_FRAMES = 2048  # frames whose noise gains are computed together (their matrices: ~60 kB per frame)
+
+
+def _gains(kin: Kinematics, points: PointSet, qs: np.ndarray, ok: np.ndarray, present: np.ndarray,
+           weights: np.ndarray, free: np.ndarray, m: int) -> np.ndarray:
+    """Noise gains (b, m) of the frames qs (b, m); NaN where ``ok`` is False and for coordinates
+    not in ``free``."""
+    gain = np.full((qs.shape[0], m), np.nan)
+    if not ok.any():
+        return gain
+    qf = qs[ok]
+    w = np.where(present[ok], weights[None, :], 0.0)  # (b, k)
+    J = kin.point_jacobian(qf, points)[..., free]  # (b, k, 3, f)
+    b, k = w.shape
+    J = J.reshape(b, 3 * k, len(free))
+    w3 = np.repeat(w, 3, axis=1)
+    G = kin.G(qf)[..., free]  # (b, 2, f)
+    _, _, Vt = np.linalg.svd(G)
+    N = np.swapaxes(Vt[:, G.shape[1]:, :], 1, 2)  # (b, f, f - 2): null space of G
+    A = J @ N
+    M = np.swapaxes(A, 1, 2) @ (A * w3[..., None])
+    S = np.swapaxes(A, 1, 2) @ (A * (w3**2)[..., None])
+    Minv = np.linalg.pinv(M, rcond=1e-12, hermitian=True)
+    cov = N @ Minv @ S @ Minv @ np.swapaxes(N, 1, 2)
+    diag = np.einsum("bii->bi", cov)
+    # pinv drops directions no marker sees: those coordinates are undetermined (infinite gain)
+    rank = np.linalg.matrix_rank(M, hermitian=True, rtol=1e-12)
+    blind = rank < M.shape[-1]
+    g = np.degrees(np.sqrt(np.maximum(diag, 0.0))) / 1000.0
+    if blind.any():
+        # the coordinates the null direction of M moves
+        evals, evecs = np.linalg.eigh(M[blind])
+        null = evals <= 1e-12 * evals[..., -1:]  # (nb, f-2): directions no marker sees
+        moved = (np.abs(np.einsum("bfr,brs->bfs", N[blind], evecs)) * null[:, None, :]).max(axis=2) > 1e-6
+        g[blind] = np.where(moved, np.inf, g[blind])
+    full = np.full((int(ok.sum()), m), np.nan)
+    full[:, free] = g
+    gain[ok] = full
+    return gain

@@ -94,6 +94,19 @@ def reconstruct(model: Model, protocol: Protocol, targets: MarkerTargets, /, *, 
     return run(model, protocol, targets, options=spec.make_options(options), progress=progress)
 
 
+def stream_reconstruct(model: Model, protocol: Protocol, targets: MarkerTargets, sink: Callable[[Reconstruction], None],
+                       /, *, method: Method | str = Method.PF, progress: Callable[[int], None] | None = None,
+                       chunk_frames: int | None = None, **options: Any) -> tuple[dict[str, float], dict[str, Any]]:
+    """Run one method handing its result to ``sink`` in chunks (bounded memory on trials of any
+    length: exubio.methods.common); returns the method's (timings_s, info)."""
+    from exubio.methods import method_spec
+    from exubio.methods.common import CHUNK_FRAMES
+
+    spec = method_spec(Method.parse(method).value)
+    return spec.load_stream()(model, protocol, targets, sink, options=spec.make_options(options), progress=progress,
+                              chunk_frames=chunk_frames or CHUNK_FRAMES)
+
+
 def output_stem(trial_path: str | Path, method: Method | str) -> str:
     return f"{Path(trial_path).stem}.{Method.parse(method).value}"
 
@@ -102,11 +115,12 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
                   metadata: dict[str, Any], summary_data: dict[str, Any],
                   undetermined: np.ndarray | None = None,
                   isb: tuple[tuple[str, ...], np.ndarray] | None = None,
-                  isb_comments: tuple[str, ...] = ()) -> dict[str, Path]:
+                  isb_comments: tuple[str, ...] = (), streamed: dict[str, Any] | None = None) -> dict[str, Path]:
     """Write <stem>.csv, .mot, .npz and .summary.json into out_dir, each atomically, and with
     ``isb`` (column names, angles (n, 15) rad) the ISB angles as <stem>.isb.csv (degrees). Coordinates
     that are not measurements (held, locked, undetermined for the trial) are named in the .mot
-    header and summary.json; ``undetermined`` (n, m) per frame goes into the .npz."""
+    header and summary.json; ``undetermined`` (n, m) per frame goes into the .npz; ``streamed``:
+    arrays the reconstruction left on disk (exubio.io.streamed), copied into the .npz."""
     out = Path(out_dir)
     paths = {
         "csv": out / f"{stem}.csv",
@@ -129,7 +143,7 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
         results.write_angles_csv(paths["isb"], recon.time_s, isb[0], isb[1], comments=isb_comments)
     results.write_mot(paths["mot"], recon.time_s, recon.coordinate_names, recon.q_rad, name=stem, notes=notes)
     results.write_npz(paths["npz"], recon, metadata=metadata,
-                      extra_arrays=None if undetermined is None else {"undetermined": undetermined})
+                      extra_arrays=None if undetermined is None else {"undetermined": undetermined}, streamed=streamed)
     results.write_json(paths["summary"], summary_data)
     return paths
 
@@ -160,31 +174,51 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
                      method_options: dict[str, dict[str, Any]] | None = None,
                      summary_extra: dict[str, Any] | None = None,
                      progress_factory: Callable[[str, int], Callable[[int], None]] | None = None,
-                     calibration: dict[str, Any] | None = None, static_reference: Any = None
-                     ) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
+                     calibration: dict[str, Any] | None = None, static_reference: Any = None,
+                     chunk_frames: int | None = None) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
     """Everything ``exubio reconstruct`` does for one trial; returns (reconstruction, paths, summary)
     per method. Every method runs first; then the trial is assessed (label checks, determinacy,
     range limits, PF-LS agreement, ``calibration``: the calibration report dict) and every summary
     carries its quality verdict. Refuses (InputError) to replace earlier results unless
-    ``overwrite``."""
-    from exubio.angles import ANGLE_NAMES, ISB_SEQUENCES, isb_table, measured_isb_joints
-    from exubio.assess import assess_trial, trial_label_findings
+    ``overwrite``. Bounded memory: each method streams its result in chunks of ``chunk_frames``
+    (exubio.io.streamed), the model points going to disk as they come; the reconstructions
+    returned hold no model points (``model_points_m`` None: they are in the .npz)."""
+    from contextlib import ExitStack
+
+    from exubio.io.streamed import StreamedReconstruction
 
     methods = [Method.parse(m) for m in methods]
     stems = [output_stem(trial_path, m) for m in methods]
     results.prepare_output_dir(out_dir, stems, overwrite=overwrite)
     inputs = load_inputs(trial_path, model_path=model_path, protocol_path=protocol_path,
                          body_mass_kg=body_mass_kg, model=model)
-    recons = []
-    for method in methods:
+    with ExitStack() as parts:  # the streamed model points' part files go, whatever happens
+        return _reconstruct_streamed(inputs, trial_path, out_dir, methods, stems, parts, StreamedReconstruction,
+                                     method_options=method_options, summary_extra=summary_extra,
+                                     progress_factory=progress_factory, calibration=calibration,
+                                     static_reference=static_reference, chunk_frames=chunk_frames)
+
+
+def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, stems, parts, sink_type, /, *,
+                          method_options, summary_extra, progress_factory, calibration, static_reference,
+                          chunk_frames) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
+    from exubio.angles import ANGLE_NAMES, ISB_SEQUENCES, isb_table, measured_isb_joints
+    from exubio.assess import assess_trial, trial_label_findings
+
+    recons, sinks = [], []
+    for method, stem in zip(methods, stems):
         progress = progress_factory(method.value, inputs.targets.n_frames) if progress_factory else None
         opts = (method_options or {}).get(method.value, {})
-        recons.append(reconstruct(inputs.model, inputs.protocol, inputs.targets, method=method, progress=progress, **opts))
+        sink = parts.enter_context(sink_type(out_dir, stem, inputs.targets, inputs.model.coordinate_names))
+        timings, info = stream_reconstruct(inputs.model, inputs.protocol, inputs.targets, sink, method=method,
+                                           progress=progress, chunk_frames=chunk_frames, **opts)
+        recons.append(sink.reconstruction(timings_s=timings, info=info))
+        sinks.append(sink)
     findings = trial_label_findings(inputs.model, inputs.protocol, inputs.targets, reference=static_reference)
     assessment = assess_trial(inputs.model, inputs.protocol, inputs.targets, recons, label_findings=findings,
                               calibration=calibration)
     out = []
-    for method, stem, recon in zip(methods, stems, recons):
+    for method, stem, recon, sink in zip(methods, stems, recons, sinks):
         meta = run_metadata(inputs, trial_path, method)
         extra = {"unused_trial_labels": _unused(inputs), **(summary_extra or {})}
         if isinstance(extra.get("calibration"), dict):  # private entries (the static's distances) stay out
@@ -208,7 +242,8 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
         summ = summary(recon, source=str(trial_path), extra=extra)
         paths = write_outputs(recon, out_dir, stem, metadata=meta, summary_data=summ,
                               undetermined=assessment.determinacy[recon.method].undetermined, isb=isb,
-                              isb_comments=isb_header(extra["isb_angles"], Path(trial_path).name, method.value))
+                              isb_comments=isb_header(extra["isb_angles"], Path(trial_path).name, method.value),
+                              streamed={"model_points_m": sink.model_points})
         out.append((recon, paths, summ))
     return out
 

@@ -358,7 +358,9 @@ class Reconstruction:
     """Joint kinematics of one trial by one method.
 
     q_rad, qd_rad_s, qdd_rad_s2: (n_frames, n_coordinates).
-    model_points_m: (n_frames, n_markers, 3) model points R_i at the reconstructed q.
+    model_points_m: (n_frames, n_markers, 3) model points R_i at the reconstructed q; None in a
+                    reconstruction streamed to its result files (exubio.io.streamed): they are
+                    in its .npz.
     measured_m:     (n_frames, n_markers, 3) the targets the method tracked (NaN in gaps).
     residuals_m:    (n_frames, n_markers) |R_i - M_i|, NaN where the marker was missing.
     constraint:     (n_frames, 2) ellipsoid constraint g (dimensionless).
@@ -375,7 +377,7 @@ class Reconstruction:
     qd_rad_s: np.ndarray
     qdd_rad_s2: np.ndarray
     marker_names: tuple[str, ...]
-    model_points_m: np.ndarray
+    model_points_m: np.ndarray | None
     measured_m: np.ndarray
     residuals_m: np.ndarray
     constraint: np.ndarray

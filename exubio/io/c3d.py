@@ -57,8 +57,11 @@ def read_c3d(path: str | os.PathLike, /) -> Trajectories:
     else:  # more frames than the 16-bit header, and so ezc3d, counts
         points, residuals = _read_point_block(path, c3d, n_long)
     params = c3d["parameters"]["POINT"]
+    header_rate = c3d["header"]["points"]["frame_rate"]
+    del c3d  # ezc3d's per-sample C++ objects: gone before the arrays below are made
+    _release_freed_heap()
     unit = _units(path, params)
-    rate = _rate(path, params, c3d["header"]["points"]["frame_rate"])
+    rate = _rate(path, params, header_rate)
     raw_labels = _labels(path, params, points.shape[1])
     positions = _positions(points, residuals) * METRES_PER_UNIT[unit.split()[0]]
     keep, labels, ignored = _select_markers(path, raw_labels)
@@ -85,6 +88,21 @@ def _open(path: Path) -> Any:
         return ezc3d.c3d(str(path))
     except Exception as exc:  # ezc3d raises OSError/RuntimeError/ValueError from C++
         raise InputError(f"{path}: not a readable C3D file ({type(exc).__name__}: {exc})") from exc
+
+
+def _release_freed_heap() -> None:
+    """Give the C heap ezc3d freed back to the system. ezc3d holds every sample as a small C++
+    object (~4 kB per frame of 22 markers); freed, they stay in the process's heap (glibc keeps
+    fragmented small blocks), which measured 106 MB after reading a 24,000-frame file and 18 MB
+    after ``malloc_trim``. Elsewhere than glibc this does nothing."""
+    import ctypes
+    import ctypes.util
+
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        libc.malloc_trim(0)
+    except (OSError, AttributeError):  # not glibc
+        pass
 
 
 def _check_not_truncated(path: Path, n_read: int) -> None:

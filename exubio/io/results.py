@@ -16,6 +16,7 @@ import logging
 import math
 import os
 import secrets
+import zipfile
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
@@ -170,6 +171,9 @@ def _check_angles(path: Path, time_s: np.ndarray, names: Sequence[str], q_rad: n
     return time, names, q
 
 
+TABLE_BLOCK_ROWS = 20000  # text tables are formatted and written this many rows at a time
+
+
 def _table_text(time: np.ndarray, q_deg: np.ndarray, sep: str) -> str:
     if time.shape[0] == 0:
         return ""
@@ -177,6 +181,19 @@ def _table_text(time: np.ndarray, q_deg: np.ndarray, sep: str) -> str:
     fmt = [_TIME_FORMAT] + [_ANGLE_FORMAT] * q_deg.shape[1]
     np.savetxt(buf, np.column_stack([time, q_deg]), fmt=fmt, delimiter=sep)
     return buf.getvalue()
+
+
+def _write_table(path: Path, head: str, time: np.ndarray, q_rad: np.ndarray, sep: str) -> Path:
+    """``head`` then the rows (time, degrees), formatted a block of rows at a time (a long trial's
+    table is never one string in memory)."""
+    def writer(tmp: Path) -> None:
+        with open(tmp, "w", encoding="utf-8", newline="") as fh:
+            fh.write(head)
+            for a in range(0, time.shape[0], TABLE_BLOCK_ROWS):
+                b = min(a + TABLE_BLOCK_ROWS, time.shape[0])
+                fh.write(_table_text(time[a:b], np.degrees(q_rad[a:b]), sep))
+
+    return atomic_write(path, writer)
 
 
 def write_angles_csv(
@@ -189,8 +206,7 @@ def write_angles_csv(
     path = Path(path)
     time, names, q = _check_angles(path, time_s, coordinate_names, q_rad)
     head = "".join(f"# {c}\n" for c in comments)
-    text = head + ",".join(("time_s",) + names) + "\n" + _table_text(time, np.degrees(q), ",")
-    return _write_text(path, text)
+    return _write_table(path, head + ",".join(("time_s",) + names) + "\n", time, q, ",")
 
 
 def read_angles_csv(path: str | os.PathLike, /) -> tuple[np.ndarray, tuple[str, ...], np.ndarray]:
@@ -232,7 +248,7 @@ def write_mot(
         f"{name}\nversion=1\nnRows={time.shape[0]}\nnColumns={len(names) + 1}\n"
         f"inDegrees=yes\n" + "".join(f"{n}\n" for n in notes) + "endheader\n" + "\t".join(("time",) + names) + "\n"
     )
-    return _write_text(path, header + _table_text(time, np.degrees(q), "\t"))
+    return _write_table(path, header, time, q, "\t")
 
 
 def read_mot(path: str | os.PathLike, /) -> tuple[np.ndarray, tuple[str, ...], np.ndarray]:
@@ -313,13 +329,23 @@ _NPZ_ARRAYS = (
 
 
 def write_npz(path: str | os.PathLike, reconstruction: Reconstruction, /, *, metadata: Mapping[str, Any],
-              extra_arrays: Mapping[str, np.ndarray] | None = None) -> Path:
+              extra_arrays: Mapping[str, np.ndarray] | None = None, streamed: Mapping[str, Any] | None = None) -> Path:
     """Every array of ``reconstruction`` (names as string arrays, gaps as three parallel arrays,
     timings/info as JSON) plus ``metadata`` JSON-encoded in the string entry ``metadata_json``,
     and ``extra_arrays`` (e.g. ``undetermined``: (n, m) bool, coordinates the markers do not
-    determine in that frame). Uncompressed, loadable with ``np.load(path)`` (no pickle)."""
+    determine in that frame). Uncompressed, loadable with ``np.load(path)`` (no pickle), the same
+    layout as ``np.savez``. ``streamed``: arrays the reconstruction does not hold in memory (e.g.
+    ``model_points_m`` of exubio.io.streamed), as objects with ``shape``, ``dtype``, ``complete``
+    and ``blocks()`` (their rows in order), copied into the archive a block at a time."""
     rec = reconstruction
-    arrays: dict[str, np.ndarray] = {key: np.asarray(getattr(rec, key)) for key in _NPZ_ARRAYS}
+    streamed = dict(streamed or {})
+    for key, source in streamed.items():
+        if key not in _NPZ_ARRAYS or getattr(rec, key) is not None:
+            raise ValueError(f"write_npz: streamed '{key}' must be a reconstruction entry it does not hold")
+        if not source.complete:
+            raise ValueError(f"write_npz: streamed '{key}' is incomplete")
+    arrays: dict[str, Any] = {key: streamed.get(key, None) if key in streamed else np.asarray(getattr(rec, key))
+                              for key in _NPZ_ARRAYS}
     for key, value in (extra_arrays or {}).items():
         if key in arrays or key in _NPZ_RESERVED:
             raise ValueError(f"write_npz: extra array '{key}' would replace a reconstruction entry")
@@ -337,8 +363,17 @@ def write_npz(path: str | os.PathLike, reconstruction: Reconstruction, /, *, met
     )
 
     def writer(tmp: Path) -> None:
-        with open(tmp, "wb") as fh:
-            np.savez(fh, **arrays)
+        with zipfile.ZipFile(tmp, mode="w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
+            for key, value in arrays.items():
+                with zf.open(key + ".npy", "w", force_zip64=True) as fh:
+                    if isinstance(value, np.ndarray):
+                        np.lib.format.write_array(fh, value, allow_pickle=False)
+                    else:  # rows from a file, a block at a time
+                        header = {"descr": np.lib.format.dtype_to_descr(np.dtype(value.dtype)),
+                                  "fortran_order": False, "shape": tuple(value.shape)}
+                        np.lib.format.write_array_header_1_0(fh, header)
+                        for block in value.blocks():
+                            fh.write(np.ascontiguousarray(block, dtype=value.dtype).tobytes())
 
     return atomic_write(path, writer)
 

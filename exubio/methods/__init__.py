@@ -1,6 +1,8 @@
 """The reconstruction methods and their registry: each method is a function
 ``run(model, protocol, targets, *, options, progress) -> Reconstruction`` with one frozen options
-dataclass. The registry names them for the pipeline, the CLI and the API; a method's module (and
+dataclass, and its streaming form ``stream(model, protocol, targets, sink, *, options, progress,
+chunk_frames) -> (timings_s, info)`` that hands the result to ``sink`` in chunks
+(exubio.methods.common). The registry names them for the pipeline, the CLI and the API; a method's module (and
 with PF, Exudyn) is imported only when the method is used."""
 from __future__ import annotations
 
@@ -21,10 +23,14 @@ class MethodSpec:
     module: str
     options: str  # the options dataclass in ``module``
     function: str  # the reconstruction function in ``module``
+    stream: str  # the same, handing the result to a sink in chunks: (timings_s, info)
 
     def load(self) -> tuple[type, Callable[..., Any]]:
         mod = importlib.import_module(self.module)
         return getattr(mod, self.options), getattr(mod, self.function)
+
+    def load_stream(self) -> Callable[..., Any]:
+        return getattr(importlib.import_module(self.module), self.stream)
 
     def make_options(self, values: dict[str, Any]) -> Any:
         """The method's options from keyword values; an unknown key is an InputError naming it and
@@ -39,9 +45,9 @@ class MethodSpec:
 
 REGISTRY: dict[str, MethodSpec] = {
     "pf": MethodSpec("pf", "potential field: marker springs and dampers, forward dynamics on Exudyn",
-                     "exubio.methods.pf", "PFOptions", "reconstruct_pf"),
+                     "exubio.methods.pf", "PFOptions", "reconstruct_pf", "stream_pf"),
     "ls": MethodSpec("ls", "constrained least squares per frame (the paper's reference)",
-                     "exubio.methods.ls", "LSOptions", "reconstruct_ls"),
+                     "exubio.methods.ls", "LSOptions", "reconstruct_ls", "stream_ls"),
 }
 
 
