@@ -1,0 +1,120 @@
+"""Chunked (streaming) reconstruction: PF keeps integrating across chunk boundaries, LS carries its
+warm start, and the result is the one-pass result; the pipeline writes the same files whatever
+the chunk size and leaves no part file behind, also when a run fails."""
+from __future__ import annotations
+
+import filecmp
+
+import numpy as np
+import pytest
+
+from exubio.errors import ReconstructionError
+from exubio.io.results import read_npz, write_npz
+from exubio.io.streamed import ArrayFile
+from exubio.methods.common import Collector, chunk_bounds
+from exubio.methods.ls import reconstruct_ls, stream_ls
+from exubio.methods.pf import PFOptions, reconstruct_pf, stream_pf
+from exubio.pipeline import load_inputs, reconstruct_file
+from exubio.resources import shipped_file
+
+EXAMPLE = shipped_file("exubio.data", "example_abduction.c3d", "exubio/data")
+
+
+@pytest.fixture(scope="module")
+def inputs():
+    return load_inputs(EXAMPLE)
+
+
+def _joined(stream, inputs, size, **kw):
+    chunks = Collector()
+    timings, info = stream(inputs.model, inputs.protocol, inputs.targets, chunks, chunk_frames=size, **kw)
+    return chunks, chunks.reconstruction(inputs.targets, timings_s=timings, info=info)
+
+
+def test_chunk_bounds_cover_the_frames_in_order():
+    assert chunk_bounds(10, 4) == [(0, 4), (4, 8), (8, 10)]
+    assert chunk_bounds(10, 4, first=1) == [(0, 5), (5, 9), (9, 10)]
+    assert chunk_bounds(3, 10, first=1) == [(0, 3)]
+
+
+@pytest.mark.parametrize("size", [37, 250])
+def test_pf_in_chunks_equals_one_pass(inputs, size):
+    one = reconstruct_pf(inputs.model, inputs.protocol, inputs.targets)
+    chunks, joined = _joined(stream_pf, inputs, size)
+    assert len(chunks.chunks) == -(-inputs.targets.n_frames // size)
+    assert [c.n_frames for c in chunks.chunks[:-1]] == [size] * (len(chunks.chunks) - 1)
+    assert np.abs(joined.q_rad - one.q_rad).max() <= 1e-12
+    assert np.abs(joined.qd_rad_s - one.qd_rad_s).max() <= 1e-9
+    assert np.abs(joined.qdd_rad_s2 - one.qdd_rad_s2).max() <= 1e-9
+    assert np.abs(joined.model_points_m - one.model_points_m).max() <= 1e-12
+    assert np.abs(joined.constraint).max() < 1e-10  # every chunk projected on the ellipsoid
+
+
+@pytest.mark.parametrize("size", [20, 333])
+def test_ls_in_chunks_equals_one_pass(inputs, size):
+    one = reconstruct_ls(inputs.model, inputs.protocol, inputs.targets)
+    chunks, joined = _joined(stream_ls, inputs, size)
+    assert len(chunks.chunks) > 1
+    np.testing.assert_array_equal(joined.q_rad, one.q_rad)
+    np.testing.assert_array_equal(joined.status, one.status)
+    assert np.abs(joined.qdd_rad_s2 - one.qdd_rad_s2).max() <= 1e-9
+
+
+def test_pf_divergence_stops_the_integration_at_the_chunk_that_shows_it(inputs):
+    seen = []
+    with pytest.raises(ReconstructionError, match="diverged"):
+        stream_pf(inputs.model, inputs.protocol, inputs.targets, seen.append, chunk_frames=100,
+                  options=PFOptions(divergence_deflection_m=1e-4))
+    assert seen == []  # the first chunk already fails: nothing of it was handed on
+
+
+def test_array_file_round_trip_and_npz_layout(tmp_path):
+    rng = np.random.default_rng(1)
+    data = rng.normal(size=(1003, 4, 3))
+    f = ArrayFile(tmp_path / ".x.tmp.part", data.shape)
+    for a in range(0, 1003, 100):
+        f.append(data[a:a + 100])
+    assert f.complete
+    np.testing.assert_array_equal(np.concatenate(list(f.blocks())), data)
+    f.remove()
+    assert not (tmp_path / ".x.tmp.part").exists()
+    with pytest.raises(ValueError):
+        ArrayFile(tmp_path / ".y.tmp.part", (2, 4, 3)).append(np.zeros((3, 4, 3)))
+
+
+def test_streamed_npz_equals_the_in_memory_one(inputs, tmp_path):
+    recon = reconstruct_ls(inputs.model, inputs.protocol, inputs.targets)
+    write_npz(tmp_path / "a.npz", recon, metadata={"x": 1})
+    f = ArrayFile(tmp_path / ".mp.tmp.part", recon.model_points_m.shape)
+    f.append(recon.model_points_m)
+    import dataclasses
+
+    write_npz(tmp_path / "b.npz", dataclasses.replace(recon, model_points_m=None), metadata={"x": 1},
+              streamed={"model_points_m": f})
+    a, b = read_npz(tmp_path / "a.npz"), read_npz(tmp_path / "b.npz")
+    for name in ("q_rad", "model_points_m", "measured_m", "residuals_m", "status"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    assert filecmp.cmp(tmp_path / "a.npz", tmp_path / "b.npz", shallow=False)  # the np.savez layout, byte for byte
+
+
+def test_pipeline_files_do_not_depend_on_the_chunk_size(tmp_path):
+    whole = reconstruct_file(EXAMPLE, tmp_path / "whole", methods=["pf", "ls"], chunk_frames=100000)
+    small = reconstruct_file(EXAMPLE, tmp_path / "small", methods=["pf", "ls"], chunk_frames=60)
+    assert all(r.model_points_m is None for r, _, _ in whole + small)  # left on disk, not in memory
+    for (_, pa, sa), (_, pb, sb) in zip(whole, small):
+        for kind in ("csv", "mot", "isb"):
+            assert filecmp.cmp(pa[kind], pb[kind], shallow=False), kind
+        a, b = read_npz(pa["npz"]), read_npz(pb["npz"])
+        np.testing.assert_array_equal(a.q_rad, b.q_rad)
+        np.testing.assert_array_equal(a.model_points_m, b.model_points_m)
+        assert sa["quality"] == sb["quality"]
+        assert sa["residual_mm"]["max"] == pytest.approx(sb["residual_mm"]["max"], abs=1e-12)
+    for folder in ("whole", "small"):
+        assert not [p for p in (tmp_path / folder).iterdir() if p.name.startswith(".")]  # no part file left
+
+
+def test_a_failing_run_leaves_no_part_file(tmp_path):
+    with pytest.raises(ReconstructionError):
+        reconstruct_file(EXAMPLE, tmp_path, methods=["pf"], chunk_frames=50,
+                         method_options={"pf": {"divergence_deflection_m": 1e-4}})
+    assert list(tmp_path.iterdir()) == []
