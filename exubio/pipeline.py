@@ -43,8 +43,24 @@ class Method(str, enum.Enum):
 
 
 @dataclass(frozen=True)
+class TrialInfo:
+    """What the outputs say of the trial file once its markers are prepared (its raw positions are
+    not kept: on a long trial they are as large as the targets)."""
+
+    source: str
+    labels: tuple[str, ...]
+    ignored_labels: tuple[str, ...]
+    units_in_file: str
+    rate_hz: float
+
+    @classmethod
+    def of(cls, traj: Trajectories) -> "TrialInfo":
+        return cls(traj.source, traj.labels, traj.ignored_labels, traj.units_in_file, traj.rate_hz)
+
+
+@dataclass(frozen=True)
 class TrialInputs:
-    trajectories: Trajectories
+    trial: TrialInfo
     model: Model
     protocol: Protocol
     targets: MarkerTargets
@@ -81,7 +97,7 @@ def load_inputs(trial_path: str | Path, /, *, model_path: str | Path | None = No
     else:
         protocol = protocol_for_model(model, protocol_path)
     targets = prepare_targets(traj, protocol)
-    return TrialInputs(traj, model, protocol, targets)
+    return TrialInputs(TrialInfo.of(traj), model, protocol, targets)
 
 
 def reconstruct(model: Model, protocol: Protocol, targets: MarkerTargets, /, *, method: Method | str = Method.PF,
@@ -162,9 +178,9 @@ def run_metadata(inputs: TrialInputs, trial_path: str | Path, method: Method) ->
         "protocol_relabel": dict(inputs.protocol.relabel),
         "method": method.value,
         "units": {"angles_in_files": "deg", "positions_in_npz": "m", "time": "s"},
-        "ignored_labels": list(inputs.trajectories.ignored_labels),
-        "units_in_trial_file": inputs.trajectories.units_in_file,
-        "rate_hz": inputs.trajectories.rate_hz,
+        "ignored_labels": list(inputs.trial.ignored_labels),
+        "units_in_trial_file": inputs.trial.units_in_file,
+        "rate_hz": inputs.trial.rate_hz,
     }
 
 
@@ -269,8 +285,8 @@ def isb_header(info: dict[str, Any], trial: str, method: str) -> tuple[str, ...]
 def _unused(inputs: TrialInputs) -> list[str]:
     from exubio.protocol import resolve_labels
 
-    match = resolve_labels(inputs.protocol, inputs.trajectories.labels, source=inputs.trajectories.source)
-    return list(match.unused) + list(inputs.trajectories.ignored_labels)
+    match = resolve_labels(inputs.protocol, inputs.trial.labels, source=inputs.trial.source)
+    return list(match.unused) + list(inputs.trial.ignored_labels)
 
 
 def agreement_deg(a: Reconstruction, b: Reconstruction, /) -> dict[str, float]:

@@ -4,6 +4,7 @@ the chunk size and leaves no part file behind, also when a run fails."""
 from __future__ import annotations
 
 import filecmp
+import os
 
 import numpy as np
 import pytest
@@ -118,3 +119,24 @@ def test_a_failing_run_leaves_no_part_file(tmp_path):
         reconstruct_file(EXAMPLE, tmp_path, methods=["pf"], chunk_frames=50,
                          method_options={"pf": {"divergence_deflection_m": 1e-4}})
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_killed_writers_leftovers_are_removed_by_the_next_run(tmp_path):
+    import subprocess
+    import sys
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                          text=True, check=True)
+    pid = int(dead.stdout)
+    out = tmp_path / "out"
+    out.mkdir()
+    killed = [out / f".example_abduction.pf.{pid}.0123abcd.tmp.model_points",
+              out / f".example_abduction.pf.csv.{pid}.89abcdef.tmp.csv"]
+    running = out / f".example_abduction.pf.csv.{os.getpid()}.0123abcd.tmp.csv"  # a writer still at work
+    other = out / f".other_trial.pf.csv.{pid}.0123abcd.tmp.csv"  # not this run's results
+    for p in killed + [running, other]:
+        p.write_bytes(b"partial")
+    reconstruct_file(EXAMPLE, out, methods=["pf"])
+    assert not any(p.exists() for p in killed)
+    assert running.exists() and other.exists()
+    assert (out / "example_abduction.pf.npz").is_file()

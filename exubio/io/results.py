@@ -15,6 +15,7 @@ import json
 import logging
 import math
 import os
+import re
 import secrets
 import zipfile
 from pathlib import Path
@@ -122,6 +123,8 @@ def prepare_output_dir(out_dir: str | os.PathLike, stems: Sequence[str], /, *, o
     is deleted here: old files are replaced only by the writers' atomic renames.
     """
     folder = writable_folder(out_dir)
+    for leftover in remove_leftovers(folder, stems):
+        logger.info("removed %s, left by a run that was killed", leftover)
     existing = _existing_targets(folder, stems)
     if existing and not overwrite:
         names = ", ".join(str(p) for p in existing)
@@ -132,6 +135,36 @@ def prepare_output_dir(out_dir: str | os.PathLike, stems: Sequence[str], /, *, o
     if existing:
         logger.info("%d existing result file(s) in %s will be replaced", len(existing), folder)
     return folder
+
+
+_TEMP_NAME = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.[0-9a-f]{8}\.tmp(\..*)?$")
+
+
+def remove_leftovers(folder: Path, stems: Sequence[str], /) -> list[Path]:
+    """Remove the hidden temporary files (``atomic_write``'s, exubio.io.streamed's part files) of
+    the results ``stems`` (see prepare_output_dir) that a writer left when it was killed: those whose
+    process (the pid in their name) no longer runs. A running writer's files are left alone."""
+    removed = []
+    for p in folder.iterdir():
+        m = _TEMP_NAME.match(p.name)
+        if not m or not p.is_file() or _process_runs(int(m["pid"])):
+            continue
+        if any(m["name"] == stem or m["name"].startswith(stem + ".") for stem in stems):
+            _remove_quietly(p)
+            removed.append(p)
+    return removed
+
+
+def _process_runs(pid: int) -> bool:
+    if os.name == "nt":  # os.kill(pid, 0) would send CTRL_C_EVENT there: cannot tell, keep the files
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):  # another user's process, or cannot tell: keep its files
+        return True
+    return True
 
 
 def _existing_targets(folder: Path, stems: Sequence[str]) -> list[Path]:
