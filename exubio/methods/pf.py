@@ -135,7 +135,7 @@ def initial_state(kin: Kinematics, points, targets: MarkerTargets, stiffness: np
     first = 0
     present = targets.present
     weights = stiffness / stiffness.mean()
-    q0, _, ok = solve_positions(kin, points, targets.positions_m[first:first + 1], weights,
+    q0, _, ok, _ = solve_positions(kin, points, targets.positions_m[first:first + 1], weights,
                                 q_start=np.zeros(kin.n_coordinates), options=LSOptions(tol_rad=1e-12, max_iterations=60),
                                 frame_dt=1.0, held=held, limits=limits)
     if not ok[0]:
@@ -152,7 +152,8 @@ def reconstruct_pf(model: Model, protocol: Protocol, targets: MarkerTargets, /, 
                    progress: Callable[[int], None] | None = None) -> Reconstruction:
     """Reconstruct a trial with the potential-field method."""
     chunks = Collector()
-    timings, info = stream_pf(model, protocol, targets, chunks, options=options, progress=progress)
+    timings, info = stream_pf(model, protocol, targets, chunks, options=options, progress=progress,
+                              chunk_frames=max(targets.n_frames, 1))  # one chunk: every frame at the end
     return chunks.reconstruction(targets, timings_s=timings, info=info)
 
 
