@@ -101,26 +101,34 @@ def load_inputs(trial_path: str | Path, /, *, model_path: str | Path | None = No
 
 
 def reconstruct(model: Model, protocol: Protocol, targets: MarkerTargets, /, *, method: Method | str = Method.PF,
-                progress: Callable[[int], None] | None = None, **options: Any) -> Reconstruction:
-    """Run one method. ``options`` go to the method's options dataclass (e.g. step_s for PF)."""
+                options: Any = None, progress: Callable[[int], None] | None = None, **values: Any) -> Reconstruction:
+    """Run one method on loaded objects: ``options`` is the method's options object (PFOptions,
+    LSOptions: exubio.methods.REGISTRY), or give its fields as keywords (e.g. step_s=0.005)."""
     from exubio.methods import method_spec
 
     spec = method_spec(Method.parse(method).value)  # exubio.methods.REGISTRY
     _, run = spec.load()
-    return run(model, protocol, targets, options=spec.make_options(options), progress=progress)
+    return run(model, protocol, targets, options=_options(spec, options, values), progress=progress)
+
+
+def _options(spec: Any, options: Any, values: dict[str, Any]) -> Any:
+    if options is not None and values:
+        raise InputError(f"method {spec.name}: give an options object or option keywords, not both")
+    return spec.make_options(options if options is not None else values)
 
 
 def stream_reconstruct(model: Model, protocol: Protocol, targets: MarkerTargets, sink: Callable[[Reconstruction], None],
-                       /, *, method: Method | str = Method.PF, progress: Callable[[int], None] | None = None,
-                       chunk_frames: int | None = None, **options: Any) -> tuple[dict[str, float], dict[str, Any]]:
+                       /, *, method: Method | str = Method.PF, options: Any = None,
+                       progress: Callable[[int], None] | None = None, chunk_frames: int | None = None,
+                       **values: Any) -> tuple[dict[str, float], dict[str, Any]]:
     """Run one method handing its result to ``sink`` in chunks (bounded memory on trials of any
     length: exubio.methods.common); returns the method's (timings_s, info)."""
     from exubio.methods import method_spec
     from exubio.methods.common import CHUNK_FRAMES
 
     spec = method_spec(Method.parse(method).value)
-    return spec.load_stream()(model, protocol, targets, sink, options=spec.make_options(options), progress=progress,
-                              chunk_frames=chunk_frames or CHUNK_FRAMES)
+    return spec.load_stream()(model, protocol, targets, sink, options=_options(spec, options, values),
+                              progress=progress, chunk_frames=chunk_frames or CHUNK_FRAMES)
 
 
 def output_stem(trial_path: str | Path, method: Method | str) -> str:

@@ -85,3 +85,19 @@ def test_methods_come_from_one_registry_and_options_are_checked():
         exubio.reconstruct(trial, method="kalman")
     rec = exubio.reconstruct(trial, method="ls", tol_rad=1e-6)
     assert rec.method == "ls"
+
+
+def test_typed_options_objects_are_accepted_and_checked():
+    """The entry point takes the method's options object; another method's options are refused."""
+    from exubio.methods.ls import LSOptions
+    from exubio.methods.pf import PFOptions
+    from exubio.pipeline import load_inputs, reconstruct
+    from exubio.resources import shipped_file
+
+    inp = load_inputs(shipped_file("exubio.data", "example_abduction.c3d", "exubio/data"))
+    rec = reconstruct(inp.model, inp.protocol, inp.targets, method="ls", options=LSOptions(tol_rad=1e-6))
+    assert rec.info["options"]["tol_rad"] == 1e-6
+    with pytest.raises(exubio.InputError, match="expected LSOptions"):
+        reconstruct(inp.model, inp.protocol, inp.targets, method="ls", options=PFOptions())
+    with pytest.raises(exubio.InputError, match="not both"):
+        reconstruct(inp.model, inp.protocol, inp.targets, method="ls", options=LSOptions(), tol_rad=1e-6)

@@ -32,10 +32,17 @@ class MethodSpec:
     def load_stream(self) -> Callable[..., Any]:
         return getattr(importlib.import_module(self.module), self.stream)
 
-    def make_options(self, values: dict[str, Any]) -> Any:
-        """The method's options from keyword values; an unknown key is an InputError naming it and
-        the valid ones."""
+    def make_options(self, values: "dict[str, Any] | Any" = None) -> Any:
+        """The method's options from keyword values (or an options object, checked to be this
+        method's type); an unknown key is an InputError naming it and the valid ones."""
         options_type, _ = self.load()
+        if values is None:
+            return options_type()
+        if dataclasses.is_dataclass(values) and not isinstance(values, type):
+            if not isinstance(values, options_type):
+                raise InputError(f"method {self.name}: options of type {type(values).__name__} given; "
+                                 f"expected {options_type.__name__}")
+            return values
         fields = {f.name for f in dataclasses.fields(options_type)}
         unknown = sorted(set(values) - fields)
         if unknown:
