@@ -28,7 +28,7 @@ import numpy as np
 
 from exubio.io.results import read_npz
 from exubio.model import load_model
-from exubio.pipeline import process_trial
+from exubio.jobs import TrialJob, run_job
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "data"
@@ -53,7 +53,7 @@ def runs() -> list[dict]:
 
 
 def run_one(spec: dict, work: Path) -> dict:
-    from exubio.pipeline import calibrate_session
+    from exubio.session import calibrate_session
 
     out_dir = work / f"{spec['trial'].stem}_{'session' if spec['protocol'] == SESSION else 'shipped'}"
     extra, model_path = {}, None
@@ -61,22 +61,22 @@ def run_one(spec: dict, work: Path) -> dict:
         model_path, _, extra["calibration"] = calibrate_session(spec["static"], out_dir, "static",
                                                                 protocol_path=spec["protocol"],
                                                                 functional_path=spec.get("functional"))
-    result = process_trial(spec["trial"], out_dir=out_dir, methods=["pf", "ls"], model_path=model_path,
-                           protocol_path=spec["protocol"], static_frames=spec.get("static_frames"),
-                           summary_extra=extra, report=False)
+    result = run_job(TrialJob(spec["trial"], out_dir, methods=("pf", "ls"), model=model_path, protocol=spec["protocol"],
+                              static_frames=spec.get("static_frames"), calibration=extra.get("calibration"),
+                              report=False))
     model = load_model(model_path) if model_path else None
     rec = {"trial": spec["trial"].name, "static": Path(spec["static"]).name if spec.get("static") else spec.get("static_frames"),
            "protocol": "session relabel" if spec["protocol"] == SESSION else Path(spec["protocol"] or "upper_limb_21").stem,
            "methods": {}}
-    for m in result["methods"]:
-        s = m["summary"]
-        recon = read_npz(m["paths"]["npz"])
-        rng = np.degrees((model or load_model(result["calibration"]["model_file"])).coordinate_ranges_rad)
+    for m in result.methods:
+        s = m.summary
+        recon = read_npz(m.paths["npz"])
+        rng = np.degrees((model or load_model(result.calibration.model_file)).coordinate_ranges_rad)
         q = np.degrees(recon.q_rad)
         outside = {n: [round(float(q[:, j].min()), 1), round(float(q[:, j].max()), 1)]
                    for j, n in enumerate(recon.coordinate_names)
                    if n not in s.get("not_measured", []) and (q[:, j].min() < rng[j, 0] - 0.5 or q[:, j].max() > rng[j, 1] + 0.5)}
-        rec["methods"][m["method"]] = {
+        rec["methods"][m.method] = {
             "verdict": s["quality"]["verdict"],
             "reasons": [f"{r['level']}: {r['message']}" for r in s["quality"]["reasons"]],
             "mean_residual_mm": round(s["residual_mm"]["mean"], 2),
@@ -84,7 +84,7 @@ def run_one(spec: dict, work: Path) -> dict:
             "not_measured": s.get("not_measured", []),
             "undetermined": s["determinacy"]["undetermined_for_trial"],
         }
-    agree = {k: v for k, v in (result.get("agreement_deg") or {}).items() if v == v}
+    agree = {k: v for k, v in (result.agreement_deg or {}).items() if v == v}
     rec["pf_ls_max_rmse_deg_determined"] = round(max(agree.values()), 2) if agree else None
     rec["pf_ls_worst"] = max(agree, key=agree.get) if agree else None
     return rec

@@ -6,10 +6,13 @@ import argparse
 import logging
 import sys
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import exubio
 from exubio.errors import ExubioError, InputError, ModelError, ProtocolError, ReconstructionError
+
+if TYPE_CHECKING:  # the CLI imports the pipeline only when a command runs (fast --help)
+    from exubio.jobs import TrialJob, TrialResult
 
 log = logging.getLogger("exubio")
 
@@ -80,23 +83,23 @@ def _print_result(recon, paths, summ) -> None:
     _print_summary(recon.method, paths, summ)
 
 
-def _print_trial(result: dict, quiet: bool) -> None:
+def _print_trial(result: TrialResult, quiet: bool) -> None:
     from exubio.calibration import format_report
 
-    if result["calibration"]:
+    if result.calibration:
         if not quiet:
-            print(format_report(result["calibration"]["report"]))
-        print(f"calibrated model: {result['calibration']['model_file']}")
-    for m in result["methods"]:
-        _print_summary(m["method"], m["paths"], m["summary"])
-    if "agreement_deg" in result:
-        agree = result["agreement_deg"]
+            print(format_report(result.calibration.report))
+        print(f"calibrated model: {result.calibration.model_file}")
+    for m in result.methods:
+        _print_summary(m.method, m.paths, m.summary)
+    if result.agreement_deg:
+        agree = result.agreement_deg
         worst = max(agree, key=agree.get)
         print(f"PF-LS agreement: max RMSE {agree[worst]:.3f} deg ({worst})")
-    if result.get("report"):
-        print(f"report: {result['report']['pdf']} (+ .png)")
-    for m in result["methods"]:
-        _print_quality(m["method"], m["summary"])
+    if result.report:
+        print(f"report: {result.report['pdf']} (+ .png)")
+    for m in result.methods:
+        _print_quality(m.method, m.summary)
 
 
 def _print_quality(method: str, summ: dict) -> None:
@@ -110,9 +113,9 @@ def _print_quality(method: str, summ: dict) -> None:
         print(f"[{method}]   not measured (held or not observed): {', '.join(summ['not_measured'])}")
 
 
-def _trial_code(result: dict) -> int:
+def _trial_code(result: TrialResult) -> int:
     """1 when any method's verdict is 'fail' (see exubio.quality), else 0."""
-    return EXIT_FAILED if "fail" in (result.get("verdicts") or {}).values() else EXIT_OK
+    return EXIT_FAILED if "fail" in result.verdicts.values() else EXIT_OK
 
 
 def _check_output_folder(folder: Path, out: str) -> None:
@@ -125,7 +128,7 @@ def _check_output_folder(folder: Path, out: str) -> None:
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from exubio.calibration import format_report, parse_frames
-    from exubio.pipeline import calibrate_file
+    from exubio.session import calibrate_file
 
     if Path(args.out).suffix.lower() not in (".yaml", ".yml"):
         raise InputError(f"--out {args.out}: expected a model file ending in .yaml")
@@ -139,14 +142,13 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _run_trial(kwargs: dict) -> tuple[str, dict | None, int, str]:
+def _run_trial(job: TrialJob) -> tuple[str, TrialResult | None, int, str]:
     """One trial in a worker process: (trial, result, exit code, error message)."""
-    from exubio.pipeline import process_trial
+    from exubio.jobs import run_job
 
-    kwargs = dict(kwargs)
-    trial = kwargs.pop("trial")
+    trial = str(job.trial)
     try:
-        result = process_trial(trial, **kwargs)
+        result = run_job(job)
         return trial, result, _trial_code(result), ""
     except (InputError, ProtocolError, ModelError) as exc:
         return trial, None, EXIT_BAD_INPUT, str(exc)
@@ -183,7 +185,7 @@ def _reconstruct_arms(args: argparse.Namespace, protocols: list[str]) -> int:
 
 
 def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
-    from exubio.pipeline import calibrate_session
+    from exubio.session import calibrate_session
 
     model_path, extra = args.model, {}
     if args.also_static and not args.static:
@@ -216,15 +218,16 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
         extra = {"calibration": calibration}
         for f in calibration["labels"]:
             print(f"static trial {args.static}: {f['severity']}: {f['kind']} ({', '.join(f['markers'])}): {f['evidence']}")
-    common = dict(out_dir=args.out, methods=_methods(args.method), model_path=model_path,
-                  protocol_path=args.protocol, body_mass_kg=args.body_mass, overwrite=args.overwrite,
-                  method_options={"pf": {"gravity": args.gravity}}, summary_extra=extra,
-                  static_frames=None if args.static else args.static_frames, report=not args.no_report)
-    jobs = [dict(common, trial=t) for t in args.trials]
-    if len(jobs) == 1 and not args.scheduler:  # errors propagate to main(): one message, one exit code
-        from exubio.pipeline import process_trial
+    from exubio.jobs import TrialJob, run_job
 
-        result = process_trial(args.trials[0], **dict(common, progress_factory=_progress_factory(not args.quiet)))
+    methods = _methods(args.method)
+    jobs = [TrialJob(t, args.out, methods=tuple(methods), model=model_path, protocol=args.protocol,
+                     body_mass_kg=args.body_mass, overwrite=args.overwrite,
+                     options={"pf": {"gravity": args.gravity}} if "pf" in methods else {},
+                     calibration=extra.get("calibration"), static_frames=None if args.static else args.static_frames,
+                     report=not args.no_report) for t in args.trials]
+    if len(jobs) == 1 and not args.scheduler:  # errors propagate to main(): one message, one exit code
+        result = run_job(jobs[0], progress_factory=_progress_factory(not args.quiet))
         _print_trial(result, args.quiet)
         return _trial_code(result)
     codes = []
@@ -232,7 +235,7 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
         from exubio.study import map_on_scheduler
 
         done = map_on_scheduler(_run_trial, jobs, args.scheduler,
-                                on_error=lambda job, exc: (job["trial"], None, EXIT_FAILED, f"{type(exc).__name__}: {exc}"))
+                                on_error=lambda job, exc: (str(job.trial), None, EXIT_FAILED, f"{type(exc).__name__}: {exc}"))
     elif args.jobs > 1:
         from concurrent.futures import ProcessPoolExecutor
 
@@ -244,7 +247,7 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
         print(f"== {trial}")
         if result is not None:
             _print_trial(result, args.quiet)
-            print(f"verdict: {', '.join(f'{m} {v}' for m, v in result['verdicts'].items())}")
+            print(f"verdict: {', '.join(f'{m} {v}' for m, v in result.verdicts.items())}")
         else:
             print(f"exubio: {'error' if code == EXIT_BAD_INPUT else 'reconstruction failed'}: {message}",
                   file=sys.stderr)
@@ -253,7 +256,7 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
     print(f"{len(codes) - failed} of {len(codes)} trials reconstructed")
     for trial, result, _, _ in done:
         if result is not None:
-            print(f"  {trial}: " + ", ".join(f"{m} {v}" for m, v in result["verdicts"].items()))
+            print(f"  {trial}: " + ", ".join(f"{m} {v}" for m, v in result.verdicts.items()))
     return max(codes)
 
 

@@ -86,11 +86,12 @@ def load_model_and_protocol(*, model_path: str | Path | None = None, protocol_pa
     return model, protocol_for_model(model, protocol_path)
 
 
-def load_inputs(trial_path: str | Path, /, *, model_path: str | Path | None = None,
+def load_inputs(trial_path: str | Path | Trajectories, /, *, model_path: str | Path | None = None,
                 protocol_path: str | Path | None = None, body_mass_kg: float | None = None,
                 model: Model | None = None) -> TrialInputs:
-    """Read the trial, the model and the protocol, and prepare the marker targets."""
-    traj = read_trial(trial_path)
+    """Read the trial (or take it, read already), the model and the protocol, and prepare the
+    marker targets."""
+    traj = trial_path if isinstance(trial_path, Trajectories) else read_trial(trial_path)
     if model is None:
         model, protocol = load_model_and_protocol(model_path=model_path, protocol_path=protocol_path,
                                                   body_mass_kg=body_mass_kg)
@@ -193,9 +194,10 @@ def run_metadata(inputs: TrialInputs, trial_path: str | Path, method: Method) ->
 
 
 def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods: list[Method | str],
+                     trajectories: Trajectories | None = None,
                      model_path: str | Path | None = None, protocol_path: str | Path | None = None,
                      body_mass_kg: float | None = None, overwrite: bool = False, model: Model | None = None,
-                     method_options: dict[str, dict[str, Any]] | None = None,
+                     method_options: dict[str, Any] | None = None,
                      summary_extra: dict[str, Any] | None = None,
                      progress_factory: Callable[[str, int], Callable[[int], None]] | None = None,
                      calibration: dict[str, Any] | None = None, static_reference: Any = None,
@@ -204,7 +206,7 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
     per method. Every method runs first; then the trial is assessed (label checks, determinacy,
     range limits, PF-LS agreement, ``calibration``: the calibration report dict) and every summary
     carries its quality verdict. Refuses (InputError) to replace earlier results unless
-    ``overwrite``. Bounded memory: each method streams its result in chunks of ``chunk_frames``
+    ``overwrite``. ``trajectories``: the trial ``trial_path`` already read. Bounded memory: each method streams its result in chunks of ``chunk_frames``
     (exubio.io.streamed), the model points going to disk as they come; the reconstructions
     returned hold no model points (``model_points_m`` None: they are in the .npz)."""
     from contextlib import ExitStack
@@ -214,8 +216,8 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
     methods = [Method.parse(m) for m in methods]
     stems = [output_stem(trial_path, m) for m in methods]
     results.prepare_output_dir(out_dir, stems, overwrite=overwrite)
-    inputs = load_inputs(trial_path, model_path=model_path, protocol_path=protocol_path,
-                         body_mass_kg=body_mass_kg, model=model)
+    inputs = load_inputs(trajectories if trajectories is not None else trial_path, model_path=model_path,
+                         protocol_path=protocol_path, body_mass_kg=body_mass_kg, model=model)
     with ExitStack() as parts:  # the streamed model points' part files go, whatever happens
         return _reconstruct_streamed(inputs, trial_path, out_dir, methods, stems, parts, StreamedReconstruction,
                                      method_options=method_options, summary_extra=summary_extra,
@@ -232,10 +234,12 @@ def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, ste
     recons, sinks = [], []
     for method, stem in zip(methods, stems):
         progress = progress_factory(method.value, inputs.targets.n_frames) if progress_factory else None
-        opts = (method_options or {}).get(method.value, {})
+        opts = (method_options or {}).get(method.value)  # the options object, or a dict of its fields
+        values = opts if isinstance(opts, dict) else {}
         sink = parts.enter_context(sink_type(out_dir, stem, inputs.targets, inputs.model.coordinate_names))
         timings, info = stream_reconstruct(inputs.model, inputs.protocol, inputs.targets, sink, method=method,
-                                           progress=progress, chunk_frames=chunk_frames, **opts)
+                                           options=None if isinstance(opts, dict) else opts, progress=progress,
+                                           chunk_frames=chunk_frames, **values)
         recons.append(sink.reconstruction(timings_s=timings, info=info))
         sinks.append(sink)
     findings = trial_label_findings(inputs.model, inputs.protocol, inputs.targets, reference=static_reference)
@@ -303,100 +307,20 @@ def agreement_deg(a: Reconstruction, b: Reconstruction, /) -> dict[str, float]:
     return {n: float(v) for n, v in zip(a.coordinate_names, np.sqrt(np.mean(d**2, axis=0)))}
 
 
-def calibration_summary(report, /, *, static: str, model_file: str | Path, frames: str | None = None,
-                        labels: Any = ()) -> dict[str, Any]:
-    """The calibration as summary.json records it (the full report dict under ``report``, the
-    label findings on the static trial under ``labels``)."""
-    from exubio.assess import _finding_dict
+def _session(name: str):
+    from exubio import session
 
-    return {"static": static, "frames": frames, "model_file": str(model_file),
-            "mean_residual_mm": report.mean_residual_mm, "residual_mm": report.to_dict().get("residual_mm"),
-            "report": report.to_dict(), "labels": [_finding_dict(f) for f in labels]}
+    return getattr(session, name)
 
 
-def static_checks(static_path: str | Path, /, *, protocol_path: str | Path | None = None,
-                  model_path: str | Path | None = None, frames: slice | None = None):
-    """The label findings on a static trial (against the generic model) and its pair distances,
-    the reference the session's task trials are checked against (exubio.labels)."""
-    from exubio.labels import check_trial, pair_distances
-
-    model, protocol = load_model_and_protocol(model_path=model_path, protocol_path=protocol_path)
-    targets = prepare_targets(read_trial(static_path), protocol)
-    pos = targets.positions_m if frames is None else targets.positions_m[frames]
-    findings = check_trial(targets, model=model, protocol=protocol, ranges_rad=model.coordinate_ranges_rad)
-    return findings, pair_distances(pos, targets.marker_names, source=str(static_path))
+def calibrate_file(*args: Any, **kwargs: Any):
+    """exubio.session.calibrate_file (kept here for callers of the former location)."""
+    return _session("calibrate_file")(*args, **kwargs)
 
 
-def calibrate_file(static_path: str | Path, /, *, protocol_path: str | Path | None = None,
-                   model_path: str | Path | None = None, body_mass_kg: float | None = None,
-                   frames: slice | None = None, out_path: str | Path | None = None,
-                   overwrite: bool = False, functional_path: str | Path | None = None,
-                   more_static_paths: tuple[str | Path, ...] = ()):
-    """Everything ``exubio calibrate`` does: read the trial, the generic model and the protocol,
-    calibrate (``exubio.calibration.calibrate_model``, a pure step), and (with ``out_path``) write
-    the calibrated model YAML. Returns (calibrated model, the protocol bound to it, the
-    CalibrationReport). An existing ``out_path`` is replaced only with ``overwrite``.
-    ``functional_path``: a movement trial of the same session for a functional (SCoRE)
-    glenohumeral centre; ``more_static_paths``: further static poses (e.g. arm raised) the
-    thorax ellipsoid is fitted through as well."""
-    from exubio.calibration import calibrate_model, calibrated_protocol
-    from exubio.model import save_model
-
-    if out_path is not None and Path(out_path).exists() and not overwrite:
-        raise InputError(f"{out_path}: the model file already exists; pass --overwrite to replace it")
-    model, protocol = load_model_and_protocol(model_path=model_path, protocol_path=protocol_path,
-                                              body_mass_kg=body_mass_kg)
-    functional = None
-    if functional_path is not None:
-        functional = prepare_targets(read_trial(functional_path), protocol)
-    more = tuple(prepare_targets(read_trial(p), protocol) for p in more_static_paths)
-    calibrated, report = calibrate_model(model, protocol, read_trial(static_path), frames=frames, functional=functional,
-                                         more_statics=more)
-    if out_path is not None:
-        save_model(calibrated, out_path, calibration=report.to_dict())
-    return calibrated, calibrated_protocol(protocol, calibrated), report
-
-
-def calibrate_into(source: str | Path, out_dir: str | Path, stem: str, /, *, protocol_path: str | Path | None = None,
-                   model_path: str | Path | None = None, body_mass_kg: float | None = None,
-                   frames_text: str | None = None, overwrite: bool = False,
-                   functional_path: str | Path | None = None, more_static_paths: tuple[str | Path, ...] = ()):
-    """Calibrate the model to ``source`` (a static trial, or frames of the trial itself) and write
-    ``out_dir/<stem>.model.yaml``; returns (model file, CalibrationReport)."""
-    from exubio.calibration import parse_frames
-    from exubio.model import save_model
-
-    model_file = Path(out_dir) / f"{stem}.model.yaml"
-    results.prepare_output_dir(out_dir, [model_file.name], overwrite=overwrite)
-    model, _, report = calibrate_file(source, protocol_path=protocol_path, model_path=model_path,
-                                      body_mass_kg=body_mass_kg, frames=parse_frames(frames_text),
-                                      functional_path=functional_path, more_static_paths=more_static_paths)
-    save_model(model, model_file, calibration=report.to_dict())
-    return model_file, report
-
-
-def calibrate_session(source: str | Path, out_dir: str | Path, stem: str, /, *, protocol_path: str | Path | None = None,
-                      model_path: str | Path | None = None, body_mass_kg: float | None = None,
-                      frames_text: str | None = None, overwrite: bool = False,
-                      reference: bool = True, functional_path: str | Path | None = None,
-                      more_static_paths: tuple[str | Path, ...] = ()) -> tuple[Path, Any, dict[str, Any]]:
-    """calibrate_into plus the static trial's label checks: (model file, report, the calibration
-    summary for summary.json). With ``reference`` (a static trial apart from the task trials) the
-    summary's private ``_reference`` holds the static's pair distances, which the session's trials
-    are checked against; it is not written to summary.json."""
-    from exubio.calibration import parse_frames
-
-    model_file, report = calibrate_into(source, out_dir, stem, protocol_path=protocol_path, model_path=model_path,
-                                        body_mass_kg=body_mass_kg, frames_text=frames_text, overwrite=overwrite,
-                                        functional_path=functional_path, more_static_paths=more_static_paths)
-    frames = parse_frames(frames_text)
-    findings, ref_distances = static_checks(source, protocol_path=protocol_path, model_path=model_path,
-                                        frames=slice(*report.frames) if frames is not None else None)
-    summary = calibration_summary(report, static=str(source), model_file=model_file, frames=frames_text,
-                                  labels=findings)
-    if reference:
-        summary["_reference"] = ref_distances
-    return model_file, report, summary
+def calibrate_session(*args: Any, **kwargs: Any):
+    """exubio.session.calibrate_session (kept here for callers of the former location)."""
+    return _session("calibrate_session")(*args, **kwargs)
 
 
 def process_trial(trial_path: str | Path, /, *, out_dir: str | Path, methods: list[Method | str],

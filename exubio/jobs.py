@@ -1,0 +1,130 @@
+"""One trial as a job: what is to be done with it (``TrialJob``) and what came of it (``TrialResult``).
+
+Both are frozen, typed and picklable: ``exubio reconstruct`` runs a job in this process, in a
+process pool or on Dask workers, and ``exubio study`` makes one job per trial of its sessions. A job
+names its files (trial, model, protocol) and carries the methods' options as their typed objects
+(PFOptions, LSOptions: exubio.methods.REGISTRY), checked when the job is made, before any work.
+``run_job`` reads the trial once (also when it is calibrated on its own frames), reconstructs it
+with every method (exubio.pipeline.reconstruct_file: streamed, bounded memory), writes the results
+and the trial report, and returns the TrialResult: per method the summary and the files, the
+PF-LS agreement, the verdicts, the calibration.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+from exubio.io import results
+from exubio.io.trial import read_trial
+from exubio.pipeline import Method, reconstruct_file
+
+
+@dataclass(frozen=True)
+class TrialJob:
+    """trial: the C3D/TRC file; out_dir: where its results go (named after the trial file);
+    methods: "pf" and/or "ls"; model: a model file (e.g. a session's calibrated model), else the
+    shipped generic one; protocol: a protocol file, else the shipped one; options: per method its
+    options object (or a dict of its fields, turned into the object here); static_frames: calibrate
+    on these frames of the trial itself ("0:50"); calibration: the session's calibration summary
+    (exubio.session.calibrate_session), which goes into every summary and verdict;
+    static_reference: the session static's pair distances the label checks compare with."""
+
+    trial: Path
+    out_dir: Path
+    methods: tuple[str, ...] = ("pf",)
+    model: Path | None = None
+    protocol: Path | None = None
+    body_mass_kg: float | None = None
+    options: Mapping[str, Any] = field(default_factory=dict)
+    static_frames: str | None = None
+    report: bool = True
+    overwrite: bool = False
+    calibration: Mapping[str, Any] | None = None
+    static_reference: Any = None
+
+    def __post_init__(self) -> None:
+        from exubio.methods import method_spec
+
+        set_ = object.__setattr__
+        set_(self, "trial", Path(self.trial))
+        set_(self, "out_dir", Path(self.out_dir))
+        set_(self, "methods", tuple(Method.parse(m).value for m in self.methods))
+        for name in ("model", "protocol"):
+            if getattr(self, name) is not None:
+                set_(self, name, Path(getattr(self, name)))
+        set_(self, "options", {m: method_spec(m).make_options(self.options.get(m)) for m in self.methods})
+
+
+@dataclass(frozen=True)
+class MethodResult:
+    """One method's results: its files by kind (csv, mot, npz, summary, isb) and its summary.json."""
+
+    method: str
+    paths: Mapping[str, str]
+    summary: Mapping[str, Any]
+
+    @property
+    def verdict(self) -> str:
+        return self.summary["quality"]["verdict"]
+
+
+@dataclass(frozen=True)
+class Calibrated:
+    """The model a trial was calibrated to on its own frames: its file and CalibrationReport."""
+
+    model_file: str
+    report: Any
+
+
+@dataclass(frozen=True)
+class TrialResult:
+    trial: str
+    methods: tuple[MethodResult, ...]
+    agreement_deg: Mapping[str, float] | None = None  # PF-LS RMSE per determined coordinate
+    calibration: Calibrated | None = None
+    report: Mapping[str, str] | None = None  # "pdf", "png"
+
+    @property
+    def verdicts(self) -> dict[str, str]:
+        return {m.method: m.verdict for m in self.methods}
+
+
+def run_job(job: TrialJob, /, *, progress_factory: Callable[[str, int], Callable[[int], None]] | None = None
+            ) -> TrialResult:
+    """Process one trial (see the module docstring). Refuses (InputError) to replace earlier results
+    unless ``job.overwrite``."""
+    from exubio.session import calibrate_session
+
+    stem = job.trial.stem
+    if job.report:
+        results.prepare_output_dir(job.out_dir, [f"{stem}.report.pdf", f"{stem}.report.png"], overwrite=job.overwrite)
+    trajectories = None  # read here only when the trial is calibrated on its own frames: then read once
+    model, calibration, summary_cal = job.model, None, job.calibration
+    if job.static_frames:
+        trajectories = read_trial(job.trial)
+        model, report, summary_cal = calibrate_session(trajectories, job.out_dir, stem, protocol_path=job.protocol,
+                                                       model_path=job.model, body_mass_kg=job.body_mass_kg,
+                                                       frames_text=job.static_frames, overwrite=job.overwrite,
+                                                       reference=False)
+        calibration = Calibrated(str(model), report)
+    extra = {"calibration": summary_cal} if summary_cal else {}
+    reference = job.static_reference if job.static_reference is not None else (summary_cal or {}).get("_reference")
+    outputs = reconstruct_file(job.trial, job.out_dir, methods=list(job.methods), trajectories=trajectories,
+                               model_path=model, protocol_path=job.protocol, body_mass_kg=job.body_mass_kg,
+                               overwrite=job.overwrite, method_options=dict(job.options), summary_extra=extra,
+                               progress_factory=progress_factory, calibration=summary_cal,
+                               static_reference=reference)
+    methods = tuple(MethodResult(r.method, {k: str(v) for k, v in paths.items()}, summ) for r, paths, summ in outputs)
+    agreement = None
+    if len(outputs) == 2:
+        agree = outputs[0][2].get("pf_ls_agreement_deg") or {}
+        agreement = {k: v for k, v in agree.items() if isinstance(v, float)}
+    result = TrialResult(str(job.trial), methods, agreement, calibration)
+    if job.report:
+        from exubio.report.trial_report import build_trial_report
+
+        pdf, png = build_trial_report([m.paths["npz"] for m in methods], job.out_dir / f"{stem}.report.pdf")
+        result = dataclasses.replace(result, report={"pdf": str(pdf), "png": str(png)})
+    return result
