@@ -16,7 +16,8 @@ import numpy as np
 from exubio.angles import humerothoracic_elevation, isb_angles
 from exubio.invivo import compare_elevation, raising
 from exubio.pipeline import reconstruct
-from exubio.validate import LUDEWIG_PLANE, _real_trial, why_no_real_trial
+from exubio.validation.trials import LUDEWIG_PLANE, why_no_real_trial
+from exubio.validation.trials import real_trial as _real_trial
 
 BANDS = ((30, 60), (60, 90), (90, 120), (120, 150))
 

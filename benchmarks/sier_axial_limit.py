@@ -49,7 +49,7 @@ from exubio.methods.ls import held_mask
 from exubio.pipeline import load_model_and_protocol, reconstruct
 from exubio.preprocess import prepare_targets
 from exubio.simulate import STA_SCALE, Motion, simulate_trial
-from exubio.validate import ValidationSettings
+from exubio.validation import ValidationSettings
 
 S = ValidationSettings()
 RATE_HZ = S.sier_realisation_rate_hz

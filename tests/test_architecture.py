@@ -20,7 +20,10 @@ OWNERS = {
     "dask": {"study.py"},
     "pandas": {"api.py"},
 }
-SOLVERS = ("exubio.methods", "exubio.backend", "exudyn", "exubio.pipeline", "exubio.calibration", "exubio.validate")
+VALIDATION_STUDY = tuple(f"exubio.validation.{m}" for m in ("run", "trials", "determinacy", "sensitivity", "residuals",
+                                                              "sier", "invivo", "c3d_tasks", "agreement"))
+SOLVERS = ("exubio.methods", "exubio.backend", "exudyn", "exubio.pipeline", "exubio.calibration", "exubio.validate",
+           *VALIDATION_STUDY)
 
 
 def _modules() -> dict[str, Path]:
@@ -48,7 +51,8 @@ def test_each_library_has_one_owner(library):
 
 
 @pytest.mark.parametrize("module", ["report/trial_report.py", "report/validation_report.py", "report/study_report.py",
-                                    "viewer.py"])
+                                    "viewer.py", "validation/results.py", "validation/codec.py",
+                                    "validation/settings.py", "validation/checks.py", "validation/paths.py"])
 def test_what_draws_results_never_imports_a_solver(module):
     bad = sorted(m for m in _imports(PACKAGE / module) if m.startswith(SOLVERS))
     assert not bad, f"{module} imports {bad}"

@@ -1,12 +1,16 @@
 """The validation study and its report: a quick run writes the data files, the PDF with the
-expected pages and the PNGs; the report is rebuilt from the files alone without importing the
+expected pages and the PNGs; the typed results go through the files and back unchanged, and files
+that do not fit them are refused; the report is rebuilt from the files alone without importing the
 solver; the bundled Ludewig et al. 2009 data; the real-trial plumbing (skipped without
 ../shared/data)."""
 from __future__ import annotations
 
 import ast
+import copy
+import dataclasses
 import json
 import re
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -14,19 +18,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from exubio.invivo import ANGLE_KEYS as LUDEWIG_COLUMNS
 from exubio.reference import load_ludewig2009
 from exubio.report import FIGURES, REPORT_PAGES
-from exubio.invivo import ANGLE_KEYS as LUDEWIG_COLUMNS
-from exubio.validate import (
-    run_validation,
-    shared_data_dir,
-    undetermined_coordinates,
-    unobserved_segments,
-    why_no_real_trial,
-)
+from exubio.validation import SchemaError, ValidationResults, run_validation
+from exubio.validation.determinacy import undetermined_coordinates, unobserved_segments
+from exubio.validation.paths import portable_paths, shared_data_dir
+from exubio.validation.results import DATA_NPZ, RUNS_JSON, TABLE1_JSON
+from exubio.validation.trials import real_trial, why_no_real_trial
 
 PACKAGE = Path(__file__).resolve().parents[1] / "exubio"
-SOLVER_MODULES = ("exubio.methods", "exubio.backend", "exubio.pipeline", "exudyn")
+SOLVER_MODULES = ("exubio.methods", "exubio.backend", "exubio.pipeline", "exudyn", "exubio.calibration",
+                  "exubio.validate", "exubio.validation.run", "exubio.validation.trials")
 
 
 def _pdf_pages(path: Path) -> int:
@@ -37,8 +40,8 @@ def _pdf_pages(path: Path) -> int:
 def quick(tmp_path_factory):
     out = tmp_path_factory.mktemp("validation")
     messages: list[str] = []
-    runs = run_validation(out, quick=True, progress=messages.append)
-    return out, runs, messages
+    results = run_validation(out, quick=True, progress=messages.append)
+    return out, results, messages
 
 
 def test_quick_run_writes_every_file(quick):
@@ -53,17 +56,17 @@ def test_quick_run_writes_every_file(quick):
 
 
 def test_quick_run_content(quick):
-    out, runs, _ = quick
-    assert runs["quick"] is True
+    out, r, _ = quick
+    assert isinstance(r, ValidationResults) and r.quick is True
     # provenance: a quick run uses simulated trials only, and says so
-    assert {k: v["kind"] for k, v in runs["data"].items()} == {"abduction": "simulated", "flexion": "simulated",
-                                                               "sier": "simulated"}
-    assert "reason_not_real" in runs["data"]["abduction"]
+    assert {k: v.kind for k, v in r.data.items()} == {"abduction": "simulated", "flexion": "simulated",
+                                                      "sier": "simulated"}
+    assert r.data["abduction"].reason_not_real
     # the 32-run sensitivity grid
-    sens = runs["sensitivity"]
-    assert sens["runs"] == 32 and len(sens["stiffness_n_per_m"]) == 8 and len(sens["ratio_s"]) == 4
-    assert sens["stiffness_n_per_m"][0] == pytest.approx(10.0) and sens["stiffness_n_per_m"][-1] == pytest.approx(1e4)
-    assert sens["total_wall_s"] > 0
+    sens = r.sensitivity
+    assert sens.runs == 32 and len(sens.stiffness_n_per_m) == 8 and len(sens.ratio_s) == 4
+    assert sens.stiffness_n_per_m[0] == pytest.approx(10.0) and sens.stiffness_n_per_m[-1] == pytest.approx(1e4)
+    assert sens.mean_deflection_mm.shape == (4, 8) and sens.total_wall_s > 0
     with np.load(out / "validation_data.npz") as z:
         assert z["sens__mean_deflection_mm"].shape == (4, 8)
         assert z["res__sier__pf__mean_mm"].ndim == 1
@@ -77,31 +80,105 @@ def test_quick_run_content(quick):
             assert isinstance(row[method]["max_residual_marker"], str)
     assert table["paper"]["sier"]["frames"] == 96001
     # SIER figures against the truth exist and are finite; the checks are recorded
-    assert np.isfinite(runs["sier"]["pf"]["gh_axial_rotation_rmse_deg"])
-    assert len(runs["sier"]["pf"]["gh_marker_rmse_xyz_mm"]) == 3
-    assert {c["what"] for c in runs["checks"]} >= {"SIER: PF GH axial rotation RMSE vs truth"}
-    assert all(isinstance(c["passed"], bool) for c in runs["checks"])
+    assert np.isfinite(r.sier.pf.gh_axial_rotation_rmse_deg)
+    assert len(r.sier.pf.gh_marker_rmse_xyz_mm) == 3
+    assert {c.what for c in r.checks} >= {"SIER: PF GH axial rotation RMSE vs truth"}
+    assert all(isinstance(c.passed, bool) for c in r.checks)
     # simulated data with the full marker set: every coordinate determined
-    assert runs["agreement"]["sier"]["undetermined_coordinates"] == []
+    assert r.agreement.trials["sier"].undetermined_coordinates == ()
     # Ludewig deviations at the four elevations
-    dev = runs["invivo"]["abduction"]["pf"]["ST_medRotation_X"]
-    assert len(dev["deviation_deg"]) == 4
+    dev = r.invivo["abduction"].pf.angles["ST_medRotation_X"]
+    assert len(dev.deviation_deg) == 4
     # like for like: Ludewig's definitions stated, the ISB-frame deviation beside, the corridor
-    iv = runs["invivo"]["abduction"]
-    assert "TS>AC" in iv["definitions"]["ST"] and "xz'y''" in iv["definitions"]["GH"]
-    assert len(dev["isb_frame_deviation_deg"]) == 4
-    members = {m["study"] for m in iv["corridor"]["ST"]["members"]}
+    iv = r.invivo["abduction"]
+    assert "TS>AC" in iv.definitions["ST"] and "xz'y''" in iv.definitions["GH"]
+    assert len(dev.isb_frame_deviation_deg) == 4
+    members = {m.study for m in iv.corridor["ST"].members}
     assert members == {"Ludewig et al. 2009", "Chu et al. 2012"}  # frontal plane, in vivo, buildable frames
-    assert 0.0 <= dev["share_inside_corridor"] <= 1.0 and dev["corridor_studies"] == 2
-    assert np.isnan(iv["pf"]["GH_abduction_X"]["share_inside_corridor"] or np.nan)  # Ludewig alone in the frontal plane
-    aims = runs["invivo_aims"]
-    assert any("ST upward rotation within 8 deg" in a["what"] for a in aims)
-    assert any(a["passed"] is None and "not evaluable" in a["note"] for a in aims)
+    assert 0.0 <= dev.share_inside_corridor <= 1.0 and dev.corridor_studies == 2
+    assert np.isnan(iv.pf.angles["GH_abduction_X"].share_inside_corridor)  # Ludewig alone in the frontal plane
+    aims = r.invivo_aims
+    assert any("ST upward rotation within 8 deg" in a.what for a in aims)
+    assert any(a.passed is None and "not evaluable" in a.note for a in aims)
+    assert r.invivo["flexion"].corridor["GH"].lo.shape == (181, 3)
     with np.load(out / "validation_data.npz") as z:
         assert z["iv__flexion__corridor__GH__lo"].shape == (181, 3)
+    # validation_runs.json keeps the key names its readers use
+    runs = json.loads((out / "validation_runs.json").read_text(encoding="utf-8"))
+    assert runs["sensitivity"]["runs"] == 32 and runs["quick"] is True
+    assert len(runs["invivo"]["abduction"]["pf"]["ST_medRotation_X"]["deviation_deg"]) == 4
+    assert runs["agreement"]["sier"]["undetermined_coordinates"] == []
+    assert runs["invivo"]["abduction"]["pf"]["GH_abduction_X"]["share_inside_corridor"] is None  # NaN as null
+    assert all(isinstance(c["passed"], bool) for c in runs["checks"])
+
+
+# --------------------------------------------------------------------------------------------
+# The typed results and their files
+# --------------------------------------------------------------------------------------------
+def test_results_go_through_the_files_unchanged(quick, tmp_path):
+    """What the study returns equals what the report reads back from the files, and saving what
+    was read writes the same files again."""
+    out, results, _ = quick
+    loaded = ValidationResults.load(out)
+    assert loaded == results
+    assert loaded.report_wall_s is not None and loaded.report_wall_s == results.report_wall_s
+    loaded.save(tmp_path)
+    for name in (RUNS_JSON, TABLE1_JSON):
+        assert (tmp_path / name).read_bytes() == (out / name).read_bytes(), name
+    with np.load(out / DATA_NPZ) as a, np.load(tmp_path / DATA_NPZ) as b:
+        assert sorted(a.files) == sorted(b.files)
+        for k in a.files:
+            assert a[k].dtype == b[k].dtype and np.array_equal(a[k], b[k], equal_nan=a[k].dtype.kind == "f"), k
+    # equality sees a changed number and a changed array
+    assert dataclasses.replace(results, total_wall_s=results.total_wall_s + 1.0) != results
+    sens = dataclasses.replace(results.sensitivity, wall_s=results.sensitivity.wall_s + 1.0)
+    assert dataclasses.replace(results, sensitivity=sens) != results
+
+
+def test_files_that_do_not_fit_the_results_are_refused(quick, tmp_path):
+    """A key the records do not know or miss, an array no field reads or a missing one, a table1.json
+    that disagrees with validation_runs.json: SchemaError, never a silently wrong report."""
+    out, _, _ = quick
+    runs = json.loads((out / RUNS_JSON).read_text(encoding="utf-8"))
+    with np.load(out / DATA_NPZ) as z:
+        arrays = {k: z[k] for k in z.files}
+    assert ValidationResults.from_json(runs, arrays) == ValidationResults.load(out)
+    extra = copy.deepcopy(runs)
+    extra["sier"]["pf"]["gh_marker_rmse_mm"] = 1.0
+    with pytest.raises(SchemaError, match="gh_marker_rmse_mm"):
+        ValidationResults.from_json(extra, arrays)
+    missing = copy.deepcopy(runs)
+    del missing["table1"]["sier"]["ls"]["max_rmse_mm"]
+    with pytest.raises(SchemaError, match="max_rmse_mm"):
+        ValidationResults.from_json(missing, arrays)
+    with pytest.raises(SchemaError, match="sier__spare"):
+        ValidationResults.from_json(runs, {**arrays, "sier__spare": np.zeros(3)})
+    with pytest.raises(SchemaError, match="sier__time_s"):
+        ValidationResults.from_json(runs, {k: v for k, v in arrays.items() if k != "sier__time_s"})
+    for name in (RUNS_JSON, DATA_NPZ):
+        shutil.copy(out / name, tmp_path / name)
+    table1 = json.loads((out / TABLE1_JSON).read_text(encoding="utf-8"))
+    table1["rows"]["sier"]["frames"] += 1
+    (tmp_path / TABLE1_JSON).write_text(json.dumps(table1), encoding="utf-8")
+    with pytest.raises(SchemaError, match="disagrees"):
+        ValidationResults.load(tmp_path)
+
+
+def test_the_old_module_still_answers():
+    """exubio.validate keeps its names (a shim over exubio.validation)."""
+    import exubio.validate as old
+    from exubio.validation import ValidationSettings
+
+    assert old.ValidationSettings is ValidationSettings
+    for name in ("ValidationSettings", "QUICK_SETTINGS", "LUDEWIG_PLANE", "_real_trial", "why_no_real_trial",
+                 "portable_paths", "shared_data_dir", "undetermined_coordinates", "unobserved_segments",
+                 "run_validation"):
+        assert hasattr(old, name), name
 
 
 def test_report_rebuilds_from_files_without_the_solver(quick, tmp_path):
+    """The report reads the typed results from the files alone: neither the solver nor the study's
+    own modules are imported."""
     out, _, _ = quick
     for name in ("validation_data.npz", "table1.json", "validation_runs.json"):
         (tmp_path / name).write_bytes((out / name).read_bytes())
@@ -196,14 +273,12 @@ def test_undetermined_coordinates():
 @pytest.mark.skipif(why_no_real_trial("abduction") is not None,
                     reason=f"real trial not available: {why_no_real_trial('abduction')}")
 def test_real_trial_is_calibrated_and_prepared():
-    from exubio.validate import _real_trial
-
-    model, protocol, targets, cal = _real_trial("abduction")
+    model, protocol, targets, cal = real_trial("abduction")
     assert (shared_data_dir() / "trc").is_dir()
     assert "calibrated" in model.name
     assert set(protocol.marker_names) == {"aa", "ts", "ai", "gu", "EpL", "centelbow"}
     assert targets.n_frames == 1091
-    assert cal["residual_mm"]["mean"] < 5.0
+    assert cal.residual_mm.mean < 5.0
 
 
 def test_a_calibrated_trial_report_has_a_calibration_page(tmp_path):
@@ -236,7 +311,6 @@ def test_portable_paths_rewrites_this_machines_paths():
     """Absolute paths of the shared data and of the checkout, inside any string of a JSON-like
     object, become ../shared/data/... and ./...; other strings and numbers are left alone."""
     from exubio.resources import _CHECKOUT
-    from exubio.validate import portable_paths
 
     shared = shared_data_dir()
     obj = {"data": {"abduction": {"source": str(shared / "trc" / "a.trc"), "frames": 10}},

@@ -1,6 +1,7 @@
-"""Build the validation report from ``validation_data.npz``, ``table1.json`` and
-``validation_runs.json`` (written by ``exubio.validate``): ``validation.pdf`` (title page with the
-summary, one page per figure, Table 1 and the Ludewig comparison tables) and one PNG per figure.
+"""Build the validation report from the study's typed results (``exubio.validation.results``,
+read with ``ValidationResults.load`` from the files ``exubio.validation.run_validation`` saved):
+``validation.pdf`` (title page with the summary, one page per figure, Table 1 and the Ludewig
+comparison tables) and one PNG per figure.
 
 Figures are drawn on ``matplotlib.figure.Figure`` objects with the Agg canvas (no pyplot state).
 Angles are in degrees, lengths in mm, times in s; every figure names its data source.
@@ -8,7 +9,6 @@ Angles are in degrees, lengths in mm, times in s; every figure names its data so
 from __future__ import annotations
 
 import datetime as _dt
-import json
 import textwrap
 from pathlib import Path
 from typing import Any
@@ -17,6 +17,23 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure
+
+from exubio.validation.results import (
+    METHODS,
+    TRIALS,
+    AgreementTrial,
+    AngleComparison,
+    Check,
+    ElevationComparison,
+    Failed,
+    MasslessDiagnostic,
+    MedianMax,
+    ResidualStats,
+    SierMethod,
+    SierRunMethod,
+    Skipped,
+    ValidationResults,
+)
 
 __all__ = ["FIGURES", "REPORT_PAGES", "build_report"]
 
@@ -54,27 +71,38 @@ MESKERS_NOTE = ("Meskers et al. 1998 (electromagnetic tracking), the paper's sec
 # --------------------------------------------------------------------------------------------
 # Inputs
 # --------------------------------------------------------------------------------------------
-class _Data:
-    def __init__(self, folder: Path):
-        with np.load(folder / "validation_data.npz", allow_pickle=False) as z:
-            self.a = {k: z[k] for k in z.files}
-        self.runs = json.loads((folder / "validation_runs.json").read_text(encoding="utf-8"))
-        self.table1 = json.loads((folder / "table1.json").read_text(encoding="utf-8"))
+def _source_label(r: ValidationResults, trial: str) -> str:
+    d = r.data[trial]
+    if d.is_real:
+        return f"REAL trial {Path(d.source).name} (Seth et al. 2019), subject-calibrated model"
+    s = r.settings
+    if trial == "sier":
+        return f"simulated, noise SD {s.noise_mm:g} mm, STA {s.sta_mm:g} mm"
+    return f"SIMULATED (real trial not available), noise {s.noise_mm:g} mm, STA {s.sta_mm:g} mm"
 
-    def get(self, key: str):
-        return self.a.get(key)
 
-    def kind(self, trial: str) -> str:
-        return self.runs["data"][trial]["kind"]
+def _residuals(stats: ResidualStats | Failed) -> ResidualStats | None:
+    return stats if isinstance(stats, ResidualStats) else None
 
-    def source_label(self, trial: str) -> str:
-        d = self.runs["data"][trial]
-        if d["kind"] == "real":
-            return f"REAL trial {Path(d['source']).name} (Seth et al. 2019), subject-calibrated model"
-        s = self.runs["settings"]
-        if trial == "sier":
-            return f"simulated, noise SD {s['noise_mm']:g} mm, STA {s['sta_mm']:g} mm"
-        return f"SIMULATED (real trial not available), noise {s['noise_mm']:g} mm, STA {s['sta_mm']:g} mm"
+
+def _sier_xyz(m: SierMethod | Failed) -> tuple[float | None, ...]:
+    """A method's GH marker RMSE per axis on SIER (None when it failed)."""
+    return m.gh_marker_rmse_xyz_mm if isinstance(m, SierMethod) else (None, None, None)
+
+
+def _sier_rotation(m: SierMethod | Failed) -> float | None:
+    """A method's GH axial rotation RMSE on SIER (None when it failed)."""
+    return m.gh_axial_rotation_rmse_deg if isinstance(m, SierMethod) else None
+
+
+def _angle(src: ElevationComparison | None, key: str) -> AngleComparison | None:
+    """A source's comparison of angle ``key`` (None when the source or the angle is absent)."""
+    return src.angles.get(key) if src is not None else None
+
+
+def _agreement(r: ValidationResults, trial: str) -> AgreementTrial | None:
+    a = r.agreement.trials.get(trial)
+    return a if isinstance(a, AgreementTrial) else None
 
 
 def _fmt(v: Any, spec: str = ".2f", none: str = "n/a") -> str:
@@ -98,19 +126,19 @@ def _footer(fig: Figure, text: str) -> None:
     fig.text(0.01, 0.005, text, fontsize=6.5, color="0.35", ha="left", va="bottom", wrap=True)
 
 
-def _data_footer(d: _Data) -> str:
-    parts = [f"{t}: {d.source_label(t)}" for t in ("abduction", "flexion", "sier")]
-    return "Data: " + "; ".join(parts) + f". exubio {d.runs['exubio_version']}" + \
-        (" — QUICK RUN (short trials, smoke test only)" if d.runs.get("quick") else "")
+def _data_footer(r: ValidationResults) -> str:
+    parts = [f"{t}: {_source_label(r, t)}" for t in TRIALS]
+    return "Data: " + "; ".join(parts) + f". exubio {r.exubio_version}" + \
+        (" — QUICK RUN (short trials, smoke test only)" if r.quick else "")
 
 
 # --------------------------------------------------------------------------------------------
 # Figures
 # --------------------------------------------------------------------------------------------
-def fig_sensitivity(d: _Data) -> Figure:
-    sens = d.runs["sensitivity"]
-    cs, ks = d.get("sens__stiffness_n_per_m"), d.get("sens__ratio_s")
-    defl = d.get("sens__mean_deflection_mm")
+def fig_sensitivity(r: ValidationResults) -> Figure:
+    sens = r.sensitivity
+    cs, ks = sens.stiffness_n_per_m, sens.ratio_s
+    defl = sens.mean_deflection_mm
     fig = _new_figure((8.5, 6.0))
     ax = fig.add_subplot(111)
     markers = "osD^v<>"
@@ -123,47 +151,49 @@ def fig_sensitivity(d: _Data) -> Figure:
             ax.plot(cs[bad], np.full(bad.sum(), top * 1.15), "x", color="tab:red", ms=9,
                     label="run failed (ReconstructionError)" if failed_label else None)
             failed_label = False
-    p = d.runs["paper"]["sensitivity"]
-    ax.axvline(p["chosen_stiffness_n_per_m"], color="0.5", ls=":", lw=1)
-    ax.text(p["chosen_stiffness_n_per_m"] * 1.08, 0.55, "c = 1500 N/m: the paper's and\nexubio's default "
+    p = r.paper.sensitivity
+    ax.axvline(p.chosen_stiffness_n_per_m, color="0.5", ls=":", lw=1)
+    ax.text(p.chosen_stiffness_n_per_m * 1.08, 0.55, "c = 1500 N/m: the paper's and\nexubio's default "
             "(d = 300 Ns/m,\nk = 0.2 s)", transform=ax.get_xaxis_transform(), fontsize=7.5, va="center", color="0.3")
     ax.set_xscale("log")
     ax.set_xlabel("spring constant c (N/m), same for every marker")
     ax.set_ylabel("mean spring deflection over all markers and frames (mm)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8, loc="upper right")
-    tr = d.runs["sensitivity"]["trial"]
+    tr = sens.trial
     ax.set_title(f"Fig. 2 — PF sensitivity to spring constant c and damper-spring ratio k "
-                 f"({sens['runs']} runs, {len(sens['failed_runs'])} failed)\n{MOTION_LABEL[tr]}: "
-                 f"{d.source_label(tr)}, {sens['frames']} frames\nall {sens['runs']} runs: "
-                 f"{sens['total_wall_s']:.0f} s wall time on this machine", fontsize=9)
+                 f"({sens.runs} runs, {len(sens.failed_runs)} failed)\n{MOTION_LABEL[tr]}: "
+                 f"{_source_label(r, tr)}, {sens.frames} frames\nall {sens.runs} runs: "
+                 f"{sens.total_wall_s:.0f} s wall time on this machine", fontsize=9)
     _footer(fig, "Each point: one PF reconstruction of the whole trial with c_i = c and d_i = k·c for every marker. "
-            "Deflection = |model point − marker| (Eq. 8 residual). " + _data_footer(d))
+            "Deflection = |model point − marker| (Eq. 8 residual). " + _data_footer(r))
     fig.tight_layout(rect=(0, 0.04, 1, 1))
     return fig
 
 
-def fig_residuals(d: _Data) -> Figure:
+def fig_residuals(r: ValidationResults) -> Figure:
     fig = _new_figure((9.0, 9.5))
-    t1 = d.table1["rows"]
-    for i, name in enumerate(("abduction", "flexion", "sier")):
+    t1 = r.table1
+    for i, name in enumerate(TRIALS):
         ax = fig.add_subplot(3, 1, i + 1)
-        t = d.get(f"res__{name}__time_s")
+        row = t1[name]
+        t = row.time_s
         for method, color in (("pf", C_PF), ("ls", C_LS)):
-            m, s = d.get(f"res__{name}__{method}__mean_mm"), d.get(f"res__{name}__{method}__sd_mm")
-            if m is None:
+            st = _residuals(row.stats(method))
+            if st is None:
                 continue
+            m, s = st.mean_mm, st.sd_mm
             if method == "pf":
                 ax.fill_between(t, m - s, m + s, color="0.8", label="PF mean ± SD over markers")
                 ax.plot(t, m, color=color, lw=0.8, label="PF mean")
             else:
                 ax.plot(t, m, color=color, lw=0.7, ls="--", label="LS mean")
-        pf = t1[name].get("pf", {})
-        paper = d.table1["paper"][name]
-        ax.set_title(f"{MOTION_LABEL[name]} — {d.source_label(name)}, {t1[name].get('markers', '?')} markers\n"
-                     f"max of mean: exubio PF {_fmt(pf.get('max_mean_residual_mm'), '.1f')} ± "
-                     f"{_fmt(pf.get('sd_at_max_mean_mm'), '.1f')} mm, paper {paper['max_mean_residual_mm']} ± "
-                     f"{paper['sd_at_max_mean_mm']} mm", fontsize=8.5)
+        pf = _residuals(row.pf)
+        paper = r.paper.table1[name]
+        ax.set_title(f"{MOTION_LABEL[name]} — {_source_label(r, name)}, {row.markers} markers\n"
+                     f"max of mean: exubio PF {_fmt(pf.max_mean_residual_mm if pf else None, '.1f')} ± "
+                     f"{_fmt(pf.sd_at_max_mean_mm if pf else None, '.1f')} mm, paper {paper.max_mean_residual_mm} ± "
+                     f"{paper.sd_at_max_mean_mm} mm", fontsize=8.5)
         ax.set_ylabel("marker residual (mm)")
         ax.set_ylim(bottom=0)
         ax.grid(True, alpha=0.3)
@@ -171,38 +201,38 @@ def fig_residuals(d: _Data) -> Figure:
             ax.legend(fontsize=7, loc="upper right")
     ax.set_xlabel("time (s)")
     fig.suptitle("Fig. 3 — Marker residuals |R_i − M_i| per frame, mean ± SD over all markers (Eq. 8)", fontsize=10)
-    _footer(fig, _data_footer(d))
+    _footer(fig, _data_footer(r))
     fig.tight_layout(rect=(0, 0.03, 1, 0.97))
     return fig
 
 
-def fig_sier(d: _Data) -> Figure:
-    sier = d.runs["sier"]
-    t = d.get("sier__time_s")
+def fig_sier(r: ValidationResults) -> Figure:
+    sier = r.sier
+    t = sier.time_s
     fig = _new_figure((11.0, 8.5))
     gs = fig.add_gridspec(3, 2, width_ratios=(2.2, 1.0))
     mid = 0.5 * (t[0] + t[-1])
     zoom = (mid - 2.0, mid + 2.0) if t[-1] - t[0] > 6.0 else (t[0], t[-1])
-    pf, ls = sier.get("pf", {}), sier.get("ls", {})
+    pf, ls = sier.pf, sier.ls
     rows = [
-        ("GH axial rotation,\ngh_internal_rotation (deg)", "sier__gh_rotation_{}_deg", None,
-         f"PF RMSE {_fmt(pf.get('gh_axial_rotation_rmse_deg'))}°, LS {_fmt(ls.get('gh_axial_rotation_rmse_deg'))}° "
+        ("GH axial rotation,\ngh_internal_rotation (deg)", sier.gh_rotation_deg, None,
+         f"PF RMSE {_fmt(_sier_rotation(pf))}°, LS {_fmt(_sier_rotation(ls))}° "
          f"(paper: PF 3.69°, LS 3.13°)"),
-        (f"GH marker ({sier['gh_marker']}) X\ndisplacement (mm)", "sier__marker_{}_mm", 0,
-         f"PF RMSE {_fmt((pf.get('gh_marker_rmse_xyz_mm') or [None])[0])} mm, LS "
-         f"{_fmt((ls.get('gh_marker_rmse_xyz_mm') or [None])[0])} mm (paper: PF 1.66, LS 1.59 mm)"),
-        (f"GH marker ({sier['gh_marker']}) Z\ndisplacement (mm)", "sier__marker_{}_mm", 2,
-         f"PF RMSE {_fmt((pf.get('gh_marker_rmse_xyz_mm') or [None, None, None])[2])} mm, LS "
-         f"{_fmt((ls.get('gh_marker_rmse_xyz_mm') or [None, None, None])[2])} mm (paper: PF 1.56, LS 1.62 mm)"),
+        (f"GH marker ({sier.gh_marker}) X\ndisplacement (mm)", sier.marker_mm, 0,
+         f"PF RMSE {_fmt(_sier_xyz(pf)[0])} mm, LS "
+         f"{_fmt(_sier_xyz(ls)[0])} mm (paper: PF 1.66, LS 1.59 mm)"),
+        (f"GH marker ({sier.gh_marker}) Z\ndisplacement (mm)", sier.marker_mm, 2,
+         f"PF RMSE {_fmt(_sier_xyz(pf)[2])} mm, LS "
+         f"{_fmt(_sier_xyz(ls)[2])} mm (paper: PF 1.56, LS 1.62 mm)"),
     ]
-    for r, (ylabel, key, comp, title) in enumerate(rows):
+    for row, (ylabel, by_source, comp, title) in enumerate(rows):
         for c in range(2):
-            ax = fig.add_subplot(gs[r, c])
+            ax = fig.add_subplot(gs[row, c])
             series = [("input", C_INPUT, "-", 0.6, "simulated input (noise + STA)"),
                       ("true", C_TRUE, "--", 1.2, "true value"),
                       ("pf", C_PF, "-", 0.9, "PF"), ("ls", C_LS, "-", 0.7, "LS")]
             for src, color, ls_, lw, label in series:
-                y = d.get(key.format(src))
+                y = by_source.get(src)
                 if y is None:
                     continue
                 y = y if comp is None else y[:, comp]
@@ -214,18 +244,18 @@ def fig_sier(d: _Data) -> Figure:
             else:
                 ax.set_ylabel(ylabel, fontsize=8)
                 ax.set_title(title, fontsize=8.5)
-                if r == 1:
+                if row == 1:
                     handles, labels = ax.get_legend_handles_labels()
-            if r == 2:
+            if row == 2:
                 ax.set_xlabel("time (s)")
     fig.legend(handles, labels, loc="upper center", ncol=4, fontsize=8, bbox_to_anchor=(0.5, 0.93), frameon=False)
-    desc = textwrap.fill(sier["description"], 170)
+    desc = textwrap.fill(sier.description, 170)
     fig.suptitle(f"Fig. 4 — SIER with measurement noise and soft-tissue artefact (STA): truth vs PF vs LS "
-                 f"({sier['frames']} frames)\n{desc}", fontsize=8.5)
-    _footer(fig, f"GH marker: exubio's humerus marker {sier['gh_marker']} over the deltoid (~100 mm below the GH "
+                 f"({sier.frames} frames)\n{desc}", fontsize=8.5)
+    _footer(fig, f"GH marker: exubio's humerus marker {sier.gh_marker} over the deltoid (~100 mm below the GH "
             f"centre; the paper's GH marker sits over the humeral head). Displacements in the ISB thorax frame "
             f"(X anterior, Z right) relative to the true first-frame position; STA peak on this marker "
-            f"{sier['sta_peak_mm']:.1f} mm. RMSEs over the whole trial. " + _data_footer(d))
+            f"{sier.sta_peak_mm:.1f} mm. RMSEs over the whole trial. " + _data_footer(r))
     fig.tight_layout(rect=(0, 0.04, 1, 0.915))
     return fig
 
@@ -236,55 +266,54 @@ def _masked(y: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return out
 
 
-def _definition_note(iv: dict) -> str:
+def _definition_note() -> str:
     return ("Angles in Ludewig et al. 2009's own definitions (from the Spartacus metadata, exubio.frame_definitions): "
             "thorax and humerus as ISB; clavicle Z SC→AC; scapula Z TS→AC, X normal to AI-TS-AC (built on AC, not "
             "ISB's AA); SC, AC, ST Y-X′-Z″, GH X-Z′-Y″, no sign change (raw Euler angles).")
 
 
-def fig_invivo(d: _Data) -> Figure:
+def fig_invivo(r: ValidationResults) -> Figure:
     fig = _new_figure((17.0, 10.5))
-    iv = d.runs["invivo"]
+    iv = r.invivo
     axes = fig.subplots(3, 6, sharex=True)
     for m, name in enumerate(("abduction", "flexion")):
         res = iv[name]
-        plane = res["plane"]
-        ht_grid = d.get(f"iv__{name}__corridor__ht_deg")
-        for r, joint in enumerate(("SC", "ST", "GH")):
-            cor = res.get("corridor", {}).get(joint, {})
-            members = cor.get("members", [])
+        plane = res.plane
+        ludewig = r.ludewig[plane]
+        ht_grid = res.corridor_ht_deg
+        for row, joint in enumerate(("SC", "ST", "GH")):
+            cor = res.corridor.get(joint)
+            members = cor.members if cor is not None else ()
             for i in range(3):
-                ax = axes[r, 3 * m + i]
+                ax = axes[row, 3 * m + i]
                 key = LUDEWIG_COLUMNS[joint][i]
-                lo, hi = d.get(f"iv__{name}__corridor__{joint}__lo"), d.get(f"iv__{name}__corridor__{joint}__hi")
+                lo, hi = (cor.lo, cor.hi) if cor is not None else (None, None)
                 if lo is not None and np.isfinite(lo[:, i]).any():
                     ax.fill_between(ht_grid, lo[:, i], hi[:, i], color=C_CORRIDOR, alpha=0.35, lw=0,
                                     label=f"corridor ({len(members)} studies)")
-                for k, mem in enumerate(members):
-                    h = d.get(f"iv__{name}__corridor__{joint}__member{k}__ht_deg")
-                    y = d.get(f"iv__{name}__corridor__{joint}__member{k}__deg")
-                    if h is not None and not mem["study"].startswith("Ludewig"):
-                        ax.plot(h, y[:, i], ls=":", color="0.35", lw=0.9,
-                                label=mem["study"] + (" (converted)" if mem["converted"] else ""))
+                for mem in members:
+                    if mem.ht_deg is not None and not mem.study.startswith("Ludewig"):
+                        ax.plot(mem.ht_deg, mem.deg[:, i], ls=":", color="0.35", lw=0.9,
+                                label=mem.study + (" (converted)" if mem.converted else ""))
                 for src, color, ls_, lw, label in (("truth", C_TRUE, "--", 1.0, "simulated truth"),
                                                    ("pf", C_PF, "-", 1.1, "PF"), ("ls", C_LS, (0, (4, 2)), 1.1, "LS")):
-                    ht = d.get(f"iv__{name}__{src}__ht_deg")
-                    if ht is None:
+                    curves = res.source(src)
+                    if curves is None or curves.ht_deg is None:
                         continue
-                    rising = d.get(f"iv__{name}__{src}__raising")
-                    y = d.get(f"iv__{name}__{src}__{joint}_deg")[:, i]
-                    ax.plot(_masked(ht, rising), _masked(y, rising), color=color, ls=ls_, lw=lw, label=label)
-                ax.plot(d.get(f"lud__{plane}__ht_elevation_deg"), d.get(f"lud__{plane}__{key}"), "o-", color=C_REF,
+                    y = curves.joint_deg[joint][:, i]
+                    ax.plot(_masked(curves.ht_deg, curves.raising), _masked(y, curves.raising), color=color, ls=ls_,
+                            lw=lw, label=label)
+                ax.plot(ludewig["ht_elevation_deg"], ludewig[key], "o-", color=C_REF,
                         ms=2.5, lw=1.0, label="Ludewig 2009 (mean)", zorder=5)
                 title = ANGLE_TITLES[joint][i]
-                e = res.get("pf", {}).get(key, {})
-                if e.get("undetermined"):
+                e = _angle(res.pf, key)
+                if e is not None and e.undetermined:
                     title += "\nNOT DETERMINED by this marker set"
                     ax.set_facecolor("#eeeeee")
-                elif e.get("inferred"):
+                elif e is not None and e.inferred:
                     title += "\nINFERRED from the model (no marker on the bone)"
                     ax.set_facecolor("#f4f4f4")
-                share = e.get("share_inside_corridor")
+                share = e.share_inside_corridor if e is not None else None
                 if share is not None and np.isfinite(share):
                     title += f"\nPF inside corridor {100 * share:.0f}% of HT 30-120"
                 ax.set_title(title, fontsize=7.2)
@@ -292,7 +321,7 @@ def fig_invivo(d: _Data) -> Figure:
                 ax.tick_params(labelsize=7)
                 if i == 0:
                     ax.set_ylabel(f"{joint} angle (deg)", fontsize=8)
-                if r == 2:
+                if row == 2:
                     ax.set_xlabel("humerothoracic elevation (deg)", fontsize=8)
     handles = {}
     for ax in axes.flat:
@@ -304,89 +333,90 @@ def fig_invivo(d: _Data) -> Figure:
     fig.suptitle("Fig. 5 — shoulder angles during arm raising in Ludewig et al. 2009's frames: exubio PF and LS vs "
                  "Ludewig's bone-pin means and the corridor of comparable in vivo studies", fontsize=11, y=0.995)
     sim_note = ""
-    if any(d.kind(n) == "simulated" for n in ("abduction", "flexion")):
+    if any(not r.is_real(n) for n in ("abduction", "flexion")):
         sim_note = ("Simulated trials: the 'simulated truth' is the model's rhythm; PF/LS should match the truth, the "
                     "truth need not match Ludewig. ")
-    _footer(fig, f"{_definition_note(iv)} Corridor: spread of the study means (≥ 2 studies) converted to these "
+    _footer(fig, f"{_definition_note()} Corridor: spread of the study means (≥ 2 studies) converted to these "
             f"definitions on the model's bones (exubio.corridor); dotted: the other studies; {CORPUS_NOTE}. Only raising "
-            f"phases are drawn. {sim_note}" + _data_footer(d))
+            f"phases are drawn. {sim_note}" + _data_footer(r))
     fig.tight_layout(rect=(0, 0.08, 1, 0.93), h_pad=1.2)
     for m, name in enumerate(("abduction", "flexion")):
-        plane = iv[name]["plane"]
+        plane = iv[name].plane
         left, right = axes[0, 3 * m].get_position(), axes[0, 3 * m + 2].get_position()
         fig.text(0.5 * (left.x0 + right.x1), left.y1 + 0.045,
-                 f"({'a' if m == 0 else 'b'}) {MOTION_LABEL[name]}: {d.source_label(name)}\n"
+                 f"({'a' if m == 0 else 'b'}) {MOTION_LABEL[name]}: {_source_label(r, name)}\n"
                  f"compared with {plane}-plane elevation",
                  ha="center", va="bottom", fontsize=8.5, fontweight="bold")
     return fig
 
 
-def fig_agreement(d: _Data) -> Figure:
+def fig_agreement(r: ValidationResults) -> Figure:
     fig = _new_figure((12.5, 8.5))
     gs = fig.add_gridspec(1, 2, width_ratios=(1.0, 1.0))
     ax1, ax2 = fig.add_subplot(gs[0]), fig.add_subplot(gs[1])
-    agr = d.runs["agreement"]
-    p = d.runs["paper"]
-    names = [n for n in ("abduction", "flexion", "sier") if d.get(f"agr__{n}__coord_rmse_deg") is not None]
+    agr = r.agreement
+    p = r.paper
+    compared = {n: a for n in TRIALS if (a := _agreement(r, n)) is not None}
+    names = list(compared)
     width = 0.8 / max(len(names), 1)
     colors = {"abduction": "tab:blue", "flexion": "tab:orange", "sier": "tab:purple"}
-    coords = [str(c) for c in d.get(f"agr__{names[0]}__coordinate_names")] if names else []
+    coords = [str(c) for c in compared[names[0]].coordinate_names] if names else []
     markers: list[str] = []
-    for name in names:  # union of the trials' marker sets, in order of appearance
-        markers += [str(m) for m in d.get(f"agr__{name}__marker_names") if str(m) not in markers]
-    lim = max(2.4, 1.3 * float(agr["max_coordinate_rmse_deg"] or 0.0))
-    for j, name in enumerate(names):
+    for a in compared.values():  # union of the trials' marker sets, in order of appearance
+        markers += [str(m) for m in a.marker_names if str(m) not in markers]
+    top = agr.max_coordinate_rmse_deg
+    lim = max(2.4, 1.3 * float(top if np.isfinite(top) else 0.0))
+    for j, (name, a) in enumerate(compared.items()):
         off = (j - (len(names) - 1) / 2) * width
-        v = d.get(f"agr__{name}__coord_rmse_deg")
-        det = d.get(f"agr__{name}__determined")
-        det = np.ones(len(coords), dtype=bool) if det is None else det.astype(bool)
+        v = a.coord_rmse_deg
+        det = a.determined.astype(bool)
         y = np.arange(len(coords)) + off
-        src = "real" if d.kind(name) == "real" else "simulated"
+        src = "real" if r.is_real(name) else "simulated"
         ax1.barh(y[det], v[det], height=width, color=colors[name],
-                 label=f"{name} ({src}): max {agr[name]['max_coordinate_rmse_deg']:.2f}°")
+                 label=f"{name} ({src}): max {a.max_coordinate_rmse_deg:.2f}°")
         if (~det).any():
             ax1.barh(y[~det], np.minimum(v[~det], lim), height=width, color=colors[name], alpha=0.3, hatch="////",
                      edgecolor=colors[name], label=f"{name}: not determined by its markers")
             for yy, vv in zip(y[~det], v[~det]):
                 ax1.text(min(vv, lim) * 0.98, yy, f"{vv:.0f}°" if vv >= 10 else f"{vv:.1f}°", ha="right",
                          va="center", fontsize=5.5, color="0.15")
-        diag = d.get(f"agr__{name}__coord_rmse_massless_deg")
-        if diag is not None:
+        diag = a.coord_rmse_massless_deg
+        if diag is not None and isinstance(a.diagnostic_massless_unobserved, MasslessDiagnostic):
             ax1.plot(diag[det], y[det], "kx", ms=5, mew=1.2,
                      label=f"{name}: PF, marker-less forearm/hand massless (diagnostic): max "
-                           f"{agr[name]['diagnostic_massless_unobserved']['max_coordinate_rmse_deg']:.2f}°")
-        w = d.get(f"agr__{name}__marker_rmse_mm")
-        idx = np.array([markers.index(str(m)) for m in d.get(f"agr__{name}__marker_names")])
+                           f"{a.diagnostic_massless_unobserved.max_coordinate_rmse_deg:.2f}°")
+        w = a.marker_rmse_series_mm
+        idx = np.array([markers.index(str(m)) for m in a.marker_names])
         ax2.barh(idx + off, w, height=width, color=colors[name], label=f"{name} ({src}): max {np.nanmax(w):.2f} mm")
     ax1.set_yticks(np.arange(len(coords)), coords, fontsize=7.5)
     ax2.set_yticks(np.arange(len(markers)), markers, fontsize=7.5)
     ax1.set_xlim(0, lim)
-    ax1.axvline(p["pf_ls_max_joint_rmse_deg"], color="0.3", ls=":", label="paper's max (1.87°)")
-    ax2.axvline(p["pf_ls_max_marker_rmse_mm"], color="0.3", ls=":", label="paper's max (0.37 mm)")
+    ax1.axvline(p.pf_ls_max_joint_rmse_deg, color="0.3", ls=":", label="paper's max (1.87°)")
+    ax2.axvline(p.pf_ls_max_marker_rmse_mm, color="0.3", ls=":", label="paper's max (0.37 mm)")
     ax1.set_xlabel("RMSE between PF and LS joint coordinate (deg)")
     ax2.set_xlabel("RMSE between PF and LS model-point trajectories (mm)")
     for ax in (ax1, ax2):
         ax.invert_yaxis()
         ax.grid(True, axis="x", alpha=0.3)
         ax.legend(fontsize=6.8, loc="upper center", bbox_to_anchor=(0.5, -0.08), ncol=1, frameon=False)
-    ax1.set_title(f"joint coordinates; max over determined ones {_fmt(agr['max_coordinate_rmse_deg'])}°", fontsize=9)
-    ax2.set_title(f"model points of each trial's markers; max {_fmt(agr['max_marker_rmse_mm'])} mm", fontsize=9)
+    ax1.set_title(f"joint coordinates; max over determined ones {_fmt(agr.max_coordinate_rmse_deg)}°", fontsize=9)
+    ax2.set_title(f"model points of each trial's markers; max {_fmt(agr.max_marker_rmse_mm)} mm", fontsize=9)
     fig.suptitle("Fig. 6 — Agreement of the PF and LS reconstructions of the same trials (RMSE over all frames)",
                  fontsize=10)
-    und = {n: agr[n].get("undetermined_coordinates", []) for n in names if agr.get(n, {}).get("undetermined_coordinates")}
+    und = {n: a.undetermined_coordinates for n, a in compared.items() if a.undetermined_coordinates}
     note = ""
     if und:
         note = ("Hatched (clipped, value written): coordinates the trial's markers do not determine (null space of the "
                 "constrained marker Jacobian, exubio.validate.undetermined_coordinates): there PF and LS settle "
                 "differently, which is no error of either. ")
-    diag = {n: agr[n]["diagnostic_massless_unobserved"] for n in names
-            if "max_coordinate_rmse_deg" in agr.get(n, {}).get("diagnostic_massless_unobserved", {})}
+    diag = {n: a.diagnostic_massless_unobserved for n, a in compared.items()
+            if isinstance(a.diagnostic_massless_unobserved, MasslessDiagnostic)}
     if diag:
         note += ("Crosses: the same PF run with the segments that carry no marker ("
-                 + ", ".join(sorted({s for v in diag.values() for s in v["segments"]}))
+                 + ", ".join(sorted({s for v in diag.values() for s in v.segments}))
                  + ") made almost massless (x 1e-3): in PF those segments still swing on their free joints and load "
                  "the humerus through its markers' springs; LS has no inertia. Bars minus crosses = that effect. ")
-    _footer(fig, note + _data_footer(d))
+    _footer(fig, note + _data_footer(r))
     fig.tight_layout(rect=(0, 0.06, 1, 0.96))
     return fig
 
@@ -427,76 +457,72 @@ def _text_pages(title: str, subtitle: str, blocks: list[tuple[str, str]]) -> lis
     return pages
 
 
-def summary_pages(d: _Data) -> list[Figure]:
-    r = d.runs
-    t1 = d.table1["rows"]
-    p = r["paper"]
-    sier = r["sier"]
-    agr = r["agreement"]
-    sens = r["sensitivity"]
+def summary_pages(r: ValidationResults) -> list[Figure]:
+    t1 = r.table1
+    p = r.paper
+    sier = r.sier
+    agr = r.agreement
+    sens = r.sensitivity
     when = _dt.datetime.now().strftime("%Y-%m-%d %H:%M")
     prov = []
-    for name in ("abduction", "flexion", "sier"):
-        info = r["data"][name]
-        if info["kind"] == "real":
-            cal = info.get("calibration") or {}
-            fr = cal.get("frames") or {}
-            res = cal.get("residual_mm") or {}
-            prov.append(f"• {MOTION_LABEL[name]}: REAL trial {info['source']} ({info['frames']} frames at "
-                        f"{info.get('rate_hz', 0):g} Hz, markers {', '.join(info.get('markers', []))}; "
-                        f"{info['citation']}), protocol {info['protocol']}. Model: the generic model calibrated to "
-                        f"the subject (exubio.calibration) on frames {fr.get('start')}-{fr.get('stop')} of the same "
+    for name in TRIALS:
+        info = r.data[name]
+        if info.is_real:
+            cal = info.calibration
+            start, stop = (cal.frames.start, cal.frames.stop) if cal is not None else (None, None)
+            scales = cal.scale_factors if cal is not None else {}
+            prov.append(f"• {MOTION_LABEL[name]}: REAL trial {info.source} ({info.frames} frames at "
+                        f"{info.rate_hz or 0:g} Hz, markers {', '.join(info.markers or ())}; "
+                        f"{info.citation}), protocol {info.protocol}. Model: the generic model calibrated to "
+                        f"the subject (exubio.calibration) on frames {start}-{stop} of the same "
                         f"trial (still arm; no static trial exists), scale factors "
-                        + ", ".join(f"{k} {v:.2f}" for k, v in (cal.get('scale_factors') or {}).items() if abs(v - 1) > 1e-9)
-                        + f"; calibration residual mean {_fmt(res.get('mean'))} mm. No marker beyond the elbow and "
-                        f"none on the clavicle: forearm/hand coordinates and the clavicle's axial rotation are not "
-                        f"determined by these data.")
+                        + ", ".join(f"{k} {v:.2f}" for k, v in scales.items() if abs(v - 1) > 1e-9)
+                        + f"; calibration residual mean {_fmt(cal.residual_mm.mean if cal else None)} mm. No marker "
+                        "beyond the elbow and none on the clavicle: forearm/hand coordinates and the clavicle's axial "
+                        "rotation are not determined by these data.")
         else:
-            why = f" Real trial not used: {info['reason_not_real']}." if "reason_not_real" in info else ""
-            prov.append(f"• {MOTION_LABEL[name]}: SIMULATED — {info['description']}.{why}")
+            why = f" Real trial not used: {info.reason_not_real}." if info.reason_not_real is not None else ""
+            prov.append(f"• {MOTION_LABEL[name]}: SIMULATED — {info.description}.{why}")
     key = []
-    for name in ("abduction", "flexion", "sier"):
-        row, pp = t1[name], d.table1["paper"][name]
-        pf, ls = row.get("pf", {}), row.get("ls", {})
-        key.append(f"• {MOTION_LABEL[name]} ({row['frames']} frames, {row['duration_s']:.0f} s): PF "
-                   f"{_fmt(row['pf_wall_s'], '.1f')} s ({_fmt(pf.get('ms_per_frame'), '.2f')} ms/frame), LS "
-                   f"{_fmt(row['ls_wall_s'], '.1f')} s — paper {pp['pf_wall_s']} s / {pp['ls_wall_s']} s for "
-                   f"{pp['frames']} frames. Max mean residual PF {_fmt(pf.get('max_mean_residual_mm'), '.1f')} ± "
-                   f"{_fmt(pf.get('sd_at_max_mean_mm'), '.1f')} mm (paper {pp['max_mean_residual_mm']} ± "
-                   f"{pp['sd_at_max_mean_mm']} mm).")
-    pf, ls = sier.get("pf", {}), sier.get("ls", {})
-    xyz = pf.get("gh_marker_rmse_xyz_mm") or [None] * 3
-    lxyz = ls.get("gh_marker_rmse_xyz_mm") or [None] * 3
-    key.append(f"• SIER vs truth: GH axial rotation RMSE PF {_fmt(pf.get('gh_axial_rotation_rmse_deg'))}°, LS "
-               f"{_fmt(ls.get('gh_axial_rotation_rmse_deg'))}° (paper 3.69° / 3.13°); GH marker "
-               f"({sier['gh_marker']}) X/Z RMSE PF {_fmt(xyz[0])}/{_fmt(xyz[2])} mm, LS {_fmt(lxyz[0])}/"
-               f"{_fmt(lxyz[2])} mm (paper PF 1.66/1.56, LS 1.59/1.62 mm); STA peak {sier['sta_peak_mm']:.0f} mm.")
-    rz = (r.get("sier_realisations") or {}).get("summary", {}).get("pf")
-    if rz and rz.get("gh_axial_rotation_rmse_deg"):
-        key.append(f"• SIER over {len(r['sier_realisations']['runs'])} noise/STA seeds "
-                   f"({r['sier_realisations']['rate_hz']:g} Hz), PF median / worst: GH axial rotation "
-                   f"{_fmt(rz['gh_axial_rotation_rmse_deg']['median'])} / {_fmt(rz['gh_axial_rotation_rmse_deg']['max'])}°, "
-                   f"GH marker X {_fmt(rz['gh_marker_x_rmse_mm']['median'])} / {_fmt(rz['gh_marker_x_rmse_mm']['max'])} mm, "
-                   f"Z {_fmt(rz['gh_marker_z_rmse_mm']['median'])} / {_fmt(rz['gh_marker_z_rmse_mm']['max'])} mm.")
-    per = ", ".join(f"{n} {_fmt(agr[n]['max_coordinate_rmse_deg'])}°" for n in ("abduction", "flexion", "sier")
-                    if "max_coordinate_rmse_deg" in agr.get(n, {}))
-    key.append(f"• PF vs LS: max joint RMSE {_fmt(agr['max_coordinate_rmse_deg'])}° ({per}; coordinates the markers "
-               f"determine; paper < 1.87°), max marker trajectory RMSE {_fmt(agr['max_marker_rmse_mm'], '.2f')} mm "
+    for name in TRIALS:
+        row, pp = t1[name], p.table1[name]
+        pf = _residuals(row.pf)
+        key.append(f"• {MOTION_LABEL[name]} ({row.frames} frames, {row.duration_s:.0f} s): PF "
+                   f"{_fmt(row.pf_wall_s, '.1f')} s ({_fmt(pf.ms_per_frame if pf else None, '.2f')} ms/frame), LS "
+                   f"{_fmt(row.ls_wall_s, '.1f')} s — paper {pp.pf_wall_s} s / {pp.ls_wall_s} s for "
+                   f"{pp.frames} frames. Max mean residual PF {_fmt(pf.max_mean_residual_mm if pf else None, '.1f')} ± "
+                   f"{_fmt(pf.sd_at_max_mean_mm if pf else None, '.1f')} mm (paper {pp.max_mean_residual_mm} ± "
+                   f"{pp.sd_at_max_mean_mm} mm).")
+    xyz, lxyz = _sier_xyz(sier.pf), _sier_xyz(sier.ls)
+    key.append(f"• SIER vs truth: GH axial rotation RMSE PF {_fmt(_sier_rotation(sier.pf))}°, LS "
+               f"{_fmt(_sier_rotation(sier.ls))}° (paper 3.69° / 3.13°); GH marker "
+               f"({sier.gh_marker}) X/Z RMSE PF {_fmt(xyz[0])}/{_fmt(xyz[2])} mm, LS {_fmt(lxyz[0])}/"
+               f"{_fmt(lxyz[2])} mm (paper PF 1.66/1.56, LS 1.59/1.62 mm); STA peak {sier.sta_peak_mm:.0f} mm.")
+    rz = r.sier_realisations.summary.get("pf")
+    if rz is not None and rz.gh_axial_rotation_rmse_deg is not None:
+        rot, x, z = rz.gh_axial_rotation_rmse_deg, rz.gh_marker_x_rmse_mm, rz.gh_marker_z_rmse_mm
+        key.append(f"• SIER over {len(r.sier_realisations.runs)} noise/STA seeds "
+                   f"({r.sier_realisations.rate_hz:g} Hz), PF median / worst: GH axial rotation "
+                   f"{_fmt(rot.median)} / {_fmt(rot.max)}°, "
+                   f"GH marker X {_fmt(x.median)} / {_fmt(x.max)} mm, "
+                   f"Z {_fmt(z.median)} / {_fmt(z.max)} mm.")
+    per = ", ".join(f"{n} {_fmt(a.max_coordinate_rmse_deg)}°" for n in TRIALS if (a := _agreement(r, n)) is not None)
+    key.append(f"• PF vs LS: max joint RMSE {_fmt(agr.max_coordinate_rmse_deg)}° ({per}; coordinates the markers "
+               f"determine; paper < 1.87°), max marker trajectory RMSE {_fmt(agr.max_marker_rmse_mm, '.2f')} mm "
                f"(paper < 0.37 mm); see the findings.")
     for name in ("abduction", "flexion"):
-        iv = r["invivo"][name].get("pf", {})
         parts = []
         for col, label in (("ST_medRotation_X", "ST upward rotation"), ("SC_elevation_X", "SC elevation")):
-            if col in iv:
-                e = iv[col]
-                parts.append(f"{label} {' / '.join(_fmt(v, '+.1f') for v in e['deviation_deg'])} deg "
-                             f"(after removing the 30-deg offset: {' / '.join(_fmt(v, '+.1f') for v in e['trend_deviation_deg'][1:])})")
+            e = _angle(r.invivo[name].pf, col)
+            if e is not None:
+                parts.append(f"{label} {' / '.join(_fmt(v, '+.1f') for v in e.deviation_deg)} deg "
+                             f"(after removing the 30-deg offset: {' / '.join(_fmt(v, '+.1f') for v in e.trend_deviation_deg[1:])})")
         if parts:
-            key.append(f"• {MOTION_LABEL[name]} ({r['data'][name]['kind']}), PF minus Ludewig at HT 30/60/90/120 deg: "
+            key.append(f"• {MOTION_LABEL[name]} ({r.data[name].kind}), PF minus Ludewig at HT 30/60/90/120 deg: "
                        + "; ".join(parts) + ".")
-    key.append(f"• Sensitivity: {sens['runs']} PF runs on {sens['frames']} frames in {sens['total_wall_s']:.0f} s "
-               f"({len(sens['failed_runs'])} failed).")
-    checks = "\n".join(_check_text(c) for c in r["checks"])
+    key.append(f"• Sensitivity: {sens.runs} PF runs on {sens.frames} frames in {sens.total_wall_s:.0f} s "
+               f"({len(sens.failed_runs)} failed).")
+    checks = "\n".join(_check_text(c) for c in r.checks)
     method = (
         "exubio reconstructs the 13 joint coordinates of a 7-body right-arm model (thorax fixed; clavicle, "
         "scapula, humerus, ulna, radius, hand; the scapula glides on a thorax ellipsoid through two holonomic "
@@ -514,12 +540,12 @@ def summary_pages(d: _Data) -> list[Figure]:
         "negative; posterior clavicle rotation and posterior scapular tilt positive. The corridor behind them "
         "holds the comparable studies of the Spartacus corpus converted to the same definitions (exubio.corridor). "
         "Wall times: one process on this machine "
-        f"({r.get('processor', '')}); the paper's: SIMPACK PF and MATLAB fmincon LS on a 3.3 GHz desktop.")
+        f"({r.processor}); the paper's: SIMPACK PF and MATLAB fmincon LS on a 3.3 GHz desktop.")
     sim_sc = []
     for name in ("abduction", "flexion"):
-        e = r["invivo"][name].get("truth", {}).get("SC_elevation_X")
-        if e and np.isfinite(e["slope_deg_per_deg"] or np.nan) and np.sign(e["slope_deg_per_deg"]) != np.sign(
-                e["ludewig_slope_deg_per_deg"]):
+        e = _angle(r.invivo[name].truth, "SC_elevation_X")
+        if e is not None and np.isfinite(e.slope_deg_per_deg) and np.sign(e.slope_deg_per_deg) != np.sign(
+                e.ludewig_slope_deg_per_deg):
             sim_sc.append(name)
     sc_note = ""
     if sim_sc:
@@ -530,31 +556,32 @@ def summary_pages(d: _Data) -> list[Figure]:
                    "clavicle frame (retracted ~18 deg and elevated ~7 deg in the reference posture), so the "
                    "posterior rotation about the thorax Z axis also depresses the lateral clavicle.")
     findings = []
-    agr = r["agreement"]
+    sier_agr = _agreement(r, "sier")
     for name in ("abduction", "flexion"):
-        a = agr.get(name, {})
-        dg = a.get("diagnostic_massless_unobserved", {})
-        if r["data"][name]["kind"] == "real" and "max_coordinate_rmse_deg" in dg:
+        a = _agreement(r, name)
+        dg = a.diagnostic_massless_unobserved if a is not None else None
+        if r.is_real(name) and isinstance(dg, MasslessDiagnostic):
             findings.append(
-                f"PF vs LS on the real {name}: max RMSE {_fmt(a['max_coordinate_rmse_deg'])} deg ({a['max_coordinate']}) over "
+                f"PF vs LS on the real {name}: max RMSE {_fmt(a.max_coordinate_rmse_deg)} deg ({a.max_coordinate}) over "
                 f"the coordinates the markers determine; the humerus orientation differs by "
-                f"{_fmt(a['segment_orientation_difference_deg']['humerus']['rms'])} deg RMS. Cause: the forearm and hand "
+                f"{_fmt(a.segment_orientation_difference_deg['humerus'].rms)} deg RMS. Cause: the forearm and hand "
                 f"carry no marker in these data, yet in PF they keep their mass and swing freely on the elbow, forearm "
                 f"and wrist joints, loading the humerus (whose axial rotation hangs on EpL's spring, 35 mm from the "
                 f"long axis). With those segments almost massless (diagnostic run) the PF-LS max RMSE drops to "
-                f"{_fmt(dg['max_coordinate_rmse_deg'])} deg (humerus {_fmt(dg['segment_orientation_difference_deg']['humerus']['rms'])} "
-                f"deg RMS). On the simulated SIER with the full marker set: {_fmt(agr.get('sier', {}).get('max_coordinate_rmse_deg'))} deg.")
-    if any(r["data"][n]["kind"] == "real" for n in ("abduction", "flexion")):
+                f"{_fmt(dg.max_coordinate_rmse_deg)} deg (humerus {_fmt(dg.segment_orientation_difference_deg['humerus'].rms)} "
+                f"deg RMS). On the simulated SIER with the full marker set: "
+                f"{_fmt(sier_agr.max_coordinate_rmse_deg if sier_agr else None)} deg.")
+    if any(r.is_real(n) for n in ("abduction", "flexion")):
         findings.append(
             "Real trials: the clavicle carries no marker, so its axial rotation (SC Z'', and every AC angle) is not "
             "determined (PF and LS settle differently; dark grey panels in Fig. 5), and SC elevation and protraction "
             "are inferred from the scapula's AC position on the model's clavicle (light grey), not measured.")
         findings.append(_invivo_finding(r))
-    rz = (r.get("sier_realisations") or {}).get("summary", {}).get("pf") or {}
-    if rz.get("gh_marker_x_rmse_mm") and rz["gh_marker_x_rmse_mm"]["max"] > p["sier_gh_marker_rmse_mm"]["pf_x"]:
+    x = rz.gh_marker_x_rmse_mm if rz is not None else None
+    if x is not None and x.max > p.sier_gh_marker_rmse_mm.pf_x:
         findings.append(
-            f"SIER: over the noise/STA seeds the GH marker X RMSE reaches {_fmt(rz['gh_marker_x_rmse_mm']['max'])} mm in "
-            f"the worst seed (median {_fmt(rz['gh_marker_x_rmse_mm']['median'])} mm, paper 1.66 mm): how much artefact "
+            f"SIER: over the noise/STA seeds the GH marker X RMSE reaches {_fmt(x.max)} mm in "
+            f"the worst seed (median {_fmt(x.median)} mm, paper 1.66 mm): how much artefact "
             f"the reconstruction absorbs depends on the artefact's direction, not only on its 20-mm size.")
     notes = (
         ("\n".join(f"• {f}" for f in findings) + "\n" if findings else "") + f"{MESKERS_NOTE}{sc_note}\nLudewig et al. 2009 is available as means only (no SD): {LUDEWIG_CITATION}; bundled as "
@@ -563,14 +590,14 @@ def summary_pages(d: _Data) -> list[Figure]:
         + ("Simulated abduction/flexion (exubio.simulate) use the generic model: their shoulder rhythm follows "
            "Ludewig et al. only partly (the generic thorax ellipsoid limits scapular upward rotation), so Fig. 5 "
            "compares both the reconstructions and the simulated truth with Ludewig. "
-           if any(r["data"][n]["kind"] == "simulated" for n in ("abduction", "flexion")) else "")
-        + f"Every number here is in validation_runs.json and table1.json. Total run time {r['total_wall_s']:.0f} s"
-        + (" (QUICK RUN: short trials; numbers are a smoke test, not the validation)." if r.get("quick") else "."))
+           if any(not r.is_real(n) for n in ("abduction", "flexion")) else "")
+        + f"Every number here is in validation_runs.json and table1.json. Total run time {r.total_wall_s:.0f} s"
+        + (" (QUICK RUN: short trials; numbers are a smoke test, not the validation)." if r.quick else "."))
     return _text_pages(
         "exubio validation report",
         "Potential-field (PF) vs least-squares (LS) upper-limb kinematics, against the paper's evaluation "
         "(Fig. 2-5, Table 1)",
-        [("", f"Generated {when} by `exubio validate` (exubio {r['exubio_version']}, Python {r['python']}); "
+        [("", f"Generated {when} by `exubio validate` (exubio {r.exubio_version}, Python {r.python}); "
               f"the paper: ../shared/paper/potential_field_upper_extremity.txt."),
          ("Method", method),
          ("Data provenance", "\n".join(prov)),
@@ -579,22 +606,22 @@ def summary_pages(d: _Data) -> list[Figure]:
          ("Findings and notes", notes)])
 
 
-def _invivo_finding(r: dict) -> str:
+def _invivo_finding(r: ValidationResults) -> str:
     """Where the like-for-like comparison misses the aims, with the evidence the data give."""
     parts = []
     for name in ("abduction", "flexion"):
-        e = r["invivo"][name].get("pf", {})
+        pf = r.invivo[name].pf
+        e = pf.angles if pf is not None else {}
         if "ST_medRotation_X" not in e:
             continue
         up, ir, gh = e["ST_medRotation_X"], e["ST_protraction_Y"], e["GH_abduction_X"]
-        parts.append(f"{name}: ST upward rotation {_fmt(up['deviation_deg'][0], '+.0f')} deg at HT 30 and "
-                     f"{_fmt(up['deviation_deg'][-1], '+.0f')} at 120 (an offset at rest that closes as the arm "
-                     f"rises), ST internal rotation {' / '.join(_fmt(v, '+.0f') for v in ir['deviation_deg'])}, "
-                     f"GH elevation {' / '.join(_fmt(v, '+.0f') for v in gh['deviation_deg'])} deg")
-    t1 = r["table1"]
-    worst = "; ".join(f"{n}: {t1[n]['pf']['max_rmse_marker']} RMSE {_fmt(t1[n]['pf']['max_rmse_mm'], '.0f')} mm, "
-                      f"up to {_fmt(t1[n]['pf']['max_residual_mm'], '.0f')} mm" for n in ("abduction", "flexion")
-                      if n in t1 and "pf" in t1[n])
+        parts.append(f"{name}: ST upward rotation {_fmt(up.deviation_deg[0], '+.0f')} deg at HT 30 and "
+                     f"{_fmt(up.deviation_deg[-1], '+.0f')} at 120 (an offset at rest that closes as the arm "
+                     f"rises), ST internal rotation {' / '.join(_fmt(v, '+.0f') for v in ir.deviation_deg)}, "
+                     f"GH elevation {' / '.join(_fmt(v, '+.0f') for v in gh.deviation_deg)} deg")
+    pf_rows = {n: st for n in ("abduction", "flexion") if n in r.table1 and (st := _residuals(r.table1[n].pf))}
+    worst = "; ".join(f"{n}: {st.max_rmse_marker} RMSE {_fmt(st.max_rmse_mm, '.0f')} mm, "
+                      f"up to {_fmt(st.max_residual_mm, '.0f')} mm" for n, st in pf_rows.items())
     return ("In Ludewig's frames (Fig. 5), PF minus Ludewig: " + "; ".join(parts) + ". The aims (within 8 deg, "
             "80 % inside the corridor) are not met there (numbers page). Evidence: PF and LS agree within 1 deg, and "
             "on simulated trials both recover the truth, so the solvers do not cause it; the scapula skin markers "
@@ -603,12 +630,12 @@ def _invivo_finding(r: dict) -> str:
             "study means themselves differ by more than 10 deg in places (the corridor's width).")
 
 
-def _check_text(c: dict) -> str:
-    flag = "PASS" if c["passed"] else "FAIL"
-    if c.get("kind") == "same_sign":
-        return (f"• [{flag}] {c['what']}: {_fmt(c['value'], '+.3f')} vs Ludewig {_fmt(c['limit'], '+.3f')} "
-                f"{c['unit']}")
-    return f"• [{flag}] {c['what']}: {_fmt(c['value'], '.3g')} {c['unit']} (limit {_fmt(c['limit'], '.3g')})"
+def _check_text(c: Check) -> str:
+    flag = "PASS" if c.passed else "FAIL"
+    if c.kind == "same_sign":
+        return (f"• [{flag}] {c.what}: {_fmt(c.value, '+.3f')} vs Ludewig {_fmt(c.limit, '+.3f')} "
+                f"{c.unit}")
+    return f"• [{flag}] {c.what}: {_fmt(c.value, '.3g')} {c.unit} (limit {_fmt(c.limit, '.3g')})"
 
 
 def _table(ax, cells, col_labels, *, col_widths=None, fontsize=7.0, header_color="#dde6f0", row_scale=1.35,
@@ -627,29 +654,27 @@ def _table(ax, cells, col_labels, *, col_widths=None, fontsize=7.0, header_color
     return tab
 
 
-def table1_page(d: _Data) -> Figure:
+def table1_page(r: ValidationResults) -> Figure:
     fig = _new_figure(A4_LANDSCAPE)
-    rows = d.table1["rows"]
-    paper = d.table1["paper"]
     cells = []
-    for name in ("abduction", "flexion", "sier"):
-        r, pp = rows[name], paper[name]
-        for method in ("pf", "ls"):
-            m = r.get(method, {})
-            if "failed" in m:
-                cells.append([f"{name} ({r['data']})", method.upper()] + ["failed"] * 7)
+    for name in TRIALS:
+        row, pp = r.table1[name], r.paper.table1[name]
+        for method in METHODS:
+            m = _residuals(row.stats(method))
+            if m is None:
+                cells.append([f"{name} ({row.data})", method.upper()] + ["failed"] * 7)
                 continue
-            cells.append([f"{name} ({r['data']})", method.upper(), str(r["frames"]), f"{r['duration_s']:.1f}",
-                          _fmt(r[f"{method}_wall_s"], ".1f"), _fmt(m.get("ms_per_frame"), ".2f"),
-                          f"{_fmt(m.get('max_mean_residual_mm'), '.1f')} ± {_fmt(m.get('sd_at_max_mean_mm'), '.1f')}",
-                          f"{_fmt(m.get('max_residual_mm'), '.1f')} ({m.get('max_residual_marker')})",
-                          f"{_fmt(m.get('max_rmse_mm'), '.1f')} ({m.get('max_rmse_marker')})"])
-        cells.append([f"{name}: paper", "PF / LS", str(pp["frames"]), str(pp["duration_s"]),
-                      f"{pp['pf_wall_s']} / {pp['ls_wall_s']}",
-                      f"{pp['pf_wall_s'] / pp['frames'] * 1000:.1f} / {pp['ls_wall_s'] / pp['frames'] * 1000:.0f}",
-                      f"{pp['max_mean_residual_mm']} ± {pp['sd_at_max_mean_mm']}",
-                      f"{pp['max_residual_mm']} ({pp['max_residual_marker']})",
-                      f"{pp['max_rmse_mm']} ({pp['max_rmse_marker']})"])
+            cells.append([f"{name} ({row.data})", method.upper(), str(row.frames), f"{row.duration_s:.1f}",
+                          _fmt(row.wall_time_s(method), ".1f"), _fmt(m.ms_per_frame, ".2f"),
+                          f"{_fmt(m.max_mean_residual_mm, '.1f')} ± {_fmt(m.sd_at_max_mean_mm, '.1f')}",
+                          f"{_fmt(m.max_residual_mm, '.1f')} ({m.max_residual_marker})",
+                          f"{_fmt(m.max_rmse_mm, '.1f')} ({m.max_rmse_marker})"])
+        cells.append([f"{name}: paper", "PF / LS", str(pp.frames), str(pp.duration_s),
+                      f"{pp.pf_wall_s} / {pp.ls_wall_s}",
+                      f"{pp.pf_wall_s / pp.frames * 1000:.1f} / {pp.ls_wall_s / pp.frames * 1000:.0f}",
+                      f"{pp.max_mean_residual_mm} ± {pp.sd_at_max_mean_mm}",
+                      f"{pp.max_residual_mm} ({pp.max_residual_marker})",
+                      f"{pp.max_rmse_mm} ({pp.max_rmse_marker})"])
     ax = fig.add_axes((0.03, 0.30, 0.94, 0.6))
     tab = _table(ax, cells, ["scenario (data)", "method", "input\nframes", "simulated\nduration (s)",
                              "wall time\n(s)", "ms / frame", "max mean residual\n± SD (mm)",
@@ -669,38 +694,40 @@ def table1_page(d: _Data) -> Figure:
             "in the real TRC trials and DELT/ARM in the simulated upper_limb_21 set; its 'TS1' is ts resp. SCAP_BACK. "
             "The real trials have 6 tracked markers (paper: 21) and last 11 s and 8 s (paper: 25 s). Simulated "
             "residuals contain the simulated STA (peak "
-            f"{d.runs['settings']['sta_mm']:g} mm on each humerus marker) and noise, not a real subject's STA. "
-            + _data_footer(d))
+            f"{r.settings.sta_mm:g} mm on each humerus marker) and noise, not a real subject's STA. "
+            + _data_footer(r))
     for k, line in enumerate(textwrap.wrap(note, 190)):
         fig.text(0.03, 0.86 - (len(cells) + 2) * 0.034 - 0.04 - k * 0.022, line, fontsize=7.5)
     return fig
 
 
-def sier_realisations_page(d: _Data) -> Figure:
+def _median_or_max(stat: MedianMax | None, worst: bool) -> float | None:
+    return None if stat is None else (stat.max if worst else stat.median)
+
+
+def sier_realisations_page(r: ValidationResults) -> Figure:
     fig = _new_figure(A4_LANDSCAPE)
-    rz = d.runs.get("sier_realisations") or {"runs": [], "summary": {}}
-    main_seed = d.runs["settings"]["seed"]
+    rz = r.sier_realisations
+    main_seed = r.settings.seed
     cells = []
-    for row in rz["runs"]:
-        line = [str(row["seed"]) + (" (Fig. 4 seed)" if row["seed"] == main_seed else "")]
-        for method in ("pf", "ls"):
-            m = row.get(method, {})
-            if "failed" in m:
+    for row in rz.runs:
+        line = [str(row.seed) + (" (Fig. 4 seed)" if row.seed == main_seed else "")]
+        for method in METHODS:
+            m = row.method(method)
+            if not isinstance(m, SierRunMethod):
                 line += ["failed", "failed", "failed"]
                 continue
-            line += [_fmt(m["gh_axial_rotation_rmse_deg"]), " / ".join(_fmt(v) for v in m["gh_marker_rmse_xyz_mm"]),
-                     f"{_fmt(m['max_joint_rmse_deg'])} ({m['max_joint']})"]
+            line += [_fmt(m.gh_axial_rotation_rmse_deg), " / ".join(_fmt(v) for v in m.gh_marker_rmse_xyz_mm),
+                     f"{_fmt(m.max_joint_rmse_deg)} ({m.max_joint})"]
         cells.append(line)
-    summ = rz.get("summary", {})
-    for key, label in (("median", "median"), ("max", "worst")):
+    for worst, label in ((False, "median"), (True, "worst")):
         line = [label]
-        for method in ("pf", "ls"):
-            sm = summ.get(method) or {}
-            def g(n, sm=sm, key=key):
-                return (sm.get(n) or {}).get(key)
-
-            line += [_fmt(g("gh_axial_rotation_rmse_deg")),
-                     f"X {_fmt(g('gh_marker_x_rmse_mm'))}, Z {_fmt(g('gh_marker_z_rmse_mm'))}", ""]
+        for method in METHODS:
+            sm = rz.summary.get(method)
+            rot, x, z = (sm.gh_axial_rotation_rmse_deg, sm.gh_marker_x_rmse_mm, sm.gh_marker_z_rmse_mm) if sm else (
+                None, None, None)
+            line += [_fmt(_median_or_max(rot, worst)),
+                     f"X {_fmt(_median_or_max(x, worst))}, Z {_fmt(_median_or_max(z, worst))}", ""]
         cells.append(line)
     cells.append(["paper", "3.69", "X 1.66, Z 1.56", "", "3.13", "X 1.59, Z 1.62", ""])
     ax = fig.add_axes((0.03, 0.2, 0.94, 0.7))
@@ -708,16 +735,16 @@ def sier_realisations_page(d: _Data) -> Figure:
                        "PF worst joint\nRMSE (deg)", "LS GH axial\nRMSE (deg)", "LS GH marker\nX / Y / Z RMSE (mm)",
                        "LS worst joint\nRMSE (deg)"],
            col_widths=[0.11, 0.12, 0.17, 0.18, 0.12, 0.17, 0.18], fontsize=7.2, header_lines=2)
-    fig.text(0.03, 0.95, f"Fig. 4 (spread) — SIER accuracy over {len(rz['runs'])} noise/STA realisations "
-             f"({rz.get('duration_s', 0):g} s at {rz.get('rate_hz', 0):g} Hz, noise SD {rz.get('noise_mm', 0):g} mm, "
-             f"STA {rz.get('sta_mm', 0):g} mm)", fontsize=11.5, fontweight="bold")
+    fig.text(0.03, 0.95, f"Fig. 4 (spread) — SIER accuracy over {len(rz.runs)} noise/STA realisations "
+             f"({rz.duration_s:g} s at {rz.rate_hz:g} Hz, noise SD {rz.noise_mm:g} mm, "
+             f"STA {rz.sta_mm:g} mm)", fontsize=11.5, fontweight="bold")
     note = ("The soft-tissue artefact of exubio.simulate has a random direction and a random mix of driving joint "
             "angles per marker (seeded); its size is fixed (every humerus marker peaks at the STA amplitude). How "
             "much of it leaks into the joint angles depends on that realisation, so one seed (Fig. 4) is not enough: "
             "this table repeats SIER with seeds 0, 1, ... at a lower sampling rate. RMSE against the simulated true "
             "joint angles / true model-point positions over the whole trial; 'worst joint' = the model coordinate "
             f"with the largest RMSE. The paper reports X and Z of its GH marker only. GH marker = "
-            f"{d.runs['sier']['gh_marker']}. " + _data_footer(d))
+            f"{r.sier.gh_marker}. " + _data_footer(r))
     n_rows = len(cells) + 2
     for k, line in enumerate(textwrap.wrap(note, 190)):
         fig.text(0.03, 0.86 - n_rows * 0.034 - 0.04 - k * 0.022, line, fontsize=7.5)
@@ -731,16 +758,16 @@ COMPARED_ROWS = (("ST_medRotation_X", "ST upward rotation (X′, − = up)"), ("
                  ("SC_rotation_Z", "SC posterior rotation (Z″)"))
 
 
-def _share(e: dict) -> str:
-    v = e.get("share_inside_corridor")
+def _share(e: AngleComparison) -> str:
+    v = e.share_inside_corridor
     if v is None or not np.isfinite(v):
-        return f"n/a ({e.get('corridor_studies', 0)} study)"
-    return f"{100 * v:.0f}% ({e['corridor_studies']})"
+        return f"n/a ({e.corridor_studies} study)"
+    return f"{100 * v:.0f}% ({e.corridor_studies})"
 
 
-def ludewig_page(d: _Data) -> list[Figure]:
-    iv = d.runs["invivo"]
-    hts = [int(h) for h in iv["abduction"]["ht_check_deg"]]
+def ludewig_page(r: ValidationResults) -> list[Figure]:
+    iv = r.invivo
+    hts = [int(h) for h in iv["abduction"].ht_check_deg]
     h = "/".join(str(v) for v in hts)
     fig = _new_figure(A4_LANDSCAPE)
     head = ["motion", "angle", f"Ludewig at HT\n{h}° (deg)", f"PF − Ludewig\nat {h}° (deg)",
@@ -750,29 +777,28 @@ def ludewig_page(d: _Data) -> list[Figure]:
     rows = []
     for name in ("abduction", "flexion"):
         for key, label in COMPARED_ROWS:
-            pf, ls = iv[name].get("pf", {}).get(key), iv[name].get("ls", {}).get(key)
+            pf, ls = _angle(iv[name].pf, key), _angle(iv[name].ls, key)
             if pf is None:
                 continue
-            flag = "not det." if pf.get("undetermined") else ("inferred" if pf.get("inferred") else "")
-            rows.append([name, label, " / ".join(_fmt(v, ".1f") for v in pf["ludewig_deg"]),
-                         " / ".join(_fmt(v, "+.1f") for v in pf["deviation_deg"]),
-                         " / ".join(_fmt(v, "+.1f") for v in ls["deviation_deg"]) if ls else "—",
+            flag = "not det." if pf.undetermined else ("inferred" if pf.inferred else "")
+            rows.append([name, label, " / ".join(_fmt(v, ".1f") for v in pf.ludewig_deg),
+                         " / ".join(_fmt(v, "+.1f") for v in pf.deviation_deg),
+                         " / ".join(_fmt(v, "+.1f") for v in ls.deviation_deg) if ls else "—",
                          f"{_share(pf)} / {_share(ls).split(' ')[0] if ls else '—'}",
-                         " / ".join(_fmt(v, "+.1f") for v in pf["isb_frame_deviation_deg"])
-                         if "isb_frame_deviation_deg" in pf else "", flag])
+                         " / ".join(_fmt(v, "+.1f") for v in pf.isb_frame_deviation_deg)
+                         if pf.isb_frame_deviation_deg is not None else "", flag])
     fig.text(0.02, 0.965, f"Fig. 5 (numbers) — exubio vs Ludewig et al. 2009 in Ludewig's frames at HT {h}°, "
              f"and the share of HT 30-120° inside the corridor", fontsize=11.5, fontweight="bold", va="top")
     ax = fig.add_axes((0.02, 0.33, 0.96, 0.6))
     _table(ax, rows, head, col_widths=widths, fontsize=6.3, row_scale=1.1, header_lines=2)
-    aims = d.runs.get("invivo_aims", [])
     lines = []
-    for c in aims:
-        if c.get("passed") is None:
-            lines.append(f"[n/a] {c['what']}: {c.get('note', '')}")
+    for c in r.invivo_aims:
+        if c.passed is None:
+            lines.append(f"[n/a] {c.what}: {c.note or ''}")
         else:
-            val = f"{100 * c['value']:.0f}% (aim ≥ {100 * c['limit']:.0f}%)" if c["unit"] == "share" else \
-                f"{_fmt(c['value'], '.1f')} deg (aim ≤ {c['limit']:g})"
-            lines.append(f"[{'MET' if c['passed'] else 'NOT MET'}] {c['what']}: {val}")
+            val = f"{100 * c.value:.0f}% (aim ≥ {100 * c.limit:.0f}%)" if c.unit == "share" else \
+                f"{_fmt(c.value, '.1f')} deg (aim ≤ {c.limit:g})"
+            lines.append(f"[{'MET' if c.passed else 'NOT MET'}] {c.what}: {val}")
     fig.text(0.02, 0.315, "Aims (issue 10), per trial and method:", fontsize=8, va="top", fontweight="bold")
     col = [lines[i::2] for i in range(2)]
     for j, chunk in enumerate(col):
@@ -783,39 +809,39 @@ def ludewig_page(d: _Data) -> list[Figure]:
             f"exubio's ISB frames (scapula on AA): the difference between the two columns is the frame definition "
             f"alone. Corridor: studies (count in brackets) whose frames are built on the model; 'n/a (1 study)': "
             f"Ludewig is the only comparable study in that plane. 'not det.': the marker set does not determine "
-            f"the angle; 'inferred': a bone of the joint carries no marker. {_definition_note(iv)} {LUDEWIG_CITATION}.")
+            f"the angle; 'inferred': a bone of the joint carries no marker. {_definition_note()} {LUDEWIG_CITATION}.")
     for k, line in enumerate(textwrap.wrap(note, 230)):
         fig.text(0.02, 0.075 - k * 0.0135, line, fontsize=6.3)
-    return [fig, _corridor_studies_page(d), _c3d_tasks_page(d)]
+    return [fig, _corridor_studies_page(r), _c3d_tasks_page(r)]
 
 
-def _c3d_tasks_page(d: _Data) -> Figure:
+def _c3d_tasks_page(r: ValidationResults) -> Figure:
     fig = _new_figure(A4_LANDSCAPE)
-    c3d = d.runs.get("c3d_tasks", {})
+    c3d = r.c3d_tasks
     fig.text(0.02, 0.965, "Fig. 5 (C3D tasks) — the 21-marker C3D trials against Ludewig et al. 2009 where a plane of "
              "elevation matches", fontsize=11.5, fontweight="bold", va="top")
-    if "skipped" in c3d:
-        fig.text(0.02, 0.9, f"Not run: {c3d['skipped']}", fontsize=9, va="top")
+    if isinstance(c3d, Skipped):
+        fig.text(0.02, 0.9, f"Not run: {c3d.skipped}", fontsize=9, va="top")
         return fig
     rows, reasons = [], []
-    for trial, rec in c3d.get("trials", {}).items():
-        if "skipped" in rec:
-            reasons.append(f"{trial}: skipped: {rec['skipped']}")
+    for trial, rec in c3d.trials.items():
+        if isinstance(rec, Skipped):
+            reasons.append(f"{trial}: skipped: {rec.skipped}")
             continue
-        for plane, res in rec["matched"].items():
+        for plane, res in rec.matched.items():
             for key, label in COMPARED_ROWS[:6]:
-                pf, ls = res.get("pf", {}).get(key), res.get("ls", {}).get(key)
+                pf, ls = _angle(res.pf, key), _angle(res.ls, key)
                 if pf is None and ls is None:
                     continue
-                e = pf or ls
-                span = e and (res.get("ls") or res.get("pf"))["raising_ht_range_deg"]
-                flag = "not det." if e.get("undetermined") else ("inferred" if e.get("inferred") else "")
+                e = pf if pf is not None else ls
+                span = (res.ls or res.pf).raising_ht_range_deg
+                flag = "not det." if e.undetermined else ("inferred" if e.inferred else "")
                 rows.append([trial.replace("bioptim_exo_", ""), plane, f"{span[0]:.0f}-{span[1]:.0f}", label,
-                             " / ".join(_fmt(v, ".1f") for v in e["ludewig_deg"]),
-                             " / ".join(_fmt(v, "+.1f") for v in pf["deviation_deg"]) if pf else "—",
-                             " / ".join(_fmt(v, "+.1f") for v in ls["deviation_deg"]) if ls else "—",
+                             " / ".join(_fmt(v, ".1f") for v in e.ludewig_deg),
+                             " / ".join(_fmt(v, "+.1f") for v in pf.deviation_deg) if pf else "—",
+                             " / ".join(_fmt(v, "+.1f") for v in ls.deviation_deg) if ls else "—",
                              f"{_share(pf) if pf else '—'} / {_share(ls).split(' ')[0] if ls else '—'}", flag])
-        for plane, why in rec["not_matched"].items():
+        for plane, why in rec.not_matched.items():
             reasons.append(f"{trial.replace('bioptim_exo_', '')}, {plane}: {why}")
     head = ["trial", "plane", "HT range\n(deg)", "angle", "Ludewig at HT\n30/60/90/120 (deg)",
             "PF − Ludewig\n(deg)", "LS − Ludewig\n(deg)", "PF / LS inside\ncorridor", "flag"]
@@ -830,16 +856,16 @@ def _c3d_tasks_page(d: _Data) -> Figure:
         fig.text(0.03, top - 0.02 - k * 0.0135, textwrap.shorten(line, 240), fontsize=6.2, va="top")
     _footer(fig, "The C3D trials are free tasks, not planar elevations: a frame counts as elevation in a reference plane "
             f"when the arm is being raised and its plane of elevation (ISB HT Y angle) is within "
-            f"{c3d.get('plane_tolerance_deg', 15):g}° of the plane's (frontal 0°, scapular 40°, sagittal 90°); a plane is "
-            f"compared when those frames cover at least {c3d.get('min_span_deg', 20):g}° of HT elevation above 30°. "
+            f"{c3d.plane_tolerance_deg:g}° of the plane's (frontal 0°, scapular 40°, sagittal 90°); a plane is "
+            f"compared when those frames cover at least {c3d.min_span_deg:g}° of HT elevation above 30°. "
             "Each trial is calibrated on its session's static trial. Deviation: exubio − Ludewig in Ludewig's frames "
-            "(n/a = elevation not reached). " + _data_footer(d))
+            "(n/a = elevation not reached). " + _data_footer(r))
     return fig
 
 
-def _corridor_studies_page(d: _Data) -> Figure:
+def _corridor_studies_page(r: ValidationResults) -> Figure:
     fig = _new_figure(A4_LANDSCAPE)
-    iv = d.runs["invivo"]
+    iv = r.invivo
     fig.text(0.02, 0.965, "Fig. 5 (corridor) — which studies are in each corridor, and why the others are not",
              fontsize=11.5, fontweight="bold", va="top")
     y = 0.925
@@ -847,14 +873,15 @@ def _corridor_studies_page(d: _Data) -> Figure:
     for name in ("abduction", "flexion"):
         res = iv[name]
         for joint in ("SC", "ST", "GH"):
-            cor = res.get("corridor", {}).get(joint, {})
-            mem = ", ".join(m["study"] + (" (converted)" if m["converted"] else "") for m in cor.get("members", []))
-            for m in cor.get("members", []):
-                cited[m["study"]] = m["citation"]
-            fig.text(0.02, y, f"{MOTION_LABEL[name]} ({res['plane']} plane), {joint}: in the corridor: {mem or 'none'}",
+            cor = res.corridor.get(joint)
+            members = cor.members if cor is not None else ()
+            mem = ", ".join(m.study + (" (converted)" if m.converted else "") for m in members)
+            for m in members:
+                cited[m.study] = m.citation
+            fig.text(0.02, y, f"{MOTION_LABEL[name]} ({res.plane} plane), {joint}: in the corridor: {mem or 'none'}",
                      fontsize=7.2, va="top", fontweight="bold")
             y -= 0.018
-            for study, why in sorted(cor.get("excluded", {}).items()):
+            for study, why in sorted((cor.excluded if cor is not None else {}).items()):
                 fig.text(0.04, y, textwrap.shorten(f"left out: {study}: {why}", 200), fontsize=6.4, va="top")
                 y -= 0.0145
             y -= 0.006
@@ -863,7 +890,7 @@ def _corridor_studies_page(d: _Data) -> Figure:
              fontsize=6.4, va="top", wrap=True)
     _footer(fig, "Converted: the study's three angles re-expressed in Ludewig's definitions with the constant frame "
             "offsets between the two definitions on the model's bones (exubio.corridor.convert_angles); a study in "
-            "Ludewig's own definitions is taken as published. " + _data_footer(d))
+            "Ludewig's own definitions is taken as published. " + _data_footer(r))
     return fig
 
 
@@ -871,22 +898,22 @@ def _corridor_studies_page(d: _Data) -> Figure:
 # Build
 # --------------------------------------------------------------------------------------------
 def build_report(folder: str | Path, /, *, dpi: int | None = None) -> dict[str, Path]:
-    """Write ``validation.pdf`` and the figure PNGs into ``folder`` from the files that
-    ``exubio.validate.run_validation`` saved there; returns the written paths by name.
-    dpi: PNG resolution (default 130; 60 for a quick run)."""
+    """Write ``validation.pdf`` and the figure PNGs into ``folder`` from the results that
+    ``exubio.validation.run_validation`` saved there (``ValidationResults.load``); returns the
+    written paths by name. dpi: PNG resolution (default 130; 60 for a quick run)."""
     folder = Path(folder)
-    d = _Data(folder)
+    r = ValidationResults.load(folder)
     if dpi is None:
-        dpi = 60 if d.runs.get("quick") else 130
+        dpi = 60 if r.quick else 130
     figures = {
-        "fig2_sensitivity": fig_sensitivity(d),
-        "fig3_residuals": fig_residuals(d),
-        "fig4_sier": fig_sier(d),
-        "fig5_invivo": fig_invivo(d),
-        "fig6_pf_ls_agreement": fig_agreement(d),
+        "fig2_sensitivity": fig_sensitivity(r),
+        "fig3_residuals": fig_residuals(r),
+        "fig4_sier": fig_sier(r),
+        "fig5_invivo": fig_invivo(r),
+        "fig6_pf_ls_agreement": fig_agreement(r),
     }
-    pages = {"summary": summary_pages(d), "table1": table1_page(d), "ludewig_deviations": ludewig_page(d),
-             "sier_realisations": sier_realisations_page(d), **figures}
+    pages = {"summary": summary_pages(r), "table1": table1_page(r), "ludewig_deviations": ludewig_page(r),
+             "sier_realisations": sier_realisations_page(r), **figures}
     written: dict[str, Path] = {}
     for name, fig in figures.items():
         path = folder / f"{name}.png"
@@ -903,8 +930,8 @@ def build_report(folder: str | Path, /, *, dpi: int | None = None) -> dict[str, 
         info = pdf.infodict()
         info["Title"] = "exubio validation report"
         info["Subject"] = "potential-field vs least-squares upper-limb kinematics; data: " + \
-            ", ".join(f"{k} {v['kind']}" for k, v in d.runs["data"].items())
-        info["Creator"] = f"exubio {d.runs['exubio_version']}"
+            ", ".join(f"{k} {v.kind}" for k, v in r.data.items())
+        info["Creator"] = f"exubio {r.exubio_version}"
     tmp_pdf.replace(pdf_path)
     written["pdf"] = pdf_path
     return written
