@@ -2,7 +2,7 @@
 noise/artefact realisations), measured, and whether a change to the METHOD brings every seed
 to <= 1.5 deg.
 
-The trial is that of the validation's realisations (``exubio.validate._sier_realisations``):
+The trial is that of the validation's realisations (``exubio.validation.sier.sier_realisations``):
 ``simulate_trial(model, SIER, duration = ValidationSettings.sier_duration_s, rate =
 sier_realisation_rate_hz (200 Hz), noise_mm = 1, sta_mm = 20, seed)`` with the shipped
 upper_limb_21 protocol. The error is ``gh_internal_rotation`` (reconstructed - true) over every

@@ -321,16 +321,15 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    from exubio.validate import run_validation
+    from exubio.validation import run_validation
 
-    runs = run_validation(args.out, quick=args.quick,
-                          progress=None if args.quiet else (lambda msg: print(msg, file=sys.stderr)))
-    checks = runs.get("checks", [])
-    for c in checks:
-        print(f"{'PASS' if c['passed'] else 'FAIL'}  {c['what']}: {c['value']:.3g} {c['unit']} "
-              f"(limit {c['limit']:.3g} {c['unit']})")
+    results = run_validation(args.out, quick=args.quick,
+                             progress=None if args.quiet else (lambda msg: print(msg, file=sys.stderr)))
+    for c in results.checks:
+        state = {True: "PASS", False: "FAIL", None: "n/a "}[c.passed]
+        print(f"{state}  {c.what}: {c.value:.3g} {c.unit} (limit {c.limit:.3g} {c.unit})")
     print(f"wrote {Path(args.out) / 'validation.pdf'}, the figures and table1.json; "
-          f"{sum(bool(c['passed']) for c in checks)}/{len(checks)} checks passed")
+          f"{sum(c.passed is True for c in results.checks)}/{len(results.checks)} checks passed")
     return EXIT_OK
 
 

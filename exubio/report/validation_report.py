@@ -407,7 +407,7 @@ def fig_agreement(r: ValidationResults) -> Figure:
     note = ""
     if und:
         note = ("Hatched (clipped, value written): coordinates the trial's markers do not determine (null space of the "
-                "constrained marker Jacobian, exubio.validate.undetermined_coordinates): there PF and LS settle "
+                "constrained marker Jacobian, exubio.validation.determinacy.undetermined_coordinates): there PF and LS settle "
                 "differently, which is no error of either. ")
     diag = {n: a.diagnostic_massless_unobserved for n, a in compared.items()
             if isinstance(a.diagnostic_massless_unobserved, MasslessDiagnostic)}

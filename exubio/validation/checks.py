@@ -44,7 +44,7 @@ def paper_checks(sier: Sier, realisations: SierRealisations, agreement: Agreemen
               paper.sier_gh_axial_rmse_deg.pf, "deg")
         x, _, z = pf.gh_marker_rmse_xyz_mm
         check(f"SIER: PF GH marker ({sier.gh_marker}) X RMSE vs truth", x, paper.sier_gh_marker_rmse_mm.pf_x, "mm")
-        check(f"SIER: PF GH marker ({sier.gh_marker}) Z RMSE vs truth", z, paper.sier_gh_marker_rmse_mm.pf_x, "mm")
+        check(f"SIER: PF GH marker ({sier.gh_marker}) Z RMSE vs truth", z, paper.sier_gh_marker_rmse_mm.pf_z, "mm")
     real = realisations.summary.get("pf")
     if real is not None and real.gh_axial_rotation_rmse_deg is not None:
         n = len(realisations.runs)
@@ -53,7 +53,7 @@ def paper_checks(sier: Sier, realisations: SierRealisations, agreement: Agreemen
         check(f"SIER, {n} noise/STA seeds: PF GH marker X RMSE, worst seed", real.gh_marker_x_rmse_mm.max,
               paper.sier_gh_marker_rmse_mm.pf_x, "mm")
         check(f"SIER, {n} noise/STA seeds: PF GH marker Z RMSE, worst seed", real.gh_marker_z_rmse_mm.max,
-              paper.sier_gh_marker_rmse_mm.pf_x, "mm")
+              paper.sier_gh_marker_rmse_mm.pf_z, "mm")
     check("PF vs LS: max joint-coordinate RMSE over all motions (coordinates the markers determine)",
           agreement.max_coordinate_rmse_deg, paper.pf_ls_max_joint_rmse_deg, "deg")
     check("PF vs LS: max marker-trajectory RMSE over all motions", agreement.max_marker_rmse_mm,
