@@ -66,6 +66,13 @@ GAP_NOTE_FRACTION = 0.05
 gap is handled, its spring or LS term is off there, and the determinacy check says whether the
 remaining markers still determine every coordinate)."""
 
+FIT_SETTLED = ("converged", "stalled")
+"""Stop reasons (exubio.lsq.StopReason labels, the calibration report's ``fit_stop``) of a fit
+that reached its optimum. Any other on the final fit of the static pose and scales, on the robust
+reweighting or on a further static's pose (max_iterations, damping_exhausted, not_finite) is a
+'check': the calibrated geometry rests on a pose that is not the optimum. The fits of the start
+postures only seed the final fit and are not judged."""
+
 LEVELS = ("note", "check", "fail")
 
 
@@ -224,6 +231,13 @@ def calibration_reasons(cal: Mapping[str, Any] | None, *, scale_bounds: tuple[fl
         if motion[worst] > WINDOW_MOTION_MM:
             out.append(Reason("calibration_motion", "check", f"calibration ({src}): the static window moves: {worst} "
                               f"{motion[worst]:.1f} mm RMS about its mean (above {WINDOW_MOTION_MM:.0f} mm)"))
+    for fit, stop in (cal.get("fit_stop") or {}).items():
+        if fit != "start_pose" and stop not in FIT_SETTLED:  # the start pose only seeds the final fit
+            what = {"pose_and_scales": "the final fit of the static pose and the scale factors",
+                    "reweighting": "the robust reweighting of the static-pose fit"}.get(fit, f"the fit of the {fit}")
+            out.append(Reason("calibration_fit", "check", f"calibration ({src}): {what} stopped before converging "
+                              f"({stop.replace('_', ' ')}): the calibrated geometry may rest on a pose that is not "
+                              f"the optimum"))
     gh = (cal.get("functional") or {}).get("gh") or {}
     if gh and not gh.get("used"):
         out.append(Reason("calibration_functional", "note", f"calibration ({src}): functional glenohumeral centre "

@@ -274,24 +274,28 @@ def _rhythm_splines(plane: str) -> dict[str, CubicSpline]:
 # Constraint solution
 # --------------------------------------------------------------------------------------------
 def _solve_free(kin: Kinematics, q: np.ndarray, free: np.ndarray, *, max_iter: int = 40) -> np.ndarray:
-    """Newton on g(q) = 0 for the two free coordinates, all frames at once (q modified in place;
-    steps limited to 0.1 rad). Raises ModelError naming the frames that do not converge."""
-    for _ in range(max_iter):
-        g = kin.g(q)
-        if np.max(np.abs(g)) < _NEWTON_TOL:
-            return q
-        G = kin.G(q)[..., free]
+    """Newton on g(q) = 0 for the two free coordinates, all frames at once (exubio.lsq.newton; q
+    modified in place; steps limited to 0.1 rad). Raises ModelError naming the frames that do not
+    converge and why the iteration stopped."""
+    from exubio.lsq import newton
+
+    def update(qq: np.ndarray, g: np.ndarray, _) -> np.ndarray:
+        G = kin.G(qq)[..., free]
         dq = np.linalg.solve(G, -g[..., None])[..., 0]
         step = np.max(np.abs(dq), axis=-1, keepdims=True)
-        q[..., free] += dq * np.minimum(1.0, 0.1 / np.maximum(step, 1e-300))
+        qq[..., free] += dq * np.minimum(1.0, 0.1 / np.maximum(step, 1e-300))
+        return qq
+
+    solved = newton(q, lambda qq: (kin.g(qq), None), update, tol=_NEWTON_TOL, max_iterations=max_iter)
+    if solved.converged:
+        return q
     g = np.abs(kin.g(q)).reshape(-1, 2).max(axis=-1)
-    bad = np.flatnonzero(~(g < _NEWTON_TOL))
-    if bad.size:
-        raise ModelError(
-            f"{kin.model.source or kin.model.name}: the scapula cannot be put on the thorax ellipsoid in "
-            f"{bad.size} frame(s) (first {bad[0]}, |g| = {g[bad[0]]:.2e}) with {list(_FREE)} free"
-        )
-    return q
+    bad = np.flatnonzero(~(g <= _NEWTON_TOL))
+    raise ModelError(
+        f"{kin.model.source or kin.model.name}: the scapula cannot be put on the thorax ellipsoid in "
+        f"{bad.size} frame(s) (first {bad[0]}, |g| = {g[bad[0]]:.2e}) with {list(_FREE)} free "
+        f"(Newton stopped: {solved.reason.label.replace('_', ' ')})"
+    )
 
 
 def scapula_isb_angles(kin: Kinematics, q: np.ndarray, /) -> np.ndarray:

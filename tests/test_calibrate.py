@@ -338,6 +338,40 @@ def test_report_is_a_dataclass_with_plain_data(calibrated):
     assert d["residual_mm"]["mean"] == pytest.approx(report.mean_residual_mm)
 
 
+def test_the_report_says_how_the_fits_stopped(calibrated):
+    """Every fit of the calibration says why it stopped (exubio.lsq.StopReason labels); on the
+    simulated subject they all converge and the quality verdict has nothing to say about them."""
+    from exubio import quality as Q
+    from exubio.calibration import SCALE_BOUNDS
+
+    cal, report, _ = calibrated
+    d = report.to_dict()
+    assert d["fit_stop"] == {"start_pose": "converged", "pose_and_scales": "converged", "reweighting": "converged"}
+    assert cal.metadata["calibration"]["fit_stop"] == d["fit_stop"]
+    assert not [r for r in Q.calibration_reasons(d, scale_bounds=SCALE_BOUNDS) if r.code == "calibration_fit"]
+    assert "stopped before converging" not in format_report(report)
+
+
+@pytest.mark.parametrize("fit, stop", [("pose_and_scales", "max_iterations"), ("pose_and_scales", "damping_exhausted"),
+                                       ("reweighting", "max_iterations"), ("pose of raised.c3d", "not_finite")])
+def test_a_fit_that_did_not_converge_is_a_check(calibrated, fit, stop):
+    """A final fit, the robust reweighting or a further static's pose that stopped before
+    converging makes the calibration a 'check' that names it; a start posture that did not
+    converge is not judged (it only seeds the final fit)."""
+    import dataclasses as dc
+
+    from exubio import quality as Q
+    from exubio.calibration import SCALE_BOUNDS
+
+    _, report, _ = calibrated
+    d = dc.replace(report, fit_stop={**report.fit_stop, fit: stop}).to_dict()
+    found = [r for r in Q.calibration_reasons(d, scale_bounds=SCALE_BOUNDS) if r.code == "calibration_fit"]
+    assert len(found) == 1 and found[0].level == "check" and stop.replace("_", " ") in found[0].message
+    assert "stopped before converging" in format_report(dc.replace(report, fit_stop={**report.fit_stop, fit: stop}))
+    seed = dc.replace(report, fit_stop={**report.fit_stop, "start_pose": "damping_exhausted"}).to_dict()
+    assert not [r for r in Q.calibration_reasons(seed, scale_bounds=SCALE_BOUNDS) if r.code == "calibration_fit"]
+
+
 def test_written_inertia_keys_are_checked(tmp_path, calibrated):
     """The explicit inertia form save_model writes (com_mm, inertia_kgm2_per_kg) is validated."""
     from exubio.errors import ModelError

@@ -184,3 +184,39 @@ def test_per_frame_steps_in_blocks_equal_one_pass(model_protocol, monkeypatch, m
     a, b = runs
     for name in ("q_rad", "qd_rad_s", "qdd_rad_s2", "model_points_m", "constraint", "constraint_velocity"):
         assert np.array_equal(getattr(a, name), getattr(b, name)), name
+
+
+def test_ls_reports_why_each_frame_stopped(model_protocol, caplog):
+    """The info counts the frames per stop reason (exubio.lsq.StopReason): every frame once, the
+    converged ones (step below tol, or a merit that no longer decreases) matching the frame
+    status; too few iterations leave frames at MAX_ITERATIONS, counted, logged, NOT_CONVERGED."""
+    from exubio.types import FrameStatus
+
+    model, protocol = model_protocol
+    trial = simulate_trial(model, Motion.ABDUCTION, duration_s=1.0, rate_hz=50.0, noise_mm=1.0, seed=4)
+    targets = prepare_targets(trial.trajectories, protocol)
+    recon = reconstruct_ls(model, protocol, targets)
+    stops = recon.info["stop_reasons"]
+    assert set(stops) == {"converged", "stalled", "max_iterations", "damping_exhausted", "not_finite"}
+    assert sum(stops.values()) == targets.n_frames
+    assert stops["converged"] + stops["stalled"] == int((recon.status == FrameStatus.CONVERGED).sum()) == targets.n_frames
+    short = reconstruct_ls(model, protocol, targets, options=LSOptions(max_iterations=1, tol_rad=1e-14))
+    stops = short.info["stop_reasons"]
+    assert stops["max_iterations"] == short.info["frames_not_converged"] > 0
+    assert int((short.status == FrameStatus.NOT_CONVERGED).sum()) == stops["max_iterations"]
+    assert "max_iterations" in caplog.text
+
+
+def test_the_constraint_projection_says_when_it_stops_above_its_tolerance(model_protocol, caplog):
+    from exubio.methods.constraints import _project_block, project_on_constraints
+
+    model, _ = model_protocol
+    kin = Kinematics(model)
+    q = np.zeros((3, kin.n_coordinates))
+    q[:, model.coordinate_names.index("ac_protraction")] = [0.05, 0.1, 0.2]  # off the ellipsoid
+    solved = _project_block(kin, q)[4]
+    assert solved.converged and solved.residual <= 1e-13 and solved.iterations > 0
+    one = _project_block(kin, q, max_iterations=1)[4]
+    assert one.reason.label == "max_iterations" and one.residual > 1e-13
+    assert len(project_on_constraints(kin, q, max_iterations=1)) == 4
+    assert "stopped at max |g|" in caplog.text and "max_iterations" in caplog.text

@@ -68,13 +68,14 @@ import numpy as np
 from exubio.calibration.ellipsoid import fit_ellipsoid, fit_ellipsoid_poses, surface_distance
 from exubio.calibration.joint_centres import functional_gh, gh_joint
 from exubio.calibration.posefit import (ARM_PRIOR_M2_PER_RAD2, GIRDLE_PRIOR_M2_PER_RAD2, GIRDLE_SEGMENTS,
-    MAX_REWEIGHTING, ROBUST_SCALE_M, _Anchor, _at_limit, _fit_pose, _start_postures)
+    MAX_REWEIGHTING, ROBUST_SCALE_M, _Anchor, _at_limit, _fit_pose, _start_postures, best_start)
 from exubio.calibration.registration import _register, calibrated_protocol, marker_point_names
 from exubio.calibration.report import CalibrationReport, MarkerCalibration
 from exubio.calibration.scaling import DEFAULT_SCALE_GROUPS, _groups, _thorax_scale, scale_model
 from exubio.calibration.window import _nanmean, _window
 from exubio.errors import InputError
 from exubio.kinematics import Kinematics
+from exubio.lsq import StopReason
 from exubio.methods.common import tracked_points
 from exubio.methods.ls import Limits, LSOptions, solve_positions
 from exubio.preprocess import prepare_targets
@@ -125,21 +126,32 @@ def pose_weights(protocol: Protocol, /) -> np.ndarray:
     return np.array([1.0 if m.landmark else TECHNICAL_POSE_WEIGHT / size.get(m.cluster, 1) for m in markers])
 
 
+@dataclasses.dataclass(frozen=True)
+class _FitOutcome:
+    """How the anatomical fit ended: the reweighting iterations, why the last joint fit of pose
+    and scales stopped (exubio.lsq.StopReason), and whether the robust weights settled
+    (CONVERGED) or still changed after MAX_REWEIGHTING iterations (MAX_ITERATIONS)."""
+
+    iterations: int
+    final_fit: StopReason
+    reweighting: StopReason
+
+
 def _robust_fit(anchor: _Anchor, q: np.ndarray, factors: dict[str, float], w: np.ndarray, static: np.ndarray,
-                src: str) -> tuple[np.ndarray, dict[str, float], np.ndarray, int]:
+                src: str) -> tuple[np.ndarray, dict[str, float], np.ndarray, _FitOutcome]:
     """Iteratively reweighted joint fit of pose and scales; the robust scale is annealed from
     100 mm to ROBUST_SCALE_M so that the first, rough poses do not discard markers a better pose
-    would fit. Returns (q, factors, robust weights, iterations)."""
+    would fit. Returns (q, factors, robust weights, how it ended)."""
     robust = np.ones(len(w))
-    it, change = 0, 0.0
+    it, change, stop, settled = 0, 0.0, StopReason.MAX_ITERATIONS, StopReason.CONVERGED
     for it in range(1, MAX_REWEIGHTING + 1):
-        q, factors, cost = anchor.fit(q, factors, w * robust)
+        q, factors, cost, stop = anchor.fit(q, factors, w * robust)
         kin, pts = anchor.points(factors)
         d = np.linalg.norm(kin.points(q, pts) - np.where(np.isnan(static), 0, static), axis=1)
         c = max(ROBUST_SCALE_M, 0.1 * 0.7 ** (it - 1))
         new = 1.0 / (1.0 + (d / c) ** 2)
-        log.debug("calibration fit %d: cost %.4g, robust scale %.0f mm, scales %s", it, cost, c * 1000,
-                  {g: round(v, 4) for g, v in factors.items()})
+        log.debug("calibration fit %d: cost %.4g (%s), robust scale %.0f mm, scales %s", it, cost, stop.label,
+                  c * 1000, {g: round(v, 4) for g, v in factors.items()})
         change = float(np.abs(new - robust).max())
         robust = new
         if c == ROBUST_SCALE_M and change < 1e-3:
@@ -147,12 +159,16 @@ def _robust_fit(anchor: _Anchor, q: np.ndarray, factors: dict[str, float], w: np
     else:
         log.warning("%s: the robust weights of the anatomical fit still changed by %.1e after %d iterations",
                     src, change, MAX_REWEIGHTING)
-    return q, factors, robust, it
+        settled = StopReason.MAX_ITERATIONS
+    if not stop.converged:
+        log.warning("%s: the final fit of the static pose and the scale factors stopped before converging (%s)",
+                    src, stop.label)
+    return q, factors, robust, _FitOutcome(it, stop, settled)
 
 
 def _use_functional_gh(anchor: _Anchor, model: Model, protocol: Protocol, functional: MarkerTargets,
                        static: np.ndarray, q: np.ndarray, factors: dict[str, float], w: np.ndarray, src: str,
-                       robust: np.ndarray, it: int):
+                       robust: np.ndarray, outcome: _FitOutcome):
     """Put the model's glenohumeral centre where SCoRE finds it in the functional trial (at the
     static pose, relative to the scapula of the anatomical fit) and fit pose and scales again.
     A functional trial whose motion does not determine the centre is reported and not used."""
@@ -161,7 +177,7 @@ def _use_functional_gh(anchor: _Anchor, model: Model, protocol: Protocol, functi
         gh_static, fc = functional_gh(model, protocol, functional, static)
     except InputError as exc:
         log.warning("%s", exc)
-        return q, factors, robust, it, anchor, model, {"gh": {"used": False, "trial": fsrc, "reason": str(exc)}}
+        return q, factors, robust, outcome, anchor, model, {"gh": {"used": False, "trial": fsrc, "reason": str(exc)}}
     humerus = gh_joint(model)
     seg_factors = anchor.segment_factors(factors)
     scaled = scale_model(model, seg_factors)
@@ -174,7 +190,7 @@ def _use_functional_gh(anchor: _Anchor, model: Model, protocol: Protocol, functi
                   f"humerus markers put it (more than {FUNCTIONAL_MAX_SHIFT_M * 1000:.0f} mm; SCoRE RMS "
                   f"{fc.rms_m * 1000:.1f} mm): skin motion of the cluster markers, or too little motion; not used")
         log.warning("%s", reason)
-        return q, factors, robust, it, anchor, model, {"gh": {"used": False, "trial": fsrc, "reason": reason,
+        return q, factors, robust, outcome, anchor, model, {"gh": {"used": False, "trial": fsrc, "reason": reason,
                                                               **fc.to_dict(), "shift_from_marker_fit_mm": round(shift * 1000, 2)}}
     # the centre is fixed to the scapula where the static pose puts it; refitting the pose moves the
     # scapula a little, so place it again until it stays where SCoRE found it (fixed point)
@@ -185,7 +201,7 @@ def _use_functional_gh(anchor: _Anchor, model: Model, protocol: Protocol, functi
             dataclasses.replace(s, joint=dataclasses.replace(s.joint, centre_m=local)) if s.name == humerus else s
             for s in model.segments))
         anchor = dataclasses.replace(anchor, model=model)
-        q, factors, robust, it = _robust_fit(anchor, q, factors, w, static, src)
+        q, factors, robust, outcome = _robust_fit(anchor, q, factors, w, static, src)
         seg_factors = anchor.segment_factors(factors)
         fr = Kinematics(scale_model(model, seg_factors)).frames(q)
         miss = float(np.linalg.norm(fr.p[ih] - gh_static))
@@ -196,7 +212,7 @@ def _use_functional_gh(anchor: _Anchor, model: Model, protocol: Protocol, functi
                    "shift_from_marker_fit_mm": round(float(np.linalg.norm(gh_static - gh_fit)) * 1000, 2)}}
     log.info("%s: glenohumeral centre from SCoRE on %s, %.1f mm from the marker fit's", src, fsrc,
              info["gh"]["shift_from_marker_fit_mm"])
-    return q, factors, robust, it, anchor, model, info
+    return q, factors, robust, outcome, anchor, model, info
 
 
 def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories, /, *,
@@ -264,13 +280,13 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
     factors = {g: fixed.get(g, 1.0) for g in anchor.groups}
     # start posture: several at once, pose only, generic scale factors
     kin, pts = anchor.points(factors)
-    qs, cost = _fit_pose(kin, pts, static, w_protocol, _start_postures(model), prior, limits=limits, held=held)
-    q = qs[int(np.argmin(cost))]
-    q, factors, robust, it = _robust_fit(anchor, q, factors, w_protocol, static, src)
+    q, start_stop = best_start(_fit_pose(kin, pts, static, w_protocol, _start_postures(model), prior, limits=limits,
+                                         held=held))
+    q, factors, robust, outcome = _robust_fit(anchor, q, factors, w_protocol, static, src)
     functional_info: dict = {}
     if functional is not None:
-        q, factors, robust, it, anchor, model, functional_info = _use_functional_gh(
-            anchor, model, protocol, functional, static, q, factors, w_protocol, src, robust, it)
+        q, factors, robust, outcome, anchor, model, functional_info = _use_functional_gh(
+            anchor, model, protocol, functional, static, q, factors, w_protocol, src, robust, outcome)
     kin, pts = anchor.points(factors)
     seg_factors = anchor.segment_factors(factors)
     scaled = scale_model(model, seg_factors)
@@ -288,10 +304,13 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
     contacts = kin_c.points(q, kin_c.contacts)
     cal_protocol = calibrated_protocol(protocol, calibrated, point_names=point_names)
     pose_contacts, pose_sources = [contacts], [src]
+    fit_stop = {"start_pose": start_stop.label, "pose_and_scales": outcome.final_fit.label,
+                "reweighting": outcome.reweighting.label}
     for extra in more_statics:
-        q_k = _extra_static_pose(kin_c, cal_protocol, extra, prior, limits, held)
+        q_k, stop_k = _extra_static_pose(kin_c, cal_protocol, extra, prior, limits, held)
         pose_contacts.append(kin_c.points(q_k, kin_c.contacts))
         pose_sources.append(extra.source or "static pose")
+        fit_stop[f"pose of {pose_sources[-1]}"] = stop_k.label
     if len(pose_contacts) == 1:
         ellipsoid, k_ell = fit_ellipsoid(calibrated.ellipsoid, contacts)
     else:
@@ -319,7 +338,8 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
         scale_factors={s: float(v) for s, v in seg_factors.items()}, thorax_scale_measured=st is not None,
         static_q_rad=q.copy(), coordinate_names=model.coordinate_names,
         ellipsoid_centre_m=np.array(ellipsoid.centre_m), ellipsoid_radii_m=np.array(ellipsoid.radii_m),
-        ellipsoid_scale=k_ell, constraint_abs=g_abs, markers=tuple(markers), fit_iterations=it,
+        ellipsoid_scale=k_ell, constraint_abs=g_abs, markers=tuple(markers), fit_iterations=outcome.iterations,
+        fit_stop=fit_stop,
         ellipsoid_poses_mm=ellipsoid_poses,
         window_motion_mm={m.name: float(spread[j] * 1000) for j, m in enumerate(protocol.markers) if present[j]},
         static_pose_at_limit_deg=_at_limit(q, model),
@@ -337,9 +357,10 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
 
 
 def _extra_static_pose(kin: Kinematics, protocol: Protocol, targets: MarkerTargets, prior: np.ndarray,
-                       limits, held: np.ndarray) -> np.ndarray:
+                       limits, held: np.ndarray) -> tuple[np.ndarray, StopReason]:
     """The pose of a further static trial on the calibrated model (its registered points, no
-    ellipsoid constraint, inside the ranges, held coordinates at 0), from the usual start postures."""
+    ellipsoid constraint, inside the ranges, held coordinates at 0), from the usual start postures,
+    and why its fit stopped."""
     window, _ = _window(targets, None)
     static = _nanmean(targets.positions_m[list(window)], axis=0)
     present = np.isfinite(static).all(axis=1)
@@ -347,9 +368,8 @@ def _extra_static_pose(kin: Kinematics, protocol: Protocol, targets: MarkerTarge
         raise InputError(f"{targets.source or 'static pose'}: only {int(present.sum())} protocol markers in its still "
                          f"frames; need at least 5")
     w = np.where(present, protocol.weights, 0.0)
-    qs, cost = _fit_pose(kin, tracked_points(kin, protocol), static, w, _start_postures(kin.model), prior,
-                         limits=limits, held=held)
-    return qs[int(np.argmin(cost))]
+    return best_start(_fit_pose(kin, tracked_points(kin, protocol), static, w, _start_postures(kin.model), prior,
+                                limits=limits, held=held))
 
 
 def _joint_centres_mm(model: Model, q: np.ndarray) -> dict[str, list[float]]:
@@ -383,7 +403,7 @@ def _calibration_residuals(kin: Kinematics, protocol: Protocol, targets: MarkerT
     pts = tracked_points(kin, protocol)
     tgt = targets.positions_m[sel]
     dt = float(np.median(np.diff(targets.time_s))) if targets.n_frames > 1 else 1.0
-    q, _, _ = solve_positions(kin, pts, tgt, protocol.weights, q_start=q_static, options=LSOptions(), frame_dt=dt)
+    q = solve_positions(kin, pts, tgt, protocol.weights, q_start=q_static, options=LSOptions(), frame_dt=dt)[0]
     d = np.linalg.norm(kin.points(q, pts) - tgt, axis=2) * 1000.0
     return np.sqrt(_nanmean(d * d, axis=0))
 

@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from exubio.errors import ModelError
+from exubio.lsq import newton
 from exubio.types import Ellipsoid
 
 ELLIPSOID_RADIUS_WEIGHT_M = 0.3  # in the ellipsoid fit, 10 % of radius costs like 30 mm of centre
@@ -17,29 +18,34 @@ def fit_ellipsoid(ellipsoid: Ellipsoid, contacts_m: np.ndarray, /, *, tol: float
                   max_iterations: int = 60) -> tuple[Ellipsoid, float]:
     """Move the centre in its sagittal plane (x, y) and scale the radii by a common factor k so
     that both contact points (2, 3) lie on the ellipsoid, with the least weighted change
-    (|dc|^2 + (ELLIPSOID_RADIUS_WEIGHT_M * d ln k)^2). Returns the new ellipsoid and k. ModelError if no such
-    ellipsoid is found near the given one."""
+    (|dc|^2 + (ELLIPSOID_RADIUS_WEIGHT_M * d ln k)^2), by least-norm Newton steps (exubio.lsq.newton)
+    until max |g| <= tol. Returns the new ellipsoid and k. ModelError (saying why Newton stopped) if
+    no such ellipsoid is found near the given one (max |g| not below 1e-10)."""
     x = np.asarray(contacts_m, dtype=float)
     radii0 = np.asarray(ellipsoid.radii_m, dtype=float)
-    c = np.array(ellipsoid.centre_m, dtype=float)
-    logk = 0.0
+    cz = float(ellipsoid.centre_m[2])
     Minv = np.diag([1.0, 1.0, 1.0 / ELLIPSOID_RADIUS_WEIGHT_M**2])
-    g = None
-    for _ in range(max_iterations):
-        rr = radii0 * math.exp(logk)
-        d = x - c
-        g = (d * d / rr**2).sum(axis=1) - 1.0
-        if np.abs(g).max() < tol:
-            break
+
+    def residual(p: np.ndarray):  # p = (centre x, centre y, ln k)
+        rr = radii0 * math.exp(p[2])
+        d = x - np.array([p[0], p[1], cz])
+        return (d * d / rr**2).sum(axis=1) - 1.0, (d, rr)
+
+    def update(p: np.ndarray, g: np.ndarray, aux) -> np.ndarray:
+        d, rr = aux
         Jg = np.column_stack([-2 * d[:, 0] / rr[0] ** 2, -2 * d[:, 1] / rr[1] ** 2, -2 * (d * d / rr**2).sum(axis=1)])
         step = -Minv @ Jg.T @ np.linalg.solve(Jg @ Minv @ Jg.T, g)
-        c[0] += step[0]
-        c[1] += step[1]
-        logk += float(np.clip(step[2], -0.5, 0.5))
-    if g is None or not np.abs(g).max() < 1e-10:
+        return p + np.array([step[0], step[1], np.clip(step[2], -0.5, 0.5)])
+
+    c0 = np.asarray(ellipsoid.centre_m, dtype=float)
+    solved = newton(np.array([c0[0], c0[1], 0.0]), residual, update, tol=tol, max_iterations=max_iterations)
+    if not solved.residual < 1e-10:
         raise ModelError(f"no thorax ellipsoid near the generic one passes through both contact points "
-                         f"{np.round(x * 1000, 1).tolist()} mm (|g| = {np.abs(g).max():.2e})")
-    return dataclasses.replace(ellipsoid, centre_m=c, radii_m=radii0 * math.exp(logk)), math.exp(logk)
+                         f"{np.round(x * 1000, 1).tolist()} mm (|g| = {solved.residual:.2e}; Newton stopped: "
+                         f"{solved.reason.label.replace('_', ' ')})")
+    cx, cy, logk = solved.x
+    k = math.exp(logk)
+    return dataclasses.replace(ellipsoid, centre_m=np.array([cx, cy, cz]), radii_m=radii0 * k), k
 
 
 

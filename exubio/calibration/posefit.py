@@ -1,5 +1,6 @@
 """The anatomical fit: the static pose and the segment scale factors of the scaled generic model
-(without the ellipsoid constraint, robust weights, inside the joint ranges)."""
+(without the ellipsoid constraint, robust weights, inside the joint ranges), both by the
+Levenberg-Marquardt core of exubio.lsq (each fit says why it stopped: exubio.lsq.StopReason)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -9,6 +10,7 @@ import numpy as np
 
 from exubio.calibration.scaling import SCALE_BOUNDS, SCALE_PRIOR_M2, _scale_design, scale_model
 from exubio.kinematics import Kinematics, PointSet
+from exubio.lsq import Evaluation, Result, Settings, StopReason, levenberg_marquardt
 from exubio.methods.ls import Limits
 from exubio.ranges import AT_LIMIT_TOLERANCE_RAD, violation
 from exubio.types import Model
@@ -21,6 +23,13 @@ ARM_PRIOR_M2_PER_RAD2 = 1e-7  # the other coordinates: only breaks ties where no
 
 MAX_REWEIGHTING = 50  # iterations of the robust reweighting (stop: weights change < 1e-3)
 
+
+def _settings(max_iterations: int, tol: float) -> Settings:
+    """Both fits: mu from 1e-4, tenfold up on a rejected step, threefold down (not below 1e-9) on
+    a kept one, given up beyond 1e8; steps capped at 0.3 (rad, or scale factor); a step is kept
+    if it does not raise the cost; converged when a kept step is at most ``tol``."""
+    return Settings(max_iterations=max_iterations, step_tol=tol, damping=1e-4, damping_floor=1e-9, step_cap=0.3,
+                    damping_decrease=3.0, damping_increase=10.0, damping_cap=1e8)
 
 
 def _start_postures(model: Model) -> np.ndarray:
@@ -42,47 +51,39 @@ def _start_postures(model: Model) -> np.ndarray:
 
 def _fit_pose(kin: Kinematics, points: PointSet, target: np.ndarray, w: np.ndarray, q_starts: np.ndarray,
               prior: np.ndarray, *, limits: Limits | None = None, max_iterations: int = 300,
-              tol: float = 1e-10, held: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+              tol: float = 1e-10, held: np.ndarray | None = None) -> Result:
     """min_q sum w_i |r_i(q) - m_i|^2 + sum_j prior_j q_j^2 + kappa sum_j v_j(q)^2 (the joint
-    ranges, exubio.ranges) for every start (S, m) at once, Levenberg-Marquardt; returns (q (S, m),
-    cost (S,))."""
-    q = np.array(q_starts, dtype=float)
-    S, m = q.shape
+    ranges, exubio.ranges) for every start (S, m) at once, Levenberg-Marquardt (exubio.lsq);
+    returns the core's result: q (S, m) in ``x``, the cost (S,) in ``evaluation.cost``, why each
+    start stopped in ``reason``."""
+    m = np.shape(q_starts)[1]
     tgt = np.where(np.isnan(target), 0.0, target)
 
-    def evaluate(qq):
+    def evaluate(qq: np.ndarray, rows: np.ndarray) -> Evaluation:
         e = (kin.points(qq, points) - tgt) * (w[:, None] > 0)
-        return e, np.einsum("k,skc->s", w, e * e) + (prior * qq * qq).sum(axis=1) + _range_cost(qq, limits)
+        cost = np.einsum("k,skc->s", w, e * e) + (prior * qq * qq).sum(axis=1) + _range_cost(qq, limits)
+        return Evaluation(cost, data={"e": e})
 
-    e, cost = evaluate(q)
-    mu = np.full(S, 1e-4)
-    active = np.ones(S, dtype=bool)
-    for _ in range(max_iterations):
-        a = np.flatnonzero(active)
-        if a.size == 0:
-            break
-        J = kin.point_jacobian(q[a], points)  # (A, k, 3, m)
+    def linearise(qq: np.ndarray, rows: np.ndarray, ev: Evaluation) -> Evaluation:
+        J = kin.point_jacobian(qq, points)  # (A, k, 3, m)
         if held is not None:
             J = J * ~held  # held coordinates stay at their start value
         Jw = J * w[None, :, None, None]
         H = np.einsum("akcm,akcn->amn", Jw, J) + np.eye(m) * prior
-        grad = np.einsum("akcm,akc->am", Jw, e[a]) + prior * q[a]
+        grad = np.einsum("akcm,akc->am", Jw, ev.data["e"]) + prior * qq
         if limits is not None:
-            v = violation(q[a], limits.ranges_rad)
+            v = violation(qq, limits.ranges_rad)
             H = H + limits.kappa * (v != 0)[..., :, None] * np.eye(m)
             grad = grad + limits.kappa * v
-        dq = -np.linalg.solve(H + mu[a, None, None] * np.eye(m), grad[..., None])[..., 0]
-        big = np.abs(dq).max(axis=1)
-        dq *= np.minimum(1.0, 0.3 / np.maximum(big, 1e-300))[:, None]
-        e_t, c_t = evaluate(q[a] + dq)
-        ok = c_t <= cost[a]
-        idx = a[ok]
-        q[idx] += dq[ok]
-        e[idx], cost[idx] = e_t[ok], c_t[ok]
-        mu[a] = np.where(ok, np.maximum(mu[a] / 3, 1e-9), mu[a] * 10)
-        done = (ok & (np.abs(dq).max(axis=1) < tol)) | (mu[a] > 1e8)
-        active[a[done]] = False
-    return q, cost
+        return Evaluation(ev.cost, H=H, grad=grad, data=ev.data)
+
+    return levenberg_marquardt(q_starts, evaluate, linearise=linearise, settings=_settings(max_iterations, tol))
+
+
+def best_start(fit: Result) -> tuple[np.ndarray, StopReason]:
+    """The lowest-cost start of a ``_fit_pose`` result: its pose (m,) and why its fit stopped."""
+    i = int(np.argmin(fit.evaluation.cost))
+    return fit.x[i], fit.stop(i)
 
 
 def _at_limit(q: np.ndarray, model: Model) -> dict[str, float]:
@@ -153,37 +154,42 @@ class _Anchor:
         return cost, e, np.concatenate([Jq, Js], axis=2)
 
     def fit(self, q: np.ndarray, s: dict[str, float], w: np.ndarray, *, max_iterations: int = 200,
-            tol: float = 1e-10) -> tuple[np.ndarray, dict[str, float], float]:
-        """Joint Levenberg-Marquardt over the pose and the free scale factors (bounded)."""
+            tol: float = 1e-10) -> tuple[np.ndarray, dict[str, float], float, StopReason]:
+        """Joint Levenberg-Marquardt (exubio.lsq) over the pose and the free scale factors (bounded:
+        a trial step is clipped to SCALE_BOUNDS). Returns q, factors, cost and why the fit stopped."""
         m, free = q.size, self.free
-        cost, e, J = self.evaluate(q, s, w, jacobian=True)
-        mu = 1e-4
         prior = np.concatenate([self.prior_q, np.full(len(free), SCALE_PRIOR_M2)])
-        for _ in range(max_iterations):
-            x_dev = np.concatenate([q, [s[g] - 1.0 for g in free]])
+        centre = np.concatenate([np.zeros(m), np.ones(len(free))])  # where the priors pull x
+
+        def factors(x: np.ndarray) -> dict[str, float]:
+            out = dict(s)
+            out.update({g: float(v) for g, v in zip(free, x[m:])})
+            return out
+
+        def evaluate(x: np.ndarray, rows: np.ndarray) -> Evaluation:
+            cost, e, _ = self.evaluate(x[0, :m], factors(x[0]), w, jacobian=False)
+            return Evaluation(np.array([cost]))
+
+        def linearise(x: np.ndarray, rows: np.ndarray, ev: Evaluation) -> Evaluation:
+            qq = x[0, :m]
+            cost, e, J = self.evaluate(qq, factors(x[0]), w, jacobian=True)
             Jw = J * w[:, None, None]
             H = np.einsum("kcm,kcn->mn", Jw, J) + np.diag(prior)
-            grad = np.einsum("kcm,kc->m", Jw, e) + prior * x_dev
+            grad = np.einsum("kcm,kc->m", Jw, e) + prior * (x[0] - centre)
             if self.limits is not None:
-                v = violation(q, self.limits.ranges_rad)
+                v = violation(qq, self.limits.ranges_rad)
                 H[:m, :m] += self.limits.kappa * np.diag((v != 0).astype(float))
                 grad[:m] += self.limits.kappa * v
-            dx = -np.linalg.solve(H + mu * np.eye(H.shape[0]), grad)
-            dx *= min(1.0, 0.3 / max(np.abs(dx).max(), 1e-300))
-            q_t = q + dx[:m]
-            s_t = dict(s)
-            s_t.update({g: float(np.clip(s[g] + d, *SCALE_BOUNDS)) for g, d in zip(free, dx[m:])})
-            c_t, e_t, _ = self.evaluate(q_t, s_t, w, jacobian=False)
-            if c_t <= cost:
-                q, s = q_t, s_t
-                cost, e, J = self.evaluate(q, s, w, jacobian=True)
-                mu = max(mu / 3, 1e-9)
-                if np.abs(dx).max() < tol:
-                    break
-            else:
-                mu *= 10
-                if mu > 1e8:
-                    break
-        return q, s, cost
+            return Evaluation(np.array([cost]), H=H[None], grad=grad[None])
+
+        def bounded(x: np.ndarray, rows: np.ndarray) -> np.ndarray:
+            x[:, m:] = np.clip(x[:, m:], *SCALE_BOUNDS)
+            return x
+
+        x0 = np.concatenate([q, [s[g] for g in free]])[None]
+        res = levenberg_marquardt(x0, evaluate, linearise=linearise, project=bounded,
+                                  settings=_settings(max_iterations, tol))
+        x = res.x[0]
+        return x[:m].copy(), factors(x), float(res.evaluation.cost[0]), res.stop(0)
 
 

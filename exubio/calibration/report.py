@@ -69,6 +69,10 @@ class CalibrationReport:
     joint_centres_mm: Mapping[str, list] = dataclasses.field(default_factory=dict)  # joint -> thorax frame, static
     landmark_offsets_mm: Mapping[str, float] = dataclasses.field(default_factory=dict)  # landmark marker ->
     # its distance from the landmark it is placed over, on the calibrated model
+    fit_stop: Mapping[str, str] = dataclasses.field(default_factory=dict)  # how the fits stopped
+    # (exubio.lsq.StopReason labels): "start_pose" (the best start posture's pose-only fit),
+    # "pose_and_scales" (the final joint fit), "reweighting" ("converged": the robust weights
+    # settled; "max_iterations": not within MAX_REWEIGHTING), "pose of <trial>" per further static
 
     @property
     def residual_mm(self) -> dict[str, float]:
@@ -140,6 +144,7 @@ class CalibrationReport:
             "joint_centres_mm": {"definition": "joint centres in the thorax frame at the static pose",
                                  **{k: list(v) for k, v in self.joint_centres_mm.items()}},
             "landmark_offsets_mm": {k: round(float(v), 2) for k, v in self.landmark_offsets_mm.items()},
+            "fit_stop": dict(self.fit_stop),
         }
 
 
@@ -160,6 +165,9 @@ def format_report(report: CalibrationReport, /) -> str:
             lines.append(f"{m.name:<12} {m.segment:<9} {'not in the calibration frames: scaled generic position':>41}")
     lines.append(f"calibration residual: mean {report.mean_residual_mm:.2f} mm (RMS over the calibration frames, "
                  f"calibrated model, constrained LS per frame)")
+    unsettled = {k: v for k, v in report.fit_stop.items() if v not in ("converged", "stalled")}
+    if unsettled:
+        lines.append("fits that stopped before converging: " + ", ".join(f"{k} ({v})" for k, v in unsettled.items()))
     if report.joint_centres_mm:
         lines.append("joint centres at the static pose (thorax frame, mm): " + "; ".join(
             f"{k} {[round(v, 1) for v in p]}" for k, p in report.joint_centres_mm.items()))

@@ -3,10 +3,14 @@ g = 0 (G q̇ = 0, G q̈ + eta = 0), shared by both methods."""
 from __future__ import annotations
 
 import dataclasses
+import logging
 
 import numpy as np
 
 from exubio.kinematics import Kinematics
+from exubio.lsq import NewtonResult, newton
+
+log = logging.getLogger(__name__)
 
 
 def _constraint_chain(kin: Kinematics) -> tuple[Kinematics, np.ndarray]:
@@ -51,13 +55,19 @@ trial at once held ~4 kB of temporaries per frame."""
 def project_on_constraints(kin: Kinematics, q: np.ndarray, qd: np.ndarray | None = None,
                            qdd: np.ndarray | None = None, /, *, tol: float = 1e-13, max_iterations: int = 4,
                            held: np.ndarray | None = None):
-    """Project (q, q̇, q̈) on the constraints (``_project_block``), BLOCK_FRAMES frames at a time."""
+    """Project (q, q̇, q̈) on the constraints (``_project_block``), BLOCK_FRAMES frames at a time.
+    Returns q, q̇, q̈ and (max |g|, max |G q̇|) before the projection; a block whose Newton
+    iteration on g = 0 stops above ``tol`` is logged (its max |g| after, and why)."""
     n = q.shape[0]
     if n <= BLOCK_FRAMES:
-        return _project_block(kin, q, qd, qdd, tol=tol, max_iterations=max_iterations, held=held)
+        *out, solved = _project_block(kin, q, qd, qdd, tol=tol, max_iterations=max_iterations, held=held)
+        _log_unsettled(solved, 0, n, tol)
+        return tuple(out)
     parts = [_project_block(kin, q[a:a + BLOCK_FRAMES], None if qd is None else qd[a:a + BLOCK_FRAMES],
                             None if qdd is None else qdd[a:a + BLOCK_FRAMES], tol=tol, max_iterations=max_iterations,
                             held=held) for a in range(0, n, BLOCK_FRAMES)]
+    for a, p in zip(range(0, n, BLOCK_FRAMES), parts):
+        _log_unsettled(p[4], a, min(a + BLOCK_FRAMES, n), tol)
     befores = [p[3] for p in parts]
     before = tuple(float(np.nanmax([b[i] for b in befores])) if any(np.isfinite(b[i]) for b in befores)
                    else float("nan") for i in range(2))
@@ -66,34 +76,48 @@ def project_on_constraints(kin: Kinematics, q: np.ndarray, qd: np.ndarray | None
     return np.concatenate([p[0] for p in parts]), qd_out, qdd_out, before
 
 
+def _log_unsettled(solved: NewtonResult | None, start: int, stop: int, tol: float) -> None:
+    """Say where and why a projection's Newton iteration stopped above its tolerance."""
+    if solved is not None and not solved.converged:
+        log.warning("constraint projection of frames %d-%d stopped at max |g| = %.1e, above %.0e (%s)",
+                    start, stop - 1, solved.residual, tol, solved.reason.label)
+
+
 def _project_block(kin: Kinematics, q: np.ndarray, qd: np.ndarray | None = None,
                    qdd: np.ndarray | None = None, /, *, tol: float = 1e-13, max_iterations: int = 4,
                    held: np.ndarray | None = None):
     """Project (q, q̇, q̈) on g = 0, G q̇ = 0, G q̈ + eta = 0 (least-norm corrections in coordinate
     space, every frame at once; only the coordinates g depends on change; ``held`` coordinates are
     not corrected). Without q̇ and q̈ only q is projected. Frames with non-finite values are left
-    alone. Returns q, q̇, q̈ and (max |g|, max |G q̇|) before the projection."""
+    alone. Returns q, q̇, q̈, (max |g|, max |G q̇|) before the projection, and the Newton
+    iteration's result on g = 0 (exubio.lsq.NewtonResult: whether it reached ``tol`` and max |g|
+    after; None when no frame is finite)."""
     positions_only = qd is None
     if positions_only:
         qd = np.zeros_like(q)
         qdd = np.zeros_like(q)
     ok = np.isfinite(q).all(axis=1) & np.isfinite(qd).all(axis=1) & np.isfinite(qdd).all(axis=1)
     if not ok.any():
-        return q, qd, qdd, (float("nan"), float("nan"))
+        return q, qd, qdd, (float("nan"), float("nan")), None
     chain, cols = _constraint_chain(kin)
     q, qd, qdd = q.copy(), qd.copy(), qdd.copy()
     x, v, a = (arr[np.ix_(ok, cols)] for arr in (q, qd, qdd))
     free = np.ones(len(cols)) if held is None else (~np.asarray(held, dtype=bool)[cols]).astype(float)
     g, G, e, J = _constraint_terms(chain, x)
     before = (float(np.abs(g).max()), float(np.abs(np.einsum("...km,...m->...k", G, v)).max()))
-    for _ in range(max_iterations):
-        if np.abs(g).max() <= tol:
-            break
-        x = x - _pinv_apply(G * free, g)  # held coordinates are not corrected
-        g, G, e, J = _constraint_terms(chain, x)
+
+    def terms(xx: np.ndarray):
+        g, G, e, J = _constraint_terms(chain, xx)
+        return g, (G, e, J)
+
+    def update(xx: np.ndarray, g: np.ndarray, aux) -> np.ndarray:
+        return xx - _pinv_apply(aux[0] * free, g)  # held coordinates are not corrected
+
+    solved = newton(x, terms, update, tol=tol, max_iterations=max_iterations, first=(g, (G, e, J)))
+    x, (G, e, J) = solved.x, solved.aux
     if positions_only:
         q[np.flatnonzero(ok)[:, None], cols] = x
-        return q, None, None, before
+        return q, None, None, before, solved
     v = v - _pinv_apply(G * free, np.einsum("...km,...m->...k", G, v))
     rd = np.einsum("...kcm,...m->...kc", J, v)
     bias = chain.point_bias_acceleration(x, v, chain.contacts)
@@ -101,4 +125,4 @@ def _project_block(kin: Kinematics, q: np.ndarray, qd: np.ndarray | None = None,
     a = a - _pinv_apply(G * free, np.einsum("...km,...m->...k", G, a) + eta)
     rows = np.flatnonzero(ok)[:, None]
     q[rows, cols], qd[rows, cols], qdd[rows, cols] = x, v, a
-    return q, qd, qdd, before
+    return q, qd, qdd, before, solved

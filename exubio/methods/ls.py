@@ -7,9 +7,11 @@ of exubio.kinematics; its fixed points satisfy the first-order optimality condit
 is kept only if it lowers the l1 merit function (cost + rho |g|_1); otherwise the Levenberg-Marquardt
 damping mu grows, which keeps large-residual frames (a generic model on a real subject) convergent.
 
-Frames are solved in short blocks that run through numpy together: every frame of a block starts
-from the previous block's last solution (the warm start; blocks are ``block_s`` = 0.2 s long) and
-iterates until its step is below ``tol_rad``; its status says whether it converged.
+Frames are solved in short blocks that run through numpy together (the batched core of
+exubio.lsq): every frame of a block starts from the previous block's last solution (the warm
+start; blocks are ``block_s`` = 0.2 s long) and iterates until its step is below ``tol_rad`` or
+its merit no longer decreases; its status says whether it converged and its stop reason why it
+stopped (exubio.lsq.StopReason; counted per reason in the info of ``stream_ls``).
 
 Velocities and accelerations are the consistent linearisations: J q̇ = ṙ_M with G q̇ = 0, and
 J q̈ = r̈_M - J̇ q̇ with G q̈ = -eta (weighted least squares with the same weights).
@@ -24,6 +26,7 @@ from typing import Callable
 import numpy as np
 
 from exubio.kinematics import Kinematics, PointSet
+from exubio.lsq import Evaluation, Settings, StopReason, fix_variables, levenberg_marquardt, stop_counts
 from exubio.methods.common import CHUNK_FRAMES, ChunkSink, Collector, assemble, chunk_bounds, target_chunk, tracked_points
 from exubio.methods.constraints import project_on_constraints
 from exubio.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD, penalty_weight, violation
@@ -47,22 +50,6 @@ class LSOptions:
     # joint ranges (exubio.ranges); None or 0: no ranges in the solve
 
 
-@dataclass
-class _Linearisation:
-    """Everything one kinematics evaluation gives at q for a batch of frames (B, ...)."""
-
-    H: np.ndarray  # J^T W J (B, m, m)
-    grad: np.ndarray  # J^T W e (B, m)
-    G: np.ndarray  # (B, 2, m)
-    g: np.ndarray  # (B, 2)
-    cost: np.ndarray  # e^T W e (B,)
-
-    def take(self, mask: np.ndarray, other: "_Linearisation") -> None:
-        """Replace the frames where ``mask`` is True by those of ``other``."""
-        for name in ("H", "grad", "G", "g", "cost"):
-            getattr(self, name)[mask] = getattr(other, name)[mask]
-
-
 @dataclass(frozen=True)
 class Limits:
     """The joint ranges inside the solve: cost + kappa sum_j v_j(q)^2 with v_j the excursion beyond
@@ -81,7 +68,7 @@ class Limits:
         return cls(rng, penalty_weight(limit_stiffness_nm_per_rad, protocol.default_stiffness_n_per_m))
 
 
-def _add_limits(lin: "_Linearisation", q: np.ndarray, limits: Limits | None) -> None:
+def _add_limits(lin: Evaluation, q: np.ndarray, limits: Limits | None) -> None:
     """Add the one-sided limit potential to cost, gradient and Gauss-Newton matrix (in place)."""
     if limits is None:
         return
@@ -94,7 +81,10 @@ def _add_limits(lin: "_Linearisation", q: np.ndarray, limits: Limits | None) -> 
 
 
 def _linearise(kin: Kinematics, points: PointSet, q: np.ndarray, target: np.ndarray, w: np.ndarray,
-               limits: Limits | None = None) -> _Linearisation:
+               limits: Limits | None = None) -> Evaluation:
+    """Everything one kinematics evaluation gives at q for a batch of frames (B, ...): the cost
+    e^T W e (B,) (m^2, plus the limit potential), H = J^T W J (B, m, m), grad = J^T W e (B, m), the
+    constraints g (B, 2) and G (B, 2, m)."""
     fr = kin.frames(q)
     B, k = w.shape
     r = kin.points(q, points, frames=fr)
@@ -104,7 +94,7 @@ def _linearise(kin: Kinematics, points: PointSet, q: np.ndarray, target: np.ndar
     rc = kin.points(q, kin.contacts, frames=fr)
     Jc = kin.point_jacobian(q, kin.contacts, frames=fr, positions=rc)  # (B, 2, 3, m)
     ec = rc - kin.centre
-    lin = _Linearisation(
+    lin = Evaluation(
         H=Jw_t @ J,
         grad=(Jw_t @ e)[..., 0],
         G=2.0 * ((ec * kin.a_diag)[..., None, :] @ Jc)[..., 0, :],
@@ -115,28 +105,13 @@ def _linearise(kin: Kinematics, points: PointSet, q: np.ndarray, target: np.ndar
     return lin
 
 
-def _hold(K: np.ndarray, rhs: np.ndarray, held: np.ndarray | None) -> None:
-    """Give held coordinates a zero step: their rows and columns of the KKT matrix become identity."""
-    if held is None or not held.any():
-        return
-    idx = np.flatnonzero(held)
-    K[:, idx, :] = 0.0
-    K[:, :, idx] = 0.0
-    K[:, idx, idx] = 1.0
-    rhs[:, idx] = 0.0
-
-
-def _kkt_step(lin: _Linearisation, mu: np.ndarray, held: np.ndarray | None = None):
-    """Gauss-Newton SQP step with Levenberg-Marquardt damping mu (B,): (dq (B, m), lambda (B, 2))."""
-    B, m = lin.grad.shape
-    K = np.zeros((B, m + 2, m + 2))
-    K[:, :m, :m] = lin.H + mu[:, None, None] * np.eye(m)
-    K[:, :m, m:] = np.swapaxes(lin.G, 1, 2)
-    K[:, m:, :m] = lin.G
-    rhs = np.concatenate([-lin.grad, -lin.g], axis=1)
-    _hold(K, rhs, held)
-    sol = np.linalg.solve(K, rhs[..., None])[..., 0]
-    return sol[:, :m], sol[:, m:]
+def _settings(options: LSOptions, max_iterations: int) -> Settings:
+    """The LS solve in terms of the core: damping from ``regularisation`` (also its floor), tenfold
+    up and threefold down, given up beyond 1e8; a step is kept if the merit does not grow by more
+    than rounding (1e-12 relative), and a kept step that lowers it by no more than that stalls."""
+    return Settings(max_iterations=max_iterations, step_tol=options.tol_rad, damping=options.regularisation,
+                    damping_floor=options.regularisation, step_cap=options.max_step_rad, damping_decrease=3.0,
+                    damping_increase=10.0, damping_cap=1e8, accept_rtol=1e-12, accept_atol=1e-18, stall_rtol=1e-12)
 
 
 def _start_postures(kin: Kinematics, q_start: np.ndarray) -> np.ndarray:
@@ -156,10 +131,12 @@ def solve_positions(kin: Kinematics, points: PointSet, targets_m: np.ndarray, we
                     q_start: np.ndarray, options: LSOptions, frame_dt: float,
                     progress: Callable[[int], None] | None = None, held: np.ndarray | None = None,
                     limits: Limits | None = None, q_previous: np.ndarray | None = None):
-    """q (n, m) per frame, iterations (n,), converged (n,) bool. The first frame is solved from
-    several start postures around ``q_start``; with ``q_previous`` (the solution of the frame
-    before these, when a trial is solved in chunks) every frame is warm-started like the frames
-    after the first, so that chunks starting at 1 + a multiple of the block give the one-pass result."""
+    """q (n, m) per frame, iterations (n,), converged (n,) bool, stop reasons (n,) int8
+    (exubio.lsq.StopReason codes; converged = CONVERGED or STALLED). The first frame is solved from
+    several start postures around ``q_start`` (its stop reason is the best start's); with
+    ``q_previous`` (the solution of the frame before these, when a trial is solved in chunks) every
+    frame is warm-started like the frames after the first, so that chunks starting at 1 + a
+    multiple of the block give the one-pass result."""
     n = targets_m.shape[0]
     m = kin.n_coordinates
     present = ~np.isnan(targets_m).any(axis=2)
@@ -168,55 +145,27 @@ def solve_positions(kin: Kinematics, points: PointSet, targets_m: np.ndarray, we
     q_out = np.zeros((n, m))
     iters = np.zeros(n, dtype=int)
     converged = np.zeros(n, dtype=bool)
+    reasons = np.full(n, StopReason.MAX_ITERATIONS, dtype=np.int8)
     block = max(1, int(round(options.block_s / frame_dt)))
 
-    def run(idx: slice, q0: np.ndarray, max_it: int):
-        """Levenberg-Marquardt-safeguarded SQP: a step is kept only if it lowers the l1 merit
-        cost + rho |g|_1 (rho above the multipliers); otherwise the damping grows tenfold."""
+    def run(idx: slice | np.ndarray, q0: np.ndarray, max_it: int):
+        """Levenberg-Marquardt-safeguarded SQP on the frames ``idx`` from q0 (exubio.lsq): a step
+        is kept only if it lowers the l1 merit cost + rho |g|_1 (rho above the multipliers);
+        otherwise the damping grows tenfold. Returns q, iterations, converged, stop reasons."""
         tgt, w = tgt_all[idx], w_all[idx]
-        q = q0.copy()
-        B = q.shape[0]
-        lin = _linearise(kin, points, q, tgt, w, limits)
-        mu = np.full(B, options.regularisation)
-        active = np.ones(B, dtype=bool)
-        done = np.zeros(B, dtype=bool)
-        it = np.zeros(B, dtype=int)
-        for _ in range(max_it):
-            a = np.flatnonzero(active)
-            if a.size == 0:
-                break
-            sub = _Linearisation(lin.H[a], lin.grad[a], lin.G[a], lin.g[a], lin.cost[a])
-            dq, lam = _kkt_step(sub, mu[a], held)
-            big = np.abs(dq).max(axis=1)
-            dq = dq * np.minimum(1.0, options.max_step_rad / np.maximum(big, 1e-300))[:, None]
-            q_try = q[a] + dq
-            trial = _linearise(kin, points, q_try, tgt[a], w[a], limits)
-            rho = 2.0 * np.abs(lam).max(axis=1) + 1e-6
-            merit_old = sub.cost + rho * np.abs(sub.g).sum(axis=1)
-            merit_new = trial.cost + rho * np.abs(trial.g).sum(axis=1)
-            ok = merit_new <= merit_old * (1.0 + 1e-12) + 1e-18
-            q[a[ok]] = q_try[ok]
-            sub.take(ok, trial)
-            for name in ("H", "grad", "G", "g", "cost"):
-                getattr(lin, name)[a] = getattr(sub, name)
-            mu[a] = np.where(ok, np.maximum(mu[a] / 3.0, options.regularisation), mu[a] * 10.0)
-            it[a] += 1
-            stalled = merit_old - merit_new <= 1e-12 * merit_old  # flat valley: the objective no longer cares
-            finished = ok & ((np.abs(dq).max(axis=1) <= options.tol_rad) | stalled)
-            stuck = mu[a] > 1e8
-            done[a[finished]] = True
-            active[a[finished | stuck]] = False
-        return q, it, done
+        res = levenberg_marquardt(q0, lambda q, rows: _linearise(kin, points, q, tgt[rows], w[rows], limits),
+                                  settings=_settings(options, max_it), fixed=held)
+        return res.x, res.iterations, res.converged, res.reason
 
     if q_previous is not None:
         prev, start = np.asarray(q_previous, dtype=float), 0
     else:  # first frame: several start postures (arm down, abducted, flexed), many iterations, best kept
         starts = _start_postures(kin, q_start)
-        q0, it0, ok0 = run(np.zeros(len(starts), dtype=int), starts, options.max_iterations * 10)
+        q0, it0, ok0, why0 = run(np.zeros(len(starts), dtype=int), starts, options.max_iterations * 10)
         cost0 = np.array([_linearise(kin, points, q0[i:i + 1], tgt_all[:1], w_all[:1], limits).cost[0]
                           for i in range(len(starts))])
         best = int(np.argmin(np.where(ok0, cost0, cost0 + 1e9)))
-        q_out[0], iters[0], converged[0] = q0[best], it0.sum(), ok0[best]
+        q_out[0], iters[0], converged[0], reasons[0] = q0[best], it0.sum(), ok0[best], why0[best]
         prev = q_out[0]
         start = 1
         if progress:
@@ -224,15 +173,16 @@ def solve_positions(kin: Kinematics, points: PointSet, targets_m: np.ndarray, we
     while start < n:
         stop = min(n, start + block)
         guess = np.repeat(prev[None], stop - start, axis=0)  # warm start: the previous solution
-        q_blk, it_blk, ok_blk = run(slice(start, stop), guess, options.max_iterations)
-        q_out[start:stop], iters[start:stop], converged[start:stop] = q_blk, it_blk, ok_blk
+        q_blk, it_blk, ok_blk, why_blk = run(slice(start, stop), guess, options.max_iterations)
+        q_out[start:stop], iters[start:stop], converged[start:stop], reasons[start:stop] = q_blk, it_blk, ok_blk, why_blk
         prev = q_out[stop - 1]
         if progress:
             progress(stop - start)
         start = stop
     # every returned frame satisfies the constraints, also where the optimisation stopped early
     q_out = project_on_constraints(kin, q_out, held=held, max_iterations=10)[0]
-    return q_out, iters, converged
+    return q_out, iters, converged, reasons
+
 
 
 RATES_BLOCK_FRAMES = 4096
@@ -271,12 +221,12 @@ def _solve_rates_block(kin: Kinematics, points: PointSet, q: np.ndarray, vel: np
     K[:, m:, :m] = G
     v = np.where(present[..., None], vel, 0.0)
     rhs = np.concatenate([np.einsum("nkcm,nkc->nm", Jw, v), np.zeros((n, 2))], axis=1)
-    _hold(K, rhs, held)
+    fix_variables(K, rhs, held)
     qd = np.linalg.solve(K, rhs[..., None])[..., 0][:, :m]
     bias = kin.point_bias_acceleration(q, qd, points)
     a = np.where(present[..., None], acc - bias, 0.0)
     rhs = np.concatenate([np.einsum("nkcm,nkc->nm", Jw, a), -kin.eta(q, qd)], axis=1)
-    _hold(K, rhs, held)
+    fix_variables(K, rhs, held)
     qdd = np.linalg.solve(K, rhs[..., None])[..., 0][:, :m]
     return qd, qdd
 
@@ -317,13 +267,14 @@ def stream_ls(model: Model, protocol: Protocol, targets: MarkerTargets, sink: Ch
     size = max(block, int(chunk_frames) // block * block)  # chunks end where one pass's blocks end
     t_pos = t_rates = t_sink = 0.0
     iters_sum, iters_max, not_converged, prev = 0, 0, 0, None
+    stops = stop_counts(np.zeros(0, dtype=np.int8))
     t1 = time.perf_counter()
     for a, b in chunk_bounds(targets.n_frames, size, first=1):
         part = target_chunk(targets, a, b)
         ta = time.perf_counter()
-        q, iters, converged = solve_positions(kin, points, part.positions_m, weights, q_start=q0, options=options,
-                                              frame_dt=dt, progress=progress, held=held, limits=limits,
-                                              q_previous=prev)
+        q, iters, converged, why = solve_positions(kin, points, part.positions_m, weights, q_start=q0,
+                                                   options=options, frame_dt=dt, progress=progress, held=held,
+                                                   limits=limits, q_previous=prev)
         tb = time.perf_counter()
         qd, qdd = solve_rates(kin, points, q, part.velocities_m_s, part.accelerations_m_s2, weights,
                               RATES_REGULARISATION, held, limits)
@@ -333,15 +284,17 @@ def stream_ls(model: Model, protocol: Protocol, targets: MarkerTargets, sink: Ch
         status = np.where(n_present < MIN_MARKERS, FrameStatus.TOO_FEW_MARKERS, status)
         iters_sum, iters_max = iters_sum + int(iters.sum()), max(iters_max, int(iters.max()))
         not_converged += int((~converged).sum())
+        stops = {k: v + stops[k] for k, v in stop_counts(why).items()}
         prev = q[-1]
         chunk = assemble(kin, points, part, method="ls", q=q, qd=qd, qdd=qdd, status=status, timings_s={}, info={})
         tc = time.perf_counter()
         sink(chunk)
         t_sink += time.perf_counter() - tc
     if not_converged:
-        log.warning("LS: %d of %d frames did not converge", not_converged, targets.n_frames)
+        log.warning("LS: %d of %d frames did not converge (%s)", not_converged, targets.n_frames,
+                    ", ".join(f"{k} {v}" for k, v in stops.items() if v and not StopReason[k.upper()].converged))
     total = time.perf_counter() - t0 - t_sink  # the method's own time: what the sink does with the chunks is not
     timings = {"setup": t1 - t0, "positions": t_pos, "rates": t_rates, "total": total}
     info = {"iterations_mean": iters_sum / max(targets.n_frames, 1), "iterations_max": iters_max,
-            "frames_not_converged": not_converged, "options": options.__dict__}
+            "frames_not_converged": not_converged, "stop_reasons": stops, "options": options.__dict__}
     return timings, info
