@@ -45,7 +45,7 @@ from scipy.linalg import null_space
 
 from exubio.kinematics import Kinematics
 from exubio.methods.common import tracked_points
-from exubio.methods.ls import held_mask
+from exubio.methods.poses import held_mask
 from exubio.pipeline import load_model_and_protocol, reconstruct
 from exubio.preprocess import prepare_targets
 from exubio.simulate import STA_SCALE, Motion, simulate_trial

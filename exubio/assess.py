@@ -15,7 +15,7 @@ from exubio.calibration import SCALE_BOUNDS
 from exubio.evaluate import per_frame_residuals_mm, residual_statistics
 from exubio.kinematics import Kinematics
 from exubio.methods.common import tracked_points
-from exubio.methods.ls import held_mask
+from exubio.methods.poses import held_mask
 from exubio.methods.pf import unobserved_segments
 from exubio.observability import Determinacy, determinacy
 from exubio.ranges import limit_report

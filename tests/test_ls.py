@@ -153,7 +153,7 @@ def test_ls_velocities_and_accelerations_are_consistent(model_protocol):
 def test_rates_in_blocks_equal_one_pass(model_protocol, monkeypatch):
     """q̇ and q̈ are solved per frame, in blocks that bound memory on long trials: the block size
     changes nothing (bit for bit)."""
-    import exubio.methods.ls as ls
+    import exubio.methods.poses as ls
 
     model, protocol = model_protocol
     trial = simulate_trial(model, "abduction", duration_s=2.0, rate_hz=100.0, noise_mm=1.0, seed=9)

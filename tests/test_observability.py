@@ -5,7 +5,7 @@ import numpy as np
 
 from exubio.kinematics import Kinematics
 from exubio.methods.common import tracked_points
-from exubio.methods.ls import held_mask
+from exubio.methods.poses import held_mask
 from exubio.observability import UNDETERMINED_DEG_PER_MM, determinacy
 from exubio.pipeline import load_model_and_protocol
 

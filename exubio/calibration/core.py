@@ -77,7 +77,7 @@ from exubio.errors import InputError
 from exubio.kinematics import Kinematics
 from exubio.lsq import StopReason
 from exubio.methods.common import tracked_points
-from exubio.methods.ls import Limits, LSOptions, solve_positions
+from exubio.methods.poses import Limits, LSOptions, solve_positions
 from exubio.preprocess import prepare_targets
 from exubio.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD
 from exubio.types import MarkerTargets, Model, Protocol, Trajectories

@@ -11,7 +11,7 @@ import numpy as np
 from exubio.calibration.scaling import SCALE_BOUNDS, SCALE_PRIOR_M2, _scale_design, scale_model
 from exubio.kinematics import Kinematics, PointSet
 from exubio.lsq import Evaluation, Result, Settings, StopReason, levenberg_marquardt
-from exubio.methods.ls import Limits
+from exubio.methods.poses import Limits
 from exubio.ranges import AT_LIMIT_TOLERANCE_RAD, violation
 from exubio.types import Model
 

@@ -44,7 +44,8 @@ from exubio.errors import ReconstructionError
 from exubio.kinematics import Kinematics
 from exubio.methods.common import CHUNK_FRAMES, ChunkSink, Collector, assemble, target_chunk, tracked_points
 from exubio.methods.constraints import project_on_constraints
-from exubio.methods.ls import RATES_REGULARISATION, Limits, LSOptions, held_mask, solve_positions, solve_rates
+from exubio.lsq import StopReason
+from exubio.methods.poses import RATES_REGULARISATION, Limits, LSOptions, held_mask, solve_positions, solve_rates
 from exubio.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD
 from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Reconstruction
 
@@ -135,13 +136,15 @@ def initial_state(kin: Kinematics, points, targets: MarkerTargets, stiffness: np
     first = 0
     present = targets.present
     weights = stiffness / stiffness.mean()
-    q0, _, ok, _ = solve_positions(kin, points, targets.positions_m[first:first + 1], weights,
-                                q_start=np.zeros(kin.n_coordinates), options=LSOptions(tol_rad=1e-12, max_iterations=60),
-                                frame_dt=1.0, held=held, limits=limits)
+    q0, _, ok, stop = solve_positions(kin, points, targets.positions_m[first:first + 1], weights,
+                                      q_start=np.zeros(kin.n_coordinates),
+                                      options=LSOptions(tol_rad=1e-12, max_iterations=60),
+                                      frame_dt=1.0, held=held, limits=limits)
     if not ok[0]:
         raise ReconstructionError(
             f"{targets.source or 'trial'}: no static equilibrium at t = {targets.time_s[0]:.3f} s "
-            f"(markers present: {int(present[0].sum())} of {present.shape[1]})")
+            f"(markers present: {int(present[0].sum())} of {present.shape[1]}; the pose solve stopped: "
+            f"{StopReason(int(stop[0])).label})")
     qd0, _ = solve_rates(kin, points, q0, targets.velocities_m_s[:1], targets.accelerations_m_s2[:1], weights,
                          RATES_REGULARISATION, held, limits)
     return q0[0], qd0[0]
