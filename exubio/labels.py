@@ -43,9 +43,13 @@ inside; millimetres appear only in the evidence sentences.
 """
 from __future__ import annotations
 
+import dataclasses
+import enum
+import hashlib
 import itertools
+from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -344,6 +348,11 @@ def _as_positions(positions_m: np.ndarray, names: Sequence[str]) -> np.ndarray:
     return pos
 
 
+PAIR_BLOCK_VALUES = 8_000_000
+"""pair_distances takes the distances of this many values' worth of marker pairs at a time (64 MB;
+a 25 s trial at 200 Hz: all 231 pairs of 22 markers at once, a 20-minute one: 11 at a time)."""
+
+
 def pair_distances(positions_m: np.ndarray, names: Sequence[str], /, *, source: str = "") -> PairDistances:
     """Median and standard deviation of every pairwise marker distance over the frames of
     ``positions_m`` (n_frames, k, 3) where both markers are present (NaN = gap)."""
@@ -353,14 +362,26 @@ def pair_distances(positions_m: np.ndarray, names: Sequence[str], /, *, source: 
     med = np.full((k, k), np.nan)
     sd = np.full((k, k), np.nan)
     cnt = np.zeros((k, k), dtype=int)
-    for i in range(k):
-        d = np.linalg.norm(pos[:, i:i + 1, :] - pos, axis=2)  # (n, k)
-        ok = np.isfinite(d)
-        cnt[i] = ok.sum(axis=0)
-        seen = cnt[i] > 0
+    # each pair once (|A-B| and |B-A| are the same numbers, (a - b)^2 = (b - a)^2 exactly), all
+    # pairs in one array: the median and SD of every column are those of the pair's own series
+    iu_all, ju_all = np.triu_indices(k, 1)
+    cnt[np.arange(k), np.arange(k)] = np.isfinite(pos).all(axis=2).sum(axis=0)
+    per = max(PAIR_BLOCK_VALUES // max(3 * pos.shape[0], 1), 1)  # pairs at a time: bounded memory on long trials
+    for a in range(0, len(iu_all), per):
+        iu, ju = iu_all[a:a + per], ju_all[a:a + per]
+        d = np.linalg.norm(pos[:, iu, :] - pos[:, ju, :], axis=2)  # (n, pairs of the block)
+        c = np.isfinite(d).sum(axis=0)
+        cnt[iu, ju] = cnt[ju, iu] = c
+        seen = c > 0
         if seen.any():
-            med[i, seen] = np.nanmedian(d[:, seen], axis=0)
-            sd[i, seen] = np.nanstd(d[:, seen], axis=0)
+            # d[:, seen] is laid out column by column (as the rows of partners were): numpy sums each
+            # column as one contiguous series, whatever the number of columns (bit-identical results)
+            dm = d[:, seen]
+            clean = bool(np.isfinite(dm).all())
+            m = np.median(dm, axis=0) if clean else np.nanmedian(dm, axis=0)
+            v = np.std(dm, axis=0) if clean else np.nanstd(dm, axis=0)
+            med[iu[seen], ju[seen]] = med[ju[seen], iu[seen]] = m
+            sd[iu[seen], ju[seen]] = sd[ju[seen], iu[seen]] = v
     np.fill_diagonal(med, 0.0)
     np.fill_diagonal(sd, 0.0)
     return PairDistances(names=names, median_m=med, spread_m=sd, n_frames=cnt, source=source)
@@ -487,6 +508,70 @@ def model_expectations(model: Model, protocol: Protocol, ranges_rad: np.ndarray 
         rigid=np.array(rigid, dtype=int).reshape(-1, 2), rigid_model_m=np.array(rigid_d, dtype=float),
         model_median_m=dmed, chains=tuple(chains), ranges_rad=np.asarray(ranges_rad, dtype=float), model=model, protocol=protocol,
     )
+
+
+_EXPECTATIONS_CACHE: OrderedDict[bytes, LabelExpectations] = OrderedDict()
+_EXPECTATIONS_CACHE_SIZE = 8
+
+
+def _content_digest(*objs) -> bytes:
+    """A digest of the content of frozen dataclasses, arrays, mappings, sequences and plain values
+    (TypeError for anything else): equal digests, equal inputs of :func:`model_expectations`."""
+    h = hashlib.sha256()
+
+    def walk(o) -> None:
+        if isinstance(o, np.ndarray):
+            if o.dtype.hasobject:
+                raise TypeError("object array")
+            h.update(b"A" + str(o.dtype).encode() + repr(o.shape).encode())
+            h.update(np.ascontiguousarray(o).tobytes())
+        elif dataclasses.is_dataclass(o) and not isinstance(o, type):
+            h.update(b"D" + type(o).__module__.encode() + b"." + type(o).__qualname__.encode())
+            for f in dataclasses.fields(o):
+                h.update(b"F" + f.name.encode())
+                walk(getattr(o, f.name))
+        elif isinstance(o, enum.Enum):
+            h.update(b"E" + repr(o).encode() + b"\0")
+        elif isinstance(o, Mapping):
+            h.update(b"M%d" % len(o))
+            for key, value in o.items():
+                walk(key)
+                walk(value)
+        elif isinstance(o, (tuple, list)):
+            h.update(b"T%d" % len(o))
+            for x in o:
+                walk(x)
+        elif o is None or isinstance(o, (bool, int, float, str, np.generic)):
+            h.update(b"V" + type(o).__name__.encode() + b":" + repr(o).encode() + b"\0")
+        else:
+            raise TypeError(f"no content digest for {type(o).__name__}")
+
+    for o in objs:
+        walk(o)
+    return h.digest()
+
+
+def _expectations(model: Model, protocol: Protocol, ranges_rad: np.ndarray | None) -> LabelExpectations:
+    """:func:`model_expectations` (default postures and seed), computed once per process for a
+    given content of model, protocol and ranges: every trial of a study checks against the same
+    generic model, loaded afresh for each. The result is the one a fresh computation gives (same
+    inputs, fixed seed), bound to the objects passed; its arrays are shared and read-only."""
+    try:
+        key = _content_digest(model, protocol, _ranges_of(model, ranges_rad), N_POSTURES, POSTURE_SEED)
+    except TypeError:
+        return model_expectations(model, protocol, ranges_rad)
+    exp = _EXPECTATIONS_CACHE.get(key)
+    if exp is None:
+        exp = model_expectations(model, protocol, ranges_rad)
+        for value in (exp.relations, exp.min_ratio, exp.rigid, exp.rigid_model_m, exp.model_median_m, exp.ranges_rad,
+                      *(a for c in exp.chains for a in (c.coordinates, c.markers))):
+            value.setflags(write=False)
+        _EXPECTATIONS_CACHE[key] = exp
+        while len(_EXPECTATIONS_CACHE) > _EXPECTATIONS_CACHE_SIZE:
+            _EXPECTATIONS_CACHE.popitem(last=False)
+    else:
+        _EXPECTATIONS_CACHE.move_to_end(key)
+    return dataclasses.replace(exp, model=model, protocol=protocol)
 
 
 # --------------------------------------------------------------------------------------------
@@ -804,13 +889,14 @@ def check_trial(
     reference:    :func:`pair_distances` of the session's static trial (or
                   :func:`model_pair_distances` of a calibrated model) for the rigid-pair check.
     expectations: :func:`model_expectations` of the same model, protocol and ranges, to reuse
-                  across trials (computed when None; ``ranges_rad`` is then not used).
+                  across trials (``ranges_rad`` is then not used). When None they are computed,
+                  once per process for a given content of model, protocol and ranges.
     chain_fits:   run the chain fits (a few seconds); the distance checks alone cannot tell
                   mirror-image markers apart.
 
     Returns the findings, most serious first; an empty tuple when nothing is wrong.
     """
-    exp = expectations if expectations is not None else model_expectations(model, protocol, ranges_rad)
+    exp = expectations if expectations is not None else _expectations(model, protocol, ranges_rad)
     if exp.model is not model:
         raise InputError("check_trial: expectations were computed for another model")
     if exp.names != protocol.marker_names:

@@ -1,7 +1,9 @@
 """One trial from file to results: read, preprocess, reconstruct with a method, write the outputs.
 
 The steps are plain functions so that scripts, the CLI and the validation report compose them:
-``load_inputs`` -> ``reconstruct`` -> ``write_outputs``.
+``load_inputs`` -> ``reconstruct`` (or ``stream_reconstruct``) -> ``write_outputs``; ``reconstruct_file`` does
+all of it for one trial file, streamed (bounded memory). One trial as a job: exubio.jobs; a
+session's calibration: exubio.session.
 """
 from __future__ import annotations
 
@@ -305,64 +307,3 @@ def agreement_deg(a: Reconstruction, b: Reconstruction, /) -> dict[str, float]:
     """RMSE (deg) per coordinate between two reconstructions of the same trial."""
     d = np.rad2deg(a.q_rad - b.q_rad)
     return {n: float(v) for n, v in zip(a.coordinate_names, np.sqrt(np.mean(d**2, axis=0)))}
-
-
-def _session(name: str):
-    from exubio import session
-
-    return getattr(session, name)
-
-
-def calibrate_file(*args: Any, **kwargs: Any):
-    """exubio.session.calibrate_file (kept here for callers of the former location)."""
-    return _session("calibrate_file")(*args, **kwargs)
-
-
-def calibrate_session(*args: Any, **kwargs: Any):
-    """exubio.session.calibrate_session (kept here for callers of the former location)."""
-    return _session("calibrate_session")(*args, **kwargs)
-
-
-def process_trial(trial_path: str | Path, /, *, out_dir: str | Path, methods: list[Method | str],
-                  model_path: str | Path | None = None, protocol_path: str | Path | None = None,
-                  body_mass_kg: float | None = None, overwrite: bool = False,
-                  method_options: dict[str, dict[str, Any]] | None = None, static_frames: str | None = None,
-                  summary_extra: dict[str, Any] | None = None, report: bool = True,
-                  progress_factory: Callable[[str, int], Callable[[int], None]] | None = None,
-                  static_reference: Any = None) -> dict[str, Any]:
-    """One trial of a study, as ``exubio reconstruct`` runs it: calibrate on its own frames if
-    ``static_frames`` is given, reconstruct with every method, write the outputs. Returns what the
-    CLI prints (small and picklable, for a process pool): per method the summary and the paths,
-    the PF-LS agreement, and the calibration."""
-    extra = dict(summary_extra or {})
-    out: dict[str, Any] = {"trial": str(trial_path), "calibration": None, "report": None}
-    stem = Path(trial_path).stem
-    if report:
-        results.prepare_output_dir(out_dir, [f"{stem}.report.pdf", f"{stem}.report.png"], overwrite=overwrite)
-    if static_frames:
-        model_file, report, cal = calibrate_session(trial_path, out_dir, Path(trial_path).stem,
-                                                    protocol_path=protocol_path, model_path=model_path,
-                                                    body_mass_kg=body_mass_kg, frames_text=static_frames,
-                                                    overwrite=overwrite, reference=False)
-        model_path = model_file
-        out["calibration"] = {"model_file": str(model_file), "report": report}
-        extra["calibration"] = cal
-    outputs = reconstruct_file(trial_path, out_dir, methods=methods, model_path=model_path,
-                               protocol_path=protocol_path, body_mass_kg=body_mass_kg, overwrite=overwrite,
-                               method_options=method_options, summary_extra=extra,
-                               progress_factory=progress_factory,
-                               calibration=extra.get("calibration"),
-                               static_reference=static_reference if static_reference is not None
-                               else (extra.get("calibration") or {}).get("_reference"))
-    out["methods"] = [{"method": r.method, "paths": {k: str(v) for k, v in paths.items()}, "summary": summ}
-                      for r, paths, summ in outputs]
-    if len(outputs) == 2:
-        agree = outputs[0][2].get("pf_ls_agreement_deg") or {}
-        out["agreement_deg"] = {k: v for k, v in agree.items() if isinstance(v, float)}
-    out["verdicts"] = {r.method: summ["quality"]["verdict"] for r, _, summ in outputs}
-    if report:
-        from exubio.report.trial_report import build_trial_report
-
-        pdf, png = build_trial_report([paths["npz"] for _, paths, _ in outputs], Path(out_dir) / f"{stem}.report.pdf")
-        out["report"] = {"pdf": str(pdf), "png": str(png)}
-    return out

@@ -44,10 +44,13 @@ import traceback
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 from exubio.config import read_yaml
 from exubio.errors import ExubioError, InputError
+
+if TYPE_CHECKING:
+    from exubio.jobs import TrialResult
 
 log = logging.getLogger(__name__)
 
@@ -223,7 +226,7 @@ def load_study(path: str | Path, /) -> StudySpec:
 def run_trial_task(task: TrialTask) -> TrialOutcome:
     """Process one trial into a temporary folder beside its final one, write DONE.json last and
     rename the folder into place; any exception becomes a failed outcome (the study goes on)."""
-    from exubio.pipeline import process_trial
+    from exubio.jobs import TrialJob, run_job
 
     final = Path(task.final_dir)
     out = TrialOutcome(task.subject, task.session, task.trial, str(final), "failed")
@@ -231,10 +234,9 @@ def run_trial_task(task: TrialTask) -> TrialOutcome:
     t0 = time.perf_counter()
     try:
         tmp.mkdir(parents=True)
-        extra = {"calibration": task.calibration} if task.calibration else {}
-        result = process_trial(task.trial, out_dir=tmp, methods=list(task.methods), model_path=task.model,
-                               protocol_path=task.protocol, static_frames=task.static_frames, report=task.report,
-                               summary_extra=extra, static_reference=task.static_reference)
+        result = run_job(TrialJob(task.trial, tmp, methods=tuple(task.methods), model=task.model,
+                                  protocol=task.protocol, static_frames=task.static_frames, report=task.report,
+                                  calibration=task.calibration or None, static_reference=task.static_reference))
         _fill(out, result)
         out.status = "done"
         out.wall_s = time.perf_counter() - t0
@@ -254,17 +256,16 @@ def run_trial_task(task: TrialTask) -> TrialOutcome:
     return out
 
 
-def _fill(out: TrialOutcome, result: dict) -> None:
-    out.verdicts = dict(result.get("verdicts") or {})
-    for m in result.get("methods", []):
-        s = m["summary"]
-        out.frames = s.get("n_frames", out.frames)
-        out.residual_mm[m["method"]] = (s.get("residual_mm") or {}).get("mean")
-    agree = result.get("agreement_deg") or {}
+def _fill(out: TrialOutcome, result: TrialResult) -> None:
+    out.verdicts = result.verdicts
+    for m in result.methods:
+        out.frames = m.summary.get("n_frames", out.frames)
+        out.residual_mm[m.method] = (m.summary.get("residual_mm") or {}).get("mean")
+    agree = result.agreement_deg or {}
     out.pf_ls_max_rmse_deg = max(agree.values()) if agree else None
 
 
-def _write_done(folder: Path, out: TrialOutcome, result: dict) -> None:
+def _write_done(folder: Path, out: TrialOutcome, result: TrialResult) -> None:
     from exubio.io.results import write_json
 
     files = sorted(p.name for p in folder.iterdir())
@@ -291,7 +292,7 @@ def clean_leftovers(out_dir: Path, /) -> list[Path]:
 
 def _calibrate_session(s: SessionSpec, folder: Path) -> tuple[str | None, dict | None, Any, str]:
     """(model file, calibration summary, static reference, error) of a session with a static trial."""
-    from exubio.pipeline import calibrate_session
+    from exubio.session import calibrate_session
 
     if s.static is None:
         return (str(s.model) if s.model else None), None, None, ""
@@ -386,6 +387,21 @@ def _worker_setup() -> None:
     import exubio.pipeline  # noqa: F401
 
 
+_LOCAL_CLUSTER_CONFIG = {
+    # Dask sets MALLOC_TRIM_THRESHOLD_=65536 in the worker processes it spawns, which also fixes
+    # glibc's mmap threshold at 128 kB: every array of a trial above that (a 5000-frame trial's
+    # marker arrays are 2 MB) is then mapped and unmapped afresh, page faults included (measured:
+    # about 0.2 s more system time per 25 s trial). A study's workers run one trial after another
+    # and hold no data between them: glibc's defaults suit them.
+    "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
+    # the statistical profiler samples the task thread's stack every 10 ms (for the dashboard,
+    # which a local study cluster does not start)
+    "distributed.worker.profile.enabled": False,
+}
+"""Dask settings of the local clusters ``map_on_scheduler`` starts ("local:N"); a running
+scheduler's workers ("tcp://...") keep their own."""
+
+
 def map_on_scheduler(fn: Callable, items: list, scheduler: str, /, *,
                      on_error: Callable[[Any, BaseException], Any],
                      on_done: Callable[[Any], None] | None = None) -> list:
@@ -407,7 +423,10 @@ def map_on_scheduler(fn: Callable, items: list, scheduler: str, /, *,
             n = 0
         if n < 1:
             raise InputError(f"--scheduler {scheduler}: expected local:N with N >= 1 workers")
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
+        import dask
+
+        with dask.config.set(_LOCAL_CLUSTER_CONFIG):
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
         client = Client(cluster)
     elif scheduler.startswith("tcp://"):
         try:

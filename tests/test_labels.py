@@ -88,6 +88,68 @@ def test_pair_distances_medians_spreads_and_gaps():
         L.pair_distances(pos[:, :2], ("A", "B", "C"))
 
 
+def _pair_distances_one_marker_at_a_time(pos):
+    """The computation pair_distances did before it took every pair at once (marker by marker,
+    against all others): the reference its results must equal to the bit."""
+    pos = pos.copy()
+    pos[~np.isfinite(pos).all(axis=2)] = np.nan
+    k = pos.shape[1]
+    med, sd, cnt = np.full((k, k), np.nan), np.full((k, k), np.nan), np.zeros((k, k), dtype=int)
+    for i in range(k):
+        d = np.linalg.norm(pos[:, i:i + 1, :] - pos, axis=2)
+        cnt[i] = np.isfinite(d).sum(axis=0)
+        seen = cnt[i] > 0
+        if seen.any():
+            med[i, seen] = np.nanmedian(d[:, seen], axis=0)
+            sd[i, seen] = np.nanstd(d[:, seen], axis=0)
+    np.fill_diagonal(med, 0.0)
+    np.fill_diagonal(sd, 0.0)
+    return med, sd, cnt
+
+
+def test_pair_distances_equal_the_marker_by_marker_computation(sim):
+    rng = np.random.default_rng(5)
+    gappy = sim.copy()
+    gappy[100:180, 3] = np.nan  # a gap
+    gappy[::7, 5, 1] = np.nan  # single missing coordinates
+    gappy[:, 8] = np.nan  # a marker never seen
+    gappy[400:, 9] = np.inf
+    lonely = rng.normal(size=(40, 4, 3))
+    lonely[:, 2] = np.nan
+    lonely[10:, 3] = np.nan  # one pair only (markers 0-1, 0-3 and 1-3 overlap in 10 frames)
+    for pos in (sim, gappy, lonely, sim[:1], rng.normal(size=(600, 2, 3))):
+        names = tuple(f"M{i}" for i in range(pos.shape[1]))
+        pd = L.pair_distances(pos, names)
+        med, sd, cnt = _pair_distances_one_marker_at_a_time(pos)
+        assert np.array_equal(pd.median_m, med, equal_nan=True)
+        assert np.array_equal(pd.spread_m, sd, equal_nan=True)
+        assert np.array_equal(pd.n_frames, cnt)
+
+
+def test_expectations_are_computed_once_per_content_and_bound_to_the_objects_given(model, protocol, expect):
+    from exubio.model import load_model
+
+    other_model = load_model()  # the same file, loaded again: another object, the same content
+    other_protocol = protocol_for_model(other_model)
+    a = L._expectations(model, protocol, None)
+    b = L._expectations(other_model, other_protocol, None)
+    assert a.model is model and a.protocol is protocol and b.model is other_model and b.protocol is other_protocol
+    assert b.relations is a.relations and b.model_median_m is a.model_median_m  # computed once
+    for name in ("relations", "min_ratio", "rigid", "rigid_model_m", "model_median_m", "ranges_rad"):
+        assert np.array_equal(getattr(b, name), getattr(expect, name)), name
+        assert not getattr(b, name).flags.writeable, name
+    assert [(c.root, c.markers.tolist(), c.coordinates.tolist()) for c in b.chains] == \
+        [(c.root, c.markers.tolist(), c.coordinates.tolist()) for c in expect.chains]
+    # other content (ranges, a model point, a protocol marker) is another entry
+    narrow = model.coordinate_ranges_rad * 0.5
+    c = L._expectations(model, protocol, narrow)
+    assert c.relations is not a.relations
+    assert np.array_equal(c.relations, L.model_expectations(model, protocol, narrow).relations)
+    moved = dataclasses.replace(protocol, markers=(dataclasses.replace(
+        protocol.markers[0], local_position_m=protocol.markers[0].local_position_m + 0.05),) + protocol.markers[1:])
+    assert L._expectations(model, moved, None).model_median_m is not a.model_median_m
+
+
 def test_side_relations_hold_in_postures_not_sampled(model, protocol, expect):
     """The relations come from one posture sample; in 2000 other postures within the same ranges
     none is reversed (the 30 % margin absorbs what the sample missed)."""

@@ -197,3 +197,19 @@ def test_reconstruct_on_dask_writes_the_files_of_a_local_run(data, tmp_path):
         assert (local / name).read_bytes() == (dask / name).read_bytes(), name
     assert main(["-q", "reconstruct", *trials, "--method", "ls", "--out", str(tmp_path / "x"),
                  "--scheduler", "nowhere"]) == 2
+
+
+def test_local_dask_workers_keep_glibc_malloc_defaults_and_no_profiler():
+    """The workers of a local cluster do not get Dask's MALLOC_TRIM_THRESHOLD_ (it fixes glibc's
+    mmap threshold: every trial array above 128 kB mapped afresh) nor its statistical profiler."""
+    pytest.importorskip("distributed")
+    from exubio.study import map_on_scheduler
+
+    def probe(_):
+        import dask
+
+        return os.environ.get("MALLOC_TRIM_THRESHOLD_"), dask.config.get("distributed.worker.profile.enabled")
+
+    out = map_on_scheduler(probe, [0, 1], "local:1", on_error=lambda item, exc: exc)
+    inherited = os.environ.get("MALLOC_TRIM_THRESHOLD_")  # (a value set by the user is kept)
+    assert out == [(inherited, False), (inherited, False)]

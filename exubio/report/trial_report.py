@@ -12,15 +12,20 @@ residuals (mean ± SD over markers per frame, per-marker RMSE), constraint resid
 from __future__ import annotations
 
 import json
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
+import matplotlib as mpl
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
+from matplotlib.text import Text
+from matplotlib.ticker import NullLocator
+from matplotlib.transforms import Bbox
 
 from exubio.evaluate import per_frame_residuals_mm, residual_statistics
 from exubio.io.results import atomic_write, read_angles_csv, read_npz, read_npz_metadata
@@ -35,6 +40,104 @@ def _figure(size=(11.69, 8.27)) -> Figure:
     fig = Figure(figsize=size)
     FigureCanvasAgg(fig)
     return fig
+
+
+# --------------------------------------------------------------------------------------------
+# Figures of the plot pages, drawn again for the next trial of the process
+# --------------------------------------------------------------------------------------------
+# Creating the axes and, at the first drawing, their tick marks and labels (matplotlib makes
+# each tick of new axes from a few Line2D and Text objects) is about a third of a report's time.
+# The plot pages of a trial have the same axes as the previous trial's: after a report is written
+# its plot pages wait here, emptied of their data, and the next report draws into them. A page
+# is taken from here only by one report at a time (threads of one process each take their own).
+_FREE_PAGES: dict[tuple, list[Figure]] = {}
+_FREE_PAGES_LOCK = threading.Lock()
+_FREE_PAGES_MAX = 2  # figures kept per page layout (a process draws one report at a time)
+_PAGE_KEY = "_exubio_page_key"
+
+
+def _page_figure(key: tuple, make) -> tuple[Figure, bool]:
+    """(figure, reused): a free figure of layout ``key`` emptied of its content (see
+    :func:`_empty`), else ``make()`` (a new figure with that layout's axes)."""
+    with _FREE_PAGES_LOCK:
+        free = _FREE_PAGES.get(key)
+        fig = free.pop() if free else None
+    if fig is None:
+        fig = make()
+        reused = False
+    else:
+        _empty(fig)
+        reused = True
+    setattr(fig, _PAGE_KEY, key)
+    return fig, reused
+
+
+def _release(fig: Figure) -> None:
+    """A plot page whose report is written: kept for the next report of this process."""
+    key = getattr(fig, _PAGE_KEY, None)
+    if key is None:
+        return
+    with _FREE_PAGES_LOCK:
+        free = _FREE_PAGES.setdefault(key, [])
+        if len(free) < _FREE_PAGES_MAX and all(f is not fig for f in free):
+            free.append(fig)
+
+
+def _empty(fig: Figure) -> None:
+    """Take out of a drawn plot page what its page function puts in, so that drawing into it again
+    gives what a new figure gives: the data artists, legends, containers, property cycles, data
+    limits (the view limits follow the data again: every axes of a layout gets data, see the page
+    keys), the facecolor and the automatic title placement. The axes, their sharing, and their
+    tick objects stay (the layout, labels, titles and tick settings are set again by the page)."""
+    for legend in list(fig.legends):
+        legend.remove()
+    for ax in fig.axes:
+        for container in list(ax.containers):
+            container.remove()
+        if ax.legend_ is not None:
+            ax.legend_.remove()
+        for artist in [*ax.lines, *ax.collections, *ax.patches, *ax.texts, *ax.images, *ax.tables, *ax.artists]:
+            artist.remove()
+        ax.set_prop_cycle(None)
+        ax.dataLim = Bbox.null()
+        ax.ignore_existing_data_limits = True
+        ax.set_facecolor(mpl.rcParams["axes.facecolor"])
+        ax._autotitlepos = mpl.rcParams["axes.titley"] is None  # as Axes.clear() sets it
+
+
+def _pin_titles(fig: Figure) -> Figure:
+    """Fix each axes title where matplotlib's automatic placement would put it anyway (y = 1,
+    ``titlepad`` above the axes), so that drawing does not place it again: the automatic placement
+    measures the x and y axes' ticks and labels of every titled axes once more (a third of the time
+    of drawing the ISB page). It moves a title only above x tick labels or an x label at the top,
+    or off a y-axis offset text ("1e-5", "+1.2e2") it overlaps; axes with any of those, or with
+    inset axes, keep the automatic placement. Call once the page's data and layout are final."""
+    for ax in fig.axes:
+        if not ax.get_title() or ax.get_title(loc="left") or ax.get_title(loc="right") or ax.child_axes:
+            continue
+        if _x_labels_at_top(ax):
+            continue
+        y = ax.yaxis
+        if y.get_visible() and y.offsetText.get_visible():
+            y.get_major_formatter().format_ticks(y.get_majorticklocs())  # what drawing formats
+            if y.get_major_formatter().get_offset():
+                continue
+        ax.set_title(ax.get_title(), fontsize=ax.title.get_fontsize(), y=1.0)
+    return fig
+
+
+def _x_labels_at_top(ax) -> bool:
+    """Whether the x axis has its label or tick labels at the top (inner axes of a shared x axis,
+    whose tick labels are hidden, have none)."""
+    xa = ax.xaxis
+    if xa.get_label_position() == "top":
+        return True
+    if xa.get_ticks_position() not in ("top", "unknown"):
+        return False
+    ticks = list(xa.get_major_ticks(1))
+    if not isinstance(xa.get_minor_locator(), NullLocator):
+        ticks += list(xa.get_minor_ticks(1))
+    return any(t.label2.get_visible() for t in ticks)
 
 
 PLOT_POINTS = 800
@@ -140,8 +243,49 @@ def verdict_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[s
                      + f": calibration residual mean {cal.get('mean_residual_mm', float('nan')):.2f} mm")
     lines.append("verdict: ok = nothing found; check = read the reasons before using the angles; "
                  "fail = the angles are wrong as they stand (exit code 1). Thresholds: exubio/quality.py.")
-    fig.text(0.04, max(y, 0.25), "\n".join(lines), fontsize=8, va="top", family="monospace", wrap=True)
+    _bisect_wrap(fig.text(0.04, max(y, 0.25), "\n".join(lines), fontsize=8, va="top", family="monospace", wrap=True))
     return fig
+
+
+class _BisectWrapText(Text):
+    """A Text with ``wrap=True`` that breaks its lines where matplotlib's greedy wrapping does
+    (each line takes words while its rendered width stays within the figure), finding each break
+    by bisection instead of measuring every longer prefix in turn (which took a third of the time
+    of drawing the verdict page): a line's width grows with every word it takes. Text with "$"
+    (mathtext, whose width does not grow word by word) is wrapped by matplotlib itself."""
+
+    def _get_wrapped_text(self) -> str:
+        text = self.get_text()
+        if not self.get_wrap() or self.get_usetex() or "$" in text:
+            return super()._get_wrapped_text()
+        line_width = self._get_wrap_line_width()
+        wrapped = []
+        for unwrapped in text.split("\n"):
+            words = unwrapped.split(" ")
+            while words:
+                if len(words) == 1:
+                    wrapped.append(words.pop(0))
+                    continue
+                lo, hi = 2, len(words) + 1  # the first i in [2, len] whose words[:i] are too wide
+                while lo < hi:
+                    mid = (lo + hi) // 2
+                    if self._get_rendered_text_width(" ".join(words[:mid])) > line_width:
+                        hi = mid
+                    else:
+                        lo = mid + 1
+                if lo <= len(words):
+                    wrapped.append(" ".join(words[:lo - 1]))
+                    words = words[lo - 1:]
+                else:
+                    wrapped.append(" ".join(words))
+                    words = []
+        return "\n".join(wrapped)
+
+
+def _bisect_wrap(text: Text) -> Text:
+    """``text`` (from ``Figure.text``, so it sits among the figure's texts) wrapped by bisection."""
+    text.__class__ = _BisectWrapText
+    return text
 
 
 @dataclass(frozen=True)
@@ -174,19 +318,25 @@ def truth_rmse_deg(recon: Reconstruction, truth: Truth, skip: set[str]) -> dict[
     return out
 
 
+def _angles_layout() -> Figure:
+    fig = _figure()
+    fig.subplots(len(_JOINTS), 1, sharex=True)
+    return fig
+
+
 def angles_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[str, dict] | None = None,
                 truth: Truth | None = None) -> Figure:
     """Joint coordinates against time: one colour per coordinate, PF solid and thick, LS dashed on
     top (both visible where they agree), the truth dotted; coordinates the markers do not measure
     in grey; legends outside the axes."""
-    fig = _figure()
     names = recons[0].coordinate_names
-    axes = fig.subplots(len(_JOINTS), 1, sharex=True)
+    groups = [_members(names, prefix) for _, prefix in _JOINTS]
+    fig, _ = _page_figure(("angles", tuple(bool(g) for g in groups)), _angles_layout)
+    axes = fig.axes
     held = _not_measured(meta, summaries)
     palette = ("tab:blue", "tab:orange", "tab:green")
     method_style = {"pf": ("-", 2.0, 0.75), "ls": ((0, (4, 2)), 1.1, 1.0)}
-    for ax, (label, prefix) in zip(axes, _JOINTS):
-        idx = _members(names, prefix)
+    for ax, (label, _), idx in zip(axes, _JOINTS, groups):
         handles = {}
         for k, i in enumerate(idx):
             grey = names[i] in held
@@ -216,6 +366,15 @@ def angles_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[st
     return fig
 
 
+_ISB_JOINTS = ("SC", "ST", "GH", "HT")
+
+
+def _isb_layout() -> Figure:
+    fig = _figure()
+    fig.subplots(len(_ISB_JOINTS), 3, sharex=True)
+    return fig
+
+
 def isb_page(recons: Sequence[Reconstruction], npz_paths: Sequence[Path], meta: dict,
              summaries: dict[str, dict]) -> Figure | None:
     """ISB shoulder angles (SC, ST, GH, HT) of every method from ``<trial>.<method>.isb.csv``, with
@@ -229,9 +388,11 @@ def isb_page(recons: Sequence[Reconstruction], npz_paths: Sequence[Path], meta: 
         return None
     info = next((s.get("isb_angles") for s in summaries.values() if s.get("isb_angles")), {}) or {}
     not_measured = set(info.get("not_measured", []))
-    fig = _figure()
-    joints = ("SC", "ST", "GH", "HT")
-    axes = fig.subplots(len(joints), 3, sharex=True)
+    joints = _ISB_JOINTS
+    drawn = tuple(any(sum(n.startswith(joint + "_") for n in names) >= 3 for _, names, _ in tables.values())
+                  for joint in joints)
+    fig, _ = _page_figure(("isb", drawn), _isb_layout)
+    axes = np.array(fig.axes, dtype=object).reshape(len(joints), 3)
     method_style = {"pf": ("-", 2.0, 0.75, "black"), "ls": ((0, (4, 2)), 1.1, 1.0, "tab:red")}
     for row, joint in enumerate(joints):
         for col in range(3):
@@ -260,15 +421,21 @@ def isb_page(recons: Sequence[Reconstruction], npz_paths: Sequence[Path], meta: 
     fig.suptitle(_title(recons, meta) + "\nISB shoulder angles (Wu et al. 2005 frames from the model's landmarks, "
                  "intrinsic sequences; files <trial>.<method>.isb.csv)", fontsize=9)
     fig.subplots_adjust(left=0.07, right=0.98, top=0.88, bottom=0.06, hspace=0.45, wspace=0.2)
+    return _pin_titles(fig)
+
+
+def _residuals_layout() -> Figure:
+    fig = _figure()
+    grid = fig.add_gridspec(2, 2, height_ratios=[1.0, 1.0])
+    fig.add_subplot(grid[0, :])
+    fig.add_subplot(grid[1, 0])
+    fig.add_subplot(grid[1, 1])
     return fig
 
 
 def residuals_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[str, dict]) -> Figure:
-    fig = _figure()
-    grid = fig.add_gridspec(2, 2, height_ratios=[1.0, 1.0])
-    ax_t = fig.add_subplot(grid[0, :])
-    ax_m = fig.add_subplot(grid[1, 0])
-    ax_text = fig.add_subplot(grid[1, 1])
+    fig, _ = _page_figure(("residuals",), _residuals_layout)
+    ax_t, ax_m, ax_text = fig.axes
     width = 0.8 / len(recons)
     markers = recons[0].marker_names
     for k, r in enumerate(recons):
@@ -318,7 +485,7 @@ def residuals_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict
     ax_text.text(0.0, 1.0, "\n".join(lines), va="top", family="monospace", fontsize=7)
     fig.suptitle(_title(recons, meta), fontsize=9)
     fig.subplots_adjust(left=0.07, right=0.98, top=0.90, bottom=0.13, hspace=0.35, wspace=0.2)
-    return fig
+    return _pin_titles(fig)
 
 
 def calibration_page(meta: dict, summaries: dict[str, dict]) -> Figure | None:
@@ -416,4 +583,6 @@ def build_trial_report(npz_paths: Sequence[str | Path], pdf_path: str | Path, /,
     atomic_write(pdf_path, write_pdf)
     png = pdf_path.with_suffix(".png")
     atomic_write(png, lambda tmp: pages[0].savefig(tmp, dpi=110))
+    for page in pages:
+        _release(page)
     return pdf_path, png
