@@ -80,7 +80,8 @@ def overheads(out: Path) -> tuple[list[float], list[float]]:
     return walls, over
 
 
-_STAGES = (("exubio.pipeline", "read_trial", "read the trial"),
+_STAGES = (("exubio.jobs", "read_trial", "read the trial"),
+           ("exubio.pipeline", "read_trial", "read the trial"),
            ("exubio.pipeline", "prepare_targets", "prepare targets (thorax frame, cut-off, filter, splines)"),
            ("exubio.preprocess", "residual_cutoffs", "  of which the automatic cut-off"),
            ("exubio.pipeline", "stream_reconstruct", "reconstruction (PF)"),
@@ -123,7 +124,7 @@ def breakdown(trials: list[Path], out: Path, methods: tuple[str, ...]) -> None:
         if k >= 2:
             rows.append(dict(spent))
     print(f"CPU s per trial, median of {len(rows)} trials after 2 warm-up trials:")
-    for label in rows[0]:
+    for label in dict.fromkeys([label for _, _, label in _STAGES] + ["whole trial"]):
         print(f"  {label:58s} {statistics.median(r.get(label, 0.0) for r in rows):6.2f}")
 
 

@@ -343,14 +343,17 @@ def _as_positions(positions_m: np.ndarray, names: Sequence[str]) -> np.ndarray:
         raise InputError(f"positions must have shape (n_frames, {len(names)}, 3), got {pos.shape}")
     if len(set(names)) != len(names):
         raise InputError(f"duplicate marker names in {list(names)}")
-    pos = pos.copy()
-    pos[~np.isfinite(pos).all(axis=2)] = np.nan
+    bad = ~np.isfinite(pos).all(axis=2)  # a sample with a non-finite coordinate is missing: all NaN
+    if (bad & ~np.isnan(pos).all(axis=2)).any():  # copied only when that changes something (long trials)
+        pos = pos.copy()
+        pos[bad] = np.nan
     return pos
 
 
-PAIR_BLOCK_VALUES = 8_000_000
-"""pair_distances takes the distances of this many values' worth of marker pairs at a time (64 MB;
-a 25 s trial at 200 Hz: all 231 pairs of 22 markers at once, a 20-minute one: 11 at a time)."""
+PAIR_BLOCK_VALUES = 2_000_000
+"""pair_distances takes the distances of this many values' worth of marker pairs at a time (16 MB,
+~50 MB of working copies; a 25 s trial at 200 Hz: 133 of the 231 pairs of 22 markers at once, a
+20-minute one: 2)."""
 
 
 def pair_distances(positions_m: np.ndarray, names: Sequence[str], /, *, source: str = "") -> PairDistances:
@@ -856,6 +859,8 @@ def _in_protocol_order(trial: MarkerTargets | np.ndarray, marker_names: Sequence
             raise InputError("check_trial: give marker_names with a positions array")
         pos, names = trial, tuple(marker_names)
     pos = _as_positions(pos, tuple(names))
+    if tuple(names) == protocol.marker_names:  # already in protocol order: no copy
+        return pos
     out = np.full((pos.shape[0], len(protocol.markers), 3), np.nan)
     for j, name in enumerate(protocol.marker_names):
         if name in names:
@@ -954,7 +959,7 @@ def check_trial(
     n_found = -1
     while len(used) // 2 < MAX_SWAPS and n_found != len(used):
         n_found = len(used)
-        chains = _chain_scores(exp, pos[:, perm]) if chain_fits else {}
+        chains = _chain_scores(exp, pos if (perm == np.arange(k)).all() else pos[:, perm]) if chain_fits else {}
         stale: set[str] = set()  # chains fitted before a swap accepted in this pass
         while len(used) // 2 < MAX_SWAPS:
             dcur = d[np.ix_(perm, perm)]

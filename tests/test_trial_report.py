@@ -1,0 +1,119 @@
+"""The trial report's drawing shortcuts give the report matplotlib draws without them: plot pages
+drawn into the figures of the previous report (exubio.report.trial_report keeps them per process)
+are byte for byte those of new figures, whatever the order of the trials; text wrapped by bisection
+breaks where matplotlib's own wrapping does; titles fixed in place sit where matplotlib puts them."""
+from __future__ import annotations
+
+import dataclasses
+import io
+import random
+import re
+
+import numpy as np
+import pytest
+from matplotlib.text import Text
+
+from exubio.cli import main
+from exubio.io.c3d import write_c3d
+from exubio.model import load_model
+from exubio.report import trial_report as tr
+from exubio.simulate import simulate_trial
+
+
+def _without_date(pdf: bytes) -> bytes:
+    return re.sub(rb"/CreationDate \(D:[0-9Z'+-]+\)", b"", pdf)
+
+
+@pytest.fixture(scope="module")
+def result_sets(tmp_path_factory):
+    """Result folders of short simulated trials: PF and LS, a marker gap, a calibration page."""
+    tmp = tmp_path_factory.mktemp("trial_reports")
+    model = load_model()
+    sets = {}
+    for name, motion, methods, extra, gap in (("both", "abduction", "both", [], False),
+                                              ("gap", "flexion", "pf", [], True),
+                                              ("calibrated", "abduction", "ls", ["--static-frames", "0:20"], False)):
+        trial = simulate_trial(model, motion, duration_s=1.0, rate_hz=100.0, noise_mm=0.5, seed=len(sets) + 3)
+        traj = trial.trajectories
+        if gap:
+            pos = traj.positions_m.copy()
+            pos[30:45, traj.labels.index("MET5")] = np.nan
+            traj = dataclasses.replace(traj, positions_m=pos)
+        path = write_c3d(tmp / f"{name}.c3d", traj)
+        out = tmp / name
+        main(["-q", "reconstruct", str(path), "--method", methods, "--out", str(out), "--no-report", *extra])
+        sets[name] = sorted(out.glob("*.npz"))
+        assert sets[name], name
+    return sets
+
+
+def test_reports_drawn_into_reused_figures_are_those_of_new_figures(result_sets, tmp_path):
+    items = list(result_sets.items()) + [(f"both {p.name}", [p]) for p in result_sets["both"]]  # PF, LS alone
+    fresh = {}
+    for name, npz in items:
+        tr._FREE_PAGES.clear()
+        pdf, png = tr.build_trial_report(npz, tmp_path / "fresh.report.pdf")
+        fresh[name] = (_without_date(pdf.read_bytes()), png.read_bytes())
+    tr._FREE_PAGES.clear()
+    for name, npz in items + items[::-1]:
+        pdf, png = tr.build_trial_report(npz, tmp_path / "reused.report.pdf")
+        assert (_without_date(pdf.read_bytes()), png.read_bytes()) == fresh[name], name
+    # the plot pages went back for the next report: one figure per layout, not one per report
+    assert tr._FREE_PAGES and all(len(figs) == 1 for figs in tr._FREE_PAGES.values())
+
+
+def test_a_page_function_hands_out_a_figure_no_report_will_draw_into(result_sets):
+    from exubio.io.results import read_npz, read_npz_metadata
+
+    npz = result_sets["both"]
+    recons = [read_npz(p) for p in npz]
+    first = tr.angles_page(recons, read_npz_metadata(npz[0]), {})
+    second = tr.angles_page(recons, read_npz_metadata(npz[0]), {})
+    assert first is not second and all(first is not f for figs in tr._FREE_PAGES.values() for f in figs)
+
+
+def test_bisection_wraps_where_matplotlib_wraps():
+    rng = random.Random(0)
+    words = ("the quick brown fox jumps over a lazy dog; marker EPI_lat, SCAP_IA: 12.5 mm (RMSE) -> swapped "
+             "calibrated_on_a_long_static_trial_name.c3d").split()
+    for k in range(30):
+        lines = [" ".join(rng.choice(words) for _ in range(rng.randint(1, 70))) for _ in range(rng.randint(1, 5))]
+        if k % 5 == 0:
+            lines.append("x" * 260)  # a word wider than the page
+        fig = tr._figure()
+        text = tr._bisect_wrap(fig.text(rng.uniform(0.0, 0.6), 0.9, "\n".join(lines), wrap=True, va="top",
+                                        fontsize=rng.choice([7, 8, 11]), family=rng.choice(["monospace", "sans-serif"]),
+                                        ha=rng.choice(["left", "center", "right"])))
+        for dpi in (72, 110):
+            fig.set_dpi(dpi)
+            fig.canvas.draw()
+            assert text._get_wrapped_text() == Text._get_wrapped_text(text)
+        assert text._get_wrapped_text().count("\n") > len(lines) - 1 or k % 5  # something was wrapped
+
+
+def _titled_page(pin: bool):
+    fig = tr._figure()
+    axes = fig.subplots(2, 3, sharex=True)
+    t = np.linspace(0.0, 10.0, 200)
+    for k, ax in enumerate(axes.flat):
+        y = np.sin(t + k) * 10.0 ** k
+        if k == 4:
+            y = 1e5 + 1e-3 * np.sin(t)  # an offset text ("+1e5") at the top of the y axis
+        ax.plot(t, y)
+        ax.set_title(f"panel {k}: a title long enough to reach the axis corner", fontsize=7)
+    axes[1, 2].xaxis.set_label_position("top")
+    axes[1, 2].set_xlabel("time (s), on top")
+    fig.subplots_adjust(hspace=0.5)
+    return tr._pin_titles(fig) if pin else fig
+
+
+def test_titles_are_fixed_only_where_matplotlib_would_leave_them():
+    pinned = _titled_page(True)
+    auto = [ax._autotitlepos for ax in pinned.axes]
+    assert auto == [False, False, False, False, True, True]  # offset text; x label on top
+    images = []
+    for fig in (pinned, _titled_page(False)):
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=80)
+        images.append(buf.getvalue())
+    assert images[0] == images[1]
