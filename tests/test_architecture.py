@@ -90,3 +90,14 @@ def test_no_import_cycles_at_module_level():
     for n in sorted(graph):
         if n not in state:
             visit(n)
+
+
+def test_every_subpackage_is_installed():
+    """A package folder missing from pyproject's explicit package list works in the editable
+    checkout and is absent from a real install (CI installs with `pip install .`)."""
+    tomllib = pytest.importorskip("tomllib")  # Python >= 3.11
+
+    root = Path(__file__).resolve().parents[1]
+    listed = set(tomllib.loads((root / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]["packages"])
+    found = {".".join(p.parent.relative_to(root).parts) for p in (root / "exubio").rglob("__init__.py")}
+    assert found <= listed, f"add to [tool.setuptools] packages: {sorted(found - listed)}"
