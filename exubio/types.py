@@ -361,7 +361,8 @@ class Reconstruction:
     model_points_m: (n_frames, n_markers, 3) model points R_i at the reconstructed q; None in a
                     reconstruction streamed to its result files (exubio.io.streamed): they are
                     in its .npz.
-    measured_m:     (n_frames, n_markers, 3) the targets the method tracked (NaN in gaps).
+    measured_m:     (n_frames, n_markers, 3) the targets the method tracked (NaN in gaps); None when
+                    read from a result file without its points (exubio.io.results.read_npz).
     residuals_m:    (n_frames, n_markers) |R_i - M_i|, NaN where the marker was missing.
     constraint:     (n_frames, 2) ellipsoid constraint g (dimensionless).
     constraint_velocity: (n_frames, 2) G q̇ (1/s).
@@ -378,7 +379,7 @@ class Reconstruction:
     qdd_rad_s2: np.ndarray
     marker_names: tuple[str, ...]
     model_points_m: np.ndarray | None
-    measured_m: np.ndarray
+    measured_m: np.ndarray | None
     residuals_m: np.ndarray
     constraint: np.ndarray
     constraint_velocity: np.ndarray

@@ -140,3 +140,12 @@ def test_a_killed_writers_leftovers_are_removed_by_the_next_run(tmp_path):
     assert not any(p.exists() for p in killed)
     assert running.exists() and other.exists()
     assert (out / "example_abduction.pf.npz").is_file()
+
+
+def test_a_result_can_be_read_without_its_points(tmp_path):
+    """A report of a long trial reads the angles and residuals, not the per-marker 3-D arrays."""
+    [(_, paths, _)] = reconstruct_file(EXAMPLE, tmp_path, methods=["ls"])
+    full, light = read_npz(paths["npz"]), read_npz(paths["npz"], points=False)
+    assert light.model_points_m is None and light.measured_m is None
+    np.testing.assert_array_equal(light.q_rad, full.q_rad)
+    np.testing.assert_array_equal(light.residuals_m, full.residuals_m)

@@ -415,8 +415,15 @@ _NPZ_RESERVED = {"method", "coordinate_names", "marker_names", "gap_markers", "g
                  "timings_json", "info_json", "metadata_json"}
 
 
-def read_npz(path: str | os.PathLike, /) -> Reconstruction:
-    """The Reconstruction stored by ``write_npz`` (metadata: see ``read_npz_metadata``)."""
+POINT_ARRAYS = ("model_points_m", "measured_m")
+"""The per-marker 3-D arrays of a result (~1 kB per frame with 22 markers): what a reader that only
+needs the angles and residuals leaves on disk (``read_npz(..., points=False)``)."""
+
+
+def read_npz(path: str | os.PathLike, /, *, points: bool = True) -> Reconstruction:
+    """The Reconstruction stored by ``write_npz`` (metadata: see ``read_npz_metadata``). ``points``
+    False: the model points and measured markers (POINT_ARRAYS) are not read (None), e.g. for a
+    report of a long trial."""
     with _NpzReader(Path(path)) as data:
         gaps = tuple(
             Gap(str(m), int(a), int(b)) for m, a, b in zip(data["gap_markers"], data["gap_start"], data["gap_stop"])
@@ -428,7 +435,7 @@ def read_npz(path: str | os.PathLike, /) -> Reconstruction:
             timings_s=json.loads(str(data["timings_json"])),
             info=json.loads(str(data["info_json"])),
             gaps=gaps,
-            **{key: data[key] for key in _NPZ_ARRAYS},
+            **{key: (None if not points and key in POINT_ARRAYS else data[key]) for key in _NPZ_ARRAYS},
         )
 
 

@@ -558,7 +558,7 @@ def build_trial_report(npz_paths: Sequence[str | Path], pdf_path: str | Path, /,
     """Write ``pdf_path`` and a PNG of its first page (the verdict) beside it (``.png``), atomically.
     ``truth``: the known joint coordinates of a simulated trial, compared on page 1 and drawn."""
     npz_paths = [Path(p) for p in npz_paths]
-    recons = [read_npz(p) for p in npz_paths]
+    recons = [read_npz(p, points=False) for p in npz_paths]  # no page draws the 3-D points: long trials stay light
     meta = read_npz_metadata(npz_paths[0])
     summaries = {}
     for p, r in zip(npz_paths, recons):
