@@ -239,7 +239,7 @@ class _Frames:
                  options: PFOptions, sink: ChunkSink, dt: float):
         self.kin, self.points, self.targets, self.q0, self.held, self.dt = kin, points, targets, q0, held, dt
         self.options, self.sink = options, sink
-        self.last_raw = self.last_q = self.shift = None
+        self.last_raw = self.last_unwrapped = self.last_q = self.shift = None  # the frame before this chunk
         self.raw_g = self.raw_gqd = float("nan")
         self.sum_res, self.n_res = 0.0, 0
         self.sink_s = self.recovery_s = self.residuals_s = 0.0

@@ -22,7 +22,7 @@ def residual_table(trials: dict[str, Trial]) -> dict[str, ResidualRow]:
         for method in METHODS:
             rec = tr.recon.get(method)
             if rec is None:
-                per[method] = Failed(failed=tr.errors.get(method, "not run"))
+                per[method] = tr.failure(method)
                 continue
             mean, sd = per_frame_residuals_mm(rec)
             st = residual_statistics(rec)

@@ -49,7 +49,7 @@ def sier_against_truth(trial: Trial, s: ValidationSettings) -> Sier:
     for method in METHODS:
         rec = trial.recon.get(method)
         if rec is None:
-            per[method] = Failed(failed=trial.errors.get(method, "not run"))
+            per[method] = trial.failure(method)
             continue
         j = rec.marker_names.index(s.gh_marker)
         est = rec.model_points_m[:, j]

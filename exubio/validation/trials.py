@@ -31,6 +31,7 @@ from exubio.validation.results import (
     CalibrationResidual,
     CalibrationSummary,
     EllipsoidFit,
+    Failed,
     MeanMax,
     TrialData,
 )
@@ -67,6 +68,10 @@ class Trial:
     recon: dict[str, Reconstruction | None] = field(default_factory=dict)
     wall_s: dict[str, float] = field(default_factory=dict)
     errors: dict[str, str] = field(default_factory=dict)
+
+    def failure(self, method: str) -> Failed:
+        """The record of a method that did not run or failed on this trial."""
+        return Failed(failed=self.errors.get(method, "not run"))
 
 
 def plot_stride(n: int) -> int:
