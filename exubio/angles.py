@@ -58,6 +58,7 @@ from typing import Mapping
 
 import numpy as np
 
+from exubio.anatomy import ISB_FRAME_SEGMENTS, isb_frame
 from exubio.errors import InputError, ModelError
 from exubio.frame_definitions import JOINT_SEGMENTS, FrameDefinition, JointDefinition, NotBuildable, build_frame
 from exubio.kinematics import Kinematics
@@ -188,60 +189,19 @@ def euler_angles(R: np.ndarray, sequence: str, /, *, negative_middle: bool = Fal
 # --------------------------------------------------------------------------------------------
 # Anatomical frames
 # --------------------------------------------------------------------------------------------
-def _unit(v: np.ndarray, what: str, model: Model) -> np.ndarray:
-    n = float(np.linalg.norm(v))
-    if n < 1e-9:
-        raise ModelError(f"{model.source or model.name}: cannot build the ISB frame: {what} has zero length")
-    return v / n
-
-
-def _point(model: Model, segment: str, name: str) -> np.ndarray:
-    seg = model.segment(segment)
-    if name not in seg.points:
-        raise ModelError(
-            f"{model.source or model.name}: the ISB {segment} frame needs landmark '{name}' on segment "
-            f"'{segment}'; it has {sorted(seg.points)}"
-        )
-    return np.asarray(seg.points[name], dtype=float)
-
-
 def anatomical_frames(model: Model, /) -> dict[str, np.ndarray]:
     """ISB anatomical frames (Wu et al. 2005, module docstring) of thorax, clavicle, scapula and
     humerus as constant rotations A_s (3, 3) relative to each segment's model frame: the columns
     of A_s are the anatomical X, Y, Z axes in segment coordinates, so the anatomical frame at
     posture q is R_s(q) @ A_s. Built from the landmarks SC, AC (clavicle), AA, TS, AI (scapula),
-    GH, EL, EM or EJC (humerus) in the reference posture."""
-    y_thorax = np.array([0.0, 1.0, 0.0])
-    out = {"thorax": np.eye(3)}
-
-    sc, ac = _point(model, "clavicle", "SC"), _point(model, "clavicle", "AC")
-    z = _unit(ac - sc, "SC->AC", model)
-    x = _unit(np.cross(y_thorax, z), "thorax Y x clavicle Z", model)
-    out["clavicle"] = np.column_stack([x, np.cross(z, x), z])
-
-    aa, ts, ai = (_point(model, "scapula", n) for n in ("AA", "TS", "AI"))
-    z = _unit(aa - ts, "TS->AA", model)
-    x = _unit(np.cross(ts - ai, aa - ai), "normal of plane AI-AA-TS", model)
-    x = _unit(x - (x @ z) * z, "scapula X", model)
-    out["scapula"] = np.column_stack([x, np.cross(z, x), z])
-
-    hum = model.segment("humerus")
-    gh = _point(model, "humerus", "GH")
-    if "EJC" in hum.points:
-        elbow = _point(model, "humerus", "EJC")
-    elif "EL" in hum.points and "EM" in hum.points:
-        elbow = 0.5 * (_point(model, "humerus", "EL") + _point(model, "humerus", "EM"))
-    else:
-        raise ModelError(f"{model.source or model.name}: the ISB humerus frame needs EJC, or EL and EM, on the "
-                         f"humerus; it has {sorted(hum.points)}")
-    if "EL" in hum.points:
-        lateral = _point(model, "humerus", "EL") - elbow  # = (EL - EM) / 2 when EJC is their midpoint
-    else:
-        lateral = elbow - _point(model, "humerus", "EM")
-    y = _unit(gh - elbow, "elbow centre->GH", model)
-    x = _unit(np.cross(y, lateral), "normal of plane EL-EM-GH", model)  # anterior for a right arm
-    x = _unit(x - (x @ y) * y, "humerus X", model)
-    out["humerus"] = np.column_stack([x, y, np.cross(x, y)])
+    GH, EL, EM or EJC (humerus) in the reference posture (``exubio.anatomy``)."""
+    where = model.source or model.name
+    out = {}
+    for name in ISB_FRAME_SEGMENTS:
+        seg = model.segment(name) if name != "thorax" else None
+        points = {} if seg is None else seg.points
+        out[name] = isb_frame(name, points, fail=lambda msg, name=name: ModelError(
+            f"{where}: cannot build the ISB {name} frame: {msg}"))
     return out
 
 
@@ -361,3 +321,69 @@ def joint_angles(model: Model, q: np.ndarray, definition: JointDefinition, /, *,
     if unwrap and ang.ndim == 2 and ang.shape[0] > 1:
         ang = np.unwrap(ang, axis=0)
     return ang
+
+
+# --------------------------------------------------------------------------------------------
+# The anatomical angles every output reports
+# --------------------------------------------------------------------------------------------
+ANATOMICAL_ANGLES: tuple[tuple[str, str, str], ...] = (
+    # (column, definition, meaning with its sign for a right arm)
+    ("SC_Y_protraction", "ISB SC Y-X'-Z'' (Wu 2005): clavicle to thorax", "+ protraction, - retraction"),
+    ("SC_X_elevation", "ISB SC Y-X'-Z''", "- elevation, + depression"),
+    ("SC_Z_posterior_rotation", "ISB SC Y-X'-Z''", "+ posterior (backward) axial rotation of the clavicle"),
+    ("AC_Y_internal_rotation", "ISB AC Y-X'-Z'': scapula to clavicle", "+ internal rotation"),
+    ("AC_X_upward_rotation", "ISB AC Y-X'-Z''", "- upward rotation, + downward"),
+    ("AC_Z_posterior_tilt", "ISB AC Y-X'-Z''", "+ posterior tilt"),
+    ("ST_Y_internal_rotation", "ISB ST Y-X'-Z'': scapula to thorax", "+ internal rotation"),
+    ("ST_X_upward_rotation", "ISB ST Y-X'-Z''", "- upward rotation, + downward"),
+    ("ST_Z_posterior_tilt", "ISB ST Y-X'-Z''", "+ posterior tilt"),
+    ("GH_Y_plane_of_elevation", "ISB GH Y-X'-Y'' (Wu 2005): humerus to scapula", "plane of elevation in the scapula's frame (0 along its Z axis, + anterior)"),
+    ("GH_X_elevation", "ISB GH Y-X'-Y''", "- elevation"),
+    ("GH_Y_axial_rotation", "ISB GH Y-X'-Y''", "+ internal axial rotation"),
+    ("GH_phadke_X_elevation", "GH X-Z'-Y'' (Phadke et al. 2011, as Ludewig et al. 2009)", "- elevation (abduction)"),
+    ("GH_phadke_Z_flexion", "GH X-Z'-Y'' (Phadke)", "+ forward flexion"),
+    ("GH_phadke_Y_internal_rotation", "GH X-Z'-Y'' (Phadke)", "+ internal, - external rotation"),
+    ("HT_Y_plane_of_elevation", "ISB HT Y-X'-Y'': humerus to thorax", "0 abduction, 90 deg forward flexion"),
+    ("HT_X_elevation", "ISB HT Y-X'-Y''", "- elevation"),
+    ("HT_Y_axial_rotation", "ISB HT Y-X'-Y''", "+ internal axial rotation"),
+    ("elbow_flexion", "ulna to humerus about the epicondyle axis EM->EL (Wu 2005 part II flexion axis)", "+ flexion from the extended reference posture"),
+    ("forearm_pronation", "radius to ulna about the axis ulnar head -> radial head (Wu 2005 part II)", "+ pronation from full supination"),
+    ("wrist_flexion", "hand to radius, Z-X' cardan about the model's wrist axes", "+ flexion"),
+    ("wrist_radial_deviation", "hand to radius, Z-X' cardan", "+ radial deviation"),
+)
+"""The anatomical angles of every output (CSV, .mot, DataFrame, summary, report, viewer): the ISB
+joint angles of the shoulder from the segments' ISB frames (module docstring), GH in both
+sequences the literature uses (ISB's Y-X'-Y'' and Phadke's X-Z'-Y''), and the elbow, forearm and
+wrist angles, which are the model's own coordinates because its joints sit on those anatomical
+axes. Radians inside; degrees at the file edges. Signs are the raw decompositions' (no flip)."""
+
+ANATOMICAL_COLUMNS: tuple[str, ...] = tuple(a[0] for a in ANATOMICAL_ANGLES)
+
+_DISTAL = {"elbow_flexion": "elbow_flexion", "forearm_pronation": "pronation", "wrist_flexion": "wrist_flexion",
+           "wrist_radial_deviation": "wrist_radial_deviation"}
+"""Anatomical angle -> the model coordinate it is."""
+
+
+def anatomical_table(model: Model, q: np.ndarray, /, *, kinematics: Kinematics | None = None,
+                     unwrap: bool = True) -> tuple[tuple[str, ...], np.ndarray]:
+    """The anatomical angles (ANATOMICAL_ANGLES) of q (n, m) or (m,): (column names, angles
+    (n, 22) or (22,) in radians), unwrapped along the frames when ``unwrap``."""
+    q = np.asarray(q, dtype=float)
+    single = q.ndim == 1
+    qq = q[None, :] if single else q
+    kin = kinematics if kinematics is not None else Kinematics(model)
+    frames = anatomical_frames(model)
+    out = np.empty((qq.shape[0], len(ANATOMICAL_COLUMNS)))
+    names = model.coordinate_names
+    for a in range(0, qq.shape[0], ISB_BLOCK_FRAMES):
+        part = qq[a:a + ISB_BLOCK_FRAMES]
+        Rg = segment_anatomical_rotations(model, part, kinematics=kin, frames=frames)
+        rel = {joint: np.swapaxes(Rg[p], -1, -2) @ Rg[d] for joint, (p, d) in _JOINTS.items()}
+        cols = [euler_angles(rel["SC"], "YXZ"), euler_angles(rel["AC"], "YXZ"), euler_angles(rel["ST"], "YXZ"),
+                euler_angles(rel["GH"], "YXY", negative_middle=True), euler_angles(rel["GH"], "XZY"),
+                euler_angles(rel["HT"], "YXY", negative_middle=True)]
+        distal = np.stack([part[:, names.index(c)] for c in _DISTAL.values()], axis=-1)
+        out[a:a + ISB_BLOCK_FRAMES] = np.concatenate(cols + [distal], axis=-1)
+    if unwrap and out.shape[0] > 1:
+        out = np.unwrap(out, axis=0)
+    return ANATOMICAL_COLUMNS, (out[0] if single else out)

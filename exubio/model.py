@@ -12,6 +12,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from exubio.anatomy import isb_frame
 from exubio.config import check_keys as _check_keys
 from exubio.config import finite_float, read_yaml
 from exubio.resources import shipped_file
@@ -23,7 +24,8 @@ DEFAULT_MODEL = shipped_file("exubio.models", "upper_extremity.yaml", "models")
 
 _TOP_KEYS = {"schema_version", "name", "side", "body_mass_kg", "segments", "ellipsoid", "calibration"}
 _SEGMENT_KEYS = {"name", "parent", "origin", "joint", "inertia", "points_mm"}
-_JOINT_KEYS = {"name", "type", "coordinates"}
+_JOINT_KEYS = {"name", "type", "coordinates", "axes_frame"}
+_AXES_FRAMES = ("isb",)
 _COORD_KEYS = {"name", "axis", "range_deg"}
 _INERTIA_KEYS = {
     "mass_fraction",
@@ -128,7 +130,8 @@ def load_model(path: str | Path = DEFAULT_MODEL, /, *, body_mass_kg: float | Non
             if "origin" not in raw or "joint" not in raw:
                 raise ModelError(f"{where}: a moving segment needs 'origin' and 'joint'")
             origin = find_point(raw["origin"], f"{where}.origin", prefer=name)
-            joint = _parse_joint(raw["joint"], f"{where}.joint", centre=origin - origins[parent], find_point=find_point)
+            joint = _parse_joint(raw["joint"], f"{where}.joint", centre=origin - origins[parent], find_point=find_point,
+                                 frame_of=lambda w, name=name: _segment_isb_frame(name, global_points[name], w))
         origins[name] = origin
         local_points = {k: v - origin for k, v in global_points[name].items()}
         m, com, inertia = _parse_inertia(raw.get("inertia"), f"{where}.inertia", mass, origin, find_point)
@@ -162,11 +165,17 @@ def load_model(path: str | Path = DEFAULT_MODEL, /, *, body_mass_kg: float | Non
                  body_mass_kg=mass, source=src, metadata=metadata)
 
 
-def _parse_axis(value: Any, where: str, find_point) -> np.ndarray:
+def _segment_isb_frame(segment: str, points: Mapping[str, np.ndarray], where: str) -> np.ndarray:
+    """The ISB frame of ``segment`` from its reference-posture landmarks (exubio.anatomy)."""
+    return isb_frame(segment, points, fail=lambda msg: ModelError(f"{where}: axes_frame isb: {msg}"))
+
+
+def _parse_axis(value: Any, where: str, find_point, frame: np.ndarray | None = None) -> np.ndarray:
     if isinstance(value, str):
         if value not in _NAMED_AXES:
             raise ModelError(f"{where}: unknown axis '{value}'; use one of {sorted(_NAMED_AXES)}, [x, y, z] or {{from: P, to: Q}}")
-        return np.array(_NAMED_AXES[value])
+        named = np.array(_NAMED_AXES[value])
+        return named if frame is None else frame @ named
     if isinstance(value, Mapping):
         check_keys(value, {"from", "to"}, where, error=ModelError, required={"from", "to"})
         vec = find_point(value["to"], where) - find_point(value["from"], where)
@@ -178,8 +187,13 @@ def _parse_axis(value: Any, where: str, find_point) -> np.ndarray:
     return vec / norm
 
 
-def _parse_joint(raw: Any, where: str, *, centre: np.ndarray, find_point) -> Joint:
-    check_keys(raw, _JOINT_KEYS, where, error=ModelError, required=_JOINT_KEYS)
+def _parse_joint(raw: Any, where: str, *, centre: np.ndarray, find_point, frame_of) -> Joint:
+    check_keys(raw, _JOINT_KEYS, where, error=ModelError, required=_JOINT_KEYS - {"axes_frame"})
+    axes_frame = raw.get("axes_frame")
+    if axes_frame is not None and axes_frame not in _AXES_FRAMES:
+        raise ModelError(f"{where}.axes_frame: expected one of {list(_AXES_FRAMES)} (the segment's ISB frame, "
+                         f"Wu et al. 2005, in the reference posture), got {axes_frame!r}")
+    frame = None if axes_frame is None else frame_of(f"{where}.axes_frame")
     try:
         kind = JointKind(raw["type"])
     except ValueError:
@@ -191,14 +205,14 @@ def _parse_joint(raw: Any, where: str, *, centre: np.ndarray, find_point) -> Joi
     for k, c in enumerate(coords):
         check_keys(c, _COORD_KEYS, f"{where}.coordinates[{k}]", error=ModelError, required={"name", "axis"})
         names.append(str(c["name"]))
-        axes.append(_parse_axis(c["axis"], f"{where}.coordinates[{k}].axis", find_point))
+        axes.append(_parse_axis(c["axis"], f"{where}.coordinates[{k}].axis", find_point, frame))
         ranges.append(_parse_range(c.get("range_deg"), f"{where}.coordinates[{k}].range_deg"))
     axes_arr = np.array(axes)
     for a in range(len(axes_arr) - 1):
         if abs(axes_arr[a] @ axes_arr[a + 1]) > 0.999:
             raise ModelError(f"{where}: consecutive axes {a} and {a + 1} are parallel; the sequence would be singular")
     return Joint(name=str(raw["name"]), kind=kind, coordinates=tuple(names), axes=axes_arr, centre_m=centre,
-                 ranges_rad=np.radians(np.array(ranges)))
+                 ranges_rad=np.radians(np.array(ranges)), axes_frame=axes_frame)
 
 
 def _parse_range(value: Any, where: str) -> tuple[float, float]:
@@ -326,6 +340,8 @@ def model_to_dict(model: Model, /, *, calibration: Mapping[str, Any] | None = No
             raw["joint"] = {
                 "name": seg.joint.name,
                 "type": seg.joint.kind.value,
+                # the axes below are vectors in the thorax frame (exact); axes_frame records where they came from
+                **({"axes_frame": seg.joint.axes_frame} if seg.joint.axes_frame else {}),
                 "coordinates": [{"name": c, "axis": [float(x) for x in a], **_range_entry(r)}
                                 for c, a, r in zip(seg.joint.coordinates, seg.joint.axes, seg.joint.ranges_rad)],
             }

@@ -17,8 +17,10 @@ method's regularisation and dynamics, not from the markers, and it is marked so 
 """
 from __future__ import annotations
 
+import enum
 import warnings
 from dataclasses import dataclass
+from typing import Mapping
 
 import numpy as np
 
@@ -160,3 +162,195 @@ def _gains(kin: Kinematics, points: PointSet, qs: np.ndarray, ok: np.ndarray, pr
     full[:, free] = g
     gain[ok] = full
     return gain
+
+
+# --------------------------------------------------------------------------------------------
+# Per anatomical angle: measured, modelled or not measured
+# --------------------------------------------------------------------------------------------
+class AngleStatus(enum.IntEnum):
+    """What an anatomical angle's value in a frame rests on."""
+
+    MEASURED = 0  # the markers determine it (noise gain <= UNDETERMINED_DEG_PER_MM)
+    MODELLED = 1  # set by a named rule of the protocol (a hold), which the markers could not replace
+    NOT_MEASURED = 2  # neither: undetermined by the markers, or of a segment no marker observes
+
+    @property
+    def label(self) -> str:
+        return self.name.lower().replace("_", " ")
+
+
+MODELLED_SHARE = 0.5
+"""An angle counts as modelled by a hold when, with the hold released, more than this share of its
+variance under marker noise would come through the held coordinates (the squared multiple
+correlation of the linearised problem: holding a coordinate is conditioning on it). A share of 0.5
+or more means the hold, not the markers, decides most of what the angle is. The measured values
+are clear-cut: about 0.99 for the AC angles and the clavicle's axial rotation when it is held,
+below 0.01 for the scapulothoracic and humerothoracic angles (tests/test_angle_status.py)."""
+
+RELEASE_PRIOR = 1e-8
+"""Relative Tikhonov weight that keeps a released problem invertible where no marker sees a
+direction (its variance becomes huge but finite, so its share can be computed)."""
+
+FD_STEP_RAD = 1e-6
+
+
+@dataclass(frozen=True)
+class AngleDeterminacy:
+    """names: anatomical angle columns; gain_deg_per_mm: (n, a) their noise gain with the
+    protocol's holds (inf where no marker sees a direction the angle moves with); held_share:
+    (n, a) share of the released variance that comes through held coordinates; status: (n, a)
+    AngleStatus codes (int8); rule: per angle, the rule that models it where modelled."""
+
+    names: tuple[str, ...]
+    gain_deg_per_mm: np.ndarray
+    held_share: np.ndarray
+    status: np.ndarray
+    rule: Mapping[str, str]
+
+    def fraction(self, status: "AngleStatus") -> dict[str, float]:
+        return {n: float((self.status[:, j] == status).mean()) for j, n in enumerate(self.names)}
+
+    def trial_status(self) -> dict[str, str]:
+        """Per angle: 'measured' if measured in every frame, else the status of most of its
+        other frames, with 'partly' where it is measured in some."""
+        out = {}
+        for j, n in enumerate(self.names):
+            col = self.status[:, j]
+            if (col == AngleStatus.MEASURED).all():
+                out[n] = AngleStatus.MEASURED.label
+                continue
+            other = col[col != AngleStatus.MEASURED]
+            worst = AngleStatus(int(np.bincount(other, minlength=3).argmax()))
+            out[n] = worst.label if (col != AngleStatus.MEASURED).all() else f"partly {worst.label}"
+        return out
+
+    def to_dict(self) -> dict:
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            med = np.nanmedian(np.where(np.isfinite(self.gain_deg_per_mm), self.gain_deg_per_mm, 1e9), axis=0) \
+                if self.gain_deg_per_mm.size else np.zeros(0)
+        return {
+            "definition": f"measured: noise gain <= {UNDETERMINED_DEG_PER_MM} deg per mm of marker noise; modelled: "
+                          f"more than {MODELLED_SHARE:.0%} of its released variance comes through a held coordinate "
+                          "(the rule is named); not measured: otherwise (undetermined, or a segment without markers)",
+            "status": self.trial_status(),
+            "frames_measured_fraction": {n: round(f, 4) for n, f in self.fraction(AngleStatus.MEASURED).items()},
+            "median_gain_deg_per_mm": {n: (None if med[j] >= 1e9 else round(float(med[j]), 4))
+                                       for j, n in enumerate(self.names)},
+            "rules": dict(self.rule),
+        }
+
+
+def _angle_jacobian(table, q: np.ndarray) -> np.ndarray:
+    """d angle / d q (b, a, m) by central differences (angle differences wrapped to (-pi, pi])."""
+    b, m = q.shape
+    steps = np.eye(m) * FD_STEP_RAD
+    qp = (q[:, None, :] + steps[None]).reshape(b * m, m)
+    qm = (q[:, None, :] - steps[None]).reshape(b * m, m)
+    d = table(qp) - table(qm)
+    d = np.angle(np.exp(1j * d)) / (2.0 * FD_STEP_RAD)  # (b*m, a)
+    return np.swapaxes(d.reshape(b, m, -1), 1, 2)
+
+
+def _marker_information(kin: Kinematics, points: PointSet, qf: np.ndarray, present: np.ndarray, weights: np.ndarray,
+                        free: np.ndarray):
+    """For frames qf (b, m): N (b, f, f-2) the null space of G over the free coordinates, M and S
+    of the module docstring (b, f-2, f-2)."""
+    w = np.where(present, weights[None, :], 0.0)
+    b, k = w.shape
+    J = kin.point_jacobian(qf, points)[..., free].reshape(b, 3 * k, len(free))
+    w3 = np.repeat(w, 3, axis=1)
+    G = kin.G(qf)[..., free]
+    _, _, Vt = np.linalg.svd(G)
+    N = np.swapaxes(Vt[:, G.shape[1]:, :], 1, 2)
+    A = J @ N
+    M = np.swapaxes(A, 1, 2) @ (A * w3[..., None])
+    S = np.swapaxes(A, 1, 2) @ (A * (w3**2)[..., None])
+    return N, M, S
+
+
+def _covariance(N, M, S, m: int, free: np.ndarray, prior: float | None):
+    """Coordinate covariance (b, m, m) per m^2 of marker noise (zero rows for coordinates not in
+    ``free``), and the blind directions (b, m, r) (zero columns where a direction is seen); with
+    ``prior`` (relative), a Tikhonov term instead of the pseudo-inverse, and no blind directions."""
+    b, f = N.shape[0], N.shape[1]
+    if prior is not None:
+        scale = np.maximum(np.trace(M, axis1=1, axis2=2) / M.shape[-1], 1e-300)
+        Minv = np.linalg.inv(M + (prior * scale)[:, None, None] * np.eye(M.shape[-1]))
+        blind = np.zeros((b, m, 0))
+    else:
+        Minv = np.linalg.pinv(M, rcond=1e-12, hermitian=True)
+        evals, evecs = np.linalg.eigh(M)
+        null = evals <= 1e-12 * evals[..., -1:]
+        dirs = np.einsum("bfr,brs->bfs", N, evecs) * null[:, None, :]
+        blind = np.zeros((b, m, dirs.shape[-1]))
+        blind[:, free, :] = dirs
+    cov_f = N @ Minv @ S @ Minv @ np.swapaxes(N, 1, 2)
+    cov = np.zeros((b, m, m))
+    cov[:, free[:, None], free[None, :]] = cov_f
+    return cov, blind
+
+
+def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present: np.ndarray, weights: np.ndarray, /,
+                      *, held: np.ndarray, locked: np.ndarray, every: int = 1,
+                      rules: Mapping[str, str] | None = None) -> AngleDeterminacy:
+    """Measured / modelled / not measured for every anatomical angle (exubio.angles.ANATOMICAL_ANGLES)
+    in the frames of q (n, m), computed every ``every``-th frame and copied to the frames between.
+    held: (m,) bool, coordinates a protocol rule holds; locked: (m,) bool, coordinates of segments
+    no marker observes; rules: the rule's name per held coordinate (default 'hold')."""
+    from exubio.angles import anatomical_table
+
+    model = kin.model
+    n, m = q.shape
+    held = np.asarray(held, dtype=bool)
+    locked = np.asarray(locked, dtype=bool) & ~held
+    table = lambda qq: anatomical_table(model, qq, kinematics=kin, unwrap=False)[1]
+    names = anatomical_table(model, np.zeros(m), kinematics=kin)[0]
+    a = len(names)
+    sel = np.arange(0, n, max(int(every), 1))
+    qs = q[sel]
+    ok = np.isfinite(qs).all(axis=1)
+    gain = np.full((len(sel), a), np.inf)
+    share = np.zeros((len(sel), a))
+    dep_locked = np.zeros((len(sel), a), dtype=bool)
+    free_actual = np.flatnonzero(~held & ~locked)
+    free_released = np.flatnonzero(~locked)
+    for s0 in range(0, len(sel), BLOCK_FRAMES):
+        part = np.arange(s0, min(s0 + BLOCK_FRAMES, len(sel)))
+        part = part[ok[part]]
+        if not part.size:
+            continue
+        qf, pres = qs[part], present[sel[part]]
+        D = _angle_jacobian(table, qf)  # (b, a, m)
+        N, M, S = _marker_information(kin, points, qf, pres, weights, free_actual)
+        cov, blind = _covariance(N, M, S, m, free_actual, None)
+        var = np.einsum("bam,bmn,ban->ba", D, cov, D)
+        g = np.degrees(np.sqrt(np.maximum(var, 0.0))) / 1000.0
+        unseen = (np.abs(np.einsum("bam,bmr->bar", D, blind)) > 1e-6).any(axis=2) if blind.shape[-1] else False
+        gain[part] = np.where(unseen, np.inf, g)
+        dep_locked[part] = (np.abs(D[:, :, locked]) > 1e-6).any(axis=2) if locked.any() else False
+        if held.any():
+            N, M, S = _marker_information(kin, points, qf, pres, weights, free_released)
+            cov_r, _ = _covariance(N, M, S, m, free_released, RELEASE_PRIOR)
+            h = np.flatnonzero(held)
+            c_ah = np.einsum("bam,bmh->bah", D, cov_r[:, :, h])  # cov(angle, q_held)
+            C_hh = cov_r[:, h[:, None], h[None, :]]
+            var_r = np.einsum("bam,bmn,ban->ba", D, cov_r, D)
+            explained = np.einsum("bah,bhk,bak->ba", c_ah, np.linalg.inv(C_hh), c_ah)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                share[part] = np.where(var_r > 0, np.clip(explained / var_r, 0.0, 1.0), 0.0)
+    idx = np.clip(np.round(np.arange(n) / max(int(every), 1)).astype(int), 0, len(sel) - 1)
+    gain, share, dep_locked = gain[idx], share[idx], dep_locked[idx]
+    status = np.full((n, a), AngleStatus.MEASURED, dtype=np.int8)
+    status[share > MODELLED_SHARE] = AngleStatus.MODELLED
+    status[(gain > UNDETERMINED_DEG_PER_MM) & (share <= MODELLED_SHARE)] = AngleStatus.NOT_MEASURED
+    status[dep_locked] = AngleStatus.NOT_MEASURED
+    status[~np.isfinite(q).all(axis=1)] = AngleStatus.NOT_MEASURED
+    names_q = model.coordinate_names
+    rules = dict(rules or {})
+    held_names = [names_q[j] for j in np.flatnonzero(held)]
+    rule_of = {}
+    for j, nm in enumerate(names):
+        if (status[:, j] == AngleStatus.MODELLED).any():
+            rule_of[nm] = "; ".join(rules.get(h, f"hold: {h} fixed at its reference value") for h in held_names)
+    return AngleDeterminacy(tuple(names), gain, share, status, rule_of)

@@ -111,6 +111,8 @@ class Joint:
     coordinates: the names of the k joint coordinates, in sequence order.
     ranges_rad: (k, 2) range of motion [lower, upper] of each coordinate (rad); -inf/+inf where
               the model gives none.
+    axes_frame: where the axes came from: "isb" = the axes of the child segment's ISB frame (Wu et
+              al. 2005) in the reference posture; None = given directly in the thorax frame.
     """
 
     name: str
@@ -119,6 +121,7 @@ class Joint:
     axes: np.ndarray
     centre_m: np.ndarray
     ranges_rad: np.ndarray | None = None
+    axes_frame: str | None = None
 
     def __post_init__(self) -> None:
         k = len(self.coordinates)
