@@ -2,7 +2,7 @@
 multibody kinematics optimisation, built on Exudyn).
 
 The Python API (exubio.api): ``read_trial``, ``load_model``, ``load_protocol``, ``calibrate``,
-``reconstruct``, ``isb_angles``, ``to_dataframe``, ``write_results`` and the result type
+``reconstruct``, ``isb_angles``, ``angle_status``, ``to_dataframe``, ``write_results`` and the result type
 ``Reconstruction``; loaded on first use, so ``import exubio`` stays light."""
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ __version__ = "0.1.0"
 
 from exubio.errors import ExubioError, InputError, ModelError, ProtocolError, ReconstructionError
 
-_API = ("read_trial", "load_model", "load_protocol", "calibrate", "reconstruct", "isb_angles", "to_dataframe",
+_API = ("read_trial", "load_model", "load_protocol", "calibrate", "reconstruct", "isb_angles", "angle_status", "to_dataframe",
         "write_results")
 
 __all__ = [

@@ -24,7 +24,7 @@ from exubio.types import MarkerTargets, Model, Protocol, Reconstruction, Traject
 if TYPE_CHECKING:  # pandas is imported when a DataFrame is asked for
     import pandas
 
-__all__ = ["read_trial", "load_model", "load_protocol", "calibrate", "reconstruct", "isb_angles", "to_dataframe",
+__all__ = ["read_trial", "load_model", "load_protocol", "calibrate", "reconstruct", "isb_angles", "angle_status", "to_dataframe",
            "write_results"]
 
 
@@ -88,37 +88,70 @@ def isb_angles(model: Model, reconstruction: Reconstruction | np.ndarray, /) -> 
     return _isb(model, q)
 
 
-def to_dataframe(reconstruction: Reconstruction, /, *, model: Model | None = None) -> "pandas.DataFrame":
-    """The reconstruction as a pandas DataFrame indexed by time (s): one column per model
-    coordinate in degrees (``<coordinate>_deg``), and with ``model`` the ISB angles too
-    (``<joint>_<axis>_<angle>_deg``)."""
+def angle_status(reconstruction: Reconstruction, model: Model | None = None, protocol: Protocol | None = None, /):
+    """Every anatomical angle's status per frame (exubio.observability.AngleDeterminacy: measured,
+    modelled by a named rule, or not measured) for a reconstruction made with ``protocol``; the
+    frames where a marker was missing are those whose residual is NaN."""
+    from exubio.assess import not_solved_mask
+    from exubio.kinematics import Kinematics
+    from exubio.methods.common import tracked_points
+    from exubio.methods.poses import held_mask
+    from exubio.observability import angle_determinacy
+
+    model = model if model is not None else load_model()
+    protocol = protocol if protocol is not None else load_protocol(model=model)
+    kin = Kinematics(model)
+    held = held_mask(model, protocol)
+    present = np.isfinite(reconstruction.residuals_m)
+    dt = float(np.median(np.diff(reconstruction.time_s))) if reconstruction.n_frames > 1 else 1.0
+    return angle_determinacy(kin, tracked_points(kin, protocol), reconstruction.q_rad, present, protocol.weights,
+                             held=held, locked=not_solved_mask(model, protocol, kin) & ~held,
+                             every=max(1, int(round(0.05 / dt))))
+
+
+def to_dataframe(reconstruction: Reconstruction, /, *, model: Model | None = None,
+                 protocol: Protocol | None = None) -> "pandas.DataFrame":
+    """The reconstruction's anatomical angles (exubio.angles.ANATOMICAL_ANGLES) as a pandas
+    DataFrame indexed by time (s): ``<angle>_deg`` in degrees and ``<angle>_status`` (measured,
+    modelled, not measured: a categorical column), as in the CSV; ``df.attrs`` holds the method,
+    units and each angle's definition. The model coordinates stay in the reconstruction."""
     import pandas as pd
 
-    from exubio.angles import isb_table
+    from exubio.angles import ANATOMICAL_ANGLES, anatomical_table
+    from exubio.observability import AngleStatus
 
     r = reconstruction
-    data = {f"{n}_deg": np.degrees(r.q_rad[:, i]) for i, n in enumerate(r.coordinate_names)}
-    if model is not None:
-        names, ang = isb_table(model, r.q_rad)
-        data.update({f"{n}_deg": np.degrees(ang[:, i]) for i, n in enumerate(names)})
+    model = model if model is not None else load_model()
+    names, ang = anatomical_table(model, r.q_rad)
+    status = angle_status(r, model, protocol).status
+    labels = pd.Categorical.from_codes(np.zeros(0, dtype=int), categories=[s.label for s in AngleStatus])
+    data = {f"{n}_deg": np.degrees(ang[:, i]) for i, n in enumerate(names)}
+    data.update({f"{n}_status": pd.Categorical.from_codes(status[:, i].astype(int), categories=labels.categories)
+                 for i, n in enumerate(names)})
     df = pd.DataFrame(data, index=pd.Index(r.time_s, name="time_s"))
-    df.attrs.update({"method": r.method, "units": "deg", "source": "exubio"})
+    df.attrs.update({"method": r.method, "units": "deg", "source": "exubio",
+                     "definitions": {n: f"{d}; {m}" for n, d, m in ANATOMICAL_ANGLES}})
     return df
 
 
 def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str, /, *, model: Model | None = None,
-                  overwrite: bool = False) -> dict[str, Path]:
-    """Write ``<stem>.<method>.csv``, ``.mot``, ``.npz`` (and with ``model`` the ISB angles
-    ``.isb.csv``) into out_dir, each atomically; refuses to replace earlier results unless
-    ``overwrite``. Returns the paths by kind."""
-    from exubio.angles import isb_table
+                  protocol: Protocol | None = None, overwrite: bool = False) -> dict[str, Path]:
+    """Write ``<stem>.<method>.csv`` and ``.mot`` (the anatomical angles, each one's status in the
+    header), ``.npz`` and ``.summary.json`` into out_dir, each atomically; refuses to replace
+    earlier results unless ``overwrite``. Returns the paths by kind."""
+    from exubio.angles import anatomical_table
+    from exubio.evaluate import summary
     from exubio.io import results
-    from exubio.pipeline import write_outputs
+    from exubio.pipeline import AngleOutputs, angle_header, write_outputs
 
+    model = model if model is not None else load_model()
+    protocol = protocol if protocol is not None else load_protocol(model=model)
     full = f"{stem}.{reconstruction.method}"
     results.prepare_output_dir(out_dir, [full], overwrite=overwrite)
-    isb = isb_table(model, reconstruction.q_rad) if model is not None else None
+    det = angle_status(reconstruction, model, protocol)
+    names, values = anatomical_table(model, reconstruction.q_rad)
     meta = {"written_by": "exubio.write_results", "method": reconstruction.method,
             "units": {"angles_in_files": "deg", "positions_in_npz": "m", "time": "s"}}
-    return write_outputs(reconstruction, out_dir, full, metadata=meta, summary_data={"method": reconstruction.method},
-                         isb=isb)
+    summ = summary(reconstruction, source=stem, extra={"anatomical_angles": det.to_dict()})
+    angles = AngleOutputs(names, values, det.status, angle_header(det, stem, reconstruction.method, protocol.side))
+    return write_outputs(reconstruction, out_dir, full, metadata=meta, summary_data=summ, angles=angles)

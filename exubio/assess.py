@@ -17,9 +17,9 @@ from exubio.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.methods.poses import held_mask
 from exubio.methods.pf import unobserved_segments
-from exubio.observability import Determinacy, determinacy
+from exubio.observability import UNDETERMINED_TRIAL_FRACTION, AngleDeterminacy, AngleStatus, Determinacy, angle_determinacy, determinacy
 from exubio.ranges import limit_report
-from exubio.types import MarkerTargets, Model, Protocol, Reconstruction
+from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Reconstruction
 
 
 @dataclass(frozen=True)
@@ -35,10 +35,14 @@ class TrialAssessment:
     agreement_deg: Mapping[str, float] | None
     labels: tuple
     not_solved: tuple[str, ...]
+    angles: Mapping[str, AngleDeterminacy] | None = None  # per method: each anatomical angle's status per frame
+    structural: Mapping[str, str] | None = None  # per anatomical angle: what the marker set can do (angle_status_of_protocol)
 
     def summary_for(self, method: str) -> dict[str, Any]:
         """What goes into that method's summary.json."""
-        return {
+        angles = {} if self.angles is None else {"anatomical_angles": {
+            **self.angles[method].to_dict(), "protocol_can": dict(self.structural or {})}}
+        return {**angles,
             "quality": self.quality[method].to_dict(),
             "determinacy": self.determinacy[method].to_dict(),
             "limits": [lim.to_dict() for lim in self.limits[method]],
@@ -102,6 +106,39 @@ def not_solved_mask(model: Model, protocol: Protocol, kin: Kinematics | None = N
     return mask
 
 
+def agreement_on_measured(model: Model, a: Reconstruction, da: AngleDeterminacy, b: Reconstruction,
+                          db: AngleDeterminacy, /) -> dict[str, float]:
+    """PF-LS RMSE (deg) of every anatomical angle over the frames where both measure it (NaN where
+    none does)."""
+    from exubio.angles import anatomical_table
+
+    _, ta = anatomical_table(model, a.q_rad)
+    _, tb = anatomical_table(model, b.q_rad)
+    d = np.degrees(np.angle(np.exp(1j * (ta - tb))))
+    ok = (da.status == AngleStatus.MEASURED) & (db.status == AngleStatus.MEASURED) & np.isfinite(d)
+    return {n: (float(np.sqrt(np.mean(d[ok[:, j], j] ** 2))) if ok[:, j].any() else float("nan"))
+            for j, n in enumerate(da.names)}
+
+
+def angle_status_of_protocol(model: Model, protocol: Protocol, /, *, kin: Kinematics | None = None) -> dict[str, str]:
+    """What the protocol's markers can do for each anatomical angle, known before any trial: its
+    status over the reference postures (exubio.simulate.reference_postures: elevation in three
+    planes, HT 10-120 deg) with every non-optional marker present: 'measured' (in every posture),
+    'modelled', 'not measured', or 'partly ...' (in some postures)."""
+    from exubio.simulate import reference_postures
+
+    kin = kin or Kinematics(model)
+    try:
+        q = reference_postures(model)
+    except Exception:  # noqa: BLE001 - a model whose girdle the rhythm cannot drive: judge the reference posture
+        q = np.zeros((1, model.n_coordinates))
+    present = np.tile([not m.optional for m in protocol.markers], (q.shape[0], 1))
+    held = held_mask(model, protocol)
+    locked = not_solved_mask(model, protocol, kin) & ~held
+    det = angle_determinacy(kin, tracked_points(kin, protocol), q, present, protocol.weights, held=held, locked=locked)
+    return det.trial_status()
+
+
 def agreement_on_determined(a: Reconstruction, da: Determinacy, b: Reconstruction, db: Determinacy,
                             not_solved: np.ndarray) -> dict[str, float]:
     d = np.degrees(a.q_rad - b.q_rad)
@@ -134,13 +171,17 @@ def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recon
     not_solved = tuple(n for n, e in zip(names, excluded) if e)
     dets = {r.method: determinacy(kin, points, r.q_rad, targets.present, protocol.weights, excluded=excluded,
                                   every=determinacy_every) for r in recons}
+    held = held_mask(model, protocol)
+    angles = {r.method: angle_determinacy(kin, points, r.q_rad, targets.present, protocol.weights, held=held,
+                                          locked=excluded & ~held, every=determinacy_every) for r in recons}
+    structural = angle_status_of_protocol(model, protocol, kin=kin)
     lims = {r.method: limit_report(r.q_rad, model.coordinate_ranges_rad, names, exclude=not_solved,
                                    ignore=dets[r.method].undetermined & dets[r.method].near_gimbal_lock)
             for r in recons}
     agreement = None
     by = {r.method: r for r in recons}
     if "pf" in by and "ls" in by:
-        agreement = agreement_on_determined(by["pf"], dets["pf"], by["ls"], dets["ls"], excluded)
+        agreement = agreement_on_measured(model, by["pf"], angles["pf"], by["ls"], angles["ls"])
     off = Q.off_segment_markers(model, protocol) if calibration else {}
     report = (calibration or {}).get("report")
     static_labels = [f for f in (calibration or {}).get("labels", []) if not _same_finding(f, label_findings)]
@@ -148,17 +189,17 @@ def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recon
               + Q.calibration_reasons(report, scale_bounds=SCALE_BOUNDS, off_segment=off))
     quality = {}
     for r in recons:
-        det = dets[r.method].to_dict()
-        undetermined = set(det["undetermined_for_trial"])
         reasons = list(common)
         reasons += Q.residual_reasons(residual_statistics(r), per_frame_residuals_mm(r)[0])
         reasons += Q.limit_reasons([lim.to_dict() for lim in lims[r.method]], r.n_frames)
-        reasons += Q.determinacy_reasons(det)
+        reasons += Q.angle_reasons(angles[r.method].trial_status(), structural,
+                                   angles[r.method].fraction(AngleStatus.MEASURED), UNDETERMINED_TRIAL_FRACTION)
         status = np.asarray(r.status)
-        frames = {"not_converged": int((status == 1).sum()), "too_few_markers": int((status == 2).sum())}
+        frames = {"not_converged": int((status == FrameStatus.NOT_CONVERGED).sum()),
+                  "too_few_markers": int((status == FrameStatus.TOO_FEW_MARKERS).sum())}
         reasons += Q.convergence_reasons(frames, r.n_frames)
         dt = float(np.median(np.diff(r.time_s))) if r.n_frames > 1 else 1.0
         reasons += Q.gap_reasons(r.gaps, r.n_frames, 1.0 / dt)
-        reasons += Q.agreement_reasons(agreement, sorted(undetermined))
+        reasons += Q.agreement_reasons(agreement, ())
         quality[r.method] = Q.Quality.of(reasons)
-    return TrialAssessment(dets, lims, quality, agreement, tuple(label_findings), not_solved)
+    return TrialAssessment(dets, lims, quality, agreement, tuple(label_findings), not_solved, angles, structural)

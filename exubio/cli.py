@@ -267,9 +267,8 @@ EXAMPLE_COMMAND = ("exubio simulate --motion abduction --duration 10 --rate 100 
 def cmd_demo(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from exubio.evaluate import rmse_deg
     from exubio.io.results import read_angles_csv
-    from exubio.pipeline import agreement_deg, reconstruct_file
+    from exubio.pipeline import reconstruct_file
     from exubio.resources import shipped_file
 
     out = Path(args.out)
@@ -282,39 +281,36 @@ def cmd_demo(args: argparse.Namespace) -> int:
     outputs = reconstruct_file(c3d, out, methods=["pf", "ls"], overwrite=True,
                                progress_factory=_progress_factory(not args.quiet))
     t_true, names, q_true = read_angles_csv(truth_csv)
-    from exubio.kinematics import Kinematics
+    from exubio.angles import anatomical_table
+    from exubio.io.results import read_npz_arrays
     from exubio.model import load_model
+    from exubio.observability import AngleStatus
 
-    kin = Kinematics(load_model())
+    angle_names, true_angles = anatomical_table(load_model(), q_true)
     for recon, paths, summ in outputs:
         _print_result(recon, paths, summ)
-        held = set(summ.get("not_measured") or [])
-        # coordinates of the joints after a segment with a held coordinate absorb the held rotation
-        held_segments = {kin.model.segments[kin.coordinate_segment[names.index(n)]].name for n in held}
-        absorbing = {c for seg in kin.model.segments if seg.parent in held_segments and seg.joint
-                     for c in seg.joint.coordinates}
-        rmse = rmse_deg(recon.q_rad, q_true, names)
-        measured = {k: v for k, v in rmse.items() if k not in held | absorbing}
-        print(f"[{recon.method}] joint RMSE against the truth, measured coordinates: mean "
+        status = read_npz_arrays(paths["npz"], ("angle_status",))["angle_status"]
+        _, rec_angles = anatomical_table(load_model(), recon.q_rad)
+        err = np.degrees(np.abs(np.angle(np.exp(1j * (rec_angles - true_angles)))))
+        measured = {n: float(np.sqrt(np.mean(err[status[:, j] == AngleStatus.MEASURED, j] ** 2)))
+                    for j, n in enumerate(angle_names) if (status[:, j] == AngleStatus.MEASURED).all()}
+        print(f"[{recon.method}] anatomical angles against the truth, the {len(measured)} measured ones: RMSE mean "
               f"{np.mean(list(measured.values())):.2f} deg, max {max(measured.values()):.2f} deg "
-              f"({max(measured, key=measured.get)})")
-        if held:
-            i = [s.name for s in kin.model.segments].index("scapula")
-            R_rec, R_true = kin.frames(recon.q_rad).R[:, i], kin.frames(q_true).R[:, i]
-            err = np.degrees(np.arccos(np.clip((np.einsum("nji,nji->n", R_rec, R_true) - 1.0) / 2.0, -1.0, 1.0)))
-            print(f"[{recon.method}] held by the protocol (not measured): {', '.join(sorted(held))}; "
-                  f"{', '.join(sorted(absorbing))} absorb it (RMSE {max(rmse[c] for c in held | absorbing):.1f} deg "
-                  f"at most); the scapula's orientation in the thorax: RMSE {np.sqrt(np.mean(err**2)):.2f} deg")
+              f"({max(measured, key=measured.get)}); SC elevation {measured.get('SC_X_elevation', float('nan')):.2f}, "
+              f"SC protraction {measured.get('SC_Y_protraction', float('nan')):.2f} deg")
+        others = (summ.get("anatomical_angles") or {}).get("status", {})
+        for label in ("modelled", "not measured"):
+            these = [n for n, v in others.items() if v.endswith(label)]
+            if these:
+                print(f"[{recon.method}] {label} (not compared with the truth): {', '.join(these)}")
         _print_quality(recon.method, summ)
     agree = {k: v for k, v in (outputs[0][2].get("pf_ls_agreement_deg") or {}).items() if isinstance(v, float)}
-    if not agree:
-        agree = agreement_deg(outputs[0][0], outputs[1][0])
     worst = max(agree, key=agree.get)
-    print(f"PF-LS agreement (determined coordinates): max RMSE {agree[worst]:.3f} deg ({worst})")
+    print(f"PF-LS agreement (measured anatomical angles): max RMSE {agree[worst]:.3f} deg ({worst})")
     from exubio.report.trial_report import Truth, build_trial_report
 
     pdf, png = build_trial_report([paths["npz"] for _, paths, _ in outputs], out / "example_abduction.report.pdf",
-                                  truth=Truth(t_true, names, q_true))
+                                  truth=Truth(t_true, angle_names, true_angles))
     print(f"report: {pdf} and {png}")
     print(f"results are in {out.resolve()}")
     return EXIT_OK
@@ -337,10 +333,16 @@ def cmd_export_model(args: argparse.Namespace) -> int:
     from exubio.export import write_biomod, write_osim
     from exubio.model import load_model
 
-    writer = write_osim if args.format == "osim" else write_biomod
-    path = writer(load_model(args.model), args.out, overwrite=args.overwrite)
+    model = load_model(args.model)
+    if args.format == "osim":
+        path = write_osim(model, args.out, overwrite=args.overwrite, coordinates=args.coordinates)
+        plays = ("its coordinates are the anatomical angles, so exubio's .mot plays on it" if args.coordinates == "anatomical"
+                 else "its coordinates are exubio's model coordinates (the q of the .npz)")
+    else:
+        path = write_biomod(model, args.out, overwrite=args.overwrite)
+        plays = "its generalized coordinates are exubio's model coordinates (the q of the .npz)"
     print(f"wrote {path}: an open chain (the scapulothoracic ellipsoid cannot be expressed in this format; the file's "
-          f"header gives it); coordinates named as exubio's, so exubio's .mot plays on it")
+          f"header gives it); {plays}")
     return EXIT_OK
 
 
@@ -453,6 +455,9 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--format", required=True, choices=["osim", "biomod"], help="osim: OpenSim 4; biomod: biorbd")
     e.add_argument("--out", required=True, help="FILE.osim or FILE.bioMod to write")
     e.add_argument("--overwrite", action="store_true", help="replace an existing FILE")
+    e.add_argument("--coordinates", choices=["anatomical", "model"], default="anatomical",
+                   help="osim only: anatomical (default; SC, AC, GH between the ISB frames with the anatomical angles "
+                        "as coordinates, so exubio's .mot plays on it) or model (exubio's own joint coordinates)")
     e.set_defaults(func=cmd_export_model)
 
     st = sub.add_parser("study", parents=[common],

@@ -273,7 +273,7 @@ def _covariance(N, M, S, m: int, free: np.ndarray, prior: float | None):
     """Coordinate covariance (b, m, m) per m^2 of marker noise (zero rows for coordinates not in
     ``free``), and the blind directions (b, m, r) (zero columns where a direction is seen); with
     ``prior`` (relative), a Tikhonov term instead of the pseudo-inverse, and no blind directions."""
-    b, f = N.shape[0], N.shape[1]
+    b = N.shape[0]
     if prior is not None:
         scale = np.maximum(np.trace(M, axis1=1, axis2=2) / M.shape[-1], 1e-300)
         Minv = np.linalg.inv(M + (prior * scale)[:, None, None] * np.eye(M.shape[-1]))

@@ -138,15 +138,24 @@ def output_stem(trial_path: str | Path, method: Method | str) -> str:
     return f"{Path(trial_path).stem}.{Method.parse(method).value}"
 
 
+@dataclass(frozen=True)
+class AngleOutputs:
+    """The anatomical angles of one reconstruction as the files carry them: names
+    (exubio.angles.ANATOMICAL_COLUMNS), values (n, a) rad, status (n, a) AngleStatus codes, the
+    comment lines that describe them (``angle_header``)."""
+
+    names: tuple[str, ...]
+    values_rad: np.ndarray
+    status: np.ndarray
+    comments: tuple[str, ...] = ()
+
+
 def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
-                  metadata: dict[str, Any], summary_data: dict[str, Any],
-                  undetermined: np.ndarray | None = None,
-                  isb: tuple[tuple[str, ...], np.ndarray] | None = None,
-                  isb_comments: tuple[str, ...] = (), streamed: dict[str, Any] | None = None) -> dict[str, Path]:
-    """Write <stem>.csv, .mot, .npz and .summary.json into out_dir, each atomically, and with
-    ``isb`` (column names, angles (n, 15) rad) the ISB angles as <stem>.isb.csv (degrees). Coordinates
-    that are not measurements (held, locked, undetermined for the trial) are named in the .mot
-    header and summary.json; ``undetermined`` (n, m) per frame goes into the .npz; ``streamed``:
+                  metadata: dict[str, Any], summary_data: dict[str, Any], angles: AngleOutputs,
+                  undetermined: np.ndarray | None = None, streamed: dict[str, Any] | None = None) -> dict[str, Path]:
+    """Write <stem>.csv and .mot (the anatomical angles ``angles`` in degrees, each one's status in
+    the header), .npz (everything: the model coordinates, ``undetermined`` (n, m) per coordinate and
+    the angles' status per frame) and .summary.json into out_dir, each atomically; ``streamed``:
     arrays the reconstruction left on disk (exubio.io.streamed), copied into the .npz."""
     out = Path(out_dir)
     paths = {
@@ -155,22 +164,18 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
         "npz": out / f"{stem}.npz",
         "summary": out / f"{stem}.summary.json",
     }
-    notes = []
-    not_measured = summary_data.get("not_measured") or []
-    undet = (summary_data.get("determinacy") or {}).get("undetermined_for_trial") or []
-    if not_measured:
-        notes.append("exubio_not_measured=" + ",".join(not_measured) + " (held or locked: not solved from markers)")
-    if undet:
-        notes.append("exubio_undetermined=" + ",".join(undet) + " (the markers do not determine them; see summary.json)")
+    notes = [f"exubio_{line.split(':', 1)[0].replace(' ', '_')}={line.split(':', 1)[1].strip()}"
+             for line in angles.comments if line.startswith("status ")]
     if summary_data.get("quality"):
         notes.append(f"exubio_quality={summary_data['quality']['verdict']}")
-    results.write_angles_csv(paths["csv"], recon.time_s, recon.coordinate_names, recon.q_rad)
-    if isb is not None:
-        paths["isb"] = out / f"{stem}.isb.csv"
-        results.write_angles_csv(paths["isb"], recon.time_s, isb[0], isb[1], comments=isb_comments)
-    results.write_mot(paths["mot"], recon.time_s, recon.coordinate_names, recon.q_rad, name=stem, notes=notes)
-    results.write_npz(paths["npz"], recon, metadata=metadata,
-                      extra_arrays=None if undetermined is None else {"undetermined": undetermined}, streamed=streamed)
+    results.write_angles_csv(paths["csv"], recon.time_s, [f"{n}_deg" for n in angles.names], angles.values_rad,
+                             comments=angles.comments)
+    results.write_mot(paths["mot"], recon.time_s, angles.names, angles.values_rad, name=stem, notes=notes)
+    extra = {"angle_status": np.asarray(angles.status, dtype=np.int8),
+             "angle_names": np.array(angles.names)}
+    if undetermined is not None:
+        extra["undetermined"] = undetermined
+    results.write_npz(paths["npz"], recon, metadata=metadata, extra_arrays=extra, streamed=streamed)
     results.write_json(paths["summary"], summary_data)
     return paths
 
@@ -230,7 +235,7 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
 def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, stems, parts, sink_type, /, *,
                           method_options, summary_extra, progress_factory, calibration, static_reference,
                           chunk_frames) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
-    from exubio.angles import ANGLE_NAMES, ISB_SEQUENCES, isb_table, measured_isb_joints
+    from exubio.angles import ANATOMICAL_ANGLES, anatomical_table
     from exubio.assess import assess_trial, trial_label_findings
 
     recons, sinks = [], []
@@ -258,41 +263,58 @@ def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, ste
         if inputs.targets.cutoff_hz:
             extra["filter_cutoff_hz"] = dict(inputs.targets.cutoff_hz)
         extra.update(assessment.summary_for(recon.method))
-        isb = isb_table(inputs.model, recon.q_rad)
-        measured = measured_isb_joints(inputs.model, set(assessment.not_solved))
-        extra["isb_angles"] = {
-            "file": f"{stem}.isb.csv", "units": "deg",
-            "sequences": {j: f"{s[0]}-{s[1]}'-{s[2]}''" for j, s in ISB_SEQUENCES.items()},
-            "meaning": {j: list(v) for j, v in ANGLE_NAMES.items()},
-            "measured": measured,
-            "not_measured": [j for j in ISB_SEQUENCES if j not in measured],
-            "side": inputs.protocol.side,
-            "definition": "Wu et al. 2005 anatomical frames from the model's landmarks; intrinsic sequences; "
-                          "GH X-Z'-Y'' (Phadke et al. 2011), HT Y-X'-Y'' (exubio.angles)"}
+        names, values = anatomical_table(inputs.model, recon.q_rad)
+        det = assessment.angles[recon.method]
+        extra["angles"] = {"files": [f"{stem}.csv", f"{stem}.mot"], "units": "deg", "side": inputs.protocol.side,
+                           "definitions": {n: {"definition": d, "meaning": m} for n, d, m in ANATOMICAL_ANGLES}}
         summ = summary(recon, source=str(trial_path), extra=extra)
-        paths = write_outputs(recon, out_dir, stem, metadata=meta, summary_data=summ,
-                              undetermined=assessment.determinacy[recon.method].undetermined, isb=isb,
-                              isb_comments=isb_header(extra["isb_angles"], Path(trial_path).name, method.value),
+        angles = AngleOutputs(names, values, det.status,
+                              angle_header(det, Path(trial_path).name, method.value, inputs.protocol.side))
+        paths = write_outputs(recon, out_dir, stem, metadata=meta, summary_data=summ, angles=angles,
+                              undetermined=assessment.determinacy[recon.method].undetermined,
                               streamed={"model_points_m": sink.model_points})
         out.append((recon, paths, summ))
     return out
 
 
-def isb_header(info: dict[str, Any], trial: str, method: str) -> tuple[str, ...]:
-    """Comment lines of ``<trial>.<method>.isb.csv``: what the angles are, their sequences and
-    signs, and which joints the markers do not measure."""
-    lines = [f"exubio ISB shoulder angles of {trial} ({method.upper()}), degrees; time in seconds",
-             f"definition: {info['definition']}"]
-    for joint, seq in info["sequences"].items():
-        lines.append(f"{joint}: sequence {seq} (intrinsic); angles: " + "; ".join(info["meaning"][joint]))
-    if info.get("side") == "left":
+MAX_STATUS_RUNS = 12
+"""An angle whose status changes more often than this is summarised by shares in the file headers
+(its every frame is in the .npz)."""
+
+
+def angle_header(det, trial: str, method: str, side: str) -> tuple[str, ...]:
+    """Comment lines of ``<trial>.<method>.csv``: what the angles are (definition, sign), and each
+    one's status (exubio.observability.AngleStatus) with the frame ranges where it changes."""
+    from exubio.angles import ANATOMICAL_ANGLES
+    from exubio.observability import AngleStatus
+
+    lines = [f"exubio anatomical joint angles of {trial} ({method.upper()}); angles in degrees, time in seconds",
+             "ISB frames (Wu et al. 2005) from the model's landmarks, intrinsic sequences, raw signs; GH in ISB Y-X'-Y'' "
+             "and in Phadke's X-Z'-Y''"]
+    lines += [f"{n}: {d}; {m}" for n, d, m in ANATOMICAL_ANGLES]
+    if side == "left":
         lines.append("LEFT arm: its markers were mirrored through the thorax's sagittal plane (Z -> -Z of the ISB thorax "
                      "frame) onto the right-arm model, so every angle carries the right arm's sign (Wu et al. 2005)")
     else:
         lines.append("right arm, signs of Wu et al. 2005")
-    if info["not_measured"]:
-        lines.append("NOT MEASURED by this marker set (a segment's own joint is held or unobserved): "
-                     + ", ".join(info["not_measured"]))
+    lines.append("status: measured = the markers determine it; modelled = set by a named protocol rule; not measured = "
+                 "neither (read it as no measurement)")
+    for j, n in enumerate(det.names):
+        col = np.asarray(det.status[:, j])
+        rule = f" ({det.rule[n]})" if n in det.rule else ""
+        change = np.flatnonzero(np.diff(col)) + 1
+        if not change.size:
+            lines.append(f"status {n}: {AngleStatus(int(col[0])).label if col.size else 'measured'}{rule}")
+            continue
+        if change.size > MAX_STATUS_RUNS:
+            share = ", ".join(f"{AngleStatus(k).label} {100 * np.mean(col == k):.0f} %" for k in np.unique(col))
+            lines.append(f"status {n}: changes {change.size} times: {share} of the frames (every frame: the .npz, "
+                         f"angle_status){rule}")
+            continue
+        starts = np.concatenate([[0], change])
+        ends = np.concatenate([change, [col.size]])
+        runs = ", ".join(f"{AngleStatus(int(col[a])).label} {a}-{b - 1}" for a, b in zip(starts, ends))
+        lines.append(f"status {n}: by frame: {runs}{rule}")
     return tuple(lines)
 
 

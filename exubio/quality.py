@@ -142,8 +142,8 @@ def agreement_reasons(agreement_deg: Mapping[str, float] | None, undetermined: S
             continue
         lvl = _level(rmse, AGREEMENT_DEG)
         if lvl:
-            out.append(Reason("pf_ls_agreement", lvl, f"{name}: PF and LS differ by {rmse:.1f} deg RMSE where the "
-                              f"markers determine it (check above {AGREEMENT_DEG[0]:.0f}, fail above {AGREEMENT_DEG[1]:.0f})"))
+            out.append(Reason("pf_ls_agreement", lvl, f"{name}: PF and LS differ by {rmse:.1f} deg RMSE where both "
+                              f"measure it (check above {AGREEMENT_DEG[0]:.0f}, fail above {AGREEMENT_DEG[1]:.0f})"))
     return out
 
 
@@ -174,6 +174,34 @@ def determinacy_reasons(det: Mapping[str, Any]) -> list[Reason]:
         if name not in det.get("undetermined_for_trial", []) and name not in gimbal and frac > 0:
             out.append(Reason("undetermined_frames", "note", f"{name}: undetermined in {100 * frac:.0f} % of the frames "
                               f"(marked)"))
+    return out
+
+
+def angle_reasons(status: Mapping[str, str], structural: Mapping[str, str], measured_fraction: Mapping[str, float],
+                  undetermined_trial_fraction: float) -> list[Reason]:
+    """The anatomical angles the trial does not measure. What the marker set cannot measure in any
+    posture (``structural``, known before the trial) is one note, said once; an angle the set
+    measures but this trial does not (gaps, postures) is a check when it is not measured in more
+    than ``undetermined_trial_fraction`` of the frames, else a note (its frames are marked)."""
+    out = []
+    never = [n for n, s in structural.items() if s == "not measured"]
+    modelled = [n for n, s in structural.items() if s == "modelled"]
+    if never or modelled:
+        parts = []
+        if never:
+            parts.append("not measured (the markers do not determine them in any reference posture): " + ", ".join(never))
+        if modelled:
+            parts.append("modelled by the protocol's hold: " + ", ".join(modelled))
+        out.append(Reason("protocol_angles", "note", "this marker set: " + "; ".join(parts)))
+    for name, s in status.items():
+        known = structural.get(name, "measured")
+        if known in ("not measured", "modelled") or s == "measured":
+            continue
+        frac = 1.0 - float(measured_fraction.get(name, 0.0))
+        lvl = "check" if frac > undetermined_trial_fraction and not known.startswith("partly") else "note"
+        out.append(Reason("angle_not_measured", lvl, f"{name}: not measured in {100 * frac:.0f} % of the frames "
+                          f"(this marker set measures it{' in some postures' if known.startswith('partly') else ''}; "
+                          f"the frames are marked)"))
     return out
 
 

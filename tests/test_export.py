@@ -81,7 +81,7 @@ def osim_markers(osim_model, state, model, q):
 
 def test_osim_markers_match_exubio_kinematics(exported, tmp_path):
     opensim = pytest.importorskip("opensim")
-    osim_model, state = load_osim(opensim, write_osim(exported, tmp_path / "model.osim"))
+    osim_model, state = load_osim(opensim, write_osim(exported, tmp_path / "model.osim", coordinates="model"))
     qs = postures(exported)
     expected = exubio_markers(exported, qs)
     for q, ref in zip(qs, expected):
@@ -91,7 +91,7 @@ def test_osim_markers_match_exubio_kinematics(exported, tmp_path):
 
 def test_osim_names_ranges_and_inertia_round_trip(exported, tmp_path):
     opensim = pytest.importorskip("opensim")
-    osim_model, _ = load_osim(opensim, write_osim(exported, tmp_path / "model.osim"))
+    osim_model, _ = load_osim(opensim, write_osim(exported, tmp_path / "model.osim", coordinates="model"))
     coords = osim_model.getCoordinateSet()
     assert [coords.get(i).getName() for i in range(coords.getSize())] == list(exported.coordinate_names)
     for name, (lo, hi) in zip(exported.coordinate_names, exported.coordinate_ranges_rad):
@@ -124,7 +124,7 @@ def test_osim_names_ranges_and_inertia_round_trip(exported, tmp_path):
 
 
 def test_osim_states_what_it_cannot_express(exported, tmp_path):
-    text = write_osim(exported, tmp_path / "model.osim").read_text(encoding="utf-8")
+    text = write_osim(exported, tmp_path / "model.osim", coordinates="model").read_text(encoding="utf-8")
     head = text[: text.index("<OpenSimDocument")]
     assert "NOT EXPRESSED" in head and "open chain" in head and "ellipsoid" in head
     for seg, point in exported.ellipsoid.contact_points:
@@ -175,7 +175,7 @@ def test_osim_and_biomod_have_the_same_mass_matrix(exported, tmp_path):
     centres of mass and inertias in the same frames)."""
     opensim = pytest.importorskip("opensim")
     biorbd = pytest.importorskip("biorbd")
-    osim_model, state = load_osim(opensim, write_osim(exported, tmp_path / "model.osim"))
+    osim_model, state = load_osim(opensim, write_osim(exported, tmp_path / "model.osim", coordinates="model"))
     bio = biorbd.Model(str(write_biomod(exported, tmp_path / "model.bioMod")))
     for q in postures(exported, n=3)[3:]:
         osim_markers(osim_model, state, exported, q)  # sets q
@@ -199,6 +199,11 @@ def reconstruction(tmp_path_factory, model_files):
 
 
 def test_reconstruct_mot_plays_on_exported_osim(exported, reconstruction, tmp_path):
+    """exubio's .mot carries the anatomical angles; the anatomical .osim (SC, AC, GH between the ISB
+    frames, the angles as its coordinates) replays it: its markers at the .mot's angles are the
+    model points exubio tracked."""
+    from exubio.angles import anatomical_table
+
     opensim = pytest.importorskip("opensim")
     rec, mot = reconstruction[exported.name]
     osim_model, state = load_osim(opensim, write_osim(exported, tmp_path / "model.osim"))
@@ -206,32 +211,36 @@ def test_reconstruct_mot_plays_on_exported_osim(exported, reconstruction, tmp_pa
     table = opensim.TimeSeriesTable(str(mot))
     labels = list(table.getColumnLabels())
     assert table.getTableMetaDataAsString("inDegrees") == "yes"
-    assert labels == list(rec.coordinate_names)
-    assert all(coords.contains(name) for name in labels), "every .mot column is a coordinate of the .osim"
+    names, angles = anatomical_table(exported, rec.q_rad)
+    assert labels == list(names)
+    coordinates = [coords.get(i).getName() for i in range(coords.getSize())]
+    assert set(coordinates) <= set(labels), "every coordinate of the .osim is a column of the .mot"
     np.testing.assert_allclose(np.asarray(table.getIndependentColumn()), rec.time_s, rtol=0, atol=5e-7)
     for j, name in enumerate(labels):  # degrees, printed to 1e-6 deg
         values = table.getDependentColumn(name).to_numpy()
-        np.testing.assert_allclose(values, np.degrees(rec.q_rad[:, j]), rtol=0, atol=5.01e-7, err_msg=name)
+        np.testing.assert_allclose(values, np.degrees(angles[:, j]), rtol=0, atol=5.01e-7, err_msg=name)
 
     # OpenSim's own unit handling (Storage, degrees -> radians by each coordinate's motion type)
     storage = opensim.Storage(str(mot))
     osim_model.getSimbodyEngine().convertDegreesToRadians(storage)
-    q_mot = np.empty(rec.q_rad.shape)
-    for j, name in enumerate(labels):
+    q_mot = {}
+    for name in coordinates:
         column = opensim.ArrayDouble()
         storage.getDataColumn(name, column)
-        q_mot[:, j] = [column.get(i) for i in range(column.getSize())]
-    np.testing.assert_allclose(q_mot, rec.q_rad, rtol=0, atol=1e-8)
+        q_mot[name] = np.array([column.get(i) for i in range(column.getSize())])
+        np.testing.assert_allclose(q_mot[name], angles[:, names.index(name)], rtol=0, atol=1e-8)
 
     # replay: the .osim's markers at the .mot's angles are the model points exubio tracked
     protocol = protocol_for_model(exported)
     point_of = marker_point_names(protocol, exported)
     name_of = {(seg, point): name for name, seg, point in marker_table(exported)}
-    names = [name_of[(m.segment, point_of[m.name])] for m in protocol.markers]
-    all_names = [name for name, _, _ in marker_table(exported)]
-    columns = [all_names.index(n) for n in names]
+    wanted = [name_of[(m.segment, point_of[m.name])] for m in protocol.markers]
+    markers = osim_model.getMarkerSet()
     for i in range(0, rec.n_frames, 50):
-        got = osim_markers(osim_model, state, exported, q_mot[i])[columns]
+        for name in coordinates:
+            coords.get(name).setValue(state, float(q_mot[name][i]), False)
+        osim_model.realizePosition(state)
+        got = np.array([[markers.get(n).getLocationInGround(state).get(k) for k in range(3)] for n in wanted])
         assert np.abs(got - rec.model_points_m[i]).max() <= TOL_M
 
 
@@ -293,7 +302,7 @@ def test_an_unlimited_range_is_written_as_one_turn(tmp_path):
     free = dataclasses.replace(model, segments=tuple(dataclasses.replace(s, joint=joint) if s.name == "ulna" else s
                                                      for s in model.segments))
     turn = f"{-2 * np.pi!r} {2 * np.pi!r}"
-    assert f"<range>{turn}</range>" in write_osim(free, tmp_path / "m.osim").read_text(encoding="utf-8")
+    assert f"<range>{turn}</range>" in write_osim(free, tmp_path / "m.osim", coordinates="model").read_text(encoding="utf-8")
     assert f"\t\t{turn}\n" in write_biomod(free, tmp_path / "m.bioMod").read_text(encoding="utf-8")
 
 

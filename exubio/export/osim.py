@@ -58,9 +58,14 @@ def _transform_axis(name: str, axis, coordinate: str | None) -> str:
             "\t\t\t\t\t\t</TransformAxis>\n")
 
 
-def _custom_joint(seg) -> str:
+def _custom_joint(seg, anatomical: dict | None = None) -> str:
+    """A CustomJoint on exubio's joint axes with its coordinates; with ``anatomical`` (the joint's
+    entry of _anatomical_joints), on the two segments' ISB frames with the anatomical angles as
+    coordinates instead."""
     joint = seg.joint
     offset = f"{seg.parent}_offset"
+    if anatomical is not None:
+        return _anatomical_joint(seg, offset, **anatomical)
     coords = "".join(
         f"\t\t\t\t\t\t<Coordinate name={quoteattr(name)}>\n"
         "\t\t\t\t\t\t\t<default_value>0</default_value>\n"
@@ -88,10 +93,82 @@ def _custom_joint(seg) -> str:
             "\t\t\t\t</CustomJoint>\n")
 
 
-def osim_text(model: Model) -> str:
-    """The .osim document for ``model`` (see the module docstring)."""
+def _offset(name: str, body: str, translation, R: np.ndarray) -> str:
+    from exubio.angles import euler_angles
+
+    xyz = euler_angles(R, "XYZ")  # OpenSim's orientation: body-fixed X-Y-Z angles
+    return (f"\t\t\t\t\t\t<PhysicalOffsetFrame name={quoteattr(name)}>\n"
+            f"\t\t\t\t\t\t\t<socket_parent>/bodyset/{escape(body)}</socket_parent>\n"
+            f"\t\t\t\t\t\t\t<translation>{vec(translation)}</translation>\n"
+            f"\t\t\t\t\t\t\t<orientation>{vec(xyz)}</orientation>\n"
+            "\t\t\t\t\t\t</PhysicalOffsetFrame>\n")
+
+
+def _anatomical_joint(seg, offset: str, *, parent_frame: np.ndarray, child_frame: np.ndarray, sequence: str,
+                      names: tuple[str, ...], defaults: np.ndarray) -> str:
+    """The joint between the parent's and the child's ISB frames: rotation1..3 about the frame axes
+    of ``sequence`` (intrinsic) with the anatomical angles ``names`` as coordinates, so the
+    coordinates are exactly the published angles (default: their values in the reference posture)."""
+    joint = seg.joint
+    child = f"{seg.name}_isb"
+    coords = "".join(
+        f"\t\t\t\t\t\t<Coordinate name={quoteattr(name)}>\n"
+        f"\t\t\t\t\t\t\t<default_value>{fmt(d)}</default_value>\n"
+        f"\t\t\t\t\t\t\t<range>{vec([-UNLIMITED_RAD, UNLIMITED_RAD])}</range>\n"
+        "\t\t\t\t\t\t\t<clamped>false</clamped>\n"
+        "\t\t\t\t\t\t\t<locked>false</locked>\n"
+        "\t\t\t\t\t\t</Coordinate>\n"
+        for name, d in zip(names, defaults))
+    unit = {"X": np.eye(3)[0], "Y": np.eye(3)[1], "Z": np.eye(3)[2]}
+    axes = "".join(_transform_axis(f"rotation{i + 1}", unit[sequence[i]], names[i]) for i in range(3))
+    axes += "".join(_transform_axis(f"translation{i + 1}", np.eye(3)[i], None) for i in range(3))
+    return (f"\t\t\t\t<CustomJoint name={quoteattr(joint.name)}>\n"
+            f"\t\t\t\t\t<socket_parent_frame>{escape(offset)}</socket_parent_frame>\n"
+            f"\t\t\t\t\t<socket_child_frame>{escape(child)}</socket_child_frame>\n"
+            f"\t\t\t\t\t<coordinates>\n{coords}\t\t\t\t\t</coordinates>\n"
+            "\t\t\t\t\t<frames>\n"
+            + _offset(offset, seg.parent, joint.centre_m, parent_frame)
+            + _offset(child, seg.name, np.zeros(3), child_frame)
+            + "\t\t\t\t\t</frames>\n"
+            f"\t\t\t\t\t<SpatialTransform>\n{axes}\t\t\t\t\t</SpatialTransform>\n"
+            "\t\t\t\t</CustomJoint>\n")
+
+
+ANATOMICAL_JOINTS = {"clavicle": ("YXZ", ("SC_Y_protraction", "SC_X_elevation", "SC_Z_posterior_rotation")),
+                     "scapula": ("YXZ", ("AC_Y_internal_rotation", "AC_X_upward_rotation", "AC_Z_posterior_tilt")),
+                     "humerus": ("XZY", ("GH_phadke_X_elevation", "GH_phadke_Z_flexion", "GH_phadke_Y_internal_rotation"))}
+"""Segment -> (sequence, anatomical angles) of the joints written on ISB frames in an anatomical
+.osim: SC and AC in ISB's Y-X'-Z''; GH in Phadke's X-Z'-Y'' (ISB's Y-X'-Y'' repeats an axis, which a
+CustomJoint cannot take, and is in gimbal lock with the arm hanging)."""
+
+DISTAL_NAMES = {"elbow_flexion": "elbow_flexion", "pronation": "forearm_pronation", "wrist_flexion": "wrist_flexion",
+                "wrist_radial_deviation": "wrist_radial_deviation"}
+"""Model coordinate -> its anatomical angle name (exubio.angles.ANATOMICAL_ANGLES)."""
+
+
+def _anatomical_joints(model: Model) -> dict[str, dict]:
+    from exubio.angles import anatomical_frames, anatomical_table
+
+    frames = anatomical_frames(model)
+    names, ref = anatomical_table(model, np.zeros(model.n_coordinates))
+    out = {}
+    for seg_name, (sequence, angle_names) in ANATOMICAL_JOINTS.items():
+        seg = model.segment(seg_name)
+        out[seg_name] = {"parent_frame": frames[seg.parent], "child_frame": frames[seg_name], "sequence": sequence,
+                         "names": angle_names, "defaults": np.array([ref[names.index(n)] for n in angle_names])}
+    return out
+
+
+def osim_text(model: Model, *, coordinates: str = "anatomical") -> str:
+    """The .osim document for ``model`` (see the module docstring). ``coordinates``: "anatomical"
+    (SC, AC and GH between the ISB frames with the anatomical angles as coordinates, elbow, forearm
+    and wrist named as the anatomical angles: exubio's .mot plays on it) or "model" (exubio's own
+    joint coordinates: its .npz q plays on it)."""
+    if coordinates not in ("anatomical", "model"):
+        raise ValueError(f"coordinates: expected 'anatomical' or 'model', got {coordinates!r}")
     Kinematics(model)  # the structure exubio can compute with (fixed root, orthogonal axes)
     check_names(model)
+    anatomical = _anatomical_joints(model) if coordinates == "anatomical" else {}
     root = model.segments[0]
     note = "\n".join("  " + line.replace("--", "- -") for line in ellipsoid_note(model, "OpenSim .osim"))
     weld = (f"\t\t\t\t<WeldJoint name={quoteattr('ground_' + root.name)}>\n"
@@ -117,7 +194,8 @@ def osim_text(model: Model) -> str:
             + "".join(_body(seg) for seg in model.segments)
             + "\t\t\t</objects>\n\t\t</BodySet>\n"
             '\t\t<JointSet name="jointset">\n\t\t\t<objects>\n'
-            + weld + "".join(_custom_joint(seg) for seg in model.segments[1:])
+            + weld + "".join(_custom_joint(_renamed(seg) if anatomical else seg, anatomical.get(seg.name))
+                             for seg in model.segments[1:])
             + "\t\t\t</objects>\n\t\t</JointSet>\n"
             '\t\t<MarkerSet name="markerset">\n\t\t\t<objects>\n'
             + markers
@@ -125,7 +203,18 @@ def osim_text(model: Model) -> str:
             "\t</Model>\n</OpenSimDocument>\n")
 
 
-def write_osim(model: Model, path: str | Path, *, overwrite: bool = False) -> Path:
+def _renamed(seg):
+    """The segment with its distal joint's coordinates named as the anatomical angles."""
+    import dataclasses
+
+    if seg.joint is None or not any(c in DISTAL_NAMES for c in seg.joint.coordinates):
+        return seg
+    joint = dataclasses.replace(seg.joint, coordinates=tuple(DISTAL_NAMES.get(c, c) for c in seg.joint.coordinates))
+    return dataclasses.replace(seg, joint=joint)
+
+
+def write_osim(model: Model, path: str | Path, *, overwrite: bool = False, coordinates: str = "anatomical") -> Path:
     """Write ``model`` as an OpenSim 4 model file at ``path`` (atomically); an existing file is
-    replaced only with ``overwrite`` (otherwise InputError naming it). Returns the path."""
-    return write_text(path, osim_text(model), overwrite=overwrite)
+    replaced only with ``overwrite`` (otherwise InputError naming it); ``coordinates``: see
+    ``osim_text``. Returns the path."""
+    return write_text(path, osim_text(model, coordinates=coordinates), overwrite=overwrite)

@@ -445,6 +445,13 @@ def read_npz_metadata(path: str | os.PathLike, /) -> dict[str, Any]:
         return json.loads(str(data["metadata_json"]))
 
 
+def read_npz_arrays(path: str | os.PathLike, keys: Sequence[str], /) -> dict[str, np.ndarray]:
+    """Extra arrays that ``write_npz`` stored (e.g. ``angle_status``, ``angle_names``,
+    ``undetermined``); an InputError names the file and a key it lacks."""
+    with _NpzReader(Path(path)) as data:
+        return {k: np.asarray(data[k]) for k in keys}
+
+
 class _NpzReader:
     """np.load with InputErrors naming the file and a missing key."""
 

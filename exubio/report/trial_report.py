@@ -3,11 +3,10 @@
 It reads the ``<trial>.<method>.npz`` results and their ``summary.json`` written by ``exubio
 reconstruct`` (through exubio.io.results) and never imports the solver. Page 1 (and the PNG): the
 quality verdict of every method with its reasons, the key figures, the worst markers, the
-comparison with the truth of a simulated trial, the label findings and the coordinates that are
-not measurements. Page 2: joint coordinates of every method against time (one colour per
-coordinate, PF solid, LS dashed, the truth dotted; not measured in grey). Page 3: the ISB shoulder
-angles (SC, ST, GH, HT with their sequences, from ``<trial>.<method>.isb.csv``). Page 4: marker
-residuals (mean ± SD over markers per frame, per-marker RMSE), constraint residuals and the gaps.
+comparison of the measured anatomical angles with the truth of a simulated trial, the label
+findings and the angles that are not measurements. Page 2: the anatomical angles of every method
+against time (``<trial>.<method>.csv``; one colour per angle, PF solid, LS dashed, the truth dotted;
+modelled and not measured in grey). Page 3: marker residuals (mean ± SD over markers per frame, per-marker RMSE), constraint residuals and the gaps.
 """
 from __future__ import annotations
 
@@ -28,12 +27,41 @@ from matplotlib.ticker import NullLocator
 from matplotlib.transforms import Bbox
 
 from exubio.evaluate import per_frame_residuals_mm, residual_statistics
-from exubio.io.results import atomic_write, read_angles_csv, read_npz, read_npz_metadata
+from exubio.errors import InputError
+from exubio.io.results import atomic_write, read_angles_csv, read_npz, read_npz_arrays, read_npz_metadata
 from exubio.types import Reconstruction
 
 _COLOURS = {"pf": "black", "ls": "tab:red"}
-_JOINTS = (("sternoclavicular", "sc_"), ("acromioclavicular", "ac_"), ("glenohumeral", "gh_"),
-           ("elbow and forearm", ("elbow_", "pronation")), ("wrist", "wrist_"))
+_JOINTS = (("SC (ISB Y-X'-Z'')", "SC_"), ("AC (ISB Y-X'-Z'')", "AC_"), ("ST (ISB Y-X'-Z'')", "ST_"),
+           ("GH (ISB Y-X'-Y'')", ("GH_Y_", "GH_X_")), ("GH (Phadke X-Z'-Y'')", "GH_phadke_"),
+           ("HT (ISB Y-X'-Y'')", "HT_"), ("elbow, forearm,\nwrist", ("elbow_", "forearm_", "wrist_")))
+"""Rows of the angles page: the anatomical angles (exubio.angles.ANATOMICAL_ANGLES) by joint."""
+
+
+@dataclass(frozen=True)
+class Angles:
+    """The anatomical angles of one method's result: from <trial>.<method>.csv (degrees -> rad)
+    and their status per frame from the .npz (exubio.observability.AngleStatus codes: 0 measured,
+    1 modelled, 2 not measured)."""
+
+    time_s: np.ndarray
+    names: tuple[str, ...]
+    values_rad: np.ndarray
+    status: np.ndarray
+
+    def measured(self, j: int) -> np.ndarray:
+        return self.status[:, j] == 0
+
+
+def read_angles(npz_path: Path) -> Angles | None:
+    """The anatomical angles of a result (None for a result written before they existed)."""
+    csv = Path(str(npz_path)[: -len(".npz")] + ".csv")
+    try:
+        status = read_npz_arrays(npz_path, ("angle_status",))["angle_status"]
+    except InputError:
+        return None
+    t, names, values = read_angles_csv(csv)
+    return Angles(t, tuple(n.removesuffix("_deg") for n in names), values, status)
 
 
 def _figure(size=(11.69, 8.27)) -> Figure:
@@ -178,7 +206,7 @@ _VERDICT_COLOURS = {"ok": "tab:green", "check": "tab:orange", "fail": "tab:red"}
 
 
 def verdict_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[str, dict], *,
-                 truth: "Truth | None" = None) -> Figure:
+                 truth: "Truth | None" = None, angles: dict[str, Angles] | None = None) -> Figure:
     """Page 1: what a supervisor reads first: the verdict of every method with its reasons, the key
     figures, the worst markers, the comparison with the truth when it is known, the findings."""
     fig = _figure()
@@ -209,31 +237,32 @@ def verdict_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[s
     first = summaries.get(recons[0].method, {})
     lines = []
     if truth is not None:
-        skip = _not_measured(meta, summaries)
         for r in recons:
-            rm = truth_rmse_deg(r, truth, skip)
+            a = (angles or {}).get(r.method)
+            rm = truth_rmse_deg(a, truth) if a is not None else {}
             if rm:
                 worst = max(rm, key=rm.get)
-                lines.append(f"{r.method.upper()} against the {truth.label}: joint RMSE mean {np.mean(list(rm.values())):.2f} "
-                             f"deg, max {rm[worst]:.2f} deg ({worst}) over the {len(rm)} measured coordinates")
+                lines.append(f"{r.method.upper()} against the {truth.label}: RMSE mean {np.mean(list(rm.values())):.2f} "
+                             f"deg, max {rm[worst]:.2f} deg ({worst}) over the {len(rm)} measured anatomical angles")
     if meta.get("protocol_relabel"):
         lines.append("relabelled by the protocol (trial label -> read as): " + ", ".join(
             f"{a} -> {b}" for a, b in meta["protocol_relabel"].items()))
     agree = {k: v for k, v in (first.get("pf_ls_agreement_deg") or {}).items() if isinstance(v, float)}
     if agree:
         worst = max(agree, key=agree.get)
-        lines.append(f"PF-LS agreement on determined coordinates: max RMSE {agree[worst]:.2f} deg ({worst})")
+        lines.append(f"PF-LS agreement on the measured anatomical angles: max RMSE {agree[worst]:.2f} deg ({worst})")
     cut = first.get("filter_cutoff_hz") or {}
     if cut:
         lines.append(f"low-pass cut-off per marker: {min(cut.values()):.1f}-{max(cut.values()):.1f} Hz")
-    if first.get("not_measured"):
-        lines.append("not measured (held by the protocol or no marker on the segment): " + ", ".join(first["not_measured"]))
-    det = first.get("determinacy") or {}
-    if det.get("undetermined_for_trial"):
-        lines.append("not determined by the markers (most frames): " + ", ".join(det["undetermined_for_trial"]))
-    if det.get("frames_near_gimbal_lock_fraction"):
-        lines.append("near a gimbal lock (frames marked undetermined): " + ", ".join(
-            f"{k} {100 * v:.0f} %" for k, v in det["frames_near_gimbal_lock_fraction"].items()))
+    status = (first.get("anatomical_angles") or {}).get("status") or {}
+    rules = (first.get("anatomical_angles") or {}).get("rules") or {}
+    for label in ("modelled", "not measured"):
+        these = [n for n, v in status.items() if v.endswith(label)]
+        if these:
+            rule = sorted({rules[n] for n in these if n in rules}) if label == "modelled" else []
+            lines.append(f"{label} (not a measurement; grey on the angles page): " + ", ".join(
+                n + (" in part" if status[n].startswith("partly") else "") for n in these)
+                + (f" (rule: {'; '.join(rule)})" if rule else ""))
     for f in first.get("labels") or []:
         lines.append(f"labels: {f.get('kind')} {', '.join(f.get('markers', []))}: {f.get('evidence', '')}"[:190])
     cal = first.get("calibration") or {}
@@ -298,23 +327,16 @@ class Truth:
     label: str = "simulated truth"
 
 
-def _not_measured(meta: dict, summaries: dict[str, dict] | None) -> set[str]:
-    held = set(meta.get("held_coordinates", []))
-    for s in (summaries or {}).values():
-        held |= set(s.get("not_measured") or [])
-        held |= set((s.get("determinacy") or {}).get("undetermined_for_trial") or [])
-    return held
-
-
-def truth_rmse_deg(recon: Reconstruction, truth: Truth, skip: set[str]) -> dict[str, float]:
-    """RMSE (deg) of every coordinate against the truth (interpolated onto the reconstruction's
-    times), coordinates in ``skip`` left out."""
+def truth_rmse_deg(angles: Angles, truth: Truth) -> dict[str, float]:
+    """RMSE (deg) of every anatomical angle measured in every frame against the truth
+    (interpolated onto the result's times); the other angles are left out."""
     out = {}
-    for i, name in enumerate(recon.coordinate_names):
-        if name in skip or name not in truth.names:
+    for j, name in enumerate(angles.names):
+        if name not in truth.names or not angles.measured(j).all():
             continue
-        ref = np.interp(recon.time_s, truth.time_s, truth.q_rad[:, truth.names.index(name)])
-        out[name] = float(np.degrees(np.sqrt(np.nanmean((recon.q_rad[:, i] - ref) ** 2))))
+        ref = np.interp(angles.time_s, truth.time_s, truth.q_rad[:, truth.names.index(name)])
+        d = np.angle(np.exp(1j * (angles.values_rad[:, j] - ref)))
+        out[name] = float(np.degrees(np.sqrt(np.nanmean(d ** 2))))
     return out
 
 
@@ -325,103 +347,47 @@ def _angles_layout() -> Figure:
 
 
 def angles_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[str, dict] | None = None,
-                truth: Truth | None = None) -> Figure:
-    """Joint coordinates against time: one colour per coordinate, PF solid and thick, LS dashed on
-    top (both visible where they agree), the truth dotted; coordinates the markers do not measure
-    in grey; legends outside the axes."""
-    names = recons[0].coordinate_names
+                truth: Truth | None = None, angles: dict[str, Angles] | None = None) -> Figure:
+    """The anatomical angles against time, one row per joint: one colour per angle, PF solid and
+    thick, LS dashed on top (both visible where they agree), the truth dotted; an angle that is not
+    a measurement (modelled, or not measured) in grey; legends outside the axes."""
+    angles = angles or {}
+    names = next(iter(angles.values())).names
     groups = [_members(names, prefix) for _, prefix in _JOINTS]
     fig, _ = _page_figure(("angles", tuple(bool(g) for g in groups)), _angles_layout)
     axes = fig.axes
-    held = _not_measured(meta, summaries)
-    palette = ("tab:blue", "tab:orange", "tab:green")
+    status = (next(iter((summaries or {}).values()), {}).get("anatomical_angles") or {}).get("status") or {}
+    palette = ("tab:blue", "tab:orange", "tab:green", "tab:purple")
     method_style = {"pf": ("-", 2.0, 0.75), "ls": ((0, (4, 2)), 1.1, 1.0)}
     for ax, (label, _), idx in zip(axes, _JOINTS, groups):
         handles = {}
         for k, i in enumerate(idx):
-            grey = names[i] in held
-            colour = "silver" if grey else palette[k % 3]
-            for r in recons:
-                ls_, lw, alpha = method_style.get(r.method, ("-", 1.0, 1.0))
-                (h,) = ax.plot(*_envelope(r.time_s, np.rad2deg(r.q_rad[:, i])), ls=ls_, lw=lw, alpha=alpha,
+            state = status.get(names[i], "measured")
+            grey = state != "measured"
+            colour = "silver" if grey else palette[k % len(palette)]
+            for method, a in angles.items():
+                ls_, lw, alpha = method_style.get(method, ("-", 1.0, 1.0))
+                (h,) = ax.plot(*_envelope(a.time_s, np.rad2deg(a.values_rad[:, i])), ls=ls_, lw=lw, alpha=alpha,
                                color=colour)
-                handles.setdefault(f"{names[i]}" + (" (not measured)" if grey else ""), h)
+                handles.setdefault(names[i] + (f" ({state})" if grey else ""), h)
             if truth is not None and names[i] in truth.names:
                 ax.plot(*_envelope(truth.time_s, np.rad2deg(truth.q_rad[:, truth.names.index(names[i])])), ls=":", lw=1.2,
                         color="black")
-        ax.set_ylabel(f"{label}\n(deg)", fontsize=8)
+        ax.set_ylabel(f"{label}\n(deg)", fontsize=7)
         ax.grid(alpha=0.3)
         ax.legend(list(handles.values()), list(handles), fontsize=6, loc="upper left", bbox_to_anchor=(1.005, 1.0),
                   frameon=False)
-        ax.tick_params(labelsize=7)
+        ax.tick_params(labelsize=6.5)
     axes[-1].set_xlabel("time (s)")
     key = [Line2D([], [], color="dimgrey", ls=method_style[r.method][0], lw=method_style[r.method][1],
                   label=r.method.upper()) for r in recons if r.method in method_style]
     if truth is not None:
         key.append(Line2D([], [], color="black", ls=":", lw=1.2, label=truth.label))
     fig.legend(handles=key, loc="upper right", ncol=len(key), fontsize=8, frameon=False)
-    fig.suptitle(_title(recons, meta) + "\njoint coordinates of the model (intrinsic sequences as in the model "
-                 "file; positive = the motion the name says)", fontsize=9)
-    fig.subplots_adjust(left=0.08, right=0.8, top=0.89, bottom=0.06, hspace=0.15)
+    fig.suptitle(_title(recons, meta) + "\nanatomical angles (ISB frames of Wu et al. 2005 from the model's landmarks, "
+                 "intrinsic sequences, raw signs; the definitions are in the CSV header)", fontsize=9)
+    fig.subplots_adjust(left=0.1, right=0.76, top=0.89, bottom=0.06, hspace=0.2)
     return fig
-
-
-_ISB_JOINTS = ("SC", "ST", "GH", "HT")
-
-
-def _isb_layout() -> Figure:
-    fig = _figure()
-    fig.subplots(len(_ISB_JOINTS), 3, sharex=True)
-    return fig
-
-
-def isb_page(recons: Sequence[Reconstruction], npz_paths: Sequence[Path], meta: dict,
-             summaries: dict[str, dict]) -> Figure | None:
-    """ISB shoulder angles (SC, ST, GH, HT) of every method from ``<trial>.<method>.isb.csv``, with
-    their sequences; joints the markers do not measure marked."""
-    tables = {}
-    for p, r in zip(npz_paths, recons):
-        path = Path(str(p)[: -len(".npz")] + ".isb.csv")
-        if path.is_file():
-            tables[r.method] = read_angles_csv(path)
-    if not tables:
-        return None
-    info = next((s.get("isb_angles") for s in summaries.values() if s.get("isb_angles")), {}) or {}
-    not_measured = set(info.get("not_measured", []))
-    joints = _ISB_JOINTS
-    drawn = tuple(any(sum(n.startswith(joint + "_") for n in names) >= 3 for _, names, _ in tables.values())
-                  for joint in joints)
-    fig, _ = _page_figure(("isb", drawn), _isb_layout)
-    axes = np.array(fig.axes, dtype=object).reshape(len(joints), 3)
-    method_style = {"pf": ("-", 2.0, 0.75, "black"), "ls": ((0, (4, 2)), 1.1, 1.0, "tab:red")}
-    for row, joint in enumerate(joints):
-        for col in range(3):
-            ax = axes[row, col]
-            for method, (t, names, ang) in tables.items():
-                cols = [i for i, n in enumerate(names) if n.startswith(joint + "_")]
-                if len(cols) < 3:
-                    continue
-                ls_, lw, alpha, colour = method_style.get(method, ("-", 1.0, 1.0, "grey"))
-                ax.plot(*_envelope(t, np.degrees(ang[:, cols[col]])), ls=ls_, lw=lw, alpha=alpha, color=colour,
-                        label=method.upper())
-            seq = (info.get("sequences") or {}).get(joint, "")
-            meaning = (info.get("meaning") or {}).get(joint, ["", "", ""])[col]
-            txt = f"{joint} {seq}: {meaning}"
-            if joint in not_measured:
-                txt += "\nNOT MEASURED by this marker set"
-                ax.set_facecolor("#f0f0f0")
-            ax.set_title(txt, fontsize=7)
-            ax.grid(alpha=0.3)
-            ax.tick_params(labelsize=6.5)
-            if col == 0:
-                ax.set_ylabel("deg", fontsize=7)
-    for ax in axes[-1]:
-        ax.set_xlabel("time (s)", fontsize=7)
-    axes[0, 0].legend(fontsize=7, frameon=False)
-    fig.suptitle(_title(recons, meta) + "\nISB shoulder angles (Wu et al. 2005 frames from the model's landmarks, "
-                 "intrinsic sequences; files <trial>.<method>.isb.csv)", fontsize=9)
-    fig.subplots_adjust(left=0.07, right=0.98, top=0.88, bottom=0.06, hspace=0.45, wspace=0.2)
-    return _pin_titles(fig)
 
 
 def _residuals_layout() -> Figure:
@@ -556,7 +522,8 @@ def calibration_page(meta: dict, summaries: dict[str, dict]) -> Figure | None:
 def build_trial_report(npz_paths: Sequence[str | Path], pdf_path: str | Path, /, *,
                        truth: Truth | None = None) -> tuple[Path, Path]:
     """Write ``pdf_path`` and a PNG of its first page (the verdict) beside it (``.png``), atomically.
-    ``truth``: the known joint coordinates of a simulated trial, compared on page 1 and drawn."""
+    ``truth``: the known anatomical angles of a simulated trial (exubio.angles.anatomical_table of
+    its true coordinates), compared on page 1 (the measured angles) and drawn."""
     npz_paths = [Path(p) for p in npz_paths]
     recons = [read_npz(p, points=False) for p in npz_paths]  # no page draws the 3-D points: long trials stay light
     meta = read_npz_metadata(npz_paths[0])
@@ -565,11 +532,11 @@ def build_trial_report(npz_paths: Sequence[str | Path], pdf_path: str | Path, /,
         summary = Path(str(p)[: -len(".npz")] + ".summary.json")
         if summary.is_file():
             summaries[r.method] = json.loads(summary.read_text(encoding="utf-8"))
-    pages = [verdict_page(recons, meta, summaries, truth=truth), angles_page(recons, meta, summaries, truth),
-             residuals_page(recons, meta, summaries)]
-    isb = isb_page(recons, npz_paths, meta, summaries)
-    if isb is not None:
-        pages.insert(2, isb)
+    angles = {r.method: a for r, a in ((r, read_angles(p)) for p, r in zip(npz_paths, recons)) if a is not None}
+    pages = [verdict_page(recons, meta, summaries, truth=truth, angles=angles)]
+    if angles:
+        pages.append(angles_page(recons, meta, summaries, truth, angles))
+    pages.append(residuals_page(recons, meta, summaries))
     cal_page = calibration_page(meta, summaries)
     if cal_page is not None:
         pages.append(cal_page)
