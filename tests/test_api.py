@@ -30,20 +30,27 @@ def test_readme_api_example_runs(tmp_path, monkeypatch, capsys):
     exec(compile(_example(), "README.md", "exec"), scope)
     df, rec, paths = scope["df"], scope["rec"], scope["paths"]
     assert isinstance(rec, exubio.Reconstruction) and len(df) == rec.n_frames == 200
-    np.testing.assert_allclose(df["gh_abduction_deg"].to_numpy(), np.degrees(rec.q_rad[:, rec.coordinate_names.index(
-        "gh_abduction")]))
-    assert {"csv", "mot", "npz", "isb"} <= set(paths) and all(Path(p).is_file() for p in paths.values())
-    # the truth the simulation wrote: the API's reconstruction recovers the measured coordinates
+    from exubio.angles import anatomical_table
     from exubio.io.results import read_angles_csv
 
-    _, names, q_true = read_angles_csv(tmp_path / "trial.truth.csv")
-    i = names.index("gh_abduction")
-    assert np.degrees(np.sqrt(np.mean((rec.q_rad[:, i] - q_true[:, i]) ** 2))) < 2.0
+    names, ang = anatomical_table(scope["model"], rec.q_rad)
+    np.testing.assert_allclose(df["HT_X_elevation_deg"].to_numpy(), np.degrees(ang[:, names.index("HT_X_elevation")]))
+    assert set(df["SC_Z_posterior_rotation_status"]) == {"not measured"}
+    assert set(df["HT_X_elevation_status"]) == {"measured"}
+    assert {"csv", "mot", "npz", "summary"} <= set(paths) and all(Path(p).is_file() for p in paths.values())
+    # the files the API wrote carry the same angles as the DataFrame
+    _, csv_names, csv_ang = read_angles_csv(paths["csv"])
+    assert np.abs(np.degrees(csv_ang) - df[list(csv_names)].to_numpy()).max() < 1e-5
+    # the truth the simulation wrote: the API's reconstruction recovers the measured angles
+    _, _, q_true = read_angles_csv(tmp_path / "trial.truth.csv")
+    _, truth = anatomical_table(scope["model"], q_true)
+    i = names.index("HT_X_elevation")
+    assert np.degrees(np.sqrt(np.mean((ang[:, i] - truth[:, i]) ** 2))) < 2.0
 
 
 def test_api_names_are_exported():
     for name in ("read_trial", "load_model", "load_protocol", "calibrate", "reconstruct", "isb_angles",
-                 "to_dataframe", "write_results", "Reconstruction"):
+                 "angle_status", "to_dataframe", "write_results", "Reconstruction"):
         assert name in exubio.__all__ and getattr(exubio, name) is not None
     with pytest.raises(AttributeError):
         exubio.no_such_name  # noqa: B018

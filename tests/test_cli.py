@@ -29,13 +29,17 @@ def c3d(tmp_path, trial):
 def test_reconstruct_writes_all_outputs_with_consistent_content(tmp_path, c3d, trial, capsys):
     out = tmp_path / "out"
     assert main(["-q", "reconstruct", str(c3d), "--method", "ls", "--out", str(out)]) == 0
-    t, names, q = read_angles_csv(out / "abd.ls.csv")
-    assert names == load_model().coordinate_names
+    from exubio.angles import ANATOMICAL_COLUMNS, anatomical_table
+
+    t, names, ang = read_angles_csv(out / "abd.ls.csv")
+    assert names == tuple(f"{n}_deg" for n in ANATOMICAL_COLUMNS)  # the anatomical angles, unit in the name
     assert np.allclose(t, trial.time_s)
-    t2, names2, q2 = read_mot(out / "abd.ls.mot")
-    assert names2 == names and np.abs(q2 - q).max() < 1e-7
+    t2, names2, ang2 = read_mot(out / "abd.ls.mot")
+    assert names2 == ANATOMICAL_COLUMNS and np.abs(ang2 - ang).max() < 1e-7
     recon = read_npz(out / "abd.ls.npz")
-    assert np.abs(np.rad2deg(recon.q_rad) - np.rad2deg(q)).max() < 1e-5  # CSV holds 6 decimals of degrees
+    assert recon.coordinate_names == load_model().coordinate_names  # the model coordinates stay in the .npz
+    _, ref = anatomical_table(load_model(), recon.q_rad)
+    assert np.abs(np.rad2deg(ref - ang)).max() < 1e-5  # CSV holds 6 decimals of degrees
     summ = json.loads((out / "abd.ls.summary.json").read_text(encoding="utf-8"))
     for key in ("method", "n_frames", "wall_time_s", "ms_per_frame", "residual_mm", "constraint_max_abs"):
         assert key in summ
@@ -51,14 +55,14 @@ def test_reconstruct_writes_all_outputs_with_consistent_content(tmp_path, c3d, t
 def test_existing_result_is_refused_and_left_intact(tmp_path, c3d, capsys):
     out = tmp_path / "out"
     out.mkdir()
-    earlier = out / "abd.ls.csv"
+    earlier = out / "abd.ls.csv"  # any file of the result set
     earlier.write_text("earlier result\n", encoding="utf-8")
     assert main(["-q", "reconstruct", str(c3d), "--method", "ls", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert "abd.ls.csv" in err and "--overwrite" in err
     assert earlier.read_text(encoding="utf-8") == "earlier result\n"
     assert main(["-q", "reconstruct", str(c3d), "--method", "ls", "--out", str(out), "--overwrite"]) == 0
-    assert earlier.read_text(encoding="utf-8").startswith("time_s,")
+    assert earlier.read_text(encoding="utf-8").startswith("# exubio anatomical joint angles")
 
 
 def test_missing_trial_file(tmp_path, capsys):
@@ -185,7 +189,7 @@ def test_a_study_of_several_trials_runs_and_reports_each(tmp_path, trial, jobs, 
     assert "missing.c3d" in captured.err and "2 of 3 trials reconstructed" in captured.out
     for stem in ("s1", "s2"):
         _, _, q = read_angles_csv(out / f"{stem}.ls.csv")
-        assert q.shape == (trial.time_s.size, 13)
+        assert q.shape == (trial.time_s.size, 22)  # the 22 anatomical angles
 
 
 @pytest.mark.parametrize("edit,key", [
@@ -233,25 +237,31 @@ def test_version_quiet_after_the_subcommand_and_simulate_makes_its_folder(tmp_pa
     assert main(["reconstruct", str(out), "--method", "ls", "--out", str(tmp_path / "o"), "--no-report", "-q"]) == 0
 
 
-def test_isb_angles_file_per_method_with_what_is_measured(tmp_path, c3d):
-    """<trial>.<method>.isb.csv holds exubio.angles' ISB angles of the written q (degrees); with the
-    clavicle's axial rotation held, SC and AC are named as not measured, ST, GH and HT as measured."""
-    from exubio.angles import isb_table
+def test_angle_status_is_the_same_in_every_file(tmp_path, c3d):
+    """Each anatomical angle's status (measured, modelled, not measured) is the same in the CSV
+    header, the .mot header, summary.json and the .npz; with the shipped protocol the clavicle's
+    axial rotation is solved but named not measured, its SC elevation and protraction measured."""
+    from exubio.angles import ANATOMICAL_COLUMNS
+    from exubio.io.results import read_npz_arrays
+    from exubio.observability import AngleStatus
 
-    out = tmp_path / "isb"
+    out = tmp_path / "st"
     assert main(["-q", "reconstruct", str(c3d), "--method", "ls", "--out", str(out), "--no-report"]) == 0
-    t, names, ang = read_angles_csv(out / "abd.ls.isb.csv")
-    recon = read_npz(out / "abd.ls.npz")
-    ref_names, ref = isb_table(load_model(), recon.q_rad)
-    assert names == ref_names and np.abs(np.degrees(ang - ref)).max() < 1e-5
-    summ = json.loads((out / "abd.ls.summary.json").read_text(encoding="utf-8"))["isb_angles"]
-    assert summ["measured"] == ["ST", "GH", "HT"] and summ["not_measured"] == ["SC", "AC"]
-    assert summ["sequences"]["GH"] == "X-Z'-Y''" and summ["units"] == "deg"
-    # the file says what it holds: units, the sequence of every joint, what is not measured
-    head = [ln for ln in (out / "abd.ls.isb.csv").read_text(encoding="utf-8").splitlines() if ln.startswith("#")]
-    assert any("degrees" in ln for ln in head)
-    assert any(ln.startswith("# GH: sequence X-Z'-Y''") for ln in head)
-    assert any("NOT MEASURED" in ln and "SC, AC" in ln for ln in head)
+    summ = json.loads((out / "abd.ls.summary.json").read_text(encoding="utf-8"))["anatomical_angles"]
+    status = summ["status"]
+    assert list(status) == list(ANATOMICAL_COLUMNS)
+    assert status["SC_Z_posterior_rotation"] == "not measured"
+    assert status["SC_X_elevation"] == status["SC_Y_protraction"] == status["ST_X_upward_rotation"] == "measured"
+    assert summ["protocol_can"]["SC_Z_posterior_rotation"] == "not measured"
+    head = [ln[2:] for ln in (out / "abd.ls.csv").read_text(encoding="utf-8").splitlines() if ln.startswith("# status ")]
+    assert {h.split(":")[0][len("status "):]: h.split(": ", 1)[1] for h in head} == status
+    mot = (out / "abd.ls.mot").read_text(encoding="utf-8").split("endheader")[0]
+    for name, value in status.items():
+        assert f"exubio_status_{name}={value}\n" in mot
+    arrays = read_npz_arrays(out / "abd.ls.npz", ("angle_status", "angle_names"))
+    assert tuple(arrays["angle_names"]) == ANATOMICAL_COLUMNS
+    for j, name in enumerate(ANATOMICAL_COLUMNS):
+        assert {AngleStatus(int(k)).label for k in np.unique(arrays["angle_status"][:, j])} == {status[name]}
 
 
 def test_functional_and_further_statics_need_a_static(tmp_path, trial, capsys):

@@ -324,9 +324,10 @@ def test_a_limit_leaves_the_other_coordinates_at_the_minimum_of_the_potential(ki
                     constraints=[{"type": "eq", "fun": lambda x: kin.g(full(x)), "jac": lambda x: kin.G(full(x))[:, free]}])
     assert best.success
     arm = np.arange(6, 13)  # gh, elbow, pronation, wrist
-    # 2e-3 deg: after 17.5 s at rest the girdle's slowest mode (time constant ~2 s with the published
-    # girdle geometry, weakly held by the springs) still creeps by about 1e-3 deg
-    assert np.degrees(np.abs(wrap(q - full(best.x))[arm])).max() < 2e-3
+    # 3e-3 deg: after 17.5 s at rest the girdle's slowest mode (time constant ~2 s with the published
+    # girdle geometry, weakly held by the springs) still creeps by 1e-3-2.5e-3 deg (2.5e-3 with the
+    # SC and AC joints on the ISB frames, where it reaches the wrist's deviation)
+    assert np.degrees(np.abs(wrap(q - full(best.x))[arm])).max() < 3e-3
 
 
 def test_limits_that_cannot_act_build_no_element_and_bad_limits_are_rejected(kin, springs, motion):

@@ -57,8 +57,8 @@ def test_exudyn_joints_with_a_held_last_coordinate_match_the_numpy_kinematics(se
 def test_hold_names_must_be_model_coordinates(tmp_path, setup):
     model, _ = setup
     text = DEFAULT_PROTOCOL.read_text(encoding="utf-8")
-    assert "\nhold: [sc_posterior_rotation]\n" in text  # the shipped protocol holds it (see the file)
-    text = text.replace("\nhold: [sc_posterior_rotation]\n", "\nhold: [sc_posterior_rotaton]\n", 1)
+    assert "\n# hold: none" in text  # the shipped protocol holds nothing (see the file)
+    text = text.replace("\n# hold: none", "\nhold: [sc_posterior_rotaton]\n# hold: none", 1)
     bad = tmp_path / "p.yaml"
     bad.write_text(text, encoding="utf-8")
     with pytest.raises(ProtocolError, match="sc_posterior_rotaton.*sc_posterior_rotation"):

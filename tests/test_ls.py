@@ -45,30 +45,28 @@ def test_noise_free_ls_recovers_the_truth(model_protocol, motion):
 
 
 @pytest.mark.parametrize("motion", list(Motion))
-def test_shipped_protocol_holds_the_clavicle_axial_rotation_and_keeps_the_scapula_exact(motion):
-    """With sc_posterior_rotation held at 0, the markers still see the clavicle's true axial rotation
-    a little (CLAV_AC lies ~15 mm off its axis), so the held rotation biases the clavicle's other
-    two angles (up to ~5 deg on these simulated trials, whose clavicle rotates by Ludewig's
-    rhythm) and the AC angles absorb the rest; the scapula's orientation in the thorax, GH, elbow,
-    forearm and wrist within 0.25 deg of the truth on noise-free data, the
-    scapula orientation within 0.5 deg (measured 0.06-0.44)."""
+def test_holding_the_clavicle_axial_rotation_leaks_into_the_girdle(motion):
+    """Why the shipped protocol no longer holds sc_posterior_rotation: with the SC joint on the
+    clavicle's ISB frame the held axis is the clavicle's long axis, but the two clavicle markers lie
+    ~15 mm off it, so a held rotation the trial has (Ludewig's rhythm rotates the clavicle by up to
+    ~30 deg) leaves residuals the fit spreads over the girdle: noise-free, the measured angles are
+    off by up to 0.35-0.62 deg with the hold (0.05 in SIER, whose clavicle barely moves) and exact
+    without it."""
+    from exubio.angles import anatomical_table
+
     model, protocol = load_model_and_protocol()
-    assert protocol.held_coordinates == ("sc_posterior_rotation",)
+    assert protocol.held_coordinates == ()
+    held = replace(protocol, held_coordinates=("sc_posterior_rotation",))
     trial = simulate_trial(model, motion, duration_s=5.0, rate_hz=50.0)
-    recon = reconstruct_ls(model, protocol, _exact_targets(model, protocol, trial))
-    names = model.coordinate_names
-    held = names.index("sc_posterior_rotation")
-    assert np.abs(recon.q_rad[:, held]).max() == 0.0
-    rmse = np.sqrt(np.mean(np.rad2deg(recon.q_rad - trial.q_true) ** 2, axis=0))
-    others = [j for j, n in enumerate(names) if not n.startswith(("ac_", "sc_"))]
-    assert rmse[others].max() < 0.25, dict(zip(names, rmse.round(4)))
-    kin = Kinematics(model)
-    i = model.segment_index("scapula")
-    R_rec, R_true = kin.frames(recon.q_rad).R[:, i], kin.frames(trial.q_true).R[:, i]
-    cos = (np.einsum("nji,nji->n", R_rec, R_true) - 1.0) / 2.0
-    err = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-    assert err.max() < 0.5
-    assert np.abs(recon.constraint).max() < 1e-9
+    names, truth = anatomical_table(model, trial.q_true)
+    measured = [j for j, n in enumerate(names) if n.startswith(("SC_X", "SC_Y", "ST_", "GH_phadke", "HT_X"))]
+    worst = {}
+    for key, prot in (("free", protocol), ("hold", held)):
+        recon = reconstruct_ls(model, prot, _exact_targets(model, prot, trial))
+        _, ang = anatomical_table(model, recon.q_rad)
+        worst[key] = float(np.degrees(np.abs(np.angle(np.exp(1j * (ang - truth)))))[:, measured].max())
+    assert worst["free"] < 1e-3
+    assert worst["hold"] > 0.02, worst  # the leak the hold costs: measured 0.35-0.62 deg (SIER 0.05)
 
 
 @pytest.mark.parametrize("motion", list(Motion))

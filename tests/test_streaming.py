@@ -103,7 +103,7 @@ def test_pipeline_files_do_not_depend_on_the_chunk_size(tmp_path):
     small = reconstruct_file(EXAMPLE, tmp_path / "small", methods=["pf", "ls"], chunk_frames=60)
     assert all(r.model_points_m is None for r, _, _ in whole + small)  # left on disk, not in memory
     for (_, pa, sa), (_, pb, sb) in zip(whole, small):
-        for kind in ("csv", "mot", "isb"):
+        for kind in ("csv", "mot"):
             assert filecmp.cmp(pa[kind], pb[kind], shallow=False), kind
         a, b = read_npz(pa["npz"]), read_npz(pb["npz"])
         np.testing.assert_array_equal(a.q_rad, b.q_rad)

@@ -67,8 +67,9 @@ def test_a_page_function_hands_out_a_figure_no_report_will_draw_into(result_sets
 
     npz = result_sets["both"]
     recons = [read_npz(p) for p in npz]
-    first = tr.angles_page(recons, read_npz_metadata(npz[0]), {})
-    second = tr.angles_page(recons, read_npz_metadata(npz[0]), {})
+    angles = {r.method: tr.read_angles(p) for p, r in zip(npz, recons)}
+    first = tr.angles_page(recons, read_npz_metadata(npz[0]), {}, angles=angles)
+    second = tr.angles_page(recons, read_npz_metadata(npz[0]), {}, angles=angles)
     assert first is not second and all(first is not f for figs in tr._FREE_PAGES.values() for f in figs)
 
 
