@@ -139,6 +139,24 @@ def angle_status_of_protocol(model: Model, protocol: Protocol, /, *, kin: Kinema
     return det.trial_status()
 
 
+def coordinates_not_measured_by_protocol(model: Model, protocol: Protocol, /, *,
+                                         kin: Kinematics | None = None) -> tuple[str, ...]:
+    """The model coordinates the protocol's markers leave undetermined (noise gain above the
+    threshold) in most reference postures (exubio.simulate.reference_postures), known before any
+    trial: e.g. the clavicle's axial rotation seen by two markers near its axis."""
+    from exubio.simulate import reference_postures
+
+    kin = kin or Kinematics(model)
+    try:
+        q = reference_postures(model)
+    except Exception:  # noqa: BLE001 - as angle_status_of_protocol
+        q = np.zeros((1, model.n_coordinates))
+    present = np.tile([not m.optional for m in protocol.markers], (q.shape[0], 1))
+    det = determinacy(kin, tracked_points(kin, protocol), q, present, protocol.weights,
+                      excluded=not_solved_mask(model, protocol, kin))
+    return tuple(det.trial_undetermined())
+
+
 def agreement_on_determined(a: Reconstruction, da: Determinacy, b: Reconstruction, db: Determinacy,
                             not_solved: np.ndarray) -> dict[str, float]:
     d = np.degrees(a.q_rad - b.q_rad)
@@ -160,7 +178,11 @@ about 10x cheaper at 200 Hz."""
 
 def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recons: Sequence[Reconstruction], /, *,
                  label_findings: Sequence = (), calibration: Mapping[str, Any] | None = None,
-                 determinacy_every: int | None = None) -> TrialAssessment:
+                 determinacy_every: int | None = None, session: Sequence = (),
+                 static_name: str = "") -> TrialAssessment:
+    """Assess the reconstructions ``recons`` of one trial (module docstring). ``session``: the
+    segments whose markers look placed anew since the static (exubio.session_check.placed_anew),
+    named as a check on the static; ``static_name``: that static trial."""
     kin = Kinematics(model)
     if determinacy_every is None:
         dt = float(np.median(np.diff(targets.time_s))) if targets.n_frames > 1 else 1.0
@@ -175,6 +197,7 @@ def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recon
     angles = {r.method: angle_determinacy(kin, points, r.q_rad, targets.present, protocol.weights, held=held,
                                           locked=excluded & ~held, every=determinacy_every) for r in recons}
     structural = angle_status_of_protocol(model, protocol, kin=kin)
+    unmeasurable = coordinates_not_measured_by_protocol(model, protocol, kin=kin)
     lims = {r.method: limit_report(r.q_rad, model.coordinate_ranges_rad, names, exclude=not_solved,
                                    ignore=dets[r.method].undetermined & dets[r.method].near_gimbal_lock)
             for r in recons}
@@ -186,12 +209,13 @@ def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recon
     report = (calibration or {}).get("report")
     static_labels = [f for f in (calibration or {}).get("labels", []) if not _same_finding(f, label_findings)]
     common = (Q.label_reasons(label_findings) + Q.label_reasons(static_labels, prefix="static trial: ")
-              + Q.calibration_reasons(report, scale_bounds=SCALE_BOUNDS, off_segment=off))
+              + Q.calibration_reasons(report, scale_bounds=SCALE_BOUNDS, off_segment=off, not_measured=unmeasurable)
+              + Q.session_reasons(session, static_name))
     quality = {}
     for r in recons:
         reasons = list(common)
         reasons += Q.residual_reasons(residual_statistics(r), per_frame_residuals_mm(r)[0])
-        reasons += Q.limit_reasons([lim.to_dict() for lim in lims[r.method]], r.n_frames)
+        reasons += Q.limit_reasons([lim.to_dict() for lim in lims[r.method]], r.n_frames, not_measured=unmeasurable)
         reasons += Q.angle_reasons(angles[r.method].trial_status(), structural,
                                    angles[r.method].fraction(AngleStatus.MEASURED), UNDETERMINED_TRIAL_FRACTION)
         status = np.asarray(r.status)

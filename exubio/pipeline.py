@@ -250,8 +250,16 @@ def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, ste
         recons.append(sink.reconstruction(timings_s=timings, info=info))
         sinks.append(sink)
     findings = trial_label_findings(inputs.model, inputs.protocol, inputs.targets, reference=static_reference)
+    session = ()
+    if static_reference is not None:  # does the static belong to this trial's session?
+        from exubio.labels import pair_distances
+        from exubio.session_check import placed_anew, static_consistency
+
+        trial_pd = pair_distances(inputs.targets.positions_m, inputs.targets.marker_names)
+        session = tuple(placed_anew(static_consistency(static_reference, trial_pd, inputs.protocol)))
     assessment = assess_trial(inputs.model, inputs.protocol, inputs.targets, recons, label_findings=findings,
-                              calibration=calibration)
+                              calibration=calibration, session=session,
+                              static_name=getattr(static_reference, "source", "") or "")
     out = []
     for method, stem, recon, sink in zip(methods, stems, recons, sinks):
         meta = run_metadata(inputs, trial_path, method)

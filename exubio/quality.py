@@ -147,11 +147,17 @@ def agreement_reasons(agreement_deg: Mapping[str, float] | None, undetermined: S
     return out
 
 
-def limit_reasons(limits: Sequence[Mapping[str, Any]], n_frames: int) -> list[Reason]:
+def limit_reasons(limits: Sequence[Mapping[str, Any]], n_frames: int, *, not_measured: Sequence[str] = ()) -> list[Reason]:
+    """``not_measured``: coordinates the marker set cannot determine: at a limit, the limit is what
+    holds them (a note naming it), not markers asking for an implausible posture."""
     out = []
     for lim in limits:
-        lvl = "fail" if lim["max_beyond_deg"] > LIMIT_BEYOND_DEG else "check"
         lo, hi = lim["range_deg"]
+        if lim["coordinate"] in not_measured:
+            out.append(Reason("limit", "note", f"{lim['coordinate']} (not measured by this marker set) rests on its "
+                              f"range limit [{lo:.0f}, {hi:.0f}] deg in {lim['frames_at_limit']} of {n_frames} frames"))
+            continue
+        lvl = "fail" if lim["max_beyond_deg"] > LIMIT_BEYOND_DEG else "check"
         out.append(Reason("limit", lvl, f"{lim['coordinate']} at its range limit [{lo:.0f}, {hi:.0f}] deg in "
                           f"{lim['frames_at_limit']} of {n_frames} frames (first: frame {lim['first_frame']}; "
                           f"at most {lim['max_beyond_deg']:.1f} deg beyond)"))
@@ -175,6 +181,17 @@ def determinacy_reasons(det: Mapping[str, Any]) -> list[Reason]:
             out.append(Reason("undetermined_frames", "note", f"{name}: undetermined in {100 * frac:.0f} % of the frames "
                               f"(marked)"))
     return out
+
+
+def session_reasons(shifts: Sequence[Any], static_name: str) -> list[Reason]:
+    """Segments whose markers look placed anew between the static and this trial
+    (exubio.session_check): the static may be of another session: a check with the evidence."""
+    if not shifts:
+        return []
+    what = "; ".join(s.describe() for s in shifts)
+    return [Reason("session", "check", f"the static trial {static_name or ''} may not belong to this trial's session: "
+                   f"the markers look placed anew on {len(shifts)} segments ({what}); calibrate on this session's "
+                   f"static, or check the session's file list")]
 
 
 def angle_reasons(status: Mapping[str, str], structural: Mapping[str, str], measured_fraction: Mapping[str, float],
@@ -241,12 +258,19 @@ def label_reasons(findings: Iterable[Any], *, prefix: str = "") -> list[Reason]:
 
 
 def calibration_reasons(cal: Mapping[str, Any] | None, *, scale_bounds: tuple[float, float],
-                        off_segment: Mapping[str, float] | None = None) -> list[Reason]:
+                        off_segment: Mapping[str, float] | None = None,
+                        not_measured: Sequence[str] = ()) -> list[Reason]:
+    """``not_measured``: coordinates the marker set cannot determine (exubio.assess): their range
+    limit holds them, which is a note, not an implausible posture the markers ask for."""
     if not cal:
         return []
     out = []
     src = cal.get("source") or "the static trial"
     for name, value in (cal.get("static_pose_at_limit_deg") or {}).items():
+        if name in not_measured:
+            out.append(Reason("calibration_pose", "note", f"calibration ({src}): the static pose leaves {name}, which "
+                              f"this marker set does not measure, at its range limit ({value:.1f} deg)"))
+            continue
         out.append(Reason("calibration_pose", "check", f"calibration ({src}): the static pose puts {name} at its "
                           f"range limit ({value:.1f} deg): the markers ask for an implausible posture"))
     for seg, s in (cal.get("scale_factors") or {}).items():
