@@ -185,6 +185,8 @@ def _reconstruct_arms(args: argparse.Namespace, protocols: list[str]) -> int:
 
 
 def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
+    from exubio.io.trial import read_trial
+    from exubio.protocol import parse_relabel, relabel_trajectories
     from exubio.session import calibrate_session
 
     model_path, extra = args.model, {}
@@ -203,8 +205,15 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
             raise InputError(f"{t} and {other} have the same file name: their results in {args.out} would be mixed; "
                              f"reconstruct them into different --out folders")
     _check_output_folder(Path(args.out), args.out)
+    relabel = parse_relabel(args.relabel, option="--relabel")
+    static_relabel = parse_relabel(args.static_relabel, option="--static-relabel")
+    if static_relabel and not args.static:
+        raise InputError(f"--static-relabel {args.static_relabel}: relabels the static trial; give --static STATIC too")
     if args.static:
-        model_file, report, calibration = calibrate_session(args.static, args.out, Path(args.static).stem,
+        static = args.static
+        if static_relabel:
+            static = relabel_trajectories(read_trial(args.static), static_relabel, option="--static-relabel")
+        model_file, report, calibration = calibrate_session(static, args.out, Path(args.static).stem,
                                                            protocol_path=args.protocol, model_path=args.model,
                                                            body_mass_kg=args.body_mass, frames_text=args.static_frames,
                                                            overwrite=args.overwrite, functional_path=args.functional,
@@ -225,7 +234,7 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
                      body_mass_kg=args.body_mass, overwrite=args.overwrite,
                      options={"pf": {"gravity": args.gravity}} if "pf" in methods else {},
                      calibration=extra.get("calibration"), static_frames=None if args.static else args.static_frames,
-                     report=not args.no_report) for t in args.trials]
+                     report=not args.no_report, relabel=relabel) for t in args.trials]
     if len(jobs) == 1 and not args.scheduler:  # errors propagate to main(): one message, one exit code
         result = run_job(jobs[0], progress_factory=_progress_factory(not args.quiet))
         _print_trial(result, args.quiet)
@@ -417,6 +426,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--overwrite", action="store_true", help="replace earlier results in --out")
     r.add_argument("--no-report", action="store_true", help="skip the per-trial PDF/PNG report")
     r.add_argument("--static", help="static trial: calibrate the model to the subject first (once, for every trial)")
+    r.add_argument("--relabel", metavar="A=B,...", help="read these labels of the task trial(s) as others, for these "
+                   "trials only (not the static): e.g. RADIUS=ULNA,ULNA=RADIUS undoes a swap; a permutation, never a merge")
+    r.add_argument("--static-relabel", metavar="A=B,...", help="the same for the --static trial only (a protocol's "
+                   "relabel: applies to every trial of the session, the static included)")
     r.add_argument("--also-static", metavar="TRIAL", action="append", help="a further static pose of the session (e.g. arm raised; repeatable): the thorax ellipsoid is "
                         "fitted through the scapula contact points of every static pose")
     r.add_argument("--functional", metavar="TRIAL", help="movement trial of the same session (arm moved in several planes): glenohumeral centre by SCoRE "

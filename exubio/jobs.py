@@ -18,6 +18,7 @@ from typing import Any, Callable, Mapping
 
 from exubio.io import results
 from exubio.io.trial import read_trial
+from exubio.protocol import relabel_trajectories
 from exubio.pipeline import Method, reconstruct_file
 
 
@@ -29,7 +30,9 @@ class TrialJob:
     options object (or a dict of its fields, turned into the object here); static_frames: calibrate
     on these frames of the trial itself ("0:50"); calibration: the session's calibration summary
     (exubio.session.calibrate_session), which goes into every summary and verdict;
-    static_reference: the session static's pair distances the label checks compare with."""
+    static_reference: the session static's pair distances the label checks compare with;
+    relabel: this trial's labels read as other labels ({file label: read as}), for this trial only
+    (exubio.protocol.relabel_trajectories), before the protocol's own relabel."""
 
     trial: Path
     out_dir: Path
@@ -43,6 +46,7 @@ class TrialJob:
     overwrite: bool = False
     calibration: Mapping[str, Any] | None = None
     static_reference: Any = None
+    relabel: Mapping[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         from exubio.methods import method_spec
@@ -100,10 +104,12 @@ def run_job(job: TrialJob, /, *, progress_factory: Callable[[str, int], Callable
     stem = job.trial.stem
     if job.report:
         results.prepare_output_dir(job.out_dir, [f"{stem}.report.pdf", f"{stem}.report.png"], overwrite=job.overwrite)
-    trajectories = None  # read here only when the trial is calibrated on its own frames: then read once
+    trajectories = None  # read here only when it is relabelled or calibrated on its own frames: then read once
     model, calibration, summary_cal = job.model, None, job.calibration
+    if job.relabel:
+        trajectories = relabel_trajectories(read_trial(job.trial), job.relabel)
     if job.static_frames:
-        trajectories = read_trial(job.trial)
+        trajectories = trajectories if trajectories is not None else read_trial(job.trial)
         model, report, summary_cal = calibrate_session(trajectories, job.out_dir, stem, protocol_path=job.protocol,
                                                        model_path=job.model, body_mass_kg=job.body_mass_kg,
                                                        frames_text=job.static_frames, overwrite=job.overwrite,

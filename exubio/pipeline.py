@@ -99,6 +99,9 @@ def load_inputs(trial_path: str | Path | Trajectories, /, *, model_path: str | P
                                                   body_mass_kg=body_mass_kg)
     else:
         protocol = protocol_for_model(model, protocol_path)
+    from exubio.thorax_check import check_thorax_labels
+
+    check_thorax_labels(traj, protocol, model)  # before the thorax frame is built from them
     targets = prepare_targets(traj, protocol)
     return TrialInputs(TrialInfo.of(traj), model, protocol, targets)
 

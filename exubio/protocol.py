@@ -6,6 +6,7 @@ the top of ``protocols/upper_limb_21.yaml``.
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 from dataclasses import dataclass
@@ -21,7 +22,7 @@ from types import MappingProxyType
 from exubio.config import _kind, check_keys, finite_float, read_yaml
 from exubio.errors import InputError, ProtocolError
 from exubio.resources import shipped_file
-from exubio.types import MarkerSpec, Protocol, ThoraxFrameSpec
+from exubio.types import MarkerSpec, Protocol, ThoraxFrameSpec, Trajectories
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -585,6 +586,43 @@ def resolve_labels(protocol: Protocol, labels: Sequence[str], /, *, source: str 
     used = set(owner) | set(thorax.values())
     unused = tuple(lab for i, lab in enumerate(trial_labels) if i not in used)
     return LabelMatch(columns=columns, thorax_columns=thorax, unused=unused)
+
+
+def parse_relabel(text: str | None, /, *, option: str = "--relabel") -> dict[str, str]:
+    """``A=B,C=D`` (read trial label A as B, ...) -> {A: B, C: D}; an InputError names the option and
+    the item when an item is not LABEL=LABEL or a label is read twice."""
+    out: dict[str, str] = {}
+    for item in (text or "").split(","):
+        item = item.strip()
+        if not item:
+            continue
+        old, sep, new = item.partition("=")
+        old, new = old.strip(), new.strip()
+        if not sep or not old or not new:
+            raise InputError(f"{option} {text}: '{item}' is not LABEL=LABEL (read trial label LABEL as LABEL), "
+                             f"e.g. {option} RADIUS=ULNA,ULNA=RADIUS")
+        if old in out:
+            raise InputError(f"{option} {text}: '{old}' is given twice")
+        out[old] = new
+    return out
+
+
+def relabel_trajectories(traj: Trajectories, relabel: Mapping[str, str], /, *, option: str = "--relabel") -> Trajectories:
+    """The trial with its labels read as ``relabel`` says (a permutation: no two labels may end as
+    one; a label the trial lacks is an InputError naming it and the file)."""
+    if not relabel:
+        return traj
+    where = traj.source or "trial"
+    missing = sorted(set(relabel) - set(traj.labels))
+    if missing:
+        raise InputError(f"{option}: {where} has no label {missing}; it has {list(traj.labels)}")
+    labels = tuple(relabel.get(lab, lab) for lab in traj.labels)
+    if len(set(labels)) != len(labels):
+        dup = sorted({lab for lab in labels if labels.count(lab) > 1})
+        raise InputError(f"{option}: {where} would have two markers labelled {dup}; a relabel must be a permutation "
+                         f"of the trial's labels (e.g. A=B,B=A)")
+    log.info("%s: labels read as %s says: %s", where, option, ", ".join(f"{a}->{b}" for a, b in relabel.items()))
+    return dataclasses.replace(traj, labels=labels)
 
 
 def _relabelled(protocol: Protocol, labels: tuple[str, ...], where: str) -> tuple[str, ...]:
