@@ -179,10 +179,11 @@ about 10x cheaper at 200 Hz."""
 def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recons: Sequence[Reconstruction], /, *,
                  label_findings: Sequence = (), calibration: Mapping[str, Any] | None = None,
                  determinacy_every: int | None = None, session: Sequence = (),
-                 static_name: str = "") -> TrialAssessment:
+                 static_name: str = "", dropped: Sequence[str] = ()) -> TrialAssessment:
     """Assess the reconstructions ``recons`` of one trial (module docstring). ``session``: the
     segments whose markers look placed anew since the static (exubio.session_check.placed_anew),
-    named as a check on the static; ``static_name``: that static trial."""
+    named as a check on the static; ``static_name``: that static trial; ``dropped``: protocol markers
+    the trial lacks, left out (exubio.missing_markers): a check naming them."""
     kin = Kinematics(model)
     if determinacy_every is None:
         dt = float(np.median(np.diff(targets.time_s))) if targets.n_frames > 1 else 1.0
@@ -209,8 +210,10 @@ def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recon
     report = (calibration or {}).get("report")
     static_labels = [f for f in (calibration or {}).get("labels", []) if not _same_finding(f, label_findings)]
     common = (Q.label_reasons(label_findings) + Q.label_reasons(static_labels, prefix="static trial: ")
-              + Q.calibration_reasons(report, scale_bounds=SCALE_BOUNDS, off_segment=off, not_measured=unmeasurable)
-              + Q.session_reasons(session, static_name))
+              + Q.calibration_reasons(report, scale_bounds=SCALE_BOUNDS, off_segment=off, not_measured=unmeasurable,
+                                      accepted_offsets_mm={m.name: m.landmark_offset_mm for m in protocol.markers
+                                                           if m.landmark_offset_mm is not None})
+              + Q.session_reasons(session, static_name) + Q.dropped_reasons(dropped))
     quality = {}
     for r in recons:
         reasons = list(common)

@@ -62,10 +62,14 @@ class TrialInfo:
 
 @dataclass(frozen=True)
 class TrialInputs:
+    """A trial ready to reconstruct; ``dropped``: protocol markers the trial lacks, left out because
+    the others still measure every angle (exubio.missing_markers)."""
+
     trial: TrialInfo
     model: Model
     protocol: Protocol
     targets: MarkerTargets
+    dropped: tuple[str, ...] = ()
 
 
 def protocol_for_model(model: Model, protocol_path: str | Path | None = None, /) -> Protocol:
@@ -99,11 +103,13 @@ def load_inputs(trial_path: str | Path | Trajectories, /, *, model_path: str | P
                                                   body_mass_kg=body_mass_kg)
     else:
         protocol = protocol_for_model(model, protocol_path)
+    from exubio.missing_markers import drop_missing_markers
     from exubio.thorax_check import check_thorax_labels
 
+    protocol, dropped = drop_missing_markers(traj, protocol, model)
     check_thorax_labels(traj, protocol, model)  # before the thorax frame is built from them
     targets = prepare_targets(traj, protocol)
-    return TrialInputs(TrialInfo.of(traj), model, protocol, targets)
+    return TrialInputs(TrialInfo.of(traj), model, protocol, targets, dropped)
 
 
 def reconstruct(model: Model, protocol: Protocol, targets: MarkerTargets, /, *, method: Method | str = Method.PF,
@@ -261,7 +267,7 @@ def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, ste
         trial_pd = pair_distances(inputs.targets.positions_m, inputs.targets.marker_names)
         session = tuple(placed_anew(static_consistency(static_reference, trial_pd, inputs.protocol)))
     assessment = assess_trial(inputs.model, inputs.protocol, inputs.targets, recons, label_findings=findings,
-                              calibration=calibration, session=session,
+                              calibration=calibration, session=session, dropped=inputs.dropped,
                               static_name=getattr(static_reference, "source", "") or "")
     out = []
     for method, stem, recon, sink in zip(methods, stems, recons, sinks):

@@ -55,6 +55,7 @@ _MARKER_KEYS = (
     "damping_ns_per_m",
     "optional",
     "landmark",
+    "landmark_offset_mm",
     "cluster",
 )
 _FALLBACK_STIFFNESS = 1500.0
@@ -424,6 +425,12 @@ def _parse_marker(
     if landmark is not None:
         if not isinstance(landmark, str) or not landmark:
             raise ProtocolError(f"{src}: {where}.landmark must name a model point of '{segment}', got {_kind(landmark)}")
+    offset = spec.get("landmark_offset_mm")
+    if offset is not None:
+        if landmark is None:
+            raise ProtocolError(f"{src}: {where}.landmark_offset_mm accepts a distance from the marker's landmark; "
+                                f"give its landmark too")
+        offset = _number(offset, f"{where}.landmark_offset_mm", src, minimum=0.0, strict=True)
     cluster = spec.get("cluster")
     if cluster is not None and (not isinstance(cluster, str) or not cluster):
         raise ProtocolError(f"{src}: {where}.cluster must be a name shared by the markers of one rigid cluster, "
@@ -442,6 +449,7 @@ def _parse_marker(
         optional=optional,
         landmark=landmark,
         cluster=cluster,
+        landmark_offset_mm=offset,
     )
 
 

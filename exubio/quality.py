@@ -55,6 +55,11 @@ OFF_SEGMENT_MARGIN_M = 0.06
 """A marker registered farther than this (skin, soft tissue and marker base) outside the sphere
 that holds its segment's anatomical points cannot be on that segment: a mislabelled marker."""
 
+LANDMARK_ACCEPT_MARGIN_MM = 15.0
+"""Above a protocol's accepted landmark distance (``landmark_offset_mm``), the margin before the
+calibration names the marker again: subjects and placements of one lab vary by about 10-15 mm (the
+clavicle marker of the shared C3D subject: 64-71 mm over its trials)."""
+
 LANDMARK_OFFSET_MM = 40.0
 """A marker declared over a bony landmark (protocol key ``landmark``) registered farther than this
 from the calibrated landmark: skin, soft tissue and the marker's radius put it 10-25 mm away, the
@@ -183,6 +188,15 @@ def determinacy_reasons(det: Mapping[str, Any]) -> list[Reason]:
     return out
 
 
+def dropped_reasons(dropped: Sequence[str]) -> list[Reason]:
+    """Protocol markers the trial lacks, left out because the others still measure every angle."""
+    if not dropped:
+        return []
+    return [Reason("missing_marker", "check", f"marker(s) {', '.join(dropped)} of the protocol missing from the trial "
+                   f"(a label typo? a marker that fell off?): left out; the other markers still measure every angle "
+                   f"this marker set measures")]
+
+
 def session_reasons(shifts: Sequence[Any], static_name: str) -> list[Reason]:
     """Segments whose markers look placed anew between the static and this trial
     (exubio.session_check): the static may be of another session: a check with the evidence."""
@@ -259,9 +273,12 @@ def label_reasons(findings: Iterable[Any], *, prefix: str = "") -> list[Reason]:
 
 def calibration_reasons(cal: Mapping[str, Any] | None, *, scale_bounds: tuple[float, float],
                         off_segment: Mapping[str, float] | None = None,
-                        not_measured: Sequence[str] = ()) -> list[Reason]:
+                        not_measured: Sequence[str] = (),
+                        accepted_offsets_mm: Mapping[str, float] | None = None) -> list[Reason]:
     """``not_measured``: coordinates the marker set cannot determine (exubio.assess): their range
-    limit holds them, which is a note, not an implausible posture the markers ask for."""
+    limit holds them, which is a note, not an implausible posture the markers ask for.
+    ``accepted_offsets_mm``: per marker, the landmark distance the protocol accepts as the lab's
+    placement (``landmark_offset_mm``), instead of LANDMARK_OFFSET_MM."""
     if not cal:
         return []
     out = []
@@ -294,11 +311,17 @@ def calibration_reasons(cal: Mapping[str, Any] | None, *, scale_bounds: tuple[fl
     if gh and not gh.get("used"):
         out.append(Reason("calibration_functional", "note", f"calibration ({src}): functional glenohumeral centre "
                           f"not used: {gh.get('reason')}"))
+    accepted = dict(accepted_offsets_mm or {})
     for name, d in ((cal.get("landmark_offsets_mm") or {}).items()):
-        if d > LANDMARK_OFFSET_MM:
+        limit = max(LANDMARK_OFFSET_MM, accepted.get(name, 0.0) + LANDMARK_ACCEPT_MARGIN_MM) if name in accepted \
+            else LANDMARK_OFFSET_MM
+        if d > limit:
+            why = (f"the protocol accepts {accepted[name]:.0f} mm (+{LANDMARK_ACCEPT_MARGIN_MM:.0f})" if name in accepted
+                   else f"above {LANDMARK_OFFSET_MM:.0f} mm")
             out.append(Reason("calibration_landmark", "check", f"calibration ({src}): marker {name} is {d:.0f} mm from the "
-                              f"landmark it is declared over (above {LANDMARK_OFFSET_MM:.0f} mm): misplaced, mislabelled, "
-                              f"or a wrong static pose"))
+                              f"landmark it is declared over ({why}): misplaced, mislabelled, or a wrong static pose; "
+                              f"if it is where your lab always puts it, accept it once in the protocol "
+                              f"(markers.{name}.landmark_offset_mm)"))
     for name, d in (off_segment or {}).items():
         out.append(Reason("calibration_off_segment", "fail", f"calibration ({src}): marker {name} was registered "
                           f"{d * 1000:.0f} mm outside its segment: it is not on that segment (mislabelled?)"))

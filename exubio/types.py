@@ -244,6 +244,7 @@ class MarkerSpec:
     optional: bool = False
     landmark: str | None = None  # the bony landmark (model point of ``segment``) the marker is placed over
     cluster: str | None = None  # the rigid marker cluster it belongs to (e.g. an acromion cluster)
+    landmark_offset_mm: float | None = None  # a lab's placement, accepted once: the landmark distance allowed
 
 
 @dataclass(frozen=True)

@@ -83,20 +83,33 @@ def test_truncated_and_non_c3d_files(tmp_path, c3d, capsys):
 
 
 def test_protocol_marker_absent_from_trial(tmp_path, trial, capsys):
+    """DELT missing: the humerus keeps three markers and every angle stays measured: left out with a
+    check naming it (exit 0: a check is not a failure); without both epicondyles and ARM the humerus
+    would not be measured: one error naming them, exit 2."""
     traj = trial.trajectories
     keep = [i for i, lab in enumerate(traj.labels) if lab != "DELT"]
     path = write_c3d(tmp_path / "nodelt.c3d", replace(traj, labels=tuple(traj.labels[i] for i in keep),
                                                        positions_m=traj.positions_m[:, keep]))
-    assert main(["reconstruct", str(path), "--out", str(tmp_path / "o")]) == 2
-    assert "DELT" in capsys.readouterr().err
+    assert main(["-q", "reconstruct", str(path), "--method", "ls", "--no-report", "--out", str(tmp_path / "o")]) == 0
+    summ = json.loads((tmp_path / "o" / "nodelt.ls.summary.json").read_text(encoding="utf-8"))
+    assert any(r["code"] == "missing_marker" and "DELT" in r["message"] for r in summ["quality"]["reasons"])
+    keep = [i for i, lab in enumerate(traj.labels) if lab not in ("DELT", "ARM", "EPI_lat", "EPI_med")]
+    path = write_c3d(tmp_path / "nohum.c3d", replace(traj, labels=tuple(traj.labels[i] for i in keep),
+                                                      positions_m=traj.positions_m[:, keep]))
+    assert main(["-q", "reconstruct", str(path), "--out", str(tmp_path / "o2")]) == 2
+    err = capsys.readouterr().err
+    assert "EPI_lat" in err and "no longer measure" in err
 
 
 def test_all_nan_marker(tmp_path, trial, capsys):
+    """ARM labelled but without a single sample: treated as missing (left out with a check: the
+    humerus keeps DELT and the epicondyles)."""
     pos = trial.trajectories.positions_m.copy()
     pos[:, trial.trajectories.index("ARM")] = np.nan
     path = write_c3d(tmp_path / "nanarm.c3d", replace(trial.trajectories, positions_m=pos))
-    assert main(["reconstruct", str(path), "--out", str(tmp_path / "o")]) == 2
-    assert "ARM" in capsys.readouterr().err
+    assert main(["-q", "reconstruct", str(path), "--method", "ls", "--no-report", "--out", str(tmp_path / "o")]) == 0
+    summ = json.loads((tmp_path / "o" / "nanarm.ls.summary.json").read_text(encoding="utf-8"))
+    assert any(r["code"] == "missing_marker" and "ARM" in r["message"] for r in summ["quality"]["reasons"])
 
 
 def test_gap_is_handled_and_reported(tmp_path, trial, capsys):

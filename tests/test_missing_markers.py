@@ -1,0 +1,45 @@
+"""A protocol marker the trial lacks is left out with a check naming it when the other markers still
+measure every angle the full set measures, and refused (exit 2, naming it, a near label and the
+angles it would cost) when they do not (exubio.missing_markers)."""
+import dataclasses
+import json
+
+import pytest
+
+from exubio.cli import main
+from exubio.io.c3d import write_c3d
+from exubio.model import load_model
+from exubio.simulate import simulate_trial
+
+
+@pytest.fixture(scope="module")
+def trial():
+    return simulate_trial(load_model(), "abduction", duration_s=2.0, rate_hz=50.0, noise_mm=0.5, seed=2).trajectories
+
+
+def _renamed(traj, old, new):
+    return dataclasses.replace(traj, labels=tuple(new if lab == old else lab for lab in traj.labels))
+
+
+def test_a_typo_on_a_redundant_marker_is_left_out_with_a_check(tmp_path, trial):
+    """SCAP_Cor labelled CAP_Cor: the scapula keeps five markers and every angle stays measured."""
+    path = write_c3d(tmp_path / "typo.c3d", _renamed(trial, "SCAP_Cor", "CAP_Cor"))
+    out = tmp_path / "out"
+    assert main(["-q", "reconstruct", str(path), "--method", "ls", "--no-report", "--out", str(out)]) == 0
+    summ = json.loads((out / "typo.ls.summary.json").read_text(encoding="utf-8"))
+    reasons = [r for r in summ["quality"]["reasons"] if r["code"] == "missing_marker"]
+    assert reasons and reasons[0]["level"] == "check" and "SCAP_Cor" in reasons[0]["message"]
+    assert summ["quality"]["verdict"] == "check"
+    assert summ["anatomical_angles"]["status"]["ST_X_upward_rotation"] == "measured"
+
+
+def test_markers_whose_loss_costs_an_angle_are_refused(tmp_path, trial, capsys):
+    """Both metacarpal markers mislabelled: the wrist would no longer be measured: one error naming
+    them, the near labels the trial has and the wrist angles."""
+    traj = _renamed(_renamed(trial, "MET2", "MET_2"), "MET5", "MET_5")
+    path = write_c3d(tmp_path / "bad.c3d", traj)
+    out = tmp_path / "out"
+    assert main(["-q", "reconstruct", str(path), "--method", "ls", "--no-report", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "MET2" in err and "MET5" in err and "wrist_flexion" in err and "'MET_2' for MET2" in err
+    assert "Traceback" not in err
