@@ -229,7 +229,7 @@ MAX_SWAPS = 3
 """At most 3 swaps are reported per trial; more than that means another marker set or protocol,
 not a few slips of the labeller."""
 
-_SEVERITY = {"swap": "error", "wrong_segment": "error", "side": "warning", "distance": "warning",
+_SEVERITY = {"swap": "error", "permutation": "error", "wrong_segment": "error", "side": "warning", "distance": "warning",
              "jump": "error", "other_subject": "error"}
 
 
@@ -240,7 +240,7 @@ _SEVERITY = {"swap": "error", "wrong_segment": "error", "side": "warning", "dist
 class LabelFinding:
     """One labelling problem.
 
-    kind:     "swap" (two labels exchanged), "wrong_segment" (a label on a marker of another
+    kind:     "swap" (two labels exchanged), "permutation" (three or more in a cycle), "wrong_segment" (a label on a marker of another
               segment), "side" (a marker on the wrong side of its neighbours, no swap explains it),
               "distance" (a rigid distance disagrees with the reference: the marker moved or was
               re-placed), "jump" (a rigid distance varies within the trial: a label jumps),
@@ -248,16 +248,25 @@ class LabelFinding:
     markers:  the protocol marker names concerned.
     evidence: one sentence with the numbers (mm).
     severity: "error" (the labels must be fixed before reconstruction) or "warning".
+    relabel:  for a swap or permutation: the relabel that undoes it ({file label: read as}).
     """
 
     kind: str
     markers: tuple[str, ...]
     evidence: str
     severity: str
+    relabel: Mapping[str, str] | None = None
+
+    def __post_init__(self) -> None:
+        if self.relabel is None and self.kind == "swap" and len(self.markers) == 2:
+            a, b = self.markers
+            object.__setattr__(self, "relabel", {a: b, b: a})
 
     def to_dict(self) -> dict:
-        return {"kind": self.kind, "markers": list(self.markers), "evidence": self.evidence,
-                "severity": self.severity}
+        out = {"kind": self.kind, "markers": list(self.markers), "evidence": self.evidence, "severity": self.severity}
+        if self.relabel:
+            out["relabel"] = dict(self.relabel)
+        return out
 
 
 @dataclass(frozen=True)
@@ -956,19 +965,21 @@ def check_trial(
     candidates = [sw for sw in itertools.combinations(range(k), 2) if present[sw[0]] and present[sw[1]]]
     perm = np.arange(k)
     used: set[int] = set()
+    done: list[tuple[int, int]] = []  # accepted exchanges, in order (a marker may take part in two: a cycle)
+    swaps: list[tuple[tuple[int, int], str]] = []
     n_found = -1
-    while len(used) // 2 < MAX_SWAPS and n_found != len(used):
-        n_found = len(used)
+    while len(done) < MAX_SWAPS and n_found != len(done):
+        n_found = len(done)
         chains = _chain_scores(exp, pos if (perm == np.arange(k)).all() else pos[:, perm]) if chain_fits else {}
         stale: set[str] = set()  # chains fitted before a swap accepted in this pass
-        while len(used) // 2 < MAX_SWAPS:
+        while len(done) < MAX_SWAPS:
             dcur = d[np.ix_(perm, perm)]
             viol = _violated(dcur, exp.relations)
             bad = _rigid_bad(dcur, ref, exp.rigid)
             best = None
             for sw in candidates:
-                if sw[0] in used or sw[1] in used:
-                    continue
+                if sw in done or (sw[0] in used and sw[1] in used):
+                    continue  # an exchange once; a marker already exchanged may join one more marker (a cycle)
                 ok, reasons, score = _swap_support(exp, dcur, ref, ref_name, viol, bad, chains, stale, sw)
                 if ok and (best is None or score > best[0]):
                     best = (score, sw, reasons)
@@ -977,10 +988,11 @@ def check_trial(
             _, (i, j), reasons = best
             stale |= {c.root for c in exp.chains if i in c.markers or j in c.markers}
             used |= {i, j}
+            done.append((i, j))
             facts = _swap_facts(exp, dcur, ref, i, j)
             perm[[i, j]] = perm[[j, i]]
-            findings.append(_finding("swap", (names[i], names[j]), f"{names[i]} and {names[j]} look swapped: "
-                                     f"{facts}; swapping them: " + "; ".join(reasons)))
+            swaps.append(((i, j), f"{names[i]} and {names[j]} look swapped: {facts}; swapping them: " + "; ".join(reasons)))
+    findings += _permutation_findings(exp, pos, perm, swaps, chain_fits)
     d = d[np.ix_(perm, perm)]  # the remaining checks see the labels with the swaps undone
     spread = pd.spread_m[np.ix_(perm, perm)]
 
@@ -1043,6 +1055,44 @@ def check_trial(
 
     order = {"error": 0, "warning": 1}
     return tuple(sorted(findings, key=lambda f: order.get(f.severity, 2)))
+
+
+def _permutation_findings(exp: LabelExpectations, pos: np.ndarray, perm: np.ndarray,
+                          swaps: list[tuple[tuple[int, int], str]], chain_fits: bool) -> list[LabelFinding]:
+    """The accepted exchanges as findings: a pair on its own is a "swap"; exchanges that share a
+    marker compose a cycle (e.g. EPI_lat -> EPI_med -> DELT), reported once as a "permutation" with
+    the relabel that undoes it (``LabelFinding.relabel``) and, where the chains were fitted, the
+    residual before and after it."""
+    names = exp.names
+    groups: list[set[int]] = []
+    for (i, j), _ in swaps:
+        hit = [g for g in groups if i in g or j in g]
+        merged = {i, j}.union(*hit) if hit else {i, j}
+        groups = [g for g in groups if g not in hit] + [merged]
+    out = []
+    for g in groups:
+        evidence = [text for (i, j), text in swaps if i in g]
+        if len(g) == 2:
+            (i, j), = [sw for sw, _ in swaps if sw[0] in g]
+            out.append(_finding("swap", (names[i], names[j]), evidence[0]))
+            continue
+        members = sorted(g)
+        # column perm[m] of the file holds marker m: its label names[perm[m]] is read as names[m]
+        relabel = {names[int(perm[m])]: names[m] for m in members if perm[m] != m}
+        text = ", ".join(f"{a} is {b}" for a, b in relabel.items())
+        fit = ""
+        if chain_fits:
+            before, after = _chain_scores(exp, pos), _chain_scores(exp, pos[:, perm])
+            roots = [c.root for c in exp.chains if set(members) & set(c.markers)]
+            parts = [f"the {'-'.join(_chain_label(exp, r))} chain {_mm(before[r].rms_m)} -> {_mm(after[r].rms_m)}"
+                     for r in roots if r in before and r in after]
+            if parts:
+                fit = "; with the relabel, " + ", ".join(parts) + " RMS"
+        out.append(LabelFinding("permutation", tuple(names[m] for m in members),
+                                f"{len(members)} labels permuted in a cycle ({text}): found as {len(evidence)} "
+                                f"exchanges that share a marker: " + " | ".join(evidence) + fit,
+                                _SEVERITY["permutation"], relabel))
+    return out
 
 
 def _swap_support(exp: LabelExpectations, d: np.ndarray, ref: np.ndarray | None, ref_name: str,

@@ -267,7 +267,12 @@ def label_reasons(findings: Iterable[Any], *, prefix: str = "") -> list[Reason]:
         get = f.get if isinstance(f, Mapping) else (lambda k, _f=f: getattr(_f, k))
         lvl = {"error": "fail", "fail": "fail", "warning": "check", "check": "check", "info": "note",
                "note": "note"}.get(get("severity"), "check")
-        out.append(Reason("label", lvl, f"{prefix}{get('kind')} ({', '.join(get('markers'))}): {get('evidence')}"))
+        relabel = (f.get("relabel") if isinstance(f, Mapping) else getattr(f, "relabel", None)) or {}
+        fix = ""
+        if relabel:
+            option = "--static-relabel" if prefix.startswith("static") else "--relabel"
+            fix = f"; to fix: {option} {','.join(f'{a}={b}' for a, b in relabel.items())}"
+        out.append(Reason("label", lvl, f"{prefix}{get('kind')} ({', '.join(get('markers'))}): {get('evidence')}{fix}"))
     return out
 
 

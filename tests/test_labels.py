@@ -257,7 +257,7 @@ def test_findings_are_typed_and_printable():
     with pytest.raises(dataclasses.FrozenInstanceError):
         f.kind = "side"  # type: ignore[misc]
     assert f.to_dict() == {"kind": "swap", "markers": ["A", "B"], "evidence": "A and B look swapped: 107 mm",
-                           "severity": "error"}
+                           "severity": "error", "relabel": {"A": "B", "B": "A"}}  # a swap carries the relabel that undoes it
     assert L.format_findings([f], source="t.c3d") == "t.c3d: error [swap] A, B: A and B look swapped: 107 mm"
     assert "no finding" in L.format_findings([])
 
