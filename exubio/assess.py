@@ -179,11 +179,14 @@ about 10x cheaper at 200 Hz."""
 def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recons: Sequence[Reconstruction], /, *,
                  label_findings: Sequence = (), calibration: Mapping[str, Any] | None = None,
                  determinacy_every: int | None = None, session: Sequence = (),
-                 static_name: str = "", dropped: Sequence[str] = ()) -> TrialAssessment:
+                 static_name: str = "", dropped: Sequence[str] = (), partial_swaps: Sequence = (),
+                 repaired: bool = False) -> TrialAssessment:
     """Assess the reconstructions ``recons`` of one trial (module docstring). ``session``: the
     segments whose markers look placed anew since the static (exubio.session_check.placed_anew),
     named as a check on the static; ``static_name``: that static trial; ``dropped``: protocol markers
-    the trial lacks, left out (exubio.missing_markers): a check naming them."""
+    the trial lacks, left out (exubio.missing_markers): a check naming them; ``partial_swaps``: labels
+    exchanged in part of the trial (exubio.label_ranges): a fail, or with ``repaired`` a check that
+    says where they were exchanged back."""
     kin = Kinematics(model)
     if determinacy_every is None:
         dt = float(np.median(np.diff(targets.time_s))) if targets.n_frames > 1 else 1.0
@@ -213,7 +216,8 @@ def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recon
               + Q.calibration_reasons(report, scale_bounds=SCALE_BOUNDS, off_segment=off, not_measured=unmeasurable,
                                       accepted_offsets_mm={m.name: m.landmark_offset_mm for m in protocol.markers
                                                            if m.landmark_offset_mm is not None})
-              + Q.session_reasons(session, static_name) + Q.dropped_reasons(dropped))
+              + Q.session_reasons(session, static_name) + Q.dropped_reasons(dropped)
+              + Q.partial_swap_reasons(partial_swaps, repaired))
     quality = {}
     for r in recons:
         reasons = list(common)

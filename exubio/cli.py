@@ -234,7 +234,7 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
                      body_mass_kg=args.body_mass, overwrite=args.overwrite,
                      options={"pf": {"gravity": args.gravity}} if "pf" in methods else {},
                      calibration=extra.get("calibration"), static_frames=None if args.static else args.static_frames,
-                     report=not args.no_report, relabel=relabel) for t in args.trials]
+                     report=not args.no_report, relabel=relabel, repair_labels=args.repair_labels) for t in args.trials]
     if len(jobs) == 1 and not args.scheduler:  # errors propagate to main(): one message, one exit code
         result = run_job(jobs[0], progress_factory=_progress_factory(not args.quiet))
         _print_trial(result, args.quiet)
@@ -428,6 +428,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--static", help="static trial: calibrate the model to the subject first (once, for every trial)")
     r.add_argument("--relabel", metavar="A=B,...", help="read these labels of the task trial(s) as others, for these "
                    "trials only (not the static): e.g. RADIUS=ULNA,ULNA=RADIUS undoes a swap; a permutation, never a merge")
+    r.add_argument("--repair-labels", action="store_true", help="exchange back two labels that auto-labelling "
+                   "exchanged in part of a trial (found frame range by range; reported, the verdict a check)")
     r.add_argument("--static-relabel", metavar="A=B,...", help="the same for the --static trial only (a protocol's "
                    "relabel: applies to every trial of the session, the static included)")
     r.add_argument("--also-static", metavar="TRIAL", action="append", help="a further static pose of the session (e.g. arm raised; repeatable): the thorax ellipsoid is "

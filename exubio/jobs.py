@@ -32,7 +32,8 @@ class TrialJob:
     (exubio.session.calibrate_session), which goes into every summary and verdict;
     static_reference: the session static's pair distances the label checks compare with;
     relabel: this trial's labels read as other labels ({file label: read as}), for this trial only
-    (exubio.protocol.relabel_trajectories), before the protocol's own relabel."""
+    (exubio.protocol.relabel_trajectories), before the protocol's own relabel; repair_labels: exchange
+    back labels exchanged in part of the trial (exubio.label_ranges), reported frame range by range."""
 
     trial: Path
     out_dir: Path
@@ -47,6 +48,7 @@ class TrialJob:
     calibration: Mapping[str, Any] | None = None
     static_reference: Any = None
     relabel: Mapping[str, str] = field(default_factory=dict)
+    repair_labels: bool = False
 
     def __post_init__(self) -> None:
         from exubio.methods import method_spec
@@ -121,7 +123,7 @@ def run_job(job: TrialJob, /, *, progress_factory: Callable[[str, int], Callable
                                model_path=model, protocol_path=job.protocol, body_mass_kg=job.body_mass_kg,
                                overwrite=job.overwrite, method_options=dict(job.options), summary_extra=extra,
                                progress_factory=progress_factory, calibration=summary_cal,
-                               static_reference=reference)
+                               static_reference=reference, repair_labels=job.repair_labels)
     methods = tuple(MethodResult(r.method, {k: str(v) for k, v in paths.items()}, summ) for r, paths, summ in outputs)
     agreement = None
     if len(outputs) == 2:

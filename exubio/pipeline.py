@@ -63,13 +63,16 @@ class TrialInfo:
 @dataclass(frozen=True)
 class TrialInputs:
     """A trial ready to reconstruct; ``dropped``: protocol markers the trial lacks, left out because
-    the others still measure every angle (exubio.missing_markers)."""
+    the others still measure every angle (exubio.missing_markers); ``partial_swaps``: labels exchanged
+in part of the trial, ``repaired``: exchanged back before preparing (``--repair-labels``)."""
 
     trial: TrialInfo
     model: Model
     protocol: Protocol
     targets: MarkerTargets
     dropped: tuple[str, ...] = ()
+    partial_swaps: tuple = ()  # labels exchanged in part of the trial (exubio.label_ranges)
+    repaired: bool = False  # ... and exchanged back (--repair-labels)
 
 
 def protocol_for_model(model: Model, protocol_path: str | Path | None = None, /) -> Protocol:
@@ -94,9 +97,10 @@ def load_model_and_protocol(*, model_path: str | Path | None = None, protocol_pa
 
 def load_inputs(trial_path: str | Path | Trajectories, /, *, model_path: str | Path | None = None,
                 protocol_path: str | Path | None = None, body_mass_kg: float | None = None,
-                model: Model | None = None) -> TrialInputs:
-    """Read the trial (or take it, read already), the model and the protocol, and prepare the
-    marker targets."""
+                model: Model | None = None, repair_labels: bool = False) -> TrialInputs:
+    """Read the trial (or take it, read already), the model and the protocol, check the labels that
+    must be right before anything is computed (thorax landmarks, missing markers, labels exchanged
+    in part of the trial: repaired with ``repair_labels``), and prepare the marker targets."""
     traj = trial_path if isinstance(trial_path, Trajectories) else read_trial(trial_path)
     if model is None:
         model, protocol = load_model_and_protocol(model_path=model_path, protocol_path=protocol_path,
@@ -106,10 +110,15 @@ def load_inputs(trial_path: str | Path | Trajectories, /, *, model_path: str | P
     from exubio.missing_markers import drop_missing_markers
     from exubio.thorax_check import check_thorax_labels
 
+    from exubio.label_ranges import find_partial_swaps, repair_partial_swaps
+
     protocol, dropped = drop_missing_markers(traj, protocol, model)
     check_thorax_labels(traj, protocol, model)  # before the thorax frame is built from them
+    partial = find_partial_swaps(traj, protocol, model)
+    if partial and repair_labels:
+        traj = repair_partial_swaps(traj, protocol, partial)
     targets = prepare_targets(traj, protocol)
-    return TrialInputs(TrialInfo.of(traj), model, protocol, targets, dropped)
+    return TrialInputs(TrialInfo.of(traj), model, protocol, targets, dropped, partial, bool(partial and repair_labels))
 
 
 def reconstruct(model: Model, protocol: Protocol, targets: MarkerTargets, /, *, method: Method | str = Method.PF,
@@ -217,7 +226,8 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
                      summary_extra: dict[str, Any] | None = None,
                      progress_factory: Callable[[str, int], Callable[[int], None]] | None = None,
                      calibration: dict[str, Any] | None = None, static_reference: Any = None,
-                     chunk_frames: int | None = None) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
+                     chunk_frames: int | None = None, repair_labels: bool = False
+                     ) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
     """Everything ``exubio reconstruct`` does for one trial; returns (reconstruction, paths, summary)
     per method. Every method runs first; then the trial is assessed (label checks, determinacy,
     range limits, PF-LS agreement, ``calibration``: the calibration report dict) and every summary
@@ -233,7 +243,8 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
     stems = [output_stem(trial_path, m) for m in methods]
     results.prepare_output_dir(out_dir, stems, overwrite=overwrite)
     inputs = load_inputs(trajectories if trajectories is not None else trial_path, model_path=model_path,
-                         protocol_path=protocol_path, body_mass_kg=body_mass_kg, model=model)
+                         protocol_path=protocol_path, body_mass_kg=body_mass_kg, model=model,
+                         repair_labels=repair_labels)
     with ExitStack() as parts:  # the streamed model points' part files go, whatever happens
         return _reconstruct_streamed(inputs, trial_path, out_dir, methods, stems, parts, StreamedReconstruction,
                                      method_options=method_options, summary_extra=summary_extra,
@@ -268,6 +279,7 @@ def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, ste
         session = tuple(placed_anew(static_consistency(static_reference, trial_pd, inputs.protocol)))
     assessment = assess_trial(inputs.model, inputs.protocol, inputs.targets, recons, label_findings=findings,
                               calibration=calibration, session=session, dropped=inputs.dropped,
+                              partial_swaps=inputs.partial_swaps, repaired=inputs.repaired,
                               static_name=getattr(static_reference, "source", "") or "")
     out = []
     for method, stem, recon, sink in zip(methods, stems, recons, sinks):

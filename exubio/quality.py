@@ -188,6 +188,16 @@ def determinacy_reasons(det: Mapping[str, Any]) -> list[Reason]:
     return out
 
 
+def partial_swap_reasons(swaps: Sequence[Any], repaired: bool) -> list[Reason]:
+    """Labels exchanged in part of the trial: a fail while they stand (every angle of those frames
+    rests on the wrong markers), a check once repaired (the frames were exchanged back)."""
+    if repaired:
+        return [Reason("label_repaired", "check", f"repaired on request (--repair-labels): {s.describe()}; "
+                       f"exchanged back in those frames") for s in swaps]
+    return [Reason("partial_swap", "fail", f"{s.describe()}; rerun with --repair-labels to exchange them back in "
+                   f"those frames") for s in swaps]
+
+
 def dropped_reasons(dropped: Sequence[str]) -> list[Reason]:
     """Protocol markers the trial lacks, left out because the others still measure every angle."""
     if not dropped:

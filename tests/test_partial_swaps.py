@@ -1,0 +1,53 @@
+"""Labels exchanged in part of a trial are found per frame range and, with --repair-labels,
+exchanged back and reported (exubio.label_ranges); the trials as recorded have none. Built from
+the real trials of ../shared/data (skipped when absent)."""
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from exubio.cli import main
+from exubio.io.c3d import write_c3d
+from exubio.io.trial import read_trial
+from exubio.label_ranges import find_partial_swaps, repair_partial_swaps
+from exubio.pipeline import load_model_and_protocol
+
+C3D = Path(__file__).resolve().parents[2] / "shared" / "data" / "c3d"
+pytestmark = pytest.mark.skipif(not C3D.is_dir(), reason=f"real data folder {C3D} is absent")
+TRIAL = C3D / "bioptim_exo_martin_dynamique.c3d"
+
+
+def _exchanged(traj, a, b, start, stop):
+    import dataclasses
+
+    pos = traj.positions_m.copy()
+    i, j = traj.labels.index(a), traj.labels.index(b)
+    pos[start:stop, [i, j]] = pos[start:stop, [j, i]]
+    return dataclasses.replace(traj, positions_m=pos)
+
+
+def test_a_swap_in_a_frame_range_is_found_there_and_repaired_exactly():
+    model, protocol = load_model_and_protocol()
+    traj = read_trial(TRIAL)
+    assert find_partial_swaps(traj, protocol, model) == ()
+    bad = _exchanged(traj, "EPI_lat", "EPI_med", 200, 380)
+    (s,) = find_partial_swaps(bad, protocol, model)
+    assert {s.a, s.b} == {"EPI_lat", "EPI_med"} and s.ranges == ((200, 380),)
+    fixed = repair_partial_swaps(bad, protocol, [s])
+    np.testing.assert_array_equal(fixed.positions_m, traj.positions_m)
+
+
+def test_the_verdict_fails_on_a_partial_swap_and_repair_labels_reports_the_frames(tmp_path):
+    traj = read_trial(TRIAL)
+    path = write_c3d(tmp_path / "jump.c3d", _exchanged(traj, "ARM", "DELT", 100, 260))
+    base = ["-q", "reconstruct", str(path), "--static", str(C3D / "bioptim_exo_martin_statique.c3d"),
+            "--method", "ls", "--no-report"]
+    assert main([*base, "--out", str(tmp_path / "as_is")]) == 1
+    s = json.loads((tmp_path / "as_is" / "jump.ls.summary.json").read_text(encoding="utf-8"))
+    r = [x for x in s["quality"]["reasons"] if x["code"] == "partial_swap"]
+    assert r and r[0]["level"] == "fail" and "frames 100-259" in r[0]["message"] and "--repair-labels" in r[0]["message"]
+    main([*base, "--repair-labels", "--out", str(tmp_path / "repaired")])
+    s = json.loads((tmp_path / "repaired" / "jump.ls.summary.json").read_text(encoding="utf-8"))
+    codes = {x["code"]: x for x in s["quality"]["reasons"]}
+    assert "partial_swap" not in codes and "frames 100-259" in codes["label_repaired"]["message"]
