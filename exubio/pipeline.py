@@ -54,10 +54,12 @@ class TrialInfo:
     ignored_labels: tuple[str, ...]
     units_in_file: str
     rate_hz: float
+    input_findings: tuple[str, ...] = ()  # what the reader read around (Trajectories.input_findings)
 
     @classmethod
     def of(cls, traj: Trajectories) -> "TrialInfo":
-        return cls(traj.source, traj.labels, traj.ignored_labels, traj.units_in_file, traj.rate_hz)
+        return cls(traj.source, traj.labels, traj.ignored_labels, traj.units_in_file, traj.rate_hz,
+                   traj.input_findings)
 
 
 @dataclass(frozen=True)
@@ -258,6 +260,9 @@ def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, ste
         if inputs.targets.cutoff_hz:
             extra["filter_cutoff_hz"] = dict(inputs.targets.cutoff_hz)
         extra.update(assessment.summary_for(recon.method))
+        if inputs.trial.input_findings:
+            extra["input_findings"] = list(inputs.trial.input_findings)
+            extra["quality"] = with_input_findings(extra["quality"], inputs.trial.input_findings)
         isb = isb_table(inputs.model, recon.q_rad)
         measured = measured_isb_joints(inputs.model, set(assessment.not_solved))
         extra["isb_angles"] = {
@@ -276,6 +281,15 @@ def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, ste
                               streamed={"model_points_m": sink.model_points})
         out.append((recon, paths, summ))
     return out
+
+
+def with_input_findings(quality: dict[str, Any], findings: tuple[str, ...], /) -> dict[str, Any]:
+    """A summary's ``quality`` with a note per input finding (what the reader read around: the file is
+    named, the result stands: exubio.quality's "note" level, which leaves the verdict as it is)."""
+    from exubio.quality import Reason
+
+    notes = [Reason("input_file", "note", f"input file: {f}").to_dict() for f in findings]
+    return {**quality, "reasons": list(quality["reasons"]) + notes}
 
 
 def isb_header(info: dict[str, Any], trial: str, method: str) -> tuple[str, ...]:
