@@ -7,6 +7,7 @@ comes only after (or instead of) a reconstruction fails the test.
 from __future__ import annotations
 
 import math
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -204,6 +205,99 @@ def test_c3d_over_65535_frames_truncated_refused(tmp_path):
     path.write_bytes(data[: len(data) - 40_000])
     with pytest.raises(InputError, match=r"cut\.c3d: .*truncated.*70000 frames"):
         read_c3d(path)
+
+
+# ------------------------------------------------------- C3D headers that contradict themselves
+def _patched(path: Path, *edits: tuple[int, bytes], name: str = "hostile.c3d") -> Path:
+    """A copy of the C3D ``path`` with ``(offset, bytes)`` edits applied."""
+    data = bytearray(path.read_bytes())
+    for offset, new in edits:
+        data[offset:offset + len(new)] = new
+    out = path.with_name(name)
+    out.write_bytes(bytes(data))
+    return out
+
+
+def _float_offsets(path: Path, value: float) -> list[int]:
+    """Byte offsets of ``value`` as a little-endian float32 (the writer's Intel format)."""
+    data, needle = path.read_bytes(), struct.pack("<f", value)
+    return [i for i in range(len(data) - 3) if data[i:i + 4] == needle]
+
+
+def _point_rate_offset(path: Path) -> int:
+    """The offset of POINT:RATE's value (50 Hz) in the parameter section: the float 50 there that,
+    patched, changes what ezc3d reads as POINT:RATE."""
+    import ezc3d
+
+    for offset in _float_offsets(path, 50.0):
+        if offset < 512:
+            continue
+        probe = _patched(path, (offset, struct.pack("<f", 77.0)), name="probe.c3d")
+        if float(ezc3d.c3d(str(probe))["parameters"]["POINT"]["RATE"]["value"][0]) == 77.0:
+            probe.unlink()
+            return offset
+    raise AssertionError("POINT:RATE not found")
+
+
+@pytest.mark.parametrize("rate, expected", [(math.nan, "nan (not a finite number)"),
+                                            (math.inf, "inf (not a finite number)"),
+                                            (1e9, "1e+09 Hz (above 100000 Hz")])
+def test_c3d_rate_nan_infinite_or_1e9_refused_naming_point_rate(tmp_path, c3d, capsys, rate, expected):
+    """ezc3d crashes on a NaN POINT:RATE (vector::_M_default_append), an infinite one overflowed in
+    the preprocessing and 1e9 Hz made the filter's end padding ask for 15 GB: refused before reading."""
+    bad = _patched(c3d, (20, struct.pack("<f", rate)), (_point_rate_offset(c3d), struct.pack("<f", rate)))
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(bad, out), out, "hostile.c3d", "POINT:RATE is " + expected)
+
+
+def test_c3d_parameter_block_past_the_end_refused(tmp_path, c3d, capsys):
+    bad = _patched(c3d, (0, bytes([200])))
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(bad, out), out, "hostile.c3d", "parameter block at 512-byte block 200",
+            f"the file has {c3d.stat().st_size} bytes")
+
+
+def test_c3d_data_start_past_the_end_refused(tmp_path, c3d, capsys):
+    bad = _patched(c3d, (16, struct.pack("<H", 500)))
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(bad, out), out, "hostile.c3d", "word 9 puts the data at 512-byte block 500")
+
+
+def test_c3d_last_frame_before_the_first_read_as_the_data_hold_with_a_warning(c3d, trajectories, caplog):
+    bad = _patched(c3d, (6, struct.pack("<2H", 40, 10)))
+    with caplog.at_level("WARNING", logger="exubio.io.c3d"):
+        got = read_c3d(bad)
+    assert got.n_frames == trajectories.n_frames
+    assert np.array_equal(got.positions_m, read_c3d(c3d).positions_m, equal_nan=True)
+    (finding,) = got.input_findings
+    assert "last frame (word 5) is 10, before its first frame (word 4) 40" in finding and "hostile.c3d" in finding
+    assert finding in caplog.text
+    assert read_c3d(c3d).input_findings == ()
+
+
+def test_c3d_header_of_65535_frames_over_100_frames_read_with_a_warning(tmp_path, caplog):
+    traj = Trajectories(("A", "B"), np.random.default_rng(1).uniform(-1, 1, (100, 2, 3)), 100.0,
+                        np.arange(100) / 100.0)
+    good = write_c3d(tmp_path / "short.c3d", traj)
+    bad = _patched(good, (8, struct.pack("<H", 65535)))
+    with caplog.at_level("WARNING", logger="exubio.io.c3d"):
+        got = read_c3d(bad)
+    assert got.n_frames == 100
+    assert np.nanmax(np.abs(got.positions_m - traj.positions_m)) < 1e-6
+    (finding,) = got.input_findings
+    assert "last frame (word 5) is 65535" in finding and "no POINT:LONG_FRAMES" in finding and "holds 100" in finding
+    assert finding in caplog.text
+
+
+@pytest.mark.parametrize("value", [-5.0, 0.0, 2.5])
+def test_c3d_point_long_frames_not_a_count_refused(tmp_path, value):
+    n = 70_000
+    traj = Trajectories(("A",), np.zeros((n, 1, 3)), 100.0, np.arange(n) / 100.0)
+    good = write_c3d(tmp_path / "long.c3d", traj)
+    (offset,) = [o for o in _float_offsets(good, float(n)) if o >= 512]  # POINT:LONG_FRAMES
+    bad = _patched(good, (offset, struct.pack("<f", value)))
+    with pytest.raises(InputError, match=rf"hostile\.c3d: .*POINT:LONG_FRAMES is {value:g}; expected the number of"):
+        read_c3d(bad)
 
 
 # ---------------------------------------------------------------------------------- CLI options

@@ -15,12 +15,13 @@ MAX_RATE_HZ = 100_000.0
 
 
 def rate_problem(rate: float, /) -> str | None:
-    """Why ``rate`` (Hz) is not a usable marker rate, or None when it is."""
+    """The rate and why it is not a usable marker rate ("nan (not a finite number)"), or None when
+    it is usable."""
     if rate != rate or rate in (float("inf"), float("-inf")):
-        return f"{rate} is not a finite number"
+        return f"{rate} (not a finite number)"
     if not rate > 0:
-        return f"{rate:g} Hz is not > 0"
+        return f"{rate:g} Hz (not > 0)"
     if rate > MAX_RATE_HZ:
-        return (f"{rate:g} Hz is above {MAX_RATE_HZ:g} Hz, the highest marker rate exubio accepts "
-                f"(optical motion capture records at most about 10 kHz)")
+        return (f"{rate:g} Hz (above {MAX_RATE_HZ:g} Hz, the highest marker rate exubio accepts: optical "
+                f"motion capture records at most about 10 kHz)")
     return None

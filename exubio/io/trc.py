@@ -119,7 +119,7 @@ def _header_values(path: Path, header: dict[str, str]) -> tuple[str, float, int,
     if not (rate > 0 and math.isfinite(rate)) or n_frames < 0 or n_markers < 0:
         raise InputError(f"{path}: line 3: expected DataRate > 0, NumFrames >= 0, NumMarkers >= 0; got {header}")
     if rate_problem(rate):
-        raise InputError(f"{path}: line 3: DataRate {rate_problem(rate)}")
+        raise InputError(f"{path}: line 3: DataRate is {rate_problem(rate)}")
     return unit.lower(), rate, n_frames, n_markers
 
 
