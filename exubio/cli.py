@@ -196,12 +196,15 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
                          f"trial; give --static STATIC as well")
     if args.jobs < 1:
         raise InputError(f"--jobs {args.jobs}: expected a whole number of processes >= 1")
-    stems: dict[str, str] = {}
+    seen: dict[str, str] = {}  # file name -> the trial of that name
     for t in args.trials:  # results are named after the trial file: two of one name would mix
-        other = stems.setdefault(Path(t).stem, str(t))
-        if other != str(t):
+        other = seen.get(Path(t).stem)
+        if other is not None and Path(t).resolve() == Path(other).resolve():
+            raise InputError(f"{t}: the same trial is given twice ({other} and {t}); give each trial once")
+        if other is not None:
             raise InputError(f"{t} and {other} have the same file name: their results in {args.out} would be mixed; "
                              f"reconstruct them into different --out folders")
+        seen[Path(t).stem] = str(t)
     _check_output_folder(Path(args.out), args.out)
     if args.static:
         model_file, report, calibration = calibrate_session(args.static, args.out, Path(args.static).stem,

@@ -17,7 +17,7 @@ from typing import Any, Callable
 import numpy as np
 
 import exubio
-from exubio.errors import InputError
+from exubio.errors import InputError, ProtocolError
 from exubio.evaluate import summary
 from exubio.io import results
 from exubio.io.trial import read_trial
@@ -77,11 +77,38 @@ def protocol_for_model(model: Model, protocol_path: str | Path | None = None, /)
     protocol = load_protocol(protocol_path or DEFAULT_PROTOCOL, segments=model.segment_names, model_points=points,
                              coordinates=model.coordinate_names)
     check_landmarks(protocol, points)
+    check_held(model, protocol)
     if model.metadata.get("calibration"):
         from exubio.calibration import calibrated_protocol
 
         protocol = calibrated_protocol(protocol, model)
     return protocol
+
+
+def check_held(model: Model, protocol: Protocol, /) -> None:
+    """Refuse (ProtocolError naming the protocol's ``hold`` key) a hold that leaves the methods
+    nothing to solve: every coordinate held, or fewer coordinates free in the chain that moves the
+    ellipsoid's contact points than there are contact constraints (they could not be met: a singular
+    system in both methods)."""
+    held = set(protocol.held_coordinates)
+    names = model.coordinate_names
+    where = f"{protocol.source or protocol.name}: hold"
+    if names and held >= set(names):
+        raise ProtocolError(f"{where}: holds every coordinate of the model ({len(names)}); nothing is left for the "
+                            f"markers to determine: hold fewer (the shipped protocols hold sc_posterior_rotation)")
+    by_name = {s.name: s for s in model.segments}
+    for segment in sorted({seg for seg, _ in model.ellipsoid.contact_points}):
+        chain, name = [], segment
+        while name in by_name:
+            s = by_name[name]
+            chain = list(s.joint.coordinates if s.joint else ()) + chain
+            name = s.parent
+        free = [c for c in chain if c not in held]
+        n_constraints = sum(seg == segment for seg, _ in model.ellipsoid.contact_points)
+        if chain and len(free) < n_constraints:
+            raise ProtocolError(
+                f"{where}: leaves {len(free)} of the coordinates that move the {segment} free ({free or 'none'} of "
+                f"{chain}); its {n_constraints} points on the thorax ellipsoid need at least {n_constraints}: hold fewer")
 
 
 def load_model_and_protocol(*, model_path: str | Path | None = None, protocol_path: str | Path | None = None,

@@ -339,3 +339,88 @@ def test_output_folder_checked_before_reading_anything(tmp_path, c3d, capsys, mo
     model_out = out / "subject.yaml"
     refused(capsys, ["calibrate", str(c3d), "--out", str(model_out)], nothing_in, str(out))
     assert (tmp_path / "a_file").read_text() == "not a folder"
+
+
+# ------------------------------------------------------------------- deep YAML, singular holds
+def _deep(kind: str) -> str:
+    """A YAML mapping nested 5000 levels deep, in flow ([[[...]]]) or block (indented keys) style."""
+    if kind == "flow":
+        return "schema_version: 1\nx: " + "[" * 5000 + "]" * 5000 + "\n"
+    return "schema_version: 1\n" + "".join("  " * i + f"k{i}:\n" for i in range(5000)) + "  " * 5000 + "v: 1\n"
+
+
+@pytest.mark.parametrize("kind", ["flow", "block"])
+@pytest.mark.parametrize("option", ["--model", "--protocol"])
+def test_yaml_nested_5000_levels_refused_naming_file_and_line(tmp_path, c3d, capsys, option, kind):
+    """It raised RecursionError (PyYAML's composer and the duplicate-key walk recurse per level)."""
+    deep = tmp_path / "deep.yaml"
+    deep.write_text(_deep(kind), encoding="utf-8")
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(c3d, out, option, str(deep)), out, "deep.yaml", "nested more than 64 levels")
+
+
+def test_protocol_holding_every_coordinate_refused_naming_hold(tmp_path, c3d, capsys):
+    """Every coordinate held left a singular system (numpy LinAlgError: Singular matrix) in LS."""
+    data = yaml.safe_load(Path(DEFAULT_PROTOCOL).read_text(encoding="utf-8"))
+    data["hold"] = list(load_model().coordinate_names)
+    bad = tmp_path / "hold_all.yaml"
+    bad.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(c3d, out, "--protocol", str(bad)), out, "hold_all.yaml", "hold", "every coordinate")
+
+
+def test_protocol_holding_the_scapula_chain_but_one_refused(tmp_path, c3d, capsys):
+    """Two ellipsoid contact constraints on one free coordinate cannot be met (also a singular system)."""
+    data = yaml.safe_load(Path(DEFAULT_PROTOCOL).read_text(encoding="utf-8"))
+    data["hold"] = [c for c in load_model().coordinate_names if c.startswith(("sc_", "ac_"))][:5]
+    bad = tmp_path / "hold_girdle.yaml"
+    bad.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(c3d, out, "--protocol", str(bad)), out, "hold_girdle.yaml", "hold", "scapula",
+            "need at least 2")
+
+
+# --------------------------------------------------------------------------- results, duplicates
+def _a_result(tmp_path: Path) -> Path:
+    """A real .npz result (LS, written by write_outputs's writer) without running a method."""
+    from exubio.io.results import write_npz
+    from exubio.types import Reconstruction
+
+    n, names = 5, load_model().coordinate_names
+    recon = Reconstruction(method="ls", time_s=np.arange(n) / 50.0, coordinate_names=names,
+                           q_rad=np.zeros((n, len(names))), qd_rad_s=np.zeros((n, len(names))),
+                           qdd_rad_s2=np.zeros((n, len(names))), marker_names=("A",),
+                           model_points_m=np.zeros((n, 1, 3)), measured_m=np.zeros((n, 1, 3)),
+                           residuals_m=np.zeros((n, 1)), constraint=np.zeros((n, 2)),
+                           constraint_velocity=np.zeros((n, 2)), status=np.zeros(n, dtype=int))
+    return write_npz(tmp_path / "trial.ls.npz", recon, metadata={"trial": "trial.c3d"})
+
+
+@pytest.mark.parametrize("keep", [0.5, 0.98])
+def test_view_of_a_truncated_npz_refused_naming_it(tmp_path, capsys, keep):
+    """It ended in zipfile.BadZipFile."""
+    path = _a_result(tmp_path)
+    data = path.read_bytes()
+    path.write_bytes(data[: int(len(data) * keep)])
+    out = tmp_path / "view"
+    refused(capsys, ["view", str(path), "--out", str(out / "v.html")], out, "trial.ls.npz",
+            "not a readable .npz file", "BadZipFile")
+
+
+def test_view_of_an_npz_with_a_damaged_entry_refused_naming_it(tmp_path, capsys):
+    path = _a_result(tmp_path)
+    data = bytearray(path.read_bytes())
+    at = data.index(b"q_rad.npy") + 200  # inside the q_rad entry's data
+    data[at:at + 40] = b"\xff" * 40
+    path.write_bytes(bytes(data))
+    out = tmp_path / "view"
+    refused(capsys, ["view", str(path), "--out", str(out / "v.html")], out, "trial.ls.npz", "damaged")
+
+
+@pytest.mark.parametrize("spelling", ["same", "dotted"])
+def test_the_same_trial_twice_refused_before_anything_is_written(tmp_path, c3d, capsys, spelling):
+    """It wrote the first copy's four result files, then refused the second."""
+    again = str(c3d) if spelling == "same" else str(c3d.parent / "." / c3d.name)
+    out = tmp_path / "out"
+    argv = ["reconstruct", str(c3d), again, "--method", "ls", "--no-report", "--out", str(out)]
+    refused(capsys, argv, out, "trial.c3d", "the same trial is given twice")

@@ -456,8 +456,9 @@ class _NpzReader:
             self.data = np.load(self.path, allow_pickle=False)
         except FileNotFoundError:
             raise InputError(f"{self.path}: file not found") from None
-        except (OSError, ValueError) as exc:
-            raise InputError(f"{self.path}: not a readable .npz file ({exc})") from exc
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:  # BadZipFile: truncated, damaged
+            raise InputError(f"{self.path}: not a readable .npz file ({type(exc).__name__}: {exc}); expected an "
+                             f"exubio result <trial>.<method>.npz, whole") from None
         if not isinstance(self.data, np.lib.npyio.NpzFile):  # a .npy array under an .npz name
             raise InputError(f"{self.path}: not an .npz archive (a single array: a .npy file?); expected an exubio "
                              f"result <trial>.<method>.npz")
@@ -470,6 +471,9 @@ class _NpzReader:
             raise InputError(
                 f"{self.path}: no entry '{key}' (not an exubio result?); entries are {sorted(self.data.files)}"
             ) from None
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:  # a damaged member (CRC, short)
+            raise InputError(f"{self.path}: entry '{key}' is not readable ({type(exc).__name__}: {exc}); the file "
+                             f"is damaged") from None
 
     def __exit__(self, *exc: object) -> None:
         self.data.close()
