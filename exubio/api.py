@@ -109,7 +109,7 @@ def to_dataframe(reconstruction: Reconstruction, /, *, model: Model | None = Non
 def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str, /, *, model: Model | None = None,
                   overwrite: bool = False) -> dict[str, Path]:
     """Write ``<stem>.<method>.csv``, ``.mot``, ``.npz`` (and with ``model`` the ISB angles
-    ``.isb.csv``) into out_dir, each atomically; refuses to replace earlier results unless
+    ``.isb.csv``) into out_dir, as one set complete or absent; refuses to replace earlier results unless
     ``overwrite``. Returns the paths by kind."""
     from exubio.angles import isb_table
     from exubio.io import results
@@ -121,4 +121,4 @@ def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str
     meta = {"written_by": "exubio.write_results", "method": reconstruction.method,
             "units": {"angles_in_files": "deg", "positions_in_npz": "m", "time": "s"}}
     return write_outputs(reconstruction, out_dir, full, metadata=meta, summary_data={"method": reconstruction.method},
-                         isb=isb)
+                         isb=isb, overwrite=overwrite)

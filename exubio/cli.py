@@ -240,10 +240,10 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
         done = map_on_scheduler(_run_trial, jobs, args.scheduler,
                                 on_error=lambda job, exc: (str(job.trial), None, EXIT_FAILED, f"{type(exc).__name__}: {exc}"))
     elif args.jobs > 1:
-        from concurrent.futures import ProcessPoolExecutor
+        from exubio.study import map_in_processes
 
-        with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-            done = list(pool.map(_run_trial, jobs))
+        done = map_in_processes(_run_trial, jobs, args.jobs,
+                                on_error=lambda job, exc: (str(job.trial), None, EXIT_FAILED, f"{type(exc).__name__}: {exc}"))
     else:
         done = [_run_trial(j) for j in jobs]
     for trial, result, code, message in done:

@@ -95,11 +95,19 @@ def run_job(job: TrialJob, /, *, progress_factory: Callable[[str, int], Callable
             ) -> TrialResult:
     """Process one trial (see the module docstring). Refuses (InputError) to replace earlier results
     unless ``job.overwrite``."""
+    stem = job.trial.stem
+    if not job.report:
+        return _run_job(job, progress_factory)
+    results.writable_folder(job.out_dir)
+    with results.claim(job.out_dir, [f"{stem}.report"]):  # no other run writes this trial's report meanwhile
+        results.prepare_output_dir(job.out_dir, [f"{stem}.report.pdf", f"{stem}.report.png"], overwrite=job.overwrite)
+        return _run_job(job, progress_factory)
+
+
+def _run_job(job: TrialJob, progress_factory: Callable[[str, int], Callable[[int], None]] | None) -> TrialResult:
     from exubio.session import calibrate_session
 
     stem = job.trial.stem
-    if job.report:
-        results.prepare_output_dir(job.out_dir, [f"{stem}.report.pdf", f"{stem}.report.png"], overwrite=job.overwrite)
     trajectories = None  # read here only when the trial is calibrated on its own frames: then read once
     model, calibration, summary_cal = job.model, None, job.calibration
     if job.static_frames:

@@ -171,19 +171,19 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
                   metadata: dict[str, Any], summary_data: dict[str, Any],
                   undetermined: np.ndarray | None = None,
                   isb: tuple[tuple[str, ...], np.ndarray] | None = None,
-                  isb_comments: tuple[str, ...] = (), streamed: dict[str, Any] | None = None) -> dict[str, Path]:
-    """Write <stem>.csv, .mot, .npz and .summary.json into out_dir, each atomically, and with
-    ``isb`` (column names, angles (n, 15) rad) the ISB angles as <stem>.isb.csv (degrees). Coordinates
+                  isb_comments: tuple[str, ...] = (), streamed: dict[str, Any] | None = None,
+                  overwrite: bool = True) -> dict[str, Path]:
+    """Write <stem>.csv, .mot, .npz and .summary.json into out_dir as one result set, complete or
+    absent (exubio.io.results.ResultSet: written in a hidden staging folder, renamed into place,
+    summary.json last; without ``overwrite`` no existing file is ever replaced), and with ``isb``
+    (column names, angles (n, 15) rad) the ISB angles as <stem>.isb.csv (degrees). Coordinates
     that are not measurements (held, locked, undetermined for the trial) are named in the .mot
     header and summary.json; ``undetermined`` (n, m) per frame goes into the .npz; ``streamed``:
     arrays the reconstruction left on disk (exubio.io.streamed), copied into the .npz."""
     out = Path(out_dir)
-    paths = {
-        "csv": out / f"{stem}.csv",
-        "mot": out / f"{stem}.mot",
-        "npz": out / f"{stem}.npz",
-        "summary": out / f"{stem}.summary.json",
-    }
+    names = {"csv": f"{stem}.csv", "mot": f"{stem}.mot", "npz": f"{stem}.npz", "summary": f"{stem}.summary.json"}
+    if isb is not None:
+        names["isb"] = f"{stem}.isb.csv"
     notes = []
     not_measured = summary_data.get("not_measured") or []
     undet = (summary_data.get("determinacy") or {}).get("undetermined_for_trial") or []
@@ -193,15 +193,18 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
         notes.append("exubio_undetermined=" + ",".join(undet) + " (the markers do not determine them; see summary.json)")
     if summary_data.get("quality"):
         notes.append(f"exubio_quality={summary_data['quality']['verdict']}")
-    results.write_angles_csv(paths["csv"], recon.time_s, recon.coordinate_names, recon.q_rad)
-    if isb is not None:
-        paths["isb"] = out / f"{stem}.isb.csv"
-        results.write_angles_csv(paths["isb"], recon.time_s, isb[0], isb[1], comments=isb_comments)
-    results.write_mot(paths["mot"], recon.time_s, recon.coordinate_names, recon.q_rad, name=stem, notes=notes)
-    results.write_npz(paths["npz"], recon, metadata=metadata,
-                      extra_arrays=None if undetermined is None else {"undetermined": undetermined}, streamed=streamed)
-    results.write_json(paths["summary"], summary_data)
-    return paths
+    with results.ResultSet(out, stem, overwrite=overwrite) as result_set:
+        staged = {kind: result_set.path(name) for kind, name in names.items()}
+        results.write_angles_csv(staged["csv"], recon.time_s, recon.coordinate_names, recon.q_rad)
+        if isb is not None:
+            results.write_angles_csv(staged["isb"], recon.time_s, isb[0], isb[1], comments=isb_comments)
+        results.write_mot(staged["mot"], recon.time_s, recon.coordinate_names, recon.q_rad, name=stem, notes=notes)
+        results.write_npz(staged["npz"], recon, metadata=metadata,
+                          extra_arrays=None if undetermined is None else {"undetermined": undetermined},
+                          streamed=streamed)
+        results.write_json(staged["summary"], summary_data)
+        placed = result_set.commit(last=names["summary"])
+    return {kind: placed[name] for kind, name in names.items()}
 
 
 def run_metadata(inputs: TrialInputs, trial_path: str | Path, method: Method) -> dict[str, Any]:
@@ -246,19 +249,22 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
 
     methods = [Method.parse(m) for m in methods]
     stems = [output_stem(trial_path, m) for m in methods]
-    results.prepare_output_dir(out_dir, stems, overwrite=overwrite)
-    inputs = load_inputs(trajectories if trajectories is not None else trial_path, model_path=model_path,
-                         protocol_path=protocol_path, body_mass_kg=body_mass_kg, model=model)
-    with ExitStack() as parts:  # the streamed model points' part files go, whatever happens
+    results.writable_folder(out_dir)
+    with ExitStack() as parts:  # the locks, and the streamed model points' part files, go whatever happens
+        parts.enter_context(results.claim(out_dir, stems))  # no other run writes these results meanwhile
+        results.prepare_output_dir(out_dir, stems, overwrite=overwrite)
+        inputs = load_inputs(trajectories if trajectories is not None else trial_path, model_path=model_path,
+                             protocol_path=protocol_path, body_mass_kg=body_mass_kg, model=model)
         return _reconstruct_streamed(inputs, trial_path, out_dir, methods, stems, parts, StreamedReconstruction,
                                      method_options=method_options, summary_extra=summary_extra,
                                      progress_factory=progress_factory, calibration=calibration,
-                                     static_reference=static_reference, chunk_frames=chunk_frames)
+                                     static_reference=static_reference, chunk_frames=chunk_frames,
+                                     overwrite=overwrite)
 
 
 def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, stems, parts, sink_type, /, *,
                           method_options, summary_extra, progress_factory, calibration, static_reference,
-                          chunk_frames) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
+                          chunk_frames, overwrite) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
     from exubio.angles import ANGLE_NAMES, ISB_SEQUENCES, isb_table, measured_isb_joints
     from exubio.assess import assess_trial, trial_label_findings
 
@@ -305,7 +311,7 @@ def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, ste
         paths = write_outputs(recon, out_dir, stem, metadata=meta, summary_data=summ,
                               undetermined=assessment.determinacy[recon.method].undetermined, isb=isb,
                               isb_comments=isb_header(extra["isb_angles"], Path(trial_path).name, method.value),
-                              streamed={"model_points_m": sink.model_points})
+                              streamed={"model_points_m": sink.model_points}, overwrite=overwrite)
         out.append((recon, paths, summ))
     return out
 
