@@ -8,7 +8,7 @@ is complete. ``atomic_write`` is public so that other writers (C3D, TRC, figures
 A result set (the files of one method's result: CSV, .mot, .npz, summary.json, ...) is complete or
 absent (``ResultSet``): its files are written into a hidden staging folder in the output folder,
 then a journal (``COMMIT.json``) says the set is complete, and only then are the files renamed into
-place, summary.json last, with SIGINT and SIGTERM held back for those few renames. Without
+place, summary.json last, with Ctrl-C and SIGTERM held back for those few renames. Without
 overwrite a rename never replaces a file (``os.link``, which fails on an existing name). A run
 killed while it writes leaves a staging folder named with its pid: the next run into that folder
 removes it, or, when its journal is there (killed during the renames), finishes the renames. Two
@@ -215,12 +215,15 @@ def _recover_set(staging: Path, folder: Path) -> None:
         names = json.loads(journal.read_text(encoding="utf-8"))["files"]
     except (OSError, ValueError, KeyError, TypeError):
         return
+    finished = []
     for name in names:
         staged = staging / name
         if staged.is_file():
             os.replace(staged, folder / name)
-            logger.warning("%s: finished placing the result file of a run killed while it placed its set",
-                           folder / name)
+            finished.append(name)
+    if finished:
+        logger.info("%s: finished placing %s, the rest of a result set whose run was killed while it placed it",
+                    folder, ", ".join(finished))
 
 
 @contextmanager
@@ -311,27 +314,25 @@ class ResultSet:
         write_json(self.staging / _JOURNAL, {"files": names})
         _fsync_folder(self.staging)
         placed: list[Path] = []
-        held = _hold_signals()
-        try:
-            for name in names:
-                staged, final = self.staging / name, self.folder / name
-                if self.overwrite:
-                    os.replace(staged, final)
-                else:
-                    os.link(staged, final)  # FileExistsError when the name is taken: never replaced
-                    placed.append(final)
-                    staged.unlink()
-            _fsync_folder(self.folder)
-        except OSError as exc:
-            for final in placed:
-                _remove_quietly(final)
-            _remove_quietly(self.staging / _JOURNAL)
-            if isinstance(exc, FileExistsError):
-                raise InputError(f"{exc.filename2 or exc.filename}: result file already exists (written meanwhile "
-                                 f"by another run); pass --overwrite to replace the results") from None
-            raise InputError(f"{self.folder}: cannot place the result files ({exc.strerror or exc})") from None
-        finally:
-            _release_signals(held)
+        with _signals_held():
+            try:
+                for name in names:
+                    staged, final = self.staging / name, self.folder / name
+                    if self.overwrite:
+                        os.replace(staged, final)
+                    else:
+                        os.link(staged, final)  # FileExistsError when the name is taken: never replaced
+                        placed.append(final)
+                        staged.unlink()
+                _fsync_folder(self.folder)
+            except OSError as exc:
+                for final in placed:
+                    _remove_quietly(final)
+                _remove_quietly(self.staging / _JOURNAL)
+                if isinstance(exc, FileExistsError):
+                    raise InputError(f"{exc.filename2 or exc.filename}: result file already exists (written "
+                                     f"meanwhile by another run); pass --overwrite to replace the results") from None
+                raise InputError(f"{self.folder}: cannot place the result files ({exc.strerror or exc})") from None
         self.discard()
         return {name: self.folder / name for name in names}
 
@@ -349,22 +350,38 @@ class ResultSet:
             raise InputError(str(exc).replace(str(self.staging), str(self.folder))) from None
 
 
-_HELD_SIGNALS = {signal.SIGINT, signal.SIGTERM} if hasattr(signal, "pthread_sigmask") else set()
-
-
-def _hold_signals() -> set | None:
-    """Hold back Ctrl-C and SIGTERM (delivered when released) while a set's files are placed; the
-    previous mask, None where signals cannot be held (not the main thread, not POSIX)."""
+@contextmanager
+def _signals_held() -> Iterator[None]:
+    """Hold back Ctrl-C and SIGTERM while a set's files are placed: their handlers are replaced by
+    one that notes the signal, and the original handlers get the noted signals afterwards (a
+    KeyboardInterrupt then comes once the set is whole). Done with Python handlers, not a signal
+    mask: a mask holds only the main thread's signals, and the kernel gives a process's signal to
+    any thread that does not block it (numerical libraries run threads). Outside the main thread
+    (where handlers cannot be set) nothing is held."""
     import threading
 
-    if not _HELD_SIGNALS or threading.current_thread() is not threading.main_thread():
-        return None
-    return signal.pthread_sigmask(signal.SIG_BLOCK, _HELD_SIGNALS)
-
-
-def _release_signals(previous: set | None) -> None:
-    if previous is not None:
-        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[int] = []
+    previous = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        handler = signal.getsignal(sig)
+        if handler in (signal.SIG_IGN, None):
+            continue
+        previous[sig] = handler
+        signal.signal(sig, lambda signum, frame: pending.append(signum))
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        for sig in pending:
+            handler = previous[sig]
+            if callable(handler):
+                handler(sig, None)
+            else:  # SIG_DFL
+                signal.raise_signal(sig)
 
 
 def _fsync_folder(folder: Path) -> None:

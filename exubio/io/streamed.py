@@ -11,6 +11,7 @@ leaves a ``.*.tmp*`` file that the next study run removes).
 """
 from __future__ import annotations
 
+import errno
 import os
 import secrets
 from pathlib import Path
@@ -45,9 +46,11 @@ class ArrayFile:
                              f"rows {self.rows} of {self.shape}")
         try:
             block.tofile(self._fh)
-        except OSError as exc:  # a full disk: numpy says "N requested and M written"
-            raise InputError(f"{self.path.parent}: cannot write ({exc.strerror or exc}); the result of this "
-                             f"method was not written") from None
+        except OSError as exc:  # a full disk: numpy says only "N requested and M written"
+            reason = exc.strerror or (f"{os.strerror(errno.ENOSPC)}: {exc}" if _disk_full(self.path.parent, block.nbytes)
+                                      else str(exc))
+            raise InputError(f"{self.path.parent}: cannot write ({reason}); the result of this method was not "
+                             f"written") from None
         self.rows += block.shape[0]
 
     def blocks(self) -> Iterator[np.ndarray]:
@@ -78,6 +81,14 @@ class ArrayFile:
         except FileNotFoundError:
             pass
         done_with(self.path)
+
+
+def _disk_full(folder: Path, wanted: int) -> bool:
+    try:
+        st = os.statvfs(folder)
+    except (OSError, AttributeError):  # not POSIX
+        return False
+    return st.f_bavail * st.f_frsize < wanted
 
 
 class StreamedReconstruction:
