@@ -17,7 +17,7 @@ from typing import Any, Callable
 import numpy as np
 
 import exubio
-from exubio.errors import InputError, ProtocolError
+from exubio.errors import InputError, PartialReconstructionError, ProtocolError, ReconstructionError
 from exubio.evaluate import summary
 from exubio.io import results
 from exubio.io.trial import read_trial
@@ -237,7 +237,9 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
                      calibration: dict[str, Any] | None = None, static_reference: Any = None,
                      chunk_frames: int | None = None) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
     """Everything ``exubio reconstruct`` does for one trial; returns (reconstruction, paths, summary)
-    per method. Every method runs first; then the trial is assessed (label checks, determinacy,
+    per method. Every method runs first (one that fails, ReconstructionError, does not stop the
+    others: their results are written, then PartialReconstructionError carries them and each failed
+    method's reason; its summary says so, ``failed_methods``); then the trial is assessed (label checks, determinacy,
     range limits, PF-LS agreement, ``calibration``: the calibration report dict) and every summary
     carries its quality verdict. Refuses (InputError) to replace earlier results unless
     ``overwrite``. ``trajectories``: the trial ``trial_path`` already read. Bounded memory: each method streams its result in chunks of ``chunk_frames``
@@ -268,17 +270,29 @@ def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, ste
     from exubio.angles import ANGLE_NAMES, ISB_SEQUENCES, isb_table, measured_isb_joints
     from exubio.assess import assess_trial, trial_label_findings
 
-    recons, sinks = [], []
+    recons, sinks, done, failures = [], [], [], {}
     for method, stem in zip(methods, stems):
         progress = progress_factory(method.value, inputs.targets.n_frames) if progress_factory else None
         opts = (method_options or {}).get(method.value)  # the options object, or a dict of its fields
         values = opts if isinstance(opts, dict) else {}
         sink = parts.enter_context(sink_type(out_dir, stem, inputs.targets, inputs.model.coordinate_names))
-        timings, info = stream_reconstruct(inputs.model, inputs.protocol, inputs.targets, sink, method=method,
-                                           options=None if isinstance(opts, dict) else opts, progress=progress,
-                                           chunk_frames=chunk_frames, **values)
+        try:
+            timings, info = stream_reconstruct(inputs.model, inputs.protocol, inputs.targets, sink, method=method,
+                                               options=None if isinstance(opts, dict) else opts, progress=progress,
+                                               chunk_frames=chunk_frames, **values)
+        except ReconstructionError as exc:  # the other methods still give their results
+            if len(methods) == 1:
+                raise
+            failures[method.value] = str(exc)
+            log.warning("%s failed: %s", method.value.upper(), exc)
+            sink.discard()
+            continue
         recons.append(sink.reconstruction(timings_s=timings, info=info))
         sinks.append(sink)
+        done.append((method, stem))
+    if not recons:
+        raise ReconstructionError("; ".join(f"{m.upper()}: {reason}" for m, reason in failures.items()))
+    methods, stems = [m for m, _ in done], [s for _, s in done]
     findings = trial_label_findings(inputs.model, inputs.protocol, inputs.targets, reference=static_reference)
     assessment = assess_trial(inputs.model, inputs.protocol, inputs.targets, recons, label_findings=findings,
                               calibration=calibration)
@@ -296,6 +310,9 @@ def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, ste
         if inputs.trial.input_findings:
             extra["input_findings"] = list(inputs.trial.input_findings)
             extra["quality"] = with_input_findings(extra["quality"], inputs.trial.input_findings)
+        if failures:
+            extra["failed_methods"] = dict(failures)
+            extra["quality"] = with_failed_methods(extra["quality"], failures)
         isb = isb_table(inputs.model, recon.q_rad)
         measured = measured_isb_joints(inputs.model, set(assessment.not_solved))
         extra["isb_angles"] = {
@@ -313,6 +330,10 @@ def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, ste
                               isb_comments=isb_header(extra["isb_angles"], Path(trial_path).name, method.value),
                               streamed={"model_points_m": sink.model_points}, overwrite=overwrite)
         out.append((recon, paths, summ))
+    if failures:
+        raise PartialReconstructionError(
+            "; ".join(f"{m.upper()} failed: {reason}" for m, reason in failures.items())
+            + f" ({', '.join(r.method.upper() for r, _, _ in out)} written)", outputs=out, failures=failures)
     return out
 
 
@@ -322,6 +343,16 @@ def with_input_findings(quality: dict[str, Any], findings: tuple[str, ...], /) -
     from exubio.quality import Reason
 
     notes = [Reason("input_file", "note", f"input file: {f}").to_dict() for f in findings]
+    return {**quality, "reasons": list(quality["reasons"]) + notes}
+
+
+def with_failed_methods(quality: dict[str, Any], failures: dict[str, str], /) -> dict[str, Any]:
+    """A summary's ``quality`` with a note per method of the run that failed (this result stands
+    on its own: no PF-LS agreement was measured)."""
+    from exubio.quality import Reason
+
+    notes = [Reason("method_failed", "note", f"{m.upper()} failed on this trial, so this result is not compared with it "
+                    f"(no PF-LS agreement): {reason}").to_dict() for m, reason in failures.items()]
     return {**quality, "reasons": list(quality["reasons"]) + notes}
 
 

@@ -263,6 +263,8 @@ def run_trial_task(task: TrialTask) -> TrialOutcome:
 
 def _fill(out: TrialOutcome, result: TrialResult) -> None:
     out.verdicts = result.verdicts
+    if result.failed:  # one method failed, the other's result is written
+        out.error = "; ".join(f"{m.upper()} failed: {reason}" for m, reason in result.failed.items())
     for m in result.methods:
         out.frames = m.summary.get("n_frames", out.frames)
         out.residual_mm[m.method] = (m.summary.get("residual_mm") or {}).get("mean")

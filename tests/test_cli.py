@@ -299,3 +299,41 @@ def test_real_trc_whose_num_frames_disagrees_with_its_rows_runs_and_says_so(tmp_
     _, _, q_bad = read_angles_csv(out / "ABD01.ls.csv")
     _, _, q_good = read_angles_csv(tmp_path / "good_out" / "ABD01.ls.csv")
     assert np.array_equal(q_bad, q_good)
+
+
+def test_method_both_writes_ls_when_pf_fails_and_exits_1(tmp_path, c3d, capsys, monkeypatch):
+    """With --method both, PF's failure threw LS's result away (nothing was written). Now LS's set is
+    written, its summary names PF's failure, the console says PF failed and why, and the exit code
+    is 1 (documented in --help and the README)."""
+    import exubio.pipeline
+    from exubio.errors import ReconstructionError
+
+    stream = exubio.pipeline.stream_reconstruct
+
+    def pf_diverges(*args, method, **kwargs):
+        if exubio.pipeline.Method.parse(method).value == "pf":
+            raise ReconstructionError("abd.c3d: PF diverged at t = 0.000 s (EPI_lat spring 654 mm)")
+        return stream(*args, method=method, **kwargs)
+
+    monkeypatch.setattr(exubio.pipeline, "stream_reconstruct", pf_diverges)
+    out = tmp_path / "out"
+    code = main(["-q", "reconstruct", str(c3d), "--method", "both", "--out", str(out)])
+    console = capsys.readouterr()
+    assert code == 1, console.err
+    assert "[pf] FAILED" in console.out and "PF diverged at t = 0.000 s" in console.out
+    assert "Traceback" not in console.err
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["abd.ls.csv", "abd.ls.isb.csv", "abd.ls.mot", "abd.ls.npz", "abd.ls.summary.json",
+                     "abd.report.pdf", "abd.report.png"], names
+    summ = json.loads((out / "abd.ls.summary.json").read_text())
+    assert "PF diverged" in summ["failed_methods"]["pf"]
+    assert any(r["code"] == "method_failed" and "PF failed" in r["message"] for r in summ["quality"]["reasons"])
+    assert summ["quality"]["verdict"] in ("ok", "check")  # LS's own verdict: PF's failure is a note on it
+    # both methods failing is a failed reconstruction (exit 1), nothing written
+    monkeypatch.setattr(exubio.pipeline, "stream_reconstruct",
+                        lambda *a, method, **k: (_ for _ in ()).throw(ReconstructionError(f"{method} failed here")))
+    out2 = tmp_path / "out2"
+    assert main(["-q", "reconstruct", str(c3d), "--method", "both", "--no-report", "--out", str(out2)]) == 1
+    err = capsys.readouterr().err
+    assert "reconstruction failed" in err and "PF: " in err and "LS: " in err
+    assert not [p for p in out2.iterdir()]
