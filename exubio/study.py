@@ -487,9 +487,16 @@ def map_on_scheduler(fn: Callable, items: list, scheduler: str, /, *,
             raise InputError(f"--scheduler {scheduler}: expected local:N with N >= 1 workers")
         import dask
 
-        with dask.config.set(_LOCAL_CLUSTER_CONFIG):
-            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
-        client = Client(cluster)
+        try:
+            with dask.config.set(_LOCAL_CLUSTER_CONFIG):  # silence_logs: also the workers' logs (their processes)
+                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                                       silence_logs=logging.CRITICAL)
+            client = Client(cluster)
+        except KeyboardInterrupt:  # Ctrl-C while the cluster starts
+            if cluster is not None:
+                _stop_dask(None, cluster, [])
+            _quiet_dask_exit()
+            raise
     elif scheduler.startswith("tcp://"):
         try:
             client = Client(scheduler, timeout=10)
@@ -512,12 +519,42 @@ def map_on_scheduler(fn: Callable, items: list, scheduler: str, /, *,
                 on_done(out[k])
         return out
     except KeyboardInterrupt:
-        client.cancel(list(futures))
+        _stop_dask(client, cluster, list(futures))
+        cluster = None
         raise
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def _stop_dask(client: Any, cluster: Any, futures: list, /) -> None:
+    """After Ctrl-C: cancel the work, close the client and the local cluster within about a second
+    each, and say nothing of the connections that close meanwhile (Dask logs them as errors)."""
+    _quiet_dask_exit()
+    for step in (lambda: client.cancel(futures, force=True) if client is not None else None,
+                 lambda: client.close(timeout=0.5) if client is not None else None,
+                 lambda: cluster.close(timeout=0.5) if cluster is not None else None):
+        try:
+            step()
+        except BaseException:  # noqa: BLE001 - stopping: whatever Dask raises while it closes goes unsaid
+            pass
+
+
+def _quiet_dask_exit() -> None:
+    """Say nothing of what Dask reports while it stops after Ctrl-C: its loggers off, and its exit
+    hook (which would close a half-started or half-closed cluster again and print why it cannot)
+    unregistered."""
+    for name in ("distributed", "tornado", "asyncio"):
+        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+    try:
+        import atexit
+
+        from distributed.deploy.spec import close_clusters
+
+        atexit.unregister(close_clusters)
+    except ImportError:  # pragma: no cover - another layout of distributed
+        pass
 
 
 def _submit_dask(tasks: list[TrialTask], scheduler: str, on_done: Callable[[TrialOutcome], None]) -> list[TrialOutcome]:
