@@ -307,9 +307,12 @@ def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, ste
         if inputs.targets.cutoff_hz:
             extra["filter_cutoff_hz"] = dict(inputs.targets.cutoff_hz)
         extra.update(assessment.summary_for(recon.method))
-        if inputs.trial.input_findings:
-            extra["input_findings"] = list(inputs.trial.input_findings)
-            extra["quality"] = with_input_findings(extra["quality"], inputs.trial.input_findings)
+        cal = extra.get("calibration") if isinstance(extra.get("calibration"), dict) else {}
+        file_findings = tuple(dict.fromkeys(tuple(inputs.trial.input_findings) + tuple(
+            f"static trial: {f}" for f in cal.get("input_findings") or () if f not in inputs.trial.input_findings)))
+        if file_findings:
+            extra["input_findings"] = list(file_findings)
+            extra["quality"] = with_input_findings(extra["quality"], file_findings)
         if failures:
             extra["failed_methods"] = dict(failures)
             extra["quality"] = with_failed_methods(extra["quality"], failures)

@@ -337,3 +337,23 @@ def test_method_both_writes_ls_when_pf_fails_and_exits_1(tmp_path, c3d, capsys, 
     err = capsys.readouterr().err
     assert "reconstruction failed" in err and "PF: " in err and "LS: " in err
     assert not [p for p in out2.iterdir()]
+
+
+def test_a_static_trc_whose_num_frames_disagrees_is_named_in_the_task_trials_results(tmp_path, c3d, capsys):
+    from exubio.io.trc import write_trc
+
+    static = simulate_trial(load_model(), Motion.ABDUCTION, duration_s=0.5, rate_hz=100.0, noise_mm=0.5, seed=9)
+    path = write_trc(tmp_path / "static.trc", static.trajectories)
+    lines = path.read_text(encoding="utf-8").splitlines(keepends=True)
+    values = lines[2].split("\t")
+    values[2] = str(int(values[2]) + 1)
+    path.write_text("".join(lines[:2] + ["\t".join(values)] + lines[3:]), encoding="utf-8")
+    out = tmp_path / "out"
+    code = main(["-q", "reconstruct", str(c3d), "--static", str(path), "--static-frames", "0:20", "--method", "ls",
+                 "--no-report", "--out", str(out)])
+    assert code in (0, 1), capsys.readouterr().err
+    summ = json.loads((out / "abd.ls.summary.json").read_text())
+    (finding,) = summ["input_findings"]
+    assert finding.startswith("static trial: static.trc: line 3: NumFrames is 51 but the file has 50 data rows")
+    assert any(r["code"] == "input_file" and "static trial: static.trc" in r["message"]
+               for r in summ["quality"]["reasons"])
