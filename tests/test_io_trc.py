@@ -147,7 +147,7 @@ def test_missing_file(tmp_path):
         (dict(units="furlong"), r"line 3: Units is 'furlong', expected one of \['cm', 'm', 'mm'\]"),
         (dict(rate="fast"), r"line 3: DataRate/NumFrames/NumMarkers must be numbers"),
         (dict(rate="0"), r"line 3: expected DataRate > 0"),
-        (dict(rate="1e9"), r"line 3: DataRate 1e\+09 Hz is above 100000 Hz"),
+        (dict(rate="1e9"), r"line 3: DataRate is 1e\+09 Hz \(above 100000 Hz"),
         (dict(rows=""), r"no data rows after line 5"),
         (dict(header=HEADER.replace("\tB\t\t", "")), r"line 4: 1 marker labels, but line 3 says NumMarkers=2"),
         (dict(header=HEADER.replace("Frame#", "Frame")), r"line 4: expected 'Frame#"),
