@@ -137,8 +137,8 @@ def to_dataframe(reconstruction: Reconstruction, /, *, model: Model | None = Non
 def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str, /, *, model: Model | None = None,
                   protocol: Protocol | None = None, overwrite: bool = False) -> dict[str, Path]:
     """Write ``<stem>.<method>.csv`` and ``.mot`` (the anatomical angles, each one's status in the
-    header), ``.npz`` and ``.summary.json`` into out_dir, each atomically; refuses to replace
-    earlier results unless ``overwrite``. Returns the paths by kind."""
+    header), ``.npz`` and ``.summary.json`` into out_dir, as one set complete or absent; refuses to
+    replace earlier results unless ``overwrite``. Returns the paths by kind."""
     from exubio.angles import anatomical_table
     from exubio.evaluate import summary
     from exubio.io import results
@@ -154,4 +154,5 @@ def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str
             "units": {"angles_in_files": "deg", "positions_in_npz": "m", "time": "s"}}
     summ = summary(reconstruction, source=stem, extra={"anatomical_angles": det.to_dict()})
     angles = AngleOutputs(names, values, det.status, angle_header(det, stem, reconstruction.method, protocol.side))
-    return write_outputs(reconstruction, out_dir, full, metadata=meta, summary_data=summ, angles=angles)
+    return write_outputs(reconstruction, out_dir, full, metadata=meta, summary_data=summ, angles=angles,
+                         overwrite=overwrite)

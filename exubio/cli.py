@@ -1,5 +1,7 @@
-"""The ``exubio`` command: parse, call, print. Exit codes: 0 ok, 1 reconstruction failed,
-2 bad input. Results go to files, logs to stderr."""
+"""The ``exubio`` command: parse, call, print. Exit codes: 0 ok (verdicts ok or check), 1 a
+reconstruction failed or a verdict is fail (with --method both: one method failed and the other's
+result is written), 2 bad input (also an output folder that cannot be written or fills up), 130
+interrupted (Ctrl-C). Results go to files, logs to stderr."""
 from __future__ import annotations
 
 import argparse
@@ -17,6 +19,12 @@ if TYPE_CHECKING:  # the CLI imports the pipeline only when a command runs (fast
 log = logging.getLogger("exubio")
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+EXIT_CODES_HELP = (
+    "exit codes: 0 ok (every verdict ok or check); 1 a reconstruction failed or a verdict is fail; with "
+    "--method both, 1 also when one method failed and the other's result was written (the failure is printed with "
+    "its reason); 2 bad input, nothing written (a file, key or marker is named; also an output folder that cannot "
+    "be written or a disk that fills up: no result set is left half-written); 130 interrupted by Ctrl-C (results "
+    "that were not complete are not there; the next run removes what was left). With several trials: the worst.")
 
 
 def _progress_factory(enabled: bool) -> Callable[[str, int], Callable[[int], None]] | None:
@@ -100,6 +108,9 @@ def _print_trial(result: TrialResult, quiet: bool) -> None:
         print(f"report: {result.report['pdf']} (+ .png)")
     for m in result.methods:
         _print_quality(m.method, m.summary)
+    for method, reason in result.failed.items():
+        print(f"[{method}] FAILED, nothing written for it: {reason}")
+        print(f"[{method}] the other method's result is written (exit code 1)")
 
 
 def _print_quality(method: str, summ: dict) -> None:
@@ -114,8 +125,9 @@ def _print_quality(method: str, summ: dict) -> None:
 
 
 def _trial_code(result: TrialResult) -> int:
-    """1 when any method's verdict is 'fail' (see exubio.quality), else 0."""
-    return EXIT_FAILED if "fail" in result.verdicts.values() else EXIT_OK
+    """1 when a method failed (the others' results written) or any method's verdict is 'fail'
+    (see exubio.quality), else 0."""
+    return EXIT_FAILED if result.failed or "fail" in result.verdicts.values() else EXIT_OK
 
 
 def _check_output_folder(folder: Path, out: str) -> None:
@@ -198,12 +210,15 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
                          f"trial; give --static STATIC as well")
     if args.jobs < 1:
         raise InputError(f"--jobs {args.jobs}: expected a whole number of processes >= 1")
-    stems: dict[str, str] = {}
+    seen: dict[str, str] = {}  # file name -> the trial of that name
     for t in args.trials:  # results are named after the trial file: two of one name would mix
-        other = stems.setdefault(Path(t).stem, str(t))
-        if other != str(t):
+        other = seen.get(Path(t).stem)
+        if other is not None and Path(t).resolve() == Path(other).resolve():
+            raise InputError(f"{t}: the same trial is given twice ({other} and {t}); give each trial once")
+        if other is not None:
             raise InputError(f"{t} and {other} have the same file name: their results in {args.out} would be mixed; "
                              f"reconstruct them into different --out folders")
+        seen[Path(t).stem] = str(t)
     _check_output_folder(Path(args.out), args.out)
     relabel = parse_relabel(args.relabel, option="--relabel")
     static_relabel = parse_relabel(args.static_relabel, option="--static-relabel")
@@ -246,10 +261,10 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
         done = map_on_scheduler(_run_trial, jobs, args.scheduler,
                                 on_error=lambda job, exc: (str(job.trial), None, EXIT_FAILED, f"{type(exc).__name__}: {exc}"))
     elif args.jobs > 1:
-        from concurrent.futures import ProcessPoolExecutor
+        from exubio.study import map_in_processes
 
-        with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-            done = list(pool.map(_run_trial, jobs))
+        done = map_in_processes(_run_trial, jobs, args.jobs,
+                                on_error=lambda job, exc: (str(job.trial), None, EXIT_FAILED, f"{type(exc).__name__}: {exc}"))
     else:
         done = [_run_trial(j) for j in jobs]
     for trial, result, code, message in done:
@@ -365,7 +380,7 @@ def cmd_study(args: argparse.Namespace) -> int:
     outcomes = run_study(spec, args.out, jobs=args.jobs, scheduler=args.scheduler,
                          progress=None if args.quiet else (lambda m: print(m, file=sys.stderr)))
     failed = [o for o in outcomes if o.status == "failed"]
-    fails = [o for o in outcomes if "fail" in o.verdicts.values()]
+    fails = [o for o in outcomes if {"fail", "failed"} & set(o.verdicts.values())]
     print(f"study {spec.name}: {len(outcomes)} trial(s): {sum(o.status == 'done' for o in outcomes)} done, "
           f"{sum(o.status.startswith('skipped') for o in outcomes)} already complete, {len(failed)} failed; "
           f"table: {Path(args.out) / 'study.csv'}")
@@ -386,7 +401,7 @@ def cmd_view(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="exubio", description="Upper-extremity joint kinematics from skin markers "
+    p = argparse.ArgumentParser(prog="exubio", epilog=EXIT_CODES_HELP, description="Upper-extremity joint kinematics from skin markers "
                                 "(potential-field and least-squares methods on Exudyn).")
     p.add_argument("--version", action="version", version=f"exubio {exubio.__version__}")
     # -v/-q work before and after the subcommand (SUPPRESS: a subcommand's default does not reset them)
@@ -409,7 +424,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="PATH.c3d; PATH.truth.csv is written beside it")
     s.set_defaults(func=cmd_simulate)
 
-    r = sub.add_parser("reconstruct", parents=[common], help="joint angles from a C3D/TRC trial")
+    r = sub.add_parser("reconstruct", parents=[common], help="joint angles from a C3D/TRC trial", epilog=EXIT_CODES_HELP)
     r.add_argument("trials", nargs="+", metavar="TRIAL", help="trial file(s) (.c3d or .trc); several = a study")
     r.add_argument("--jobs", type=int, default=1, help="trials reconstructed in parallel processes (default 1)")
     r.add_argument("--scheduler", help="reconstruct the trials on Dask: local:N (a local cluster of N workers) or "
@@ -420,7 +435,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--model", help="model YAML (default: models/upper_extremity.yaml)")
     r.add_argument("--method", choices=["pf", "ls", "both"], default="pf",
                    help="pf: potential field on Exudyn; ls: constrained least squares per frame; both: the "
-                        "two, compared (default: pf)")
+                        "two, compared; if one fails, the other's result is still written, the failure is "
+                        "reported with its reason and the exit code is 1 (default: pf)")
     r.add_argument("--body-mass", type=float, help="body mass, kg (scales segment inertia)")
     r.add_argument("--out", required=True, help="output folder")
     r.add_argument("--overwrite", action="store_true", help="replace earlier results in --out")
@@ -476,7 +492,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.set_defaults(func=cmd_export_model)
 
     st = sub.add_parser("study", parents=[common],
-                        help="run a study file (subjects x sessions x trials); re-running resumes it")
+                        help="run a study file (subjects x sessions x trials); re-running resumes it",
+                        epilog=EXIT_CODES_HELP)
     st.add_argument("study", help="STUDY.yaml (format: exubio/study.py)")
     st.add_argument("--out", required=True, help="output folder: <subject>/<session>/<trial>/, study.csv, study.json")
     st.add_argument("--jobs", type=int, default=1, help="trials in parallel local processes (default 1)")

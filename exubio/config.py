@@ -14,11 +14,18 @@ import yaml
 
 from exubio.errors import ExubioError, ProtocolError
 
+MAX_NESTING = 64
+"""The deepest nesting of mappings and lists a configuration file may have. exubio's own files nest
+at most 6 levels; a file nested thousands of levels deep (hostile or generated) would exhaust
+Python's recursion in the YAML composer and in every walk over it."""
+
+
 def read_yaml(path: str | os.PathLike[str], /, *, error: type[ExubioError] = ProtocolError) -> dict[str, Any]:
     """Parse a YAML file whose top level must be a mapping.
 
     Raises ``error`` naming the file when it is missing, unreadable, not valid YAML, has a
-    repeated key in a mapping (with its line), or is not a mapping at the top.
+    repeated key in a mapping (with its line), nests deeper than MAX_NESTING, or is not a mapping
+    at the top.
     """
     p = Path(path)
     try:
@@ -36,6 +43,7 @@ def _parse(text: str, path: str, error: type[ExubioError]) -> dict[str, Any]:
     protocol for every trial (0.3-0.4 s each time); callers get a deep copy."""
     p = Path(path)
     try:
+        _check_nesting(text, p, error)
         _check_duplicate_keys(yaml.compose(text, Loader=yaml.SafeLoader), p, error)
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
@@ -43,6 +51,20 @@ def _parse(text: str, path: str, error: type[ExubioError]) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise error(f"{p}: expected a mapping of keys at the top level, got {_kind(data)}")
     return data
+
+
+def _check_nesting(text: str, path: Path, error: type[ExubioError]) -> None:
+    """Refuse a file nested deeper than MAX_NESTING, found on YAML's event stream (its parser is
+    iterative: no recursion however deep the file) before anything recursive reads it."""
+    depth = 0
+    for event in yaml.parse(text, Loader=yaml.SafeLoader):
+        if isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
+            depth += 1
+            if depth > MAX_NESTING:
+                raise error(f"{path}: line {event.start_mark.line + 1}: nested more than {MAX_NESTING} levels deep "
+                            f"(mappings and lists within each other); expected at most {MAX_NESTING}")
+        elif isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
+            depth -= 1
 
 
 def _check_duplicate_keys(node: yaml.Node | None, path: Path, error: type[ExubioError]) -> None:

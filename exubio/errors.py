@@ -25,3 +25,13 @@ class ModelError(ExubioError):
 
 class ReconstructionError(ExubioError):
     """A reconstruction could not produce a trustworthy result (divergence, solver failure)."""
+
+
+class PartialReconstructionError(ReconstructionError):
+    """Some of the methods asked for failed, the others' results were written: ``outputs`` holds the
+    written ones (exubio.pipeline.reconstruct_file's (reconstruction, paths, summary) per method),
+    ``failures`` each failed method's reason ({"pf": "..."})."""
+
+    def __init__(self, message: str, /, *, outputs: list, failures: dict[str, str]) -> None:
+        super().__init__(message)
+        self.outputs, self.failures = outputs, failures

@@ -7,7 +7,8 @@ names its files (trial, model, protocol) and carries the methods' options as the
 ``run_job`` reads the trial once (also when it is calibrated on its own frames), reconstructs it
 with every method (exubio.pipeline.reconstruct_file: streamed, bounded memory), writes the results
 and the trial report, and returns the TrialResult: per method the summary and the files, the
-PF-LS agreement, the verdicts, the calibration.
+PF-LS agreement, the verdicts, the calibration, and the methods that failed with their reasons
+(a method that fails does not take the others' results with it).
 """
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
+from exubio.errors import PartialReconstructionError
 from exubio.io import results
 from exubio.io.trial import read_trial
 from exubio.protocol import relabel_trajectories
@@ -91,21 +93,31 @@ class TrialResult:
     agreement_deg: Mapping[str, float] | None = None  # PF-LS RMSE per determined coordinate
     calibration: Calibrated | None = None
     report: Mapping[str, str] | None = None  # "pdf", "png"
+    failed: Mapping[str, str] = field(default_factory=dict)  # methods that failed: their reason (no files)
 
     @property
     def verdicts(self) -> dict[str, str]:
-        return {m.method: m.verdict for m in self.methods}
+        """Per method its verdict, "failed" for a method that failed."""
+        return {**{m.method: m.verdict for m in self.methods}, **{m: "failed" for m in self.failed}}
 
 
 def run_job(job: TrialJob, /, *, progress_factory: Callable[[str, int], Callable[[int], None]] | None = None
             ) -> TrialResult:
     """Process one trial (see the module docstring). Refuses (InputError) to replace earlier results
     unless ``job.overwrite``."""
+    stem = job.trial.stem
+    if not job.report:
+        return _run_job(job, progress_factory)
+    results.writable_folder(job.out_dir)
+    with results.claim(job.out_dir, [f"{stem}.report"]):  # no other run writes this trial's report meanwhile
+        results.prepare_output_dir(job.out_dir, [f"{stem}.report.pdf", f"{stem}.report.png"], overwrite=job.overwrite)
+        return _run_job(job, progress_factory)
+
+
+def _run_job(job: TrialJob, progress_factory: Callable[[str, int], Callable[[int], None]] | None) -> TrialResult:
     from exubio.session import calibrate_session
 
     stem = job.trial.stem
-    if job.report:
-        results.prepare_output_dir(job.out_dir, [f"{stem}.report.pdf", f"{stem}.report.png"], overwrite=job.overwrite)
     trajectories = None  # read here only when it is relabelled or calibrated on its own frames: then read once
     model, calibration, summary_cal = job.model, None, job.calibration
     if job.relabel:
@@ -119,17 +131,21 @@ def run_job(job: TrialJob, /, *, progress_factory: Callable[[str, int], Callable
         calibration = Calibrated(str(model), report)
     extra = {"calibration": summary_cal} if summary_cal else {}
     reference = job.static_reference if job.static_reference is not None else (summary_cal or {}).get("_reference")
-    outputs = reconstruct_file(job.trial, job.out_dir, methods=list(job.methods), trajectories=trajectories,
-                               model_path=model, protocol_path=job.protocol, body_mass_kg=job.body_mass_kg,
-                               overwrite=job.overwrite, method_options=dict(job.options), summary_extra=extra,
-                               progress_factory=progress_factory, calibration=summary_cal,
-                               static_reference=reference, repair_labels=job.repair_labels)
+    failed: dict[str, str] = {}
+    try:
+        outputs = reconstruct_file(job.trial, job.out_dir, methods=list(job.methods), trajectories=trajectories,
+                                   model_path=model, protocol_path=job.protocol, body_mass_kg=job.body_mass_kg,
+                                   overwrite=job.overwrite, method_options=dict(job.options), summary_extra=extra,
+                                   progress_factory=progress_factory, calibration=summary_cal,
+                                   static_reference=reference, repair_labels=job.repair_labels)
+    except PartialReconstructionError as exc:  # one method failed, the others' results are written
+        outputs, failed = exc.outputs, dict(exc.failures)
     methods = tuple(MethodResult(r.method, {k: str(v) for k, v in paths.items()}, summ) for r, paths, summ in outputs)
     agreement = None
     if len(outputs) == 2:
         agree = outputs[0][2].get("pf_ls_agreement_deg") or {}
         agreement = {k: v for k, v in agree.items() if isinstance(v, float)}
-    result = TrialResult(str(job.trial), methods, agreement, calibration)
+    result = TrialResult(str(job.trial), methods, agreement, calibration, failed=failed)
     if job.report:
         from exubio.report.trial_report import build_trial_report
 

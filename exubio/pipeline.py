@@ -17,7 +17,7 @@ from typing import Any, Callable
 import numpy as np
 
 import exubio
-from exubio.errors import InputError
+from exubio.errors import InputError, PartialReconstructionError, ProtocolError, ReconstructionError
 from exubio.evaluate import summary
 from exubio.io import results
 from exubio.io.trial import read_trial
@@ -54,10 +54,12 @@ class TrialInfo:
     ignored_labels: tuple[str, ...]
     units_in_file: str
     rate_hz: float
+    input_findings: tuple[str, ...] = ()  # what the reader read around (Trajectories.input_findings)
 
     @classmethod
     def of(cls, traj: Trajectories) -> "TrialInfo":
-        return cls(traj.source, traj.labels, traj.ignored_labels, traj.units_in_file, traj.rate_hz)
+        return cls(traj.source, traj.labels, traj.ignored_labels, traj.units_in_file, traj.rate_hz,
+                   traj.input_findings)
 
 
 @dataclass(frozen=True)
@@ -82,11 +84,38 @@ def protocol_for_model(model: Model, protocol_path: str | Path | None = None, /)
     protocol = load_protocol(protocol_path or DEFAULT_PROTOCOL, segments=model.segment_names, model_points=points,
                              coordinates=model.coordinate_names)
     check_landmarks(protocol, points)
+    check_held(model, protocol)
     if model.metadata.get("calibration"):
         from exubio.calibration import calibrated_protocol
 
         protocol = calibrated_protocol(protocol, model)
     return protocol
+
+
+def check_held(model: Model, protocol: Protocol, /) -> None:
+    """Refuse (ProtocolError naming the protocol's ``hold`` key) a hold that leaves the methods
+    nothing to solve: every coordinate held, or fewer coordinates free in the chain that moves the
+    ellipsoid's contact points than there are contact constraints (they could not be met: a singular
+    system in both methods)."""
+    held = set(protocol.held_coordinates)
+    names = model.coordinate_names
+    where = f"{protocol.source or protocol.name}: hold"
+    if names and held >= set(names):
+        raise ProtocolError(f"{where}: holds every coordinate of the model ({len(names)}); nothing is left for the "
+                            f"markers to determine: hold fewer (thoracoscapular_9 holds sc_posterior_rotation only)")
+    by_name = {s.name: s for s in model.segments}
+    for segment in sorted({seg for seg, _ in model.ellipsoid.contact_points}):
+        chain, name = [], segment
+        while name in by_name:
+            s = by_name[name]
+            chain = list(s.joint.coordinates if s.joint else ()) + chain
+            name = s.parent
+        free = [c for c in chain if c not in held]
+        n_constraints = sum(seg == segment for seg, _ in model.ellipsoid.contact_points)
+        if chain and len(free) < n_constraints:
+            raise ProtocolError(
+                f"{where}: leaves {len(free)} of the coordinates that move the {segment} free ({free or 'none'} of "
+                f"{chain}); its {n_constraints} points on the thorax ellipsoid need at least {n_constraints}: hold fewer")
 
 
 def load_model_and_protocol(*, model_path: str | Path | None = None, protocol_path: str | Path | None = None,
@@ -170,32 +199,32 @@ class AngleOutputs:
 
 def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
                   metadata: dict[str, Any], summary_data: dict[str, Any], angles: AngleOutputs,
-                  undetermined: np.ndarray | None = None, streamed: dict[str, Any] | None = None) -> dict[str, Path]:
+                  undetermined: np.ndarray | None = None, streamed: dict[str, Any] | None = None,
+                  overwrite: bool = True) -> dict[str, Path]:
     """Write <stem>.csv and .mot (the anatomical angles ``angles`` in degrees, each one's status in
     the header), .npz (everything: the model coordinates, ``undetermined`` (n, m) per coordinate and
-    the angles' status per frame) and .summary.json into out_dir, each atomically; ``streamed``:
+    the angles' status per frame) and .summary.json into out_dir as one result set, complete or
+    absent (exubio.io.results.ResultSet: written in a hidden staging folder, renamed into place,
+    summary.json last; without ``overwrite`` no existing file is ever replaced); ``streamed``:
     arrays the reconstruction left on disk (exubio.io.streamed), copied into the .npz."""
     out = Path(out_dir)
-    paths = {
-        "csv": out / f"{stem}.csv",
-        "mot": out / f"{stem}.mot",
-        "npz": out / f"{stem}.npz",
-        "summary": out / f"{stem}.summary.json",
-    }
+    names = {"csv": f"{stem}.csv", "mot": f"{stem}.mot", "npz": f"{stem}.npz", "summary": f"{stem}.summary.json"}
     notes = [f"exubio_{line.split(':', 1)[0].replace(' ', '_')}={line.split(':', 1)[1].strip()}"
              for line in angles.comments if line.startswith("status ")]
     if summary_data.get("quality"):
         notes.append(f"exubio_quality={summary_data['quality']['verdict']}")
-    results.write_angles_csv(paths["csv"], recon.time_s, [f"{n}_deg" for n in angles.names], angles.values_rad,
-                             comments=angles.comments)
-    results.write_mot(paths["mot"], recon.time_s, angles.names, angles.values_rad, name=stem, notes=notes)
-    extra = {"angle_status": np.asarray(angles.status, dtype=np.int8),
-             "angle_names": np.array(angles.names)}
+    extra = {"angle_status": np.asarray(angles.status, dtype=np.int8), "angle_names": np.array(angles.names)}
     if undetermined is not None:
         extra["undetermined"] = undetermined
-    results.write_npz(paths["npz"], recon, metadata=metadata, extra_arrays=extra, streamed=streamed)
-    results.write_json(paths["summary"], summary_data)
-    return paths
+    with results.ResultSet(out, stem, overwrite=overwrite) as result_set:
+        staged = {kind: result_set.path(name) for kind, name in names.items()}
+        results.write_angles_csv(staged["csv"], recon.time_s, [f"{n}_deg" for n in angles.names], angles.values_rad,
+                                 comments=angles.comments)
+        results.write_mot(staged["mot"], recon.time_s, angles.names, angles.values_rad, name=stem, notes=notes)
+        results.write_npz(staged["npz"], recon, metadata=metadata, extra_arrays=extra, streamed=streamed)
+        results.write_json(staged["summary"], summary_data)
+        placed = result_set.commit(last=names["summary"])
+    return {kind: placed[name] for kind, name in names.items()}
 
 
 def run_metadata(inputs: TrialInputs, trial_path: str | Path, method: Method) -> dict[str, Any]:
@@ -229,7 +258,9 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
                      chunk_frames: int | None = None, repair_labels: bool = False
                      ) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
     """Everything ``exubio reconstruct`` does for one trial; returns (reconstruction, paths, summary)
-    per method. Every method runs first; then the trial is assessed (label checks, determinacy,
+    per method. Every method runs first (one that fails, ReconstructionError, does not stop the
+    others: their results are written, then PartialReconstructionError carries them and each failed
+    method's reason; its summary says so, ``failed_methods``); then the trial is assessed (label checks, determinacy,
     range limits, PF-LS agreement, ``calibration``: the calibration report dict) and every summary
     carries its quality verdict. Refuses (InputError) to replace earlier results unless
     ``overwrite``. ``trajectories``: the trial ``trial_path`` already read. Bounded memory: each method streams its result in chunks of ``chunk_frames``
@@ -241,34 +272,49 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
 
     methods = [Method.parse(m) for m in methods]
     stems = [output_stem(trial_path, m) for m in methods]
-    results.prepare_output_dir(out_dir, stems, overwrite=overwrite)
-    inputs = load_inputs(trajectories if trajectories is not None else trial_path, model_path=model_path,
-                         protocol_path=protocol_path, body_mass_kg=body_mass_kg, model=model,
-                         repair_labels=repair_labels)
-    with ExitStack() as parts:  # the streamed model points' part files go, whatever happens
+    results.writable_folder(out_dir)
+    with ExitStack() as parts:  # the locks, and the streamed model points' part files, go whatever happens
+        parts.enter_context(results.claim(out_dir, stems))  # no other run writes these results meanwhile
+        results.prepare_output_dir(out_dir, stems, overwrite=overwrite)
+        inputs = load_inputs(trajectories if trajectories is not None else trial_path, model_path=model_path,
+                             protocol_path=protocol_path, body_mass_kg=body_mass_kg, model=model,
+                             repair_labels=repair_labels)
         return _reconstruct_streamed(inputs, trial_path, out_dir, methods, stems, parts, StreamedReconstruction,
                                      method_options=method_options, summary_extra=summary_extra,
                                      progress_factory=progress_factory, calibration=calibration,
-                                     static_reference=static_reference, chunk_frames=chunk_frames)
+                                     static_reference=static_reference, chunk_frames=chunk_frames,
+                                     overwrite=overwrite)
 
 
 def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, stems, parts, sink_type, /, *,
                           method_options, summary_extra, progress_factory, calibration, static_reference,
-                          chunk_frames) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
+                          chunk_frames, overwrite) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
     from exubio.angles import ANATOMICAL_ANGLES, anatomical_table
     from exubio.assess import assess_trial, trial_label_findings
 
-    recons, sinks = [], []
+    recons, sinks, done, failures = [], [], [], {}
     for method, stem in zip(methods, stems):
         progress = progress_factory(method.value, inputs.targets.n_frames) if progress_factory else None
         opts = (method_options or {}).get(method.value)  # the options object, or a dict of its fields
         values = opts if isinstance(opts, dict) else {}
         sink = parts.enter_context(sink_type(out_dir, stem, inputs.targets, inputs.model.coordinate_names))
-        timings, info = stream_reconstruct(inputs.model, inputs.protocol, inputs.targets, sink, method=method,
-                                           options=None if isinstance(opts, dict) else opts, progress=progress,
-                                           chunk_frames=chunk_frames, **values)
+        try:
+            timings, info = stream_reconstruct(inputs.model, inputs.protocol, inputs.targets, sink, method=method,
+                                               options=None if isinstance(opts, dict) else opts, progress=progress,
+                                               chunk_frames=chunk_frames, **values)
+        except ReconstructionError as exc:  # the other methods still give their results
+            if len(methods) == 1:
+                raise
+            failures[method.value] = str(exc)
+            log.warning("%s failed: %s", method.value.upper(), exc)
+            sink.discard()
+            continue
         recons.append(sink.reconstruction(timings_s=timings, info=info))
         sinks.append(sink)
+        done.append((method, stem))
+    if not recons:
+        raise ReconstructionError("; ".join(f"{m.upper()}: {reason}" for m, reason in failures.items()))
+    methods, stems = [m for m, _ in done], [s for _, s in done]
     findings = trial_label_findings(inputs.model, inputs.protocol, inputs.targets, reference=static_reference)
     session = ()
     if static_reference is not None:  # does the static belong to this trial's session?
@@ -292,6 +338,15 @@ def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, ste
         if inputs.targets.cutoff_hz:
             extra["filter_cutoff_hz"] = dict(inputs.targets.cutoff_hz)
         extra.update(assessment.summary_for(recon.method))
+        cal = extra.get("calibration") if isinstance(extra.get("calibration"), dict) else {}
+        file_findings = tuple(dict.fromkeys(tuple(inputs.trial.input_findings) + tuple(
+            f"static trial: {f}" for f in cal.get("input_findings") or () if f not in inputs.trial.input_findings)))
+        if file_findings:
+            extra["input_findings"] = list(file_findings)
+            extra["quality"] = with_input_findings(extra["quality"], file_findings)
+        if failures:
+            extra["failed_methods"] = dict(failures)
+            extra["quality"] = with_failed_methods(extra["quality"], failures)
         names, values = anatomical_table(inputs.model, recon.q_rad)
         det = assessment.angles[recon.method]
         extra["angles"] = {"files": [f"{stem}.csv", f"{stem}.mot"], "units": "deg", "side": inputs.protocol.side,
@@ -301,9 +356,32 @@ def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, ste
                               angle_header(det, Path(trial_path).name, method.value, inputs.protocol.side))
         paths = write_outputs(recon, out_dir, stem, metadata=meta, summary_data=summ, angles=angles,
                               undetermined=assessment.determinacy[recon.method].undetermined,
-                              streamed={"model_points_m": sink.model_points})
+                              streamed={"model_points_m": sink.model_points}, overwrite=overwrite)
         out.append((recon, paths, summ))
+    if failures:
+        raise PartialReconstructionError(
+            "; ".join(f"{m.upper()} failed: {reason}" for m, reason in failures.items())
+            + f" ({', '.join(r.method.upper() for r, _, _ in out)} written)", outputs=out, failures=failures)
     return out
+
+
+def with_input_findings(quality: dict[str, Any], findings: tuple[str, ...], /) -> dict[str, Any]:
+    """A summary's ``quality`` with a note per input finding (what the reader read around: the file is
+    named, the result stands: exubio.quality's "note" level, which leaves the verdict as it is)."""
+    from exubio.quality import Reason
+
+    notes = [Reason("input_file", "note", f"input file: {f}").to_dict() for f in findings]
+    return {**quality, "reasons": list(quality["reasons"]) + notes}
+
+
+def with_failed_methods(quality: dict[str, Any], failures: dict[str, str], /) -> dict[str, Any]:
+    """A summary's ``quality`` with a note per method of the run that failed (this result stands
+    on its own: no PF-LS agreement was measured)."""
+    from exubio.quality import Reason
+
+    notes = [Reason("method_failed", "note", f"{m.upper()} failed on this trial, so this result is not compared with it "
+                    f"(no PF-LS agreement): {reason}").to_dict() for m, reason in failures.items()]
+    return {**quality, "reasons": list(quality["reasons"]) + notes}
 
 
 MAX_STATUS_RUNS = 12

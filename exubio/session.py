@@ -115,6 +115,8 @@ def calibrate_session(source: str | Path | Trajectories, out_dir: str | Path, st
                                         frames=slice(*report.frames) if frames is not None else None)
     summary = calibration_summary(report, static=_name(source), model_file=model_file, frames=frames_text,
                                   labels=findings)
+    if source.input_findings:  # what the reader read around in the static trial's file (io/trc.py, io/c3d.py)
+        summary["input_findings"] = list(source.input_findings)
     if reference:
         summary["_reference"] = ref_distances
     return model_file, report, summary

@@ -232,8 +232,11 @@ def run_trial_task(task: TrialTask) -> TrialOutcome:
     out = TrialOutcome(task.subject, task.session, task.trial, str(final), "failed")
     tmp = final.parent / f"{_TMP_PREFIX}{final.name}-{os.getpid()}-{time.monotonic_ns()}"
     t0 = time.perf_counter()
+    from exubio.io.results import done_with, in_progress
+
     try:
         tmp.mkdir(parents=True)
+        in_progress(tmp)
         result = run_job(TrialJob(task.trial, tmp, methods=tuple(task.methods), model=task.model,
                                   protocol=task.protocol, static_frames=task.static_frames, report=task.report,
                                   calibration=task.calibration or None, static_reference=task.static_reference))
@@ -244,6 +247,7 @@ def run_trial_task(task: TrialTask) -> TrialOutcome:
         if final.exists():  # an incomplete set from an earlier run (no DONE.json): replaced
             shutil.rmtree(final)
         tmp.rename(final)
+        done_with(tmp)
     except BaseException as exc:  # noqa: BLE001 - one trial's failure of any kind is recorded
         out.status = "failed"
         out.error = f"{type(exc).__name__}: {exc}" if not isinstance(exc, ExubioError) else str(exc)
@@ -251,6 +255,7 @@ def run_trial_task(task: TrialTask) -> TrialOutcome:
         if not isinstance(exc, ExubioError):
             log.debug("%s", traceback.format_exc())
         shutil.rmtree(tmp, ignore_errors=True)
+        done_with(tmp)
         if isinstance(exc, KeyboardInterrupt):
             raise
     return out
@@ -258,6 +263,8 @@ def run_trial_task(task: TrialTask) -> TrialOutcome:
 
 def _fill(out: TrialOutcome, result: TrialResult) -> None:
     out.verdicts = result.verdicts
+    if result.failed:  # one method failed, the other's result is written
+        out.error = "; ".join(f"{m.upper()} failed: {reason}" for m, reason in result.failed.items())
     for m in result.methods:
         out.frames = m.summary.get("n_frames", out.frames)
         out.residual_mm[m.method] = (m.summary.get("residual_mm") or {}).get("mean")
@@ -357,20 +364,75 @@ def _submit_local(tasks: list[TrialTask], jobs: int, on_done: Callable[[TrialOut
             outs.append(run_trial_task(t))
             on_done(outs[-1])
         return outs
-    pool = ProcessPoolExecutor(max_workers=jobs)
-    futures: list[Future] = [pool.submit(run_trial_task, t) for t in tasks]
+
+    def failed(t: TrialTask, exc: BaseException) -> TrialOutcome:  # a worker that died (e.g. out of memory)
+        return TrialOutcome(t.subject, t.session, t.trial, t.final_dir, "failed", error=f"{type(exc).__name__}: {exc}")
+
+    return map_in_processes(run_trial_task, tasks, jobs, on_error=failed, on_done=on_done)
+
+
+STOP_WAIT_S = 0.5
+"""After Ctrl-C, how long the workers of a process pool get to remove their unfinished files after
+SIGTERM before they are killed (what a killed worker leaves, the next run removes)."""
+
+
+def map_in_processes(fn: Callable, items: list, jobs: int, /, *, on_error: Callable[[Any, BaseException], Any],
+                     on_done: Callable[[Any], None] | None = None) -> list:
+    """``[fn(item) for item in items]`` in a pool of ``jobs`` local processes, in the items' order; a
+    failed item gives ``on_error(item, exception)`` in its place. Ctrl-C reaches this process only
+    (the workers ignore SIGINT): the pool is stopped at once, every worker is sent SIGTERM (it then
+    stops as on Ctrl-C, removing its unfinished files) and killed after STOP_WAIT_S, and the
+    KeyboardInterrupt goes on to the caller (the CLI: one line, exit 130)."""
+    pool = ProcessPoolExecutor(max_workers=jobs, initializer=_pool_worker_signals)
     try:
+        futures: list[Future] = [pool.submit(fn, item) for item in items]
         outs = []
-        for f, t in zip(futures, tasks):
-            outs.append(_result_or_failure(f, t))
-            on_done(outs[-1])
+        for f, item in zip(futures, items):
+            try:
+                outs.append(f.result())
+            except Exception as exc:  # noqa: BLE001 - a worker that died fails only its item
+                outs.append(on_error(item, exc))
+            if on_done is not None:
+                on_done(outs[-1])
         pool.shutdown(wait=True)
         return outs
-    except KeyboardInterrupt:
-        pool.shutdown(wait=False, cancel_futures=True)
-        for proc in list(getattr(pool, "_processes", {}).values()):
-            proc.terminate()
+    except BaseException:
+        _stop_pool(pool)
         raise
+
+
+def _pool_worker_signals() -> None:
+    """In a pool worker: Ctrl-C is the parent's to handle; SIGTERM (the parent stopping the pool)
+    removes the temporary files and folders the worker is writing and ends it at once (not by an
+    exception, which an Exudyn callback would catch and print). A result set being placed holds
+    SIGTERM back until it is complete (exubio.io.results.ResultSet)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+    def stop(signum, frame):  # noqa: ARG001 - the signal handler's signature
+        from exubio.io.results import remove_in_progress
+
+        remove_in_progress()
+        os._exit(128 + signum)
+
+    signal.signal(signal.SIGTERM, stop)
+
+
+def _stop_pool(pool: ProcessPoolExecutor) -> None:
+    processes = list((getattr(pool, "_processes", None) or {}).values())  # before shutdown clears them
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in processes:
+        try:
+            proc.terminate()
+        except (OSError, ValueError):
+            pass
+    deadline = time.monotonic() + STOP_WAIT_S
+    for proc in processes:
+        proc.join(timeout=max(deadline - time.monotonic(), 0.0))
+        if proc.is_alive():
+            proc.kill()
+            proc.join(timeout=1.0)
 
 
 def _result_or_failure(f, t: TrialTask) -> TrialOutcome:
@@ -425,9 +487,16 @@ def map_on_scheduler(fn: Callable, items: list, scheduler: str, /, *,
             raise InputError(f"--scheduler {scheduler}: expected local:N with N >= 1 workers")
         import dask
 
-        with dask.config.set(_LOCAL_CLUSTER_CONFIG):
-            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
-        client = Client(cluster)
+        try:
+            with dask.config.set(_LOCAL_CLUSTER_CONFIG):  # silence_logs: also the workers' logs (their processes)
+                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                                       silence_logs=logging.CRITICAL)
+            client = Client(cluster)
+        except KeyboardInterrupt:  # Ctrl-C while the cluster starts
+            if cluster is not None:
+                _stop_dask(None, cluster, [])
+            _quiet_dask_exit()
+            raise
     elif scheduler.startswith("tcp://"):
         try:
             client = Client(scheduler, timeout=10)
@@ -450,12 +519,42 @@ def map_on_scheduler(fn: Callable, items: list, scheduler: str, /, *,
                 on_done(out[k])
         return out
     except KeyboardInterrupt:
-        client.cancel(list(futures))
+        _stop_dask(client, cluster, list(futures))
+        cluster = None
         raise
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def _stop_dask(client: Any, cluster: Any, futures: list, /) -> None:
+    """After Ctrl-C: cancel the work, close the client and the local cluster within about a second
+    each, and say nothing of the connections that close meanwhile (Dask logs them as errors)."""
+    _quiet_dask_exit()
+    for step in (lambda: client.cancel(futures, force=True) if client is not None else None,
+                 lambda: client.close(timeout=0.5) if client is not None else None,
+                 lambda: cluster.close(timeout=0.5) if cluster is not None else None):
+        try:
+            step()
+        except BaseException:  # noqa: BLE001 - stopping: whatever Dask raises while it closes goes unsaid
+            pass
+
+
+def _quiet_dask_exit() -> None:
+    """Say nothing of what Dask reports while it stops after Ctrl-C: its loggers off, and its exit
+    hook (which would close a half-started or half-closed cluster again and print why it cannot)
+    unregistered."""
+    for name in ("distributed", "tornado", "asyncio"):
+        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+    try:
+        import atexit
+
+        from distributed.deploy.spec import close_clusters
+
+        atexit.unregister(close_clusters)
+    except ImportError:  # pragma: no cover - another layout of distributed
+        pass
 
 
 def _submit_dask(tasks: list[TrialTask], scheduler: str, on_done: Callable[[TrialOutcome], None]) -> list[TrialOutcome]:

@@ -30,6 +30,9 @@ class Trajectories:
     source:      the file it came from ("" for data made in memory).
     ignored_labels: labels present in the file but dropped (unlabelled ``*12`` markers, ...).
     units_in_file: the length unit the file declared ("mm", "m", ...).
+    input_findings: what the reader found wrong in the file and read around (a header count the
+                 data rows contradict, ...), one sentence each naming the field; they go into the
+                 result's summary.json (``input_findings``) and its verdict reasons.
     """
 
     labels: tuple[str, ...]
@@ -39,6 +42,7 @@ class Trajectories:
     source: str = ""
     ignored_labels: tuple[str, ...] = ()
     units_in_file: str = "m"
+    input_findings: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         pos = np.asarray(self.positions_m, dtype=float)
@@ -59,12 +63,14 @@ class Trajectories:
             raise InputError(
                 f"{self.source or 'trajectories'}: time has shape {time.shape}, expected ({pos.shape[0]},)"
             )
-        if not self.rate_hz > 0:
-            raise InputError(f"{self.source or 'trajectories'}: sampling rate must be > 0, got {self.rate_hz}")
+        if not (self.rate_hz > 0 and np.isfinite(self.rate_hz)):
+            raise InputError(f"{self.source or 'trajectories'}: sampling rate must be finite and > 0, got "
+                             f"{self.rate_hz}")
         object.__setattr__(self, "labels", tuple(self.labels))
         object.__setattr__(self, "positions_m", pos)
         object.__setattr__(self, "time_s", time)
         object.__setattr__(self, "ignored_labels", tuple(self.ignored_labels))
+        object.__setattr__(self, "input_findings", tuple(self.input_findings))
 
     @property
     def n_frames(self) -> int:

@@ -45,6 +45,7 @@ import logging
 import math
 import os
 import warnings
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
@@ -168,7 +169,7 @@ def _siblings(path: Path) -> list[Path]:
         try:
             with np.load(cand, allow_pickle=False) as data:
                 stored = str(data["method"]) if "method" in data.files else None
-        except (OSError, ValueError):
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile):  # a damaged sibling is not shown
             stored = None
         if stored == other:
             out.append(cand)

@@ -7,6 +7,7 @@ comes only after (or instead of) a reconstruction fails the test.
 from __future__ import annotations
 
 import math
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -206,6 +207,99 @@ def test_c3d_over_65535_frames_truncated_refused(tmp_path):
         read_c3d(path)
 
 
+# ------------------------------------------------------- C3D headers that contradict themselves
+def _patched(path: Path, *edits: tuple[int, bytes], name: str = "hostile.c3d") -> Path:
+    """A copy of the C3D ``path`` with ``(offset, bytes)`` edits applied."""
+    data = bytearray(path.read_bytes())
+    for offset, new in edits:
+        data[offset:offset + len(new)] = new
+    out = path.with_name(name)
+    out.write_bytes(bytes(data))
+    return out
+
+
+def _float_offsets(path: Path, value: float) -> list[int]:
+    """Byte offsets of ``value`` as a little-endian float32 (the writer's Intel format)."""
+    data, needle = path.read_bytes(), struct.pack("<f", value)
+    return [i for i in range(len(data) - 3) if data[i:i + 4] == needle]
+
+
+def _point_rate_offset(path: Path) -> int:
+    """The offset of POINT:RATE's value (50 Hz) in the parameter section: the float 50 there that,
+    patched, changes what ezc3d reads as POINT:RATE."""
+    import ezc3d
+
+    for offset in _float_offsets(path, 50.0):
+        if offset < 512:
+            continue
+        probe = _patched(path, (offset, struct.pack("<f", 77.0)), name="probe.c3d")
+        if float(ezc3d.c3d(str(probe))["parameters"]["POINT"]["RATE"]["value"][0]) == 77.0:
+            probe.unlink()
+            return offset
+    raise AssertionError("POINT:RATE not found")
+
+
+@pytest.mark.parametrize("rate, expected", [(math.nan, "nan (not a finite number)"),
+                                            (math.inf, "inf (not a finite number)"),
+                                            (1e9, "1e+09 Hz (above 100000 Hz")])
+def test_c3d_rate_nan_infinite_or_1e9_refused_naming_point_rate(tmp_path, c3d, capsys, rate, expected):
+    """ezc3d crashes on a NaN POINT:RATE (vector::_M_default_append), an infinite one overflowed in
+    the preprocessing and 1e9 Hz made the filter's end padding ask for 15 GB: refused before reading."""
+    bad = _patched(c3d, (20, struct.pack("<f", rate)), (_point_rate_offset(c3d), struct.pack("<f", rate)))
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(bad, out), out, "hostile.c3d", "POINT:RATE is " + expected)
+
+
+def test_c3d_parameter_block_past_the_end_refused(tmp_path, c3d, capsys):
+    bad = _patched(c3d, (0, bytes([200])))
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(bad, out), out, "hostile.c3d", "parameter block at 512-byte block 200",
+            f"the file has {c3d.stat().st_size} bytes")
+
+
+def test_c3d_data_start_past_the_end_refused(tmp_path, c3d, capsys):
+    bad = _patched(c3d, (16, struct.pack("<H", 500)))
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(bad, out), out, "hostile.c3d", "word 9 puts the data at 512-byte block 500")
+
+
+def test_c3d_last_frame_before_the_first_read_as_the_data_hold_with_a_warning(c3d, trajectories, caplog):
+    bad = _patched(c3d, (6, struct.pack("<2H", 40, 10)))
+    with caplog.at_level("WARNING", logger="exubio.io.c3d"):
+        got = read_c3d(bad)
+    assert got.n_frames == trajectories.n_frames
+    assert np.array_equal(got.positions_m, read_c3d(c3d).positions_m, equal_nan=True)
+    (finding,) = got.input_findings
+    assert "last frame (word 5) is 10, before its first frame (word 4) 40" in finding and "hostile.c3d" in finding
+    assert finding in caplog.text
+    assert read_c3d(c3d).input_findings == ()
+
+
+def test_c3d_header_of_65535_frames_over_100_frames_read_with_a_warning(tmp_path, caplog):
+    traj = Trajectories(("A", "B"), np.random.default_rng(1).uniform(-1, 1, (100, 2, 3)), 100.0,
+                        np.arange(100) / 100.0)
+    good = write_c3d(tmp_path / "short.c3d", traj)
+    bad = _patched(good, (8, struct.pack("<H", 65535)))
+    with caplog.at_level("WARNING", logger="exubio.io.c3d"):
+        got = read_c3d(bad)
+    assert got.n_frames == 100
+    assert np.nanmax(np.abs(got.positions_m - traj.positions_m)) < 1e-6
+    (finding,) = got.input_findings
+    assert "last frame (word 5) is 65535" in finding and "no POINT:LONG_FRAMES" in finding and "holds 100" in finding
+    assert finding in caplog.text
+
+
+@pytest.mark.parametrize("value", [-5.0, 0.0, 2.5])
+def test_c3d_point_long_frames_not_a_count_refused(tmp_path, value):
+    n = 70_000
+    traj = Trajectories(("A",), np.zeros((n, 1, 3)), 100.0, np.arange(n) / 100.0)
+    good = write_c3d(tmp_path / "long.c3d", traj)
+    (offset,) = [o for o in _float_offsets(good, float(n)) if o >= 512]  # POINT:LONG_FRAMES
+    bad = _patched(good, (offset, struct.pack("<f", value)))
+    with pytest.raises(InputError, match=rf"hostile\.c3d: .*POINT:LONG_FRAMES is {value:g}; expected the number of"):
+        read_c3d(bad)
+
+
 # ---------------------------------------------------------------------------------- CLI options
 def test_static_frames_past_the_end_refused_naming_window_and_frame_count(tmp_path, c3d, capsys):
     out = tmp_path / "out"
@@ -245,3 +339,88 @@ def test_output_folder_checked_before_reading_anything(tmp_path, c3d, capsys, mo
     model_out = out / "subject.yaml"
     refused(capsys, ["calibrate", str(c3d), "--out", str(model_out)], nothing_in, str(out))
     assert (tmp_path / "a_file").read_text() == "not a folder"
+
+
+# ------------------------------------------------------------------- deep YAML, singular holds
+def _deep(kind: str) -> str:
+    """A YAML mapping nested 5000 levels deep, in flow ([[[...]]]) or block (indented keys) style."""
+    if kind == "flow":
+        return "schema_version: 1\nx: " + "[" * 5000 + "]" * 5000 + "\n"
+    return "schema_version: 1\n" + "".join("  " * i + f"k{i}:\n" for i in range(5000)) + "  " * 5000 + "v: 1\n"
+
+
+@pytest.mark.parametrize("kind", ["flow", "block"])
+@pytest.mark.parametrize("option", ["--model", "--protocol"])
+def test_yaml_nested_5000_levels_refused_naming_file_and_line(tmp_path, c3d, capsys, option, kind):
+    """It raised RecursionError (PyYAML's composer and the duplicate-key walk recurse per level)."""
+    deep = tmp_path / "deep.yaml"
+    deep.write_text(_deep(kind), encoding="utf-8")
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(c3d, out, option, str(deep)), out, "deep.yaml", "nested more than 64 levels")
+
+
+def test_protocol_holding_every_coordinate_refused_naming_hold(tmp_path, c3d, capsys):
+    """Every coordinate held left a singular system (numpy LinAlgError: Singular matrix) in LS."""
+    data = yaml.safe_load(Path(DEFAULT_PROTOCOL).read_text(encoding="utf-8"))
+    data["hold"] = list(load_model().coordinate_names)
+    bad = tmp_path / "hold_all.yaml"
+    bad.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(c3d, out, "--protocol", str(bad)), out, "hold_all.yaml", "hold", "every coordinate")
+
+
+def test_protocol_holding_the_scapula_chain_but_one_refused(tmp_path, c3d, capsys):
+    """Two ellipsoid contact constraints on one free coordinate cannot be met (also a singular system)."""
+    data = yaml.safe_load(Path(DEFAULT_PROTOCOL).read_text(encoding="utf-8"))
+    data["hold"] = [c for c in load_model().coordinate_names if c.startswith(("sc_", "ac_"))][:5]
+    bad = tmp_path / "hold_girdle.yaml"
+    bad.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(c3d, out, "--protocol", str(bad)), out, "hold_girdle.yaml", "hold", "scapula",
+            "need at least 2")
+
+
+# --------------------------------------------------------------------------- results, duplicates
+def _a_result(tmp_path: Path) -> Path:
+    """A real .npz result (LS, written by write_outputs's writer) without running a method."""
+    from exubio.io.results import write_npz
+    from exubio.types import Reconstruction
+
+    n, names = 5, load_model().coordinate_names
+    recon = Reconstruction(method="ls", time_s=np.arange(n) / 50.0, coordinate_names=names,
+                           q_rad=np.zeros((n, len(names))), qd_rad_s=np.zeros((n, len(names))),
+                           qdd_rad_s2=np.zeros((n, len(names))), marker_names=("A",),
+                           model_points_m=np.zeros((n, 1, 3)), measured_m=np.zeros((n, 1, 3)),
+                           residuals_m=np.zeros((n, 1)), constraint=np.zeros((n, 2)),
+                           constraint_velocity=np.zeros((n, 2)), status=np.zeros(n, dtype=int))
+    return write_npz(tmp_path / "trial.ls.npz", recon, metadata={"trial": "trial.c3d"})
+
+
+@pytest.mark.parametrize("keep", [0.5, 0.98])
+def test_view_of_a_truncated_npz_refused_naming_it(tmp_path, capsys, keep):
+    """It ended in zipfile.BadZipFile."""
+    path = _a_result(tmp_path)
+    data = path.read_bytes()
+    path.write_bytes(data[: int(len(data) * keep)])
+    out = tmp_path / "view"
+    refused(capsys, ["view", str(path), "--out", str(out / "v.html")], out, "trial.ls.npz",
+            "not a readable .npz file", "BadZipFile")
+
+
+def test_view_of_an_npz_with_a_damaged_entry_refused_naming_it(tmp_path, capsys):
+    path = _a_result(tmp_path)
+    data = bytearray(path.read_bytes())
+    at = data.index(b"q_rad.npy") + 200  # inside the q_rad entry's data
+    data[at:at + 40] = b"\xff" * 40
+    path.write_bytes(bytes(data))
+    out = tmp_path / "view"
+    refused(capsys, ["view", str(path), "--out", str(out / "v.html")], out, "trial.ls.npz", "damaged")
+
+
+@pytest.mark.parametrize("spelling", ["same", "dotted"])
+def test_the_same_trial_twice_refused_before_anything_is_written(tmp_path, c3d, capsys, spelling):
+    """It wrote the first copy's four result files, then refused the second."""
+    again = str(c3d) if spelling == "same" else str(c3d.parent / "." / c3d.name)
+    out = tmp_path / "out"
+    argv = ["reconstruct", str(c3d), again, "--method", "ls", "--no-report", "--out", str(out)]
+    refused(capsys, argv, out, "trial.c3d", "the same trial is given twice")

@@ -498,3 +498,42 @@ def test_a_second_static_pose_fits_the_ellipsoid_through_both(generic):
         assert len(report.ellipsoid_poses_mm) == 1 + len(extra)
     assert off["one static"]["down"] < 0.5 and off["one static"]["raised"] > 5.0, off
     assert max(off["two statics"].values()) < 0.5 * off["one static"]["raised"], off
+
+
+@pytest.mark.parametrize("what, inject", [
+    ("calibration residual", "residuals"),
+    ("static pose coordinate gh_flexion", "pose"),
+])
+def test_a_nan_anywhere_in_the_calibration_is_an_error_naming_it(generic, calibrated, monkeypatch, what, inject):
+    """A calibration whose numbers went NaN printed "calibration residual: mean nan mm" and carried on
+    (PF then diverged at t = 0): now the first non-finite number is named in a ReconstructionError."""
+    import exubio.calibration.core as core
+    from exubio.errors import ReconstructionError
+
+    model, protocol = generic
+    traj = calibrated[2].trajectories  # the static trial that calibrates cleanly (fixture)
+    if inject == "residuals":  # the LS solve of the calibration frames gives NaN for one marker
+        original = core._calibration_residuals
+
+        def nan_residual(*args, **kwargs):
+            r = original(*args, **kwargs)
+            r[3] = np.nan
+            return r
+
+        monkeypatch.setattr(core, "_calibration_residuals", nan_residual)
+        name = protocol.markers[3].name
+        match = rf"marker {name}'s calibration residual is not a finite number"
+    else:  # the fitted static pose has a NaN coordinate
+        original_fit = core._robust_fit
+
+        def nan_pose(*args, **kwargs):
+            q, factors, robust, outcome = original_fit(*args, **kwargs)
+            q = q.copy()
+            q[model.coordinate_names.index("gh_flexion")] = np.nan
+            return q, factors, robust, outcome
+
+        monkeypatch.setattr(core, "_robust_fit", nan_pose)
+        match = "static pose coordinate gh_flexion is not a finite number"
+    with pytest.raises(ReconstructionError, match=rf"calibration on .*frames 0:20: the {match}"):
+        calibrate_model(model, protocol, traj, frames=slice(0, 20))
+    assert what in match

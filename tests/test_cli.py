@@ -286,3 +286,97 @@ def test_functional_and_further_statics_need_a_static(tmp_path, trial, capsys):
         assert code == 2
         assert option in capsys.readouterr().err
         assert not (tmp_path / option[2:]).exists()
+
+
+@pytest.mark.parametrize("off", [1, -20])
+def test_real_trc_whose_num_frames_disagrees_with_its_rows_runs_and_says_so(tmp_path, off, capsys):
+    """A published TRC whose header NumFrames is off by one row or by 20 (4 of 15 published
+    thoracoscapular files are): read from its rows, as OpenSim does; the header value is named on the
+    console and in summary.json (input_findings and a verdict note), and the angles are those of the
+    file with the header corrected."""
+    src = SHARED / "data" / "trc" / "tsm_rmr_ABD01.trc"
+    if not src.is_file():
+        pytest.skip(f"{src} not available")
+    lines = src.read_text(encoding="utf-8").splitlines(keepends=True)
+    values = lines[2].split("\t")
+    n = int(values[2])
+    values[2] = str(n + off)
+    bad = tmp_path / "ABD01.trc"
+    bad.write_text("".join(lines[:2] + ["\t".join(values)] + lines[3:]), encoding="utf-8")
+    out = tmp_path / "out"
+    protocol = PROTOCOL.with_name("thoracoscapular_9.yaml")
+    argv = ["-q", "reconstruct", str(bad), "--protocol", str(protocol), "--static-frames", "0:50", "--method", "ls",
+            "--no-report", "--out", str(out)]
+    assert main(argv) == 0
+    console = capsys.readouterr()
+    assert f"NumFrames is {n + off} but the file has {n} data rows" in console.out + console.err
+    summ = json.loads((out / "ABD01.ls.summary.json").read_text())
+    assert summ["n_frames"] == n
+    assert any(f"NumFrames is {n + off}" in f for f in summ["input_findings"])
+    notes = [r for r in summ["quality"]["reasons"] if r["code"] == "input_file"]
+    assert len(notes) == 1 and notes[0]["level"] == "note" and f"NumFrames is {n + off}" in notes[0]["message"]
+    good = tmp_path / "good" / "ABD01.trc"
+    good.parent.mkdir()
+    good.write_bytes(src.read_bytes())
+    assert main(argv[:2] + [str(good)] + argv[3:-1] + [str(tmp_path / "good_out")]) == 0
+    _, _, q_bad = read_angles_csv(out / "ABD01.ls.csv")
+    _, _, q_good = read_angles_csv(tmp_path / "good_out" / "ABD01.ls.csv")
+    assert np.array_equal(q_bad, q_good)
+
+
+def test_method_both_writes_ls_when_pf_fails_and_exits_1(tmp_path, c3d, capsys, monkeypatch):
+    """With --method both, PF's failure threw LS's result away (nothing was written). Now LS's set is
+    written, its summary names PF's failure, the console says PF failed and why, and the exit code
+    is 1 (documented in --help and the README)."""
+    import exubio.pipeline
+    from exubio.errors import ReconstructionError
+
+    stream = exubio.pipeline.stream_reconstruct
+
+    def pf_diverges(*args, method, **kwargs):
+        if exubio.pipeline.Method.parse(method).value == "pf":
+            raise ReconstructionError("abd.c3d: PF diverged at t = 0.000 s (EPI_lat spring 654 mm)")
+        return stream(*args, method=method, **kwargs)
+
+    monkeypatch.setattr(exubio.pipeline, "stream_reconstruct", pf_diverges)
+    out = tmp_path / "out"
+    code = main(["-q", "reconstruct", str(c3d), "--method", "both", "--out", str(out)])
+    console = capsys.readouterr()
+    assert code == 1, console.err
+    assert "[pf] FAILED" in console.out and "PF diverged at t = 0.000 s" in console.out
+    assert "Traceback" not in console.err
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["abd.ls.csv", "abd.ls.mot", "abd.ls.npz", "abd.ls.summary.json",
+                     "abd.report.pdf", "abd.report.png"], names
+    summ = json.loads((out / "abd.ls.summary.json").read_text())
+    assert "PF diverged" in summ["failed_methods"]["pf"]
+    assert any(r["code"] == "method_failed" and "PF failed" in r["message"] for r in summ["quality"]["reasons"])
+    assert summ["quality"]["verdict"] in ("ok", "check")  # LS's own verdict: PF's failure is a note on it
+    # both methods failing is a failed reconstruction (exit 1), nothing written
+    monkeypatch.setattr(exubio.pipeline, "stream_reconstruct",
+                        lambda *a, method, **k: (_ for _ in ()).throw(ReconstructionError(f"{method} failed here")))
+    out2 = tmp_path / "out2"
+    assert main(["-q", "reconstruct", str(c3d), "--method", "both", "--no-report", "--out", str(out2)]) == 1
+    err = capsys.readouterr().err
+    assert "reconstruction failed" in err and "PF: " in err and "LS: " in err
+    assert not [p for p in out2.iterdir()]
+
+
+def test_a_static_trc_whose_num_frames_disagrees_is_named_in_the_task_trials_results(tmp_path, c3d, capsys):
+    from exubio.io.trc import write_trc
+
+    static = simulate_trial(load_model(), Motion.ABDUCTION, duration_s=0.5, rate_hz=100.0, noise_mm=0.5, seed=9)
+    path = write_trc(tmp_path / "static.trc", static.trajectories)
+    lines = path.read_text(encoding="utf-8").splitlines(keepends=True)
+    values = lines[2].split("\t")
+    values[2] = str(int(values[2]) + 1)
+    path.write_text("".join(lines[:2] + ["\t".join(values)] + lines[3:]), encoding="utf-8")
+    out = tmp_path / "out"
+    code = main(["-q", "reconstruct", str(c3d), "--static", str(path), "--static-frames", "0:20", "--method", "ls",
+                 "--no-report", "--out", str(out)])
+    assert code in (0, 1), capsys.readouterr().err
+    summ = json.loads((out / "abd.ls.summary.json").read_text())
+    (finding,) = summ["input_findings"]
+    assert finding.startswith("static trial: static.trc: line 3: NumFrames is 51 but the file has 50 data rows")
+    assert any(r["code"] == "input_file" and "static trial: static.trc" in r["message"]
+               for r in summ["quality"]["reasons"])

@@ -147,7 +147,8 @@ def test_missing_file(tmp_path):
         (dict(units="furlong"), r"line 3: Units is 'furlong', expected one of \['cm', 'm', 'mm'\]"),
         (dict(rate="fast"), r"line 3: DataRate/NumFrames/NumMarkers must be numbers"),
         (dict(rate="0"), r"line 3: expected DataRate > 0"),
-        (dict(n_frames=5), r"line 3: NumFrames is 5 but the file has 3 data rows"),
+        (dict(rate="1e9"), r"line 3: DataRate is 1e\+09 Hz \(above 100000 Hz"),
+        (dict(rows=""), r"no data rows after line 5"),
         (dict(header=HEADER.replace("\tB\t\t", "")), r"line 4: 1 marker labels, but line 3 says NumMarkers=2"),
         (dict(header=HEADER.replace("Frame#", "Frame")), r"line 4: expected 'Frame#"),
         (dict(rows=ROWS + "4\t1.25\t1\t2\t3\t4\t5\n"), r"line 10: 7 columns, expected 8"),
@@ -155,13 +156,29 @@ def test_missing_file(tmp_path):
         (dict(rows=ROWS + "4\t1.25\t1\t2\t3\t4\tfive\t6\n"), r"line 10: 'five' is not a number"),
         (dict(rows=ROWS + "4\t\t1\t2\t3\t4\t5\t6\n"), r"line 10: the Time cell is empty"),
     ],
-    ids=["line1", "units", "rate-text", "rate-zero", "nframes", "labels", "frame-col", "short-row",
+    ids=["line1", "units", "rate-text", "rate-zero", "rate-1e9", "no-rows", "labels", "frame-col", "short-row",
          "long-row", "text-cell", "no-time"],
 )
 def test_malformed_files_name_file_and_line(tmp_path, kwargs, message):
     path = small_trc(tmp_path, **kwargs)
     with pytest.raises(InputError, match=r"small\.trc: " + message):
         read_trc(path)
+
+
+@pytest.mark.parametrize("n_frames", [2, 4, 23])
+def test_num_frames_contradicted_by_the_rows_is_read_from_the_rows_with_a_finding(tmp_path, caplog, n_frames):
+    """As OpenSim reads them: the rows are the data, the header's NumFrames a count that can be
+    wrong (4 of 15 published thoracoscapular files are off by 1 or 18 rows); the header value is named
+    in a logged warning and in Trajectories.input_findings, which the results carry."""
+    path = small_trc(tmp_path, n_frames=n_frames)
+    with caplog.at_level("WARNING", logger="exubio.io.trc"):
+        traj = read_trc(path)
+    assert traj.n_frames == 3 and traj.time_s.tolist() == [0.5, 0.75, 1.0]
+    assert len(traj.input_findings) == 1
+    finding = traj.input_findings[0]
+    assert f"NumFrames is {n_frames}" in finding and "3 data rows" in finding and "small.trc" in finding
+    assert finding in caplog.text
+    assert read_trc(small_trc(tmp_path, n_frames=3)).input_findings == ()
 
 
 def test_too_short_header(tmp_path):

@@ -73,7 +73,7 @@ from exubio.calibration.registration import _register, calibrated_protocol, mark
 from exubio.calibration.report import CalibrationReport, MarkerCalibration
 from exubio.calibration.scaling import DEFAULT_SCALE_GROUPS, _groups, _thorax_scale, scale_model
 from exubio.calibration.window import _nanmean, _window
-from exubio.errors import InputError
+from exubio.errors import InputError, ReconstructionError
 from exubio.kinematics import Kinematics
 from exubio.lsq import StopReason
 from exubio.methods.common import tracked_points
@@ -345,6 +345,7 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
         static_pose_at_limit_deg=_at_limit(q, model),
         functional=functional_info, joint_centres_mm=_joint_centres_mm(calibrated, q),
         landmark_offsets_mm=_landmark_offsets_mm(calibrated, protocol, point_names, present))
+    _check_finite(report, f"{src} frames {window.start}:{window.stop}")
     stem = Path(trajectories.source).stem if trajectories.source else "subject"
     calibrated = dataclasses.replace(
         calibrated, name=f"{model.name}_calibrated_{stem}",
@@ -354,6 +355,31 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
              src, window.start, window.stop, report.mean_residual_mm,
              float(np.mean(list(report.generic_offset_mm.values()))))
     return calibrated, report
+
+
+def _check_finite(report: CalibrationReport, where: str, /) -> None:
+    """Raise ReconstructionError naming the first number of the calibration that is not finite (a
+    NaN carried on into every reconstruction of the session: PF diverged at t = 0 on one whose
+    residual printed "mean nan mm"): the static pose, scale factors, joint centres, ellipsoid, each
+    registered marker's place and residual."""
+    checks: list[tuple[str, object]] = []
+    checks += [(f"static pose coordinate {n}", v) for n, v in zip(report.coordinate_names, report.static_q_rad)]
+    checks += [(f"scale factor of {s}", v) for s, v in report.scale_factors.items()]
+    checks += [(f"joint centre {j}", v) for j, v in report.joint_centres_mm.items()]
+    checks += [("ellipsoid centre", report.ellipsoid_centre_m), ("ellipsoid radii", report.ellipsoid_radii_m),
+               ("ellipsoid scale", report.ellipsoid_scale), ("constraint residual |g|", report.constraint_abs)]
+    for m in report.markers:
+        if m.registered:
+            checks += [(f"marker {m.name}'s registered position on the {m.segment}", m.local_position_m),
+                       (f"marker {m.name}'s calibration residual", m.residual_mm),
+                       (f"marker {m.name}'s offset from its generic place", m.generic_offset_mm)]
+    for what, value in checks:
+        values = np.asarray(value, dtype=float)
+        if not np.isfinite(values).all():
+            raise ReconstructionError(
+                f"calibration on {where}: the {what} is not a finite number ({np.round(values, 6).tolist()}); the "
+                f"calibration cannot be used (markers missing or degenerate in those frames? choose other frames "
+                f"with --static-frames)")
 
 
 def _extra_static_pose(kin: Kinematics, protocol: Protocol, targets: MarkerTargets, prior: np.ndarray,

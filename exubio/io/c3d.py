@@ -16,6 +16,15 @@ TRIAL:ACTUAL_START_FIELD/ACTUAL_END_FIELD or a POINT:FRAMES above 65535 give mor
 none of these over a data block that holds more frames, it is refused (the count is unknown).
 Writing such a trial stores POINT:LONG_FRAMES and the TRIAL fields, where readers look.
 
+A header that contradicts itself is never read silently. Checked on the raw bytes before ezc3d
+sees the file (ezc3d crashes or allocates what the header asks): a parameter block or data start
+past the end of the file is refused, and so is a rate (header or POINT:RATE) that is not finite, not
+> 0 or above exubio.io.limits.MAX_RATE_HZ (the work after reading grows with it). A header whose
+last frame is before its first, or whose 65535 (the 16-bit "see POINT:LONG_FRAMES") stands over a
+data block of fewer frames and no count elsewhere, is read as the data block holds, with a warning
+naming the field (logged, and in ``Trajectories.input_findings``, which the results carry); a
+POINT:LONG_FRAMES that is not a whole number >= 1 is refused.
+
 Writing stores 32-bit floats (C3D "float" format): a position of magnitude x metres comes back
 within about 6e-8 * x (well under 1e-6 m for any lab volume).
 """
@@ -31,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from exubio.errors import InputError
+from exubio.io.limits import rate_problem
 from exubio.io.results import atomic_write
 from exubio.types import Trajectories
 
@@ -48,18 +58,23 @@ _DEC, _MIPS = 85, 86  # processor type byte of the parameter section (84: Intel)
 def read_c3d(path: str | os.PathLike, /) -> Trajectories:
     """Marker trajectories of a C3D file, in metres (see the module docstring)."""
     path = Path(path)
+    _check_raw_header(path)
     c3d = _open(path)
     points = c3d["data"]["points"]  # (4, n_markers, n_frames), file units
     residuals = c3d["data"]["meta_points"]["residuals"]
     n_long = _long_frame_count(path, c3d)
+    findings = []
     if n_long is None:
         _check_not_truncated(path, points.shape[2])
+        findings += _header_count_findings(path, points.shape[2])
     else:  # more frames than the 16-bit header, and so ezc3d, counts
         points, residuals = _read_point_block(path, c3d, n_long)
     params = c3d["parameters"]["POINT"]
     header_rate = c3d["header"]["points"]["frame_rate"]
     del c3d  # ezc3d's per-sample C++ objects: gone before the arrays below are made
     _release_freed_heap()
+    for finding in findings:
+        logger.warning("%s", finding)
     unit = _units(path, params)
     rate = _rate(path, params, header_rate)
     raw_labels = _labels(path, params, points.shape[1])
@@ -74,6 +89,7 @@ def read_c3d(path: str | os.PathLike, /) -> Trajectories:
         source=str(path),
         ignored_labels=tuple(ignored),
         units_in_file=unit,
+        input_findings=tuple(findings),
     )
 
 
@@ -103,6 +119,84 @@ def _release_freed_heap() -> None:
         libc.malloc_trim(0)
     except (OSError, AttributeError):  # not glibc
         pass
+
+
+def _check_raw_header(path: Path) -> None:
+    """Refuse, before ezc3d reads it, a file whose header points past its end or whose rate is
+    unusable (see the module docstring); ezc3d itself gives an error for a header shorter than 512 bytes."""
+    if not path.is_file():
+        return  # _open says why
+    size = path.stat().st_size
+    byte_order, processor, header = _raw_header(path)
+    if len(header) < 512:
+        return
+    bad = "not a readable C3D file (the header contradicts the file: "
+    param_block = header[0]
+    if param_block < 1 or (param_block - 1) * 512 + 4 > size:
+        raise InputError(f"{path}: {bad}its first byte puts the parameter block at 512-byte block {param_block}, "
+                         f"byte {(max(param_block, 1) - 1) * 512}, but the file has {size} bytes)")
+    data_start = struct.unpack(byte_order + "H", header[16:18])[0]
+    if data_start < 1 or (data_start - 1) * 512 >= size:
+        raise InputError(f"{path}: {bad}its word 9 puts the data at 512-byte block {data_start}, byte "
+                         f"{(max(data_start, 1) - 1) * 512}, but the file has {size} bytes)")
+    if processor == _DEC:
+        return  # VAX floats: ezc3d converts them; the rate is checked after reading (_rate)
+    point_rate = _raw_point_rate(path, byte_order, param_block, size)
+    if point_rate is not None and rate_problem(point_rate):  # ezc3d crashes on a NaN there
+        raise InputError(f"{path}: POINT:RATE is {rate_problem(point_rate)}; expected the marker sampling rate in Hz")
+
+
+def _raw_point_rate(path: Path, byte_order: str, param_block: int, size: int) -> float | None:
+    """POINT:RATE read from the raw parameter section (a float, the first value), None when absent
+    or unreadable: ezc3d crashes on a NaN there, so it is looked at before ezc3d."""
+    with open(path, "rb") as fh:
+        fh.seek((param_block - 1) * 512)
+        section = fh.read(min(size - (param_block - 1) * 512, 512 * 255))
+    if len(section) < 4:
+        return None
+    n_blocks = section[2]
+    section = section[: max(n_blocks, 1) * 512]
+    groups: dict[int, str] = {}
+    params: list[tuple[int, str, int, int]] = []  # group id, name, type, start of its data
+    pos = 4
+    while pos + 2 <= len(section):
+        n_chars, ident = struct.unpack("bb", section[pos:pos + 2])
+        if n_chars == 0:
+            break
+        name = section[pos + 2:pos + 2 + abs(n_chars)].decode("latin-1").upper()
+        here = pos + 2 + abs(n_chars)
+        if here + 2 > len(section):
+            break
+        step = struct.unpack(byte_order + "h", section[here:here + 2])[0]
+        if ident < 0:
+            groups[-ident] = name
+        elif here + 4 <= len(section):
+            kind, n_dims = struct.unpack("bB", section[here + 2:here + 4])
+            params.append((ident, name, kind, here + 4 + n_dims))
+        if step <= 0:
+            break
+        pos = here + step
+    for group, name, kind, start in params:
+        if groups.get(group) == "POINT" and name == "RATE" and kind == 4 and start + 4 <= len(section):
+            return float(struct.unpack(byte_order + "f", section[start:start + 4])[0])
+    return None
+
+
+def _header_count_findings(path: Path, n_read: int) -> list[str]:
+    """Warnings for a header frame count the data block contradicts, read as the data hold: a last
+    frame before the first; a last frame of 65535 over fewer frames and no count elsewhere."""
+    byte_order, _, header = _raw_header(path)
+    if len(header) < 10:
+        return []
+    first, last = struct.unpack(byte_order + "2H", header[6:10])
+    if last < first:
+        return [f"{path.name}: the header's last frame (word 5) is {last}, before its first frame (word 4) "
+                f"{first}; read the {n_read} frames the data block holds"]
+    if last == _HEADER_CLIPPED and n_read < last - first + 1:
+        return [f"{path.name}: the header's last frame (word 5) is 65535 (more frames than 16 bits count, "
+                f"see POINT:LONG_FRAMES) but there is no POINT:LONG_FRAMES and the data block holds "
+                f"{n_read} frames; read those {n_read}"]
+    return []
 
 
 def _check_not_truncated(path: Path, n_read: int) -> None:
@@ -146,7 +240,11 @@ def _long_frame_count(path: Path, c3d: Any) -> int | None:
     long_frames, frames = _value(point, "LONG_FRAMES"), _value(point, "FRAMES")
     start, end = _value(trial, "ACTUAL_START_FIELD"), _value(trial, "ACTUAL_END_FIELD")
     if long_frames:
-        count = round(float(long_frames[0]))
+        value = float(long_frames[0])
+        if not (value >= 1 and value == round(value)):
+            raise InputError(f"{path}: not a readable C3D file (POINT:LONG_FRAMES is {value:g}; expected the "
+                             f"number of frames, a whole number >= 1)")
+        count = round(value)
     elif len(start) == 2 and len(end) == 2:  # 32-bit frame numbers as two 16-bit words, low first
         first, last = ((int(v[1]) & 0xFFFF) << 16 | (int(v[0]) & 0xFFFF) for v in (start, end))
         count = last - first + 1
@@ -212,12 +310,12 @@ def _units(path: Path, params: dict) -> str:
 
 
 def _rate(path: Path, params: dict, header_rate: float) -> float:
+    """POINT:RATE, else (absent) the header's rate; one that is not a usable rate is refused."""
     values = np.asarray(_value(params, "RATE"), dtype=float).ravel()
+    what = "POINT:RATE" if values.size else "the header's frame rate"
     rate = float(values[0]) if values.size else float(header_rate)
-    if not rate > 0:
-        rate = float(header_rate)
-    if not rate > 0:
-        raise InputError(f"{path}: POINT:RATE is {values.tolist()} and the header rate {header_rate}; expected > 0")
+    if rate_problem(rate):
+        raise InputError(f"{path}: {what} is {rate_problem(rate)}; expected the marker sampling rate in Hz")
     return rate
 
 

@@ -5,6 +5,17 @@ which then replaces the target with ``os.replace``. An interrupted or failing wr
 never leaves a half-written result, and an existing result is never truncated before the new one
 is complete. ``atomic_write`` is public so that other writers (C3D, TRC, figures) can use it.
 
+A result set (the files of one method's result: CSV, .mot, .npz, summary.json, ...) is complete or
+absent (``ResultSet``): its files are written into a hidden staging folder in the output folder,
+then a journal (``COMMIT.json``) says the set is complete, and only then are the files renamed into
+place, summary.json last, with Ctrl-C and SIGTERM held back for those few renames. Without
+overwrite a rename never replaces a file (``os.link``, which fails on an existing name). A run
+killed while it writes leaves a staging folder named with its pid: the next run into that folder
+removes it, or, when its journal is there (killed during the renames), finishes the renames. Two
+runs never write one result set at once: ``claim`` holds a lock file created exclusively
+(O_EXCL) per result stem for the run, and a second run is refused while the first one's process
+runs. A full disk or any other OS error is an InputError naming the file.
+
 Angles are radians in memory and degrees in the CSV and .mot files (labelled: the .mot header says
 ``inDegrees=yes``; the CSV holds degrees in every coordinate column, time in seconds).
 """
@@ -17,9 +28,12 @@ import math
 import os
 import re
 import secrets
+import shutil
+import signal
 import zipfile
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -35,6 +49,31 @@ _TIME_FORMAT = "%.6f"  # seconds
 # --------------------------------------------------------------------------------------------
 # Atomic writing and the output folder
 # --------------------------------------------------------------------------------------------
+_IN_PROGRESS: dict[Path, None] = {}
+"""Temporary files and folders this process is writing (removed by ``remove_in_progress`` when a
+pool worker is stopped at once: exubio.study.map_in_processes)."""
+
+
+def in_progress(path: Path, /) -> Path:
+    """Record ``path`` as a temporary file or folder being written (see ``done_with``)."""
+    _IN_PROGRESS[Path(path)] = None
+    return path
+
+
+def done_with(path: Path, /) -> None:
+    _IN_PROGRESS.pop(Path(path), None)
+
+
+def remove_in_progress() -> None:
+    """Remove every temporary file and folder this process is writing (a process stopping at once)."""
+    for path in list(_IN_PROGRESS):
+        if path.is_dir():
+            shutil.rmtree(path, ignore_errors=True)
+        else:
+            _remove_quietly(path)
+        _IN_PROGRESS.pop(path, None)
+
+
 def atomic_write(
     path: str | os.PathLike, writer: Callable[[Path], Any], /, *, temp_suffix: str | None = None
 ) -> Path:
@@ -53,7 +92,7 @@ def atomic_write(
     if not folder.is_dir():
         raise InputError(f"{target}: cannot write, the folder '{folder}' does not exist")
     suffix = target.suffix if temp_suffix is None else temp_suffix
-    tmp = folder / f".{target.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp{suffix}"
+    tmp = in_progress(folder / f".{target.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp{suffix}")
     try:
         with open(tmp, "xb"):  # created empty, with the usual umask-based permissions
             pass
@@ -66,6 +105,8 @@ def atomic_write(
     except BaseException:
         _remove_quietly(tmp)
         raise
+    finally:
+        done_with(tmp)
     logger.debug("wrote %s", target)
     return target
 
@@ -138,21 +179,223 @@ def prepare_output_dir(out_dir: str | os.PathLike, stems: Sequence[str], /, *, o
 
 
 _TEMP_NAME = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.[0-9a-f]{8}\.tmp(\..*)?$")
+_SET_SUFFIX = ".set"  # a ResultSet's staging folder: .<stem>.<pid>.<hex>.tmp.set
+_JOURNAL = "COMMIT.json"
 
 
 def remove_leftovers(folder: Path, stems: Sequence[str], /) -> list[Path]:
-    """Remove the hidden temporary files (``atomic_write``'s, exubio.io.streamed's part files) of
-    the results ``stems`` (see prepare_output_dir) that a writer left when it was killed: those whose
-    process (the pid in their name) no longer runs. A running writer's files are left alone."""
+    """Remove what writers of the results ``stems`` (see prepare_output_dir) left when they were
+    killed: hidden temporary files (``atomic_write``'s, exubio.io.streamed's part files) and
+    ResultSet staging folders whose process (the pid in their name) no longer runs; a staging folder
+    whose journal says its set was complete is first committed (its remaining renames done). A
+    running writer's files are left alone."""
     removed = []
-    for p in folder.iterdir():
+    for p in sorted(folder.iterdir()):
         m = _TEMP_NAME.match(p.name)
-        if not m or not p.is_file() or _process_runs(int(m["pid"])):
+        if not m or _process_runs(int(m["pid"])):
             continue
-        if any(m["name"] == stem or m["name"].startswith(stem + ".") for stem in stems):
+        if not any(m["name"] == stem or m["name"].startswith(stem + ".") for stem in stems):
+            continue
+        if p.is_dir() and p.name.endswith(".tmp" + _SET_SUFFIX):
+            _recover_set(p, folder)
+            shutil.rmtree(p, ignore_errors=True)
+            removed.append(p)
+        elif p.is_file():
             _remove_quietly(p)
             removed.append(p)
     return removed
+
+
+def _recover_set(staging: Path, folder: Path) -> None:
+    """Finish the renames of a set killed while committing (its journal lists them, in order)."""
+    journal = staging / _JOURNAL
+    if not journal.is_file():
+        return  # killed before the set was complete: nothing of it was placed
+    try:
+        names = json.loads(journal.read_text(encoding="utf-8"))["files"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return
+    finished = []
+    for name in names:
+        staged = staging / name
+        if staged.is_file():
+            os.replace(staged, folder / name)
+            finished.append(name)
+    if finished:
+        logger.info("%s: finished placing %s, the rest of a result set whose run was killed while it placed it",
+                    folder, ", ".join(finished))
+
+
+@contextmanager
+def claim(folder: str | os.PathLike, stems: Sequence[str], /) -> Iterator[None]:
+    """Hold, for the block, a lock file ``.<stem>.lock`` per stem in ``folder``, created exclusively
+    (O_EXCL) and holding this process's pid: a second run for one of these results is refused
+    (InputError) while the first one's process runs; a lock whose process is gone (killed) is taken
+    over. The locks are removed at the end of the block."""
+    folder = Path(folder)
+    held: list[Path] = []
+    try:
+        for stem in stems:
+            held.append(_lock(folder / f".{stem}.lock", stem))
+        yield
+    finally:
+        for lock in held:
+            _remove_quietly(lock)
+            done_with(lock)
+
+
+def _lock(path: Path, stem: str) -> Path:
+    import time
+
+    for attempt in range(5):
+        try:
+            fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            pid = _lock_pid(path)
+            if pid is None and attempt < 4:  # its creator is writing its pid this instant
+                time.sleep(0.02)
+                continue
+            if pid and _process_runs(pid):
+                raise InputError(f"{path.parent / stem}: another exubio run (process {pid}) is writing this result "
+                                 f"in {path.parent}; wait for it to end or choose another output folder") from None
+            _remove_quietly(path)  # its run was killed
+            continue
+        except OSError as exc:
+            raise InputError(f"{path.parent}: cannot write ({exc.strerror or exc})") from None
+        in_progress(path)
+        try:
+            os.write(fd, str(os.getpid()).encode("ascii"))
+        except OSError as exc:
+            _remove_quietly(path)
+            raise InputError(f"{path.parent}: cannot write ({exc.strerror or exc})") from None
+        finally:
+            os.close(fd)
+        return path
+    raise InputError(f"{path.parent / stem}: another exubio run is writing this result in {path.parent}; wait for it "
+                     f"to end or choose another output folder")
+
+
+def _lock_pid(path: Path) -> int | None:
+    """The pid in a lock file; None when it is empty (being written) or unreadable; 0 when gone."""
+    try:
+        text = path.read_text(encoding="ascii").strip()
+    except FileNotFoundError:
+        return 0
+    except (OSError, UnicodeDecodeError):
+        return None
+    return int(text) if text.isdigit() else None
+
+
+class ResultSet:
+    """The files of one result set (``<stem>.*`` in ``folder``), complete or absent (see the module docstring).
+    ``path(name)`` is where a writer writes the file ``name`` (in the staging folder); ``commit()``
+    places them all and returns their final paths; leaving the ``with`` block by an exception
+    removes the staging folder, so nothing of the set appears."""
+
+    def __init__(self, folder: str | os.PathLike, stem: str, /, *, overwrite: bool) -> None:
+        self.folder, self.overwrite = Path(folder), overwrite
+        self.staging = self.folder / f".{stem}.{os.getpid()}.{secrets.token_hex(4)}.tmp{_SET_SUFFIX}"
+        try:
+            self.staging.mkdir()
+        except OSError as exc:
+            raise InputError(f"{self.folder}: cannot write ({exc.strerror or exc})") from None
+        in_progress(self.staging)
+        self.names: list[str] = []
+
+    def path(self, name: str) -> Path:
+        if name not in self.names:
+            self.names.append(name)
+        return self.staging / name
+
+    def commit(self, *, last: str | None = None) -> dict[str, Path]:
+        """Place every file (``last`` after the others); a name taken meanwhile without overwrite
+        undoes the placing and is an InputError naming it."""
+        names = [n for n in self.names if n != last] + ([last] if last in self.names else [])
+        write_json(self.staging / _JOURNAL, {"files": names})
+        _fsync_folder(self.staging)
+        placed: list[Path] = []
+        with _signals_held():
+            try:
+                for name in names:
+                    staged, final = self.staging / name, self.folder / name
+                    if self.overwrite:
+                        os.replace(staged, final)
+                    else:
+                        os.link(staged, final)  # FileExistsError when the name is taken: never replaced
+                        placed.append(final)
+                        staged.unlink()
+                _fsync_folder(self.folder)
+            except OSError as exc:
+                for final in placed:
+                    _remove_quietly(final)
+                _remove_quietly(self.staging / _JOURNAL)
+                if isinstance(exc, FileExistsError):
+                    raise InputError(f"{exc.filename2 or exc.filename}: result file already exists (written "
+                                     f"meanwhile by another run); pass --overwrite to replace the results") from None
+                raise InputError(f"{self.folder}: cannot place the result files ({exc.strerror or exc})") from None
+        self.discard()
+        return {name: self.folder / name for name in names}
+
+    def discard(self) -> None:
+        shutil.rmtree(self.staging, ignore_errors=True)
+        done_with(self.staging)
+
+    def __enter__(self) -> "ResultSet":
+        return self
+
+    def __exit__(self, exc_type, exc: BaseException | None, tb: object) -> None:
+        if self.staging.exists():
+            self.discard()
+        if isinstance(exc, InputError) and str(self.staging) in str(exc):  # name the file, not its staging place
+            raise InputError(str(exc).replace(str(self.staging), str(self.folder))) from None
+
+
+@contextmanager
+def _signals_held() -> Iterator[None]:
+    """Hold back Ctrl-C and SIGTERM while a set's files are placed: their handlers are replaced by
+    one that notes the signal, and the original handlers get the noted signals afterwards (a
+    KeyboardInterrupt then comes once the set is whole). Done with Python handlers, not a signal
+    mask: a mask holds only the main thread's signals, and the kernel gives a process's signal to
+    any thread that does not block it (numerical libraries run threads). Outside the main thread
+    (where handlers cannot be set) nothing is held."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[int] = []
+    previous = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        handler = signal.getsignal(sig)
+        if handler in (signal.SIG_IGN, None):
+            continue
+        previous[sig] = handler
+        signal.signal(sig, lambda signum, frame: pending.append(signum))
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        for sig in pending:
+            handler = previous[sig]
+            if callable(handler):
+                handler(sig, None)
+            else:  # SIG_DFL
+                signal.raise_signal(sig)
+
+
+def _fsync_folder(folder: Path) -> None:
+    """Make the renames in ``folder`` durable (where the OS can open a folder)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 def _process_runs(pid: int) -> bool:
@@ -463,8 +706,9 @@ class _NpzReader:
             self.data = np.load(self.path, allow_pickle=False)
         except FileNotFoundError:
             raise InputError(f"{self.path}: file not found") from None
-        except (OSError, ValueError) as exc:
-            raise InputError(f"{self.path}: not a readable .npz file ({exc})") from exc
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:  # BadZipFile: truncated, damaged
+            raise InputError(f"{self.path}: not a readable .npz file ({type(exc).__name__}: {exc}); expected an "
+                             f"exubio result <trial>.<method>.npz, whole") from None
         if not isinstance(self.data, np.lib.npyio.NpzFile):  # a .npy array under an .npz name
             raise InputError(f"{self.path}: not an .npz archive (a single array: a .npy file?); expected an exubio "
                              f"result <trial>.<method>.npz")
@@ -477,6 +721,9 @@ class _NpzReader:
             raise InputError(
                 f"{self.path}: no entry '{key}' (not an exubio result?); entries are {sorted(self.data.files)}"
             ) from None
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:  # a damaged member (CRC, short)
+            raise InputError(f"{self.path}: entry '{key}' is not readable ({type(exc).__name__}: {exc}); the file "
+                             f"is damaged") from None
 
     def __exit__(self, *exc: object) -> None:
         self.data.close()

@@ -11,6 +11,7 @@ leaves a ``.*.tmp*`` file that the next study run removes).
 """
 from __future__ import annotations
 
+import errno
 import os
 import secrets
 from pathlib import Path
@@ -19,6 +20,7 @@ from typing import Any, Iterator, Mapping
 import numpy as np
 
 from exubio.errors import InputError
+from exubio.io.results import done_with, in_progress
 from exubio.types import MarkerTargets, Reconstruction
 
 READ_BLOCK_BYTES = 1 << 24  # ArrayFile.blocks reads about this much at a time (16 MB)
@@ -35,18 +37,28 @@ class ArrayFile:
             self._fh = open(self.path, "xb")
         except OSError as exc:
             raise InputError(f"{self.path}: cannot write ({exc})") from exc
+        in_progress(self.path)
 
     def append(self, block: np.ndarray) -> None:
         block = np.ascontiguousarray(block, dtype=self.dtype)
         if block.shape[1:] != self.shape[1:] or self.rows + block.shape[0] > self.shape[0]:
             raise ValueError(f"ArrayFile {self.path.name}: block of shape {block.shape} does not continue "
                              f"rows {self.rows} of {self.shape}")
-        block.tofile(self._fh)
+        try:
+            block.tofile(self._fh)
+        except OSError as exc:  # a full disk: numpy says only "N requested and M written"
+            reason = exc.strerror or (f"{os.strerror(errno.ENOSPC)}: {exc}" if _disk_full(self.path.parent, block.nbytes)
+                                      else str(exc))
+            raise InputError(f"{self.path.parent}: cannot write ({reason}); the result of this method was not "
+                             f"written") from None
         self.rows += block.shape[0]
 
     def blocks(self) -> Iterator[np.ndarray]:
         """The rows written, in blocks of about READ_BLOCK_BYTES."""
-        self._fh.flush()
+        try:
+            self._fh.flush()
+        except OSError as exc:
+            raise InputError(f"{self.path.parent}: cannot write ({exc.strerror or exc})") from None
         row_bytes = int(np.prod(self.shape[1:], dtype=np.int64)) * self.dtype.itemsize
         per = max(READ_BLOCK_BYTES // max(row_bytes, 1), 1)
         with open(self.path, "rb") as fh:
@@ -60,11 +72,23 @@ class ArrayFile:
         return self.rows == self.shape[0]
 
     def remove(self) -> None:
-        self._fh.close()
+        try:
+            self._fh.close()
+        except OSError:  # a full disk: the file goes anyway
+            pass
         try:
             self.path.unlink()
         except FileNotFoundError:
             pass
+        done_with(self.path)
+
+
+def _disk_full(folder: Path, wanted: int) -> bool:
+    try:
+        st = os.statvfs(folder)
+    except (OSError, AttributeError):  # not POSIX
+        return False
+    return st.f_bavail * st.f_frsize < wanted
 
 
 class StreamedReconstruction:

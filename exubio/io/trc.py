@@ -12,7 +12,10 @@ Layout (1-based line numbers)::
 
 Reading converts to metres and takes the sample times from the Time column, which must be finite,
 increasing and on the DataRate of line 3 (row i at the first time + i / DataRate, within half a
-sample); anything else is refused naming the line. Writing prints
+sample); anything else is refused naming the line. A NumFrames that disagrees with the data rows is
+read from the rows, as OpenSim does (published files are off by a row or more), with a warning
+naming the header value that also goes into the result (``Trajectories.input_findings``). A DataRate
+above exubio.io.limits.MAX_RATE_HZ is refused (the work after reading grows with it). Writing prints
 positions with a resolution of 1e-9 m whatever the unit (mm: 6 decimals) and times with 10
 significant digits; missing samples become empty cells.
 """
@@ -26,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from exubio.errors import InputError
+from exubio.io.limits import rate_problem
 from exubio.io.results import atomic_write
 from exubio.types import Trajectories
 
@@ -49,8 +53,13 @@ def read_trc(path: str | os.PathLike, /) -> Trajectories:
     unit, rate, n_frames, n_markers = _header_values(path, header)
     labels = _marker_labels(path, lines[3], n_markers)
     time, coords, line_nos = _data(path, lines, n_markers)
+    findings = []
     if time.shape[0] != n_frames:
-        raise InputError(f"{path}: line 3: NumFrames is {n_frames} but the file has {time.shape[0]} data rows")
+        findings.append(f"{path.name}: line 3: NumFrames is {n_frames} but the file has {time.shape[0]} data rows; "
+                        f"read the {time.shape[0]} rows (as OpenSim does)")
+        logger.warning("%s", findings[-1])
+    if time.shape[0] == 0:
+        raise InputError(f"{path}: no data rows after line {_FIRST_DATA_LINE - 1}; expected at least one frame")
     _check_rate(path, time, line_nos, rate)
     return Trajectories(
         labels=tuple(labels),
@@ -59,6 +68,7 @@ def read_trc(path: str | os.PathLike, /) -> Trajectories:
         time_s=time,
         source=str(path),
         units_in_file=unit,
+        input_findings=tuple(findings),
     )
 
 
@@ -108,6 +118,8 @@ def _header_values(path: Path, header: dict[str, str]) -> tuple[str, float, int,
         ) from None
     if not (rate > 0 and math.isfinite(rate)) or n_frames < 0 or n_markers < 0:
         raise InputError(f"{path}: line 3: expected DataRate > 0, NumFrames >= 0, NumMarkers >= 0; got {header}")
+    if rate_problem(rate):
+        raise InputError(f"{path}: line 3: DataRate is {rate_problem(rate)}")
     return unit.lower(), rate, n_frames, n_markers
 
 

@@ -1,0 +1,311 @@
+"""`exubio reconstruct`'s result sets are complete or absent whatever happens: a full disk, SIGINT or
+SIGKILL at every write, two runs into one folder at once; Ctrl-C of any command is one line and exit
+130 within about a second (exubio.io.results.ResultSet, claim; exubio.study.map_in_processes)."""
+from __future__ import annotations
+
+import errno
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import exubio.io.results
+from exubio.cli import main
+from exubio.io.c3d import write_c3d
+from exubio.io.results import read_npz
+from exubio.model import load_model
+from exubio.simulate import Motion, simulate_trial
+
+SET_FILES = ("csv", "mot", "npz", "summary.json")  # one method's result set
+TIMEOUT = 120
+
+
+def _trial(path: Path, duration: float, seed: int = 1) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    sim = simulate_trial(load_model(), Motion.ABDUCTION, duration_s=duration, rate_hz=100.0, noise_mm=0.5, seed=seed)
+    return write_c3d(path, sim.trajectories)
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory) -> Path:
+    return _trial(tmp_path_factory.mktemp("trials") / "tiny.c3d", 0.5)
+
+
+@pytest.fixture(scope="module")
+def long_trial(tmp_path_factory) -> Path:
+    return _trial(tmp_path_factory.mktemp("trials") / "long.c3d", 10.0)
+
+
+def set_state(out: Path, stem: str, method: str) -> str:
+    """'complete' (every file of the set, readable and of one run), 'absent' (none) or 'partial'."""
+    present = [s for s in SET_FILES if (out / f"{stem}.{method}.{s}").is_file()]
+    if not present:
+        return "absent"
+    if len(present) != len(SET_FILES):
+        return "partial"
+    summ = json.loads((out / f"{stem}.{method}.summary.json").read_text(encoding="utf-8"))
+    recon = read_npz(out / f"{stem}.{method}.npz", points=False)
+    rows = [line for line in (out / f"{stem}.{method}.csv").read_text(encoding="utf-8").splitlines()
+            if line and not line.startswith("#")]
+    n_csv = len(rows) - 1  # the column header, then one row per frame
+    assert summ["n_frames"] == recon.n_frames == n_csv
+    return "complete"
+
+
+def hidden(out: Path) -> list[str]:
+    return sorted(p.name for p in out.iterdir() if p.name.startswith(".")) if out.is_dir() else []
+
+
+def one_error_line(err: str) -> str:
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert "Traceback" not in err and len(lines) == 1, err
+    return lines[0]
+
+
+# ---------------------------------------------------------------------------------- full disk
+def _mount_tmpfs(folder: Path, size_kb: int) -> bool:
+    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        done = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size_kb}k", "tmpfs", str(folder)],
+                              capture_output=True, timeout=10)
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+    return done.returncode == 0
+
+
+def _umount(folder: Path) -> None:
+    subprocess.run(["umount", str(folder)], capture_output=True, timeout=10)
+
+
+def _check_full_disk_run(code: int, err: str, out: Path, stem: str) -> str:
+    """A run on a disk that filled: exit 0 with everything, or exit 2 with one line naming the
+    full disk; every set complete or absent; nothing hidden left behind."""
+    states = {m: set_state(out, stem, m) for m in ("pf", "ls")}
+    assert "partial" not in states.values(), (states, sorted(p.name for p in out.iterdir()))
+    assert hidden(out) == [], hidden(out)
+    if code == 0:
+        assert states == {"pf": "complete", "ls": "complete"}
+        return "written"
+    assert code == 2, err
+    line = one_error_line(err)
+    assert line.startswith("exubio: error: ") and "No space left on device" in line, line
+    return f"{states['pf']}/{states['ls']}"
+
+
+def test_a_full_disk_leaves_each_set_complete_or_absent_and_one_error(tmp_path, long_trial, capsys):
+    """tmpfs disks of 0.25-6 MB fill at every stage of `reconstruct --method both` (the part file of
+    the model points, each file of the PF set, of the LS set): exit 2, one line, no traceback (it
+    was `OSError: 108000 requested and 3072 written`), no half set (1-4 files of a set were left)."""
+    probe = tmp_path / "probe"
+    if not _mount_tmpfs(probe, 64):
+        pytest.skip("tmpfs cannot be mounted here: test_an_injected_enospc_... covers a full disk")
+    _umount(probe)
+    seen = set()
+    for size_kb in (256, 512, 1024, 1536, 2048, 2560, 3072, 4096, 8192):
+        disk = tmp_path / f"disk{size_kb}"
+        assert _mount_tmpfs(disk, size_kb)
+        try:
+            out = disk / "out"
+            code = main(["-q", "reconstruct", str(long_trial), "--method", "both", "--no-report", "--out", str(out)])
+            seen.add(_check_full_disk_run(code, capsys.readouterr().err, out, "long"))
+        finally:
+            _umount(disk)
+    assert "written" in seen and len(seen) >= 3, seen  # the disk filled at several stages, and 8 MB was enough
+
+
+@pytest.mark.parametrize("at_call", [1, 2, 4, 6, 9])
+def test_an_injected_enospc_leaves_each_set_complete_or_absent_and_one_error(tmp_path, tiny, capsys, monkeypatch,
+                                                                            at_call):
+    """The same without a tmpfs: the disk is full from the at_call-th file written on."""
+    calls = [0]
+    original = exubio.io.results.atomic_write
+
+    def full_disk(path, writer, /, **kw):
+        def write(tmp):
+            calls[0] += 1
+            if calls[0] >= at_call:
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+            writer(tmp)
+
+        return original(path, write, **kw)
+
+    monkeypatch.setattr(exubio.io.results, "atomic_write", full_disk)
+    out = tmp_path / "out"
+    code = main(["-q", "reconstruct", str(tiny), "--method", "both", "--no-report", "--out", str(out)])
+    assert _check_full_disk_run(code, capsys.readouterr().err, out, "tiny") != "written"
+
+
+# ------------------------------------------------------------------ SIGINT and SIGKILL at each write
+DRIVER = r"""
+import os, signal, sys
+import exubio.io.results as results
+kill_at, sig, log = int(os.environ["KILL_AT"]), int(os.environ["KILL_SIGNAL"]), os.environ.get("EVENT_LOG")
+count = [0]
+def event(what):
+    count[0] += 1
+    if log:
+        with open(log, "a") as fh:
+            fh.write(f"{count[0]} {what}\n")
+    if count[0] == kill_at:
+        os.kill(os.getpid(), sig)
+original = results.atomic_write
+def atomic_write(path, writer, /, **kw):
+    def write(tmp):
+        writer(tmp)
+        event("wrote " + os.path.basename(str(path)))
+    return original(path, write, **kw)
+results.atomic_write = atomic_write
+for name in ("replace", "link"):
+    def renamer(src, dst, *a, _f=getattr(os, name), _n=name, **k):
+        event(_n + " " + os.path.basename(str(dst)))
+        return _f(src, dst, *a, **k)
+    setattr(os, name, renamer)
+from exubio.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def _run(argv: list[str], **env: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", DRIVER, *argv], capture_output=True, text=True, encoding="utf-8",
+                          timeout=TIMEOUT, env={**os.environ, "KILL_AT": "0", "KILL_SIGNAL": "9", **env})
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL])
+def test_sigint_or_sigkill_at_each_write_leaves_the_set_complete_or_absent(tmp_path, tiny, sig):
+    """A run killed at its k-th write (each file written, each rename: 14 for one method's set), for
+    every k: the set is complete or absent at once (SIGINT: exit 130 and one line; a set being placed
+    holds SIGINT back until it is whole), or, SIGKILL among the renames, its journal is there and the
+    next run finishes it. The next run removes every leftover and replaces no complete set (exit 2
+    without --overwrite). It left a set without its summary.json."""
+    argv = ["-q", "reconstruct", str(tiny), "--method", "ls", "--no-report", "--out"]
+    log = tmp_path / "events.txt"
+    counted = _run(argv + [str(tmp_path / "count")], EVENT_LOG=str(log))
+    assert counted.returncode == 0, counted.stderr
+    events = log.read_text(encoding="utf-8").splitlines()
+    assert events[-1].endswith("link tiny.ls.summary.json") and len(events) == 14, events
+    seen = set()
+    for k in range(1, len(events) + 1):
+        out = tmp_path / f"k{k}"
+        killed = _run(argv + [str(out)], KILL_AT=str(k), KILL_SIGNAL=str(int(sig)))
+        state = set_state(out, "tiny", "ls")
+        seen.add(state)
+        if sig == signal.SIGINT:
+            assert killed.returncode == 130, (events[k - 1], killed.stderr)
+            assert "interrupted" in one_error_line(killed.stderr)
+            assert state != "partial" and hidden(out) == [], (events[k - 1], state, hidden(out))
+        else:
+            assert killed.returncode == -signal.SIGKILL
+            if state == "partial":  # killed among the renames: the journal says what is left to do
+                assert "link" in events[k - 1], (events[k - 1], state)
+                assert any((out / h / "COMMIT.json").is_file() for h in hidden(out)), hidden(out)
+        before = (out / "tiny.ls.npz").read_bytes() if state == "complete" else None
+        again = _run(argv + [str(out)])  # cleans up; refuses to replace a complete set (no --overwrite)
+        assert set_state(out, "tiny", "ls") == "complete", (events[k - 1], again.stderr)
+        if again.returncode != 0:  # the set was complete, or made complete from its journal: not replaced
+            assert again.returncode == 2 and "already exists" in one_error_line(again.stderr), again.stderr
+            assert before is None or (out / "tiny.ls.npz").read_bytes() == before
+        assert hidden(out) == [], (events[k - 1], hidden(out))
+    # killed before the set was placed, and while it was placed: SIGINT waits for the set to be
+    # whole, SIGKILL leaves part of it (which the next run finished, above)
+    assert seen == ({"absent", "complete"} if sig == signal.SIGINT else {"absent", "partial"}), seen
+
+
+# ------------------------------------------------------------------------- two runs at once
+SLOW_COMMIT = r"""
+import sys, time
+import exubio.io.results as results
+commit = results.ResultSet.commit
+def slow(self, **kw):
+    time.sleep(1.0)  # both runs are certainly at work at the same time
+    return commit(self, **kw)
+results.ResultSet.commit = slow
+from exubio.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_two_runs_into_one_folder_at_once_never_replace_each_other(tmp_path):
+    """Two trials of one name (different data) into one folder at once, without --overwrite: both
+    exited 0 and one replaced the other's results. Now one writes its sets; the other is refused
+    (exit 2, one line naming the other run or the existing result) and the sets are all the winner's."""
+    a, b = _trial(tmp_path / "a" / "t.c3d", 0.5, seed=1), _trial(tmp_path / "b" / "t.c3d", 0.5, seed=2)
+    out = tmp_path / "out"
+    runs = [subprocess.Popen([sys.executable, "-c", SLOW_COMMIT, "-q", "reconstruct", str(t), "--method", "both",
+                              "--no-report", "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             text=True, encoding="utf-8") for t in (a, b)]
+    results = [(p.wait(timeout=TIMEOUT), p.communicate()[1]) for p in runs]
+    codes = sorted(code for code, _ in results)
+    assert codes == [0, 2], results
+    loser = next(err for code, err in results if code == 2)
+    line = one_error_line(loser)
+    assert "another exubio run" in line or "already exists" in line, line
+    winner = (a, b)[[code for code, _ in results].index(0)]
+    for method in ("pf", "ls"):
+        assert set_state(out, "t", method) == "complete"
+        summ = json.loads((out / f"t.{method}.summary.json").read_text(encoding="utf-8"))
+        meta = exubio.io.results.read_npz_metadata(out / f"t.{method}.npz")
+        assert summ["source"] == meta["trial"] == str(winner)
+    assert hidden(out) == []
+
+
+# --------------------------------------------------------------------------------- Ctrl-C
+def _interrupt(cmd: list[str], delay: float) -> tuple[int, str, float]:
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, encoding="utf-8")
+    time.sleep(delay)
+    t0 = time.perf_counter()
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=60)
+    return p.returncode, err, time.perf_counter() - t0
+
+
+@pytest.mark.parametrize("run_on, delay", [(["--jobs", "1"], 3.0), (["--jobs", "2"], 3.0),
+                                           (["--scheduler", "local:2"], 2.0), (["--scheduler", "local:2"], 5.0)])
+def test_ctrl_c_of_reconstruct_is_one_line_exit_130_and_leaves_sets_complete_or_absent(tmp_path, long_trial, run_on,
+                                                                                      delay):
+    """--jobs 2 took 2.3 s and wrote on; on Dask (while the cluster starts, 2 s, or works, 5 s) Dask
+    printed its closing connections' tracebacks."""
+    if "--scheduler" in run_on:
+        pytest.importorskip("distributed")
+    trials = [str(long_trial), str(_trial(tmp_path / "t2" / "other.c3d", 10.0, seed=5))]
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "exubio.cli", "-q", "reconstruct", *trials, "--method", "both", "--no-report",
+           *run_on, "--out", str(out)]
+    code, err, stopped = _interrupt(cmd, delay)
+    assert code == 130, err
+    assert "interrupted" in one_error_line(err)
+    assert stopped < 2.0, stopped  # about a second (0.1-0.2 s measured on an idle machine)
+    for stem in ("long", "other"):
+        for m in ("pf", "ls"):
+            assert set_state(out, stem, m) in ("complete", "absent")
+    time.sleep(0.5)  # the stopped workers' exits
+    assert hidden(out) == []
+
+
+def test_ctrl_c_of_a_study_with_2_jobs_is_one_line_exit_130(tmp_path, long_trial):
+    """It ended in `AttributeError: 'NoneType' object has no attribute 'values'` after 3.8 s."""
+    import yaml
+
+    for k in range(4):
+        (tmp_path / "d").mkdir(exist_ok=True)
+        (tmp_path / "d" / f"t{k}.c3d").write_bytes(long_trial.read_bytes())
+    study = tmp_path / "study.yaml"
+    study.write_text(yaml.safe_dump({"schema_version": 1, "name": "t", "report": False, "sessions": [
+        {"subject": "S01", "trials": ["d/*.c3d"], "methods": ["pf", "ls"]}]}), encoding="utf-8")
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "exubio.cli", "-q", "study", str(study), "--jobs", "2", "--out", str(out)]
+    code, err, stopped = _interrupt(cmd, 4.0)
+    assert code == 130, err
+    assert "interrupted" in one_error_line(err)
+    assert stopped < 2.0, stopped
+    for trial_dir in (out / "S01" / "s1").iterdir():
+        assert trial_dir.name.startswith(".tmp-") is False, trial_dir  # the stopped workers' folders went
+        assert (trial_dir / "DONE.json").is_file()
+    rerun = subprocess.run(cmd, capture_output=True, text=True, encoding="utf-8", timeout=300)
+    assert rerun.returncode == 0, rerun.stderr
+    assert np.all([(out / "S01" / "s1" / f"t{k}" / "DONE.json").is_file() for k in range(4)])
