@@ -5,7 +5,9 @@ Each C3D task trial is calibrated on its own session's static trial (../shared/d
 F0_boire_05 has none and is calibrated on its own first 20 frames; the TRC trials on their first
 50 frames with the thoracoscapular protocol. The kinova_martin session is run twice: with the
 shipped protocol, and with ``protocols/examples/kinova_martin_session.yaml`` (the shipped protocol
-plus the relabelling of that session's swapped RADIUS/ULNA labels).
+plus the relabelling of that session's swapped RADIUS/ULNA labels). Then every task trial of the two
+martin sessions with the static of the OTHER session (markers re-placed between them): what a lab
+gets when a study file points a trial to the wrong session.
 
 Prints, per trial and protocol: the verdict of each method with its reasons, the mean residual,
 the worst PF-LS RMSE over the determined coordinates and every coordinate's range (deg) against
@@ -47,6 +49,12 @@ def runs() -> list[dict]:
     out.append({"trial": c3d / "bioptim_exo_martin_dynamique.c3d", "static": c3d / "bioptim_exo_martin_statique.c3d",
                 "protocol": None})
     out.append({"trial": c3d / "bioptim_exo_F0_boire_05.c3d", "static_frames": "0:20", "protocol": None})
+    # a static of the other session of the same subject (markers re-placed between them)
+    for name in ("aisselle", "dent", "manger", "tete"):
+        out.append({"trial": c3d / f"bioptim_exo_kinova_martin_{name}_f3_1.c3d", "static": c3d / "bioptim_exo_martin_statique.c3d",
+                    "protocol": SESSION, "cross": True})
+    out.append({"trial": c3d / "bioptim_exo_martin_dynamique.c3d", "static": c3d / "bioptim_exo_kinova_martin_statique.c3d",
+                "protocol": None, "cross": True})
     for name in ("ABD01", "FLX01"):
         out.append({"trial": SHARED / "trc" / f"tsm_rmr_{name}.trc", "static_frames": "0:50", "protocol": TRC_PROTOCOL})
     return out
@@ -55,7 +63,7 @@ def runs() -> list[dict]:
 def run_one(spec: dict, work: Path) -> dict:
     from exubio.session import calibrate_session
 
-    out_dir = work / f"{spec['trial'].stem}_{'session' if spec['protocol'] == SESSION else 'shipped'}"
+    out_dir = work / f"{spec['trial'].stem}_{'session' if spec['protocol'] == SESSION else 'shipped'}{'_cross' if spec.get('cross') else ''}"
     extra, model_path = {}, None
     if spec.get("static"):  # the session's static trial: calibration, its label checks, the reference
         model_path, _, extra["calibration"] = calibrate_session(spec["static"], out_dir, "static",
@@ -66,7 +74,8 @@ def run_one(spec: dict, work: Path) -> dict:
                               report=False))
     model = load_model(model_path) if model_path else None
     rec = {"trial": spec["trial"].name, "static": Path(spec["static"]).name if spec.get("static") else spec.get("static_frames"),
-           "protocol": "session relabel" if spec["protocol"] == SESSION else Path(spec["protocol"] or "upper_limb_21").stem,
+           "protocol": ("session relabel" if spec["protocol"] == SESSION else Path(spec["protocol"] or "upper_limb_21").stem)
+           + (" / OTHER SESSION'S STATIC" if spec.get("cross") else ""),
            "methods": {}}
     for m in result.methods:
         s = m.summary

@@ -15,6 +15,11 @@ A study file (YAML, paths relative to it)::
         functional: S01/move.c3d    # optional, with static: SCoRE glenohumeral centre
         static_frames: "0:50"       # optional, without static: each trial calibrated on its own frames
         trials: ["S01/task_*.c3d"]  # globs
+        relabel: {RADIUS: ULNA, ULNA: RADIUS}   # optional: read these labels as others in every trial
+                                    # of the session, the static included
+        static_relabel: {MET2: MET5, MET5: MET2}  # optional: the static only (replaces relabel for it)
+        trial_relabel:              # optional: per trial file name, for that trial only (replaces
+          task_03.c3d: {EPI_lat: EPI_med, EPI_med: EPI_lat}   # relabel for it)
 
 Results: ``OUT/<subject>/<session>/<trial>/`` holds one trial's result set (the files of
 ``exubio reconstruct``) and ``DONE.json`` (written last); the session's calibrated model is in
@@ -44,7 +49,7 @@ import traceback
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Iterable
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
 
 from exubio.config import read_yaml
 from exubio.errors import ExubioError, InputError
@@ -61,7 +66,7 @@ DONE_FILE = "DONE.json"
 _TMP_PREFIX = ".tmp-"
 _STUDY_KEYS = {"schema_version", "name", "methods", "report", "sessions"}
 _SESSION_KEYS = {"subject", "session", "protocol", "model", "static", "functional", "static_frames", "trials",
-                 "methods"}
+                 "methods", "relabel", "static_relabel", "trial_relabel"}
 STUDY_COLUMNS = ("subject", "session", "trial", "status", "pf_verdict", "ls_verdict", "frames", "pf_residual_mm",
                  "ls_residual_mm", "pf_ls_max_rmse_deg", "wall_s", "folder", "error")
 
@@ -77,6 +82,12 @@ class SessionSpec:
     functional: Path | None = None
     static_frames: str | None = None
     methods: tuple[str, ...] = ("pf", "ls")
+    relabel: Mapping[str, str] = field(default_factory=dict)  # every trial and the static
+    static_relabel: Mapping[str, str] | None = None  # the static only (None: relabel)
+    trial_relabel: Mapping[str, Mapping[str, str]] = field(default_factory=dict)  # trial file name -> its own
+
+    def relabel_of(self, trial: Path) -> dict[str, str]:
+        return dict(self.trial_relabel.get(trial.name, self.relabel))
 
 
 @dataclass(frozen=True)
@@ -102,6 +113,7 @@ class TrialTask:
     report: bool
     calibration: dict | None = None
     static_reference: Any = None
+    relabel: dict | None = None
 
 
 @dataclass
@@ -147,6 +159,17 @@ def _methods(value: Any, where: str) -> tuple[str, ...]:
     if not isinstance(value, list) or not value or any(m not in ("pf", "ls") for m in value):
         raise InputError(f"{where}: methods must be a list of 'pf' and/or 'ls', got {value!r}")
     return tuple(dict.fromkeys(value))
+
+
+def _relabel_map(value: Any, where: str) -> dict[str, str] | None:
+    """A relabel mapping of a study file ({trial label: read as}); InputError naming the key."""
+    if value is None:
+        return None
+    if not isinstance(value, dict) or not all(isinstance(k, str) and isinstance(v, str) and k and v
+                                              for k, v in value.items()):
+        raise InputError(f"{where}: expected a mapping of trial label -> the label it is read as, e.g. "
+                         f"{{RADIUS: ULNA, ULNA: RADIUS}}; got {value!r}")
+    return dict(value)
 
 
 def load_study(path: str | Path, /) -> StudySpec:
@@ -211,8 +234,22 @@ def load_study(path: str | Path, /) -> StudySpec:
         frames = s.get("static_frames")
         if frames is not None and static is not None:
             raise InputError(f"{where}.static_frames: with a static trial the window is found in it; give one of the two")
+        relabel = _relabel_map(s.get("relabel"), f"{where}.relabel") or {}
+        static_relabel = _relabel_map(s.get("static_relabel"), f"{where}.static_relabel")
+        if static_relabel is not None and static is None:
+            raise InputError(f"{where}.static_relabel: relabels the static trial; the session has no static")
+        per_trial = s.get("trial_relabel") or {}
+        if not isinstance(per_trial, dict):
+            raise InputError(f"{where}.trial_relabel: expected a mapping of trial file name -> {{label: read as}}")
+        names = {t.name for t in trials}
+        trial_relabel = {}
+        for name, mapping in per_trial.items():
+            if str(name) not in names:
+                raise InputError(f"{where}.trial_relabel.{name}: not a trial of this session; its trials are {sorted(names)}")
+            trial_relabel[str(name)] = _relabel_map(mapping, f"{where}.trial_relabel.{name}") or {}
         sessions.append(SessionSpec(
-            subject=subject, session=session, trials=tuple(trials),
+            subject=subject, session=session, trials=tuple(trials), relabel=relabel, static_relabel=static_relabel,
+            trial_relabel=trial_relabel,
             protocol=_path(s.get("protocol"), base, f"{where}.protocol"),
             model=_path(s.get("model"), base, f"{where}.model"), static=static, functional=functional,
             static_frames=None if frames is None else str(frames),
@@ -239,7 +276,8 @@ def run_trial_task(task: TrialTask) -> TrialOutcome:
         in_progress(tmp)
         result = run_job(TrialJob(task.trial, tmp, methods=tuple(task.methods), model=task.model,
                                   protocol=task.protocol, static_frames=task.static_frames, report=task.report,
-                                  calibration=task.calibration or None, static_reference=task.static_reference))
+                                  calibration=task.calibration or None, static_reference=task.static_reference,
+                                  relabel=dict(task.relabel or {})))
         _fill(out, result)
         out.status = "done"
         out.wall_s = time.perf_counter() - t0
@@ -308,7 +346,14 @@ def _calibrate_session(s: SessionSpec, folder: Path) -> tuple[str | None, dict |
         tmp = folder / f"{_TMP_PREFIX}calibration-{os.getpid()}"
         shutil.rmtree(tmp, ignore_errors=True)
         tmp.mkdir(parents=True)
-        model_tmp, _, summary = calibrate_session(s.static, tmp, s.static.stem, protocol_path=s.protocol,
+        static = s.static
+        static_relabel = s.relabel if s.static_relabel is None else s.static_relabel
+        if static_relabel:
+            from exubio.io.trial import read_trial
+            from exubio.protocol import relabel_trajectories
+
+            static = relabel_trajectories(read_trial(s.static), static_relabel, option=f"{s.subject}/{s.session} relabel")
+        model_tmp, _, summary = calibrate_session(static, tmp, s.static.stem, protocol_path=s.protocol,
                                                    model_path=s.model, functional_path=s.functional, overwrite=True)
         ref = summary.pop("_reference", None)
         from exubio.io.results import write_json
@@ -353,7 +398,7 @@ def plan(spec: StudySpec, out_dir: Path) -> tuple[list[TrialTask], list[TrialOut
             tasks.append(TrialTask(subject=s.subject, session=s.session, trial=str(t), final_dir=str(trial_dirs[t]),
                                    methods=s.methods, protocol=str(s.protocol) if s.protocol else None, model=model,
                                    static_frames=s.static_frames, report=spec.report, calibration=cal,
-                                   static_reference=ref))
+                                   static_reference=ref, relabel=s.relabel_of(t) or None))
     return tasks, skipped
 
 

@@ -213,3 +213,36 @@ def test_local_dask_workers_keep_glibc_malloc_defaults_and_no_profiler():
     out = map_on_scheduler(probe, [0, 1], "local:1", on_error=lambda item, exc: exc)
     inherited = os.environ.get("MALLOC_TRIM_THRESHOLD_")  # (a value set by the user is kept)
     assert out == [(inherited, False), (inherited, False)]
+
+
+def test_a_relabel_fixes_one_trial_of_a_session_without_touching_the_others(data, tmp_path):
+    """trial_relabel reads one trial's labels as others, for that trial only; the session's other
+    trials and its static are read as they are; a relabel naming a trial the session lacks is refused."""
+    import dataclasses
+
+    from exubio.io.c3d import write_c3d, read_c3d
+
+    folder = tmp_path / "sess"
+    folder.mkdir()
+    good = read_c3d(data / "b" / "other.c3d")
+    write_c3d(folder / "good.c3d", good)
+    labels = list(good.labels)
+    i, j = labels.index("MET2"), labels.index("MET5")
+    labels[i], labels[j] = labels[j], labels[i]
+    write_c3d(folder / "swapped.c3d", dataclasses.replace(good, labels=tuple(labels)))
+    session = {"subject": "S", "trials": ["sess/*.c3d"], "methods": ["ls"], "static": "sess/good.c3d"}
+    for fixed in (False, True):
+        extra = {"trial_relabel": {"swapped.c3d": {"MET2": "MET5", "MET5": "MET2"}}} if fixed else {}
+        study = tmp_path / f"study_{fixed}.yaml"
+        study.write_text(yaml.safe_dump({"schema_version": 1, "report": False, "sessions": [{**session, **extra}]}),
+                         encoding="utf-8")
+        out = tmp_path / f"out_{fixed}"
+        main(["-q", "study", str(study), "--out", str(out)])
+        for trial in ("good", "swapped"):
+            summ = json.loads(next((out / "S" / "s1" / trial).glob("*.ls.summary.json")).read_text(encoding="utf-8"))
+            labelled = [r for r in summ["quality"]["reasons"] if r["code"] == "label"]
+            assert bool(labelled) == (trial == "swapped" and not fixed), (fixed, trial, labelled)
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump({"schema_version": 1, "sessions": [
+        {**session, "trial_relabel": {"nothere.c3d": {"A": "B"}}}]}), encoding="utf-8")
+    assert main(["-q", "study", str(bad), "--out", str(tmp_path / "x")]) == 2
