@@ -353,6 +353,51 @@ def cmd_validate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_protocols(args: argparse.Namespace) -> int:
+    from exubio.pipeline import protocol_for_model
+    from exubio.model import load_model
+    from exubio.protocol import read_protocol_mapping, resolve_protocol, shipped_protocols
+
+    if not args.name:
+        print("shipped protocols (use by name: --protocol NAME, from any folder):")
+        for name in shipped_protocols():
+            prot = protocol_for_model(load_model(), name)
+            first = " ".join(str(read_protocol_mapping(name).get("description") or "").split())[:110]
+            print(f"  {name:22s} {len(prot.markers)} markers; {first}")
+        print("list one's markers: exubio protocols NAME")
+        return EXIT_OK
+    prot = protocol_for_model(load_model(), args.name)
+    print(f"{prot.name} ({resolve_protocol(args.name)}): thorax frame from "
+          + (", ".join(f"{k}={getattr(prot.thorax_frame, k)}" for k in prot.thorax_frame.keys) or "identity"))
+    if prot.held_coordinates:
+        print(f"  holds: {', '.join(prot.held_coordinates)}")
+    for m in prot.markers:
+        extra = ", ".join(x for x in (f"landmark {m.landmark}" if m.landmark else "", f"cluster {m.cluster}" if m.cluster
+                                       else "", "optional" if m.optional else "", f"aliases {list(m.aliases)}" if m.aliases
+                                       else "") if x)
+        print(f"  {m.name:12s} {m.segment:9s} {extra}")
+    return EXIT_OK
+
+
+def cmd_model_points(args: argparse.Namespace) -> int:
+    from exubio.model import load_model
+
+    model = load_model(args.model)
+    segments = [s for s in model.segments if args.segment in (None, s.name)]
+    if not segments:
+        raise InputError(f"--segment {args.segment}: not a segment of {model.source}; its segments are "
+                         f"{list(model.segment_names)}")
+    print(f"{model.name}: points per segment, mm, in the segment frame that local_position_mm uses (origin: the "
+          f"segment's joint centre; axes parallel to the ISB thorax frame, X anterior, Y superior, Z right, in the "
+          f"reference posture: arm hanging, palm forward). A marker over one of these gives point: NAME instead.")
+    for seg in segments:
+        origin = "" if seg.joint is None else f" (origin: its {seg.joint.name} joint centre)"
+        print(f"{seg.name}{origin}:")
+        for name, local in seg.points.items():
+            print(f"  {name:12s} [{local[0] * 1000:7.1f}, {local[1] * 1000:7.1f}, {local[2] * 1000:7.1f}]")
+    return EXIT_OK
+
+
 def cmd_export_model(args: argparse.Namespace) -> int:
     from exubio.export import write_biomod, write_osim
     from exubio.model import load_model
@@ -414,7 +459,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("simulate", parents=[common], help="write a synthetic trial (C3D) and its true joint angles (CSV)")
-    s.add_argument("--motion", required=True, choices=["abduction", "flexion", "sier"])
+    s.add_argument("--motion", required=True, choices=["abduction", "flexion", "scaption", "sier"])
     s.add_argument("--duration", type=float, default=10.0, help="seconds (default 10)")
     s.add_argument("--rate", type=float, default=100.0, help="sampling rate, Hz (default 100)")
     s.add_argument("--noise-mm", type=float, default=0.0, help="Gaussian measurement noise SD, mm")
@@ -509,6 +554,20 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--model", help="the model YAML, when the one the result names cannot be found")
     w.add_argument("--max-frames", type=int, default=300, help="at most this many animation frames (default 300)")
     w.set_defaults(func=cmd_view)
+
+    pr = sub.add_parser("protocols", parents=[common], help="list the shipped protocols (by name, usable from any folder) "
+                        "and, with a name, the markers of one", epilog="example: exubio protocols upper_limb_21")
+    pr.add_argument("name", nargs="?", help="a shipped protocol's name or a protocol file: list its markers")
+    pr.set_defaults(func=cmd_protocols)
+
+    mp = sub.add_parser("model-points", parents=[common], help="the model's points per segment in the segment frames "
+                        "a protocol's local_position_mm uses (mm), to write a protocol for your marker set",
+                        epilog="example: exubio model-points --segment humerus   (or a calibrated model: "
+                               "exubio model-points subject.yaml)")
+    mp.add_argument("model", nargs="?", default="upper_extremity", help="model YAML or a shipped model's name "
+                    "(default: upper_extremity)")
+    mp.add_argument("--segment", help="only this segment")
+    mp.set_defaults(func=cmd_model_points)
 
     d = sub.add_parser("demo", parents=[common], help="reconstruct the shipped example trial with PF and LS, compare with its truth")
     d.add_argument("--out", default="exubio_demo", help="output folder (default ./exubio_demo)")

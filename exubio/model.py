@@ -15,7 +15,7 @@ import numpy as np
 from exubio.anatomy import isb_frame
 from exubio.config import check_keys as _check_keys
 from exubio.config import finite_float, read_yaml
-from exubio.resources import shipped_file
+from exubio.resources import resolve, shipped_file
 from exubio.errors import ModelError
 from exubio.types import Ellipsoid, Joint, JointKind, Model, Segment
 
@@ -78,8 +78,9 @@ def _point_pair(value: Any, where: str) -> tuple[str, str]:
 
 
 def load_model(path: str | Path = DEFAULT_MODEL, /, *, body_mass_kg: float | None = None) -> Model:
-    """Read a model YAML. ``body_mass_kg`` overrides the file's body mass (inertia scales)."""
-    path = Path(path)
+    """Read a model YAML: a path, or the name of a shipped model ("upper_extremity").
+    ``body_mass_kg`` overrides the file's body mass (inertia scales)."""
+    path = resolve(path, "exubio.models", "models", "upper_extremity.yaml")
     data = read_yaml(path, error=ModelError)
     src = str(path)
     check_keys(data, _TOP_KEYS, src, error=ModelError, required={"schema_version", "segments", "ellipsoid"})

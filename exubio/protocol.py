@@ -21,7 +21,7 @@ from types import MappingProxyType
 
 from exubio.config import _kind, check_keys, finite_float, read_yaml
 from exubio.errors import InputError, ProtocolError
-from exubio.resources import shipped_file
+from exubio.resources import resolve, shipped_file, shipped_names
 from exubio.types import MarkerSpec, Protocol, ThoraxFrameSpec, Trajectories
 
 __all__ = [
@@ -90,6 +90,7 @@ def load_protocol(
     the shipped protocols by name) and replaces the keys it gives; errors name the file a key
     comes from. ``relabel`` renames trial labels before they are matched (see resolve_labels).
     """
+    path = resolve_protocol(path)
     src = str(path)
     data, origin = _read_extended(Path(path), ())
     seg_names = tuple(segments)
@@ -192,12 +193,22 @@ def load_protocol(
     )
 
 
+def resolve_protocol(value: str | os.PathLike[str], /) -> Path:
+    """A protocol file the user named: a path, or the name of a shipped protocol ("upper_limb_21")."""
+    return resolve(value, "exubio.protocols", "protocols", "upper_limb_21.yaml")
+
+
+def shipped_protocols() -> list[str]:
+    """The names of the shipped protocols."""
+    return shipped_names("exubio.protocols", "protocols", "upper_limb_21.yaml")
+
+
 def read_protocol_mapping(path: str | os.PathLike[str], /) -> dict[str, Any]:
     """The top-level mapping of a protocol file with its ``extends`` chain merged in (what
     load_protocol validates): for code that needs the file's own words, such as the ``point:``
     each marker names. Raises ProtocolError like load_protocol for unreadable files, unknown keys,
     a wrong schema_version or a broken ``extends``."""
-    return _read_extended(Path(path), ())[0]
+    return _read_extended(resolve_protocol(path), ())[0]
 
 
 def _read_extended(path: Path, seen: tuple[Path, ...]) -> tuple[dict[str, Any], dict[str, str]]:

@@ -17,3 +17,27 @@ def shipped_file(package: str, name: str, checkout_dir: str) -> Path:
     except ModuleNotFoundError:
         pass
     return _CHECKOUT / checkout_dir / name
+
+
+def shipped_dir(package: str, checkout_dir: str, probe: str) -> Path:
+    """The folder of a shipped package's files (``probe``: one file known to be there)."""
+    return shipped_file(package, probe, checkout_dir).parent
+
+
+def resolve(value: str | Path, package: str, checkout_dir: str, probe: str, /) -> Path:
+    """A file the user named: the path if it exists, else, for a bare name (no folder), the
+    shipped file of that name, with or without ``.yaml`` (``--protocol upper_limb_21`` works from
+    any folder, installed or not). Otherwise the path as given (its reader reports it missing)."""
+    path = Path(value)
+    if path.is_file() or path.parent != Path("."):
+        return path
+    folder = shipped_dir(package, checkout_dir, probe)
+    for name in (path.name, f"{path.name}.yaml"):
+        if (folder / name).is_file():
+            return folder / name
+    return path
+
+
+def shipped_names(package: str, checkout_dir: str, probe: str, /) -> list[str]:
+    """The names of the shipped YAML files of a package (without .yaml)."""
+    return sorted(p.stem for p in shipped_dir(package, checkout_dir, probe).glob("*.yaml"))
