@@ -226,12 +226,15 @@ def verdict_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[s
                    + f"; max |g| {np.nanmax(np.abs(r.constraint)):.0e}")
         fig.text(0.22, y - 0.005, figures, fontsize=8, va="top")
         y -= 0.045
-        for reason in q["reasons"][:9]:
-            fig.text(0.06, y, f"{reason['level']}: {reason['message']}"[:190], fontsize=7, va="top",
-                     color=_VERDICT_COLOURS.get(reason["level"], "black") if reason["level"] != "note" else "dimgrey")
-            y -= 0.024
-        if len(q["reasons"]) > 9:
-            fig.text(0.06, y, f"... {len(q['reasons']) - 9} more in {r.method}.summary.json", fontsize=7, va="top")
+        shown = q["reasons"][:REASONS_ON_PAGE_1]
+        for reason in shown:
+            text = f"{reason['level']}: {reason['message']}"
+            _bisect_wrap(fig.text(0.06, y, text, fontsize=7, va="top", wrap=True,
+                                  color=_VERDICT_COLOURS.get(reason["level"], "black") if reason["level"] != "note"
+                                  else "dimgrey"))
+            y -= 0.017 * max(1, -(-len(text) // REASON_CHARS_PER_LINE)) + 0.006
+        if len(q["reasons"]) > len(shown):
+            fig.text(0.06, y, f"... {len(q['reasons']) - len(shown)} more in {r.method}.summary.json", fontsize=7, va="top")
             y -= 0.024
         y -= 0.02
     first = summaries.get(recons[0].method, {})
@@ -272,8 +275,48 @@ def verdict_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[s
                      + f": calibration residual mean {cal.get('mean_residual_mm', float('nan')):.2f} mm")
     lines.append("verdict: ok = nothing found; check = read the reasons before using the angles; "
                  "fail = the angles are wrong as they stand (exit code 1). Thresholds: exubio/quality.py.")
-    _bisect_wrap(fig.text(0.04, max(y, 0.25), "\n".join(lines), fontsize=8, va="top", family="monospace", wrap=True))
+    _bisect_wrap(fig.text(0.04, max(y, 0.36), "\n".join(lines), fontsize=8, va="top", family="monospace", wrap=True))
+    if angles:
+        _key_angles(fig, recons, angles, summaries)
     return fig
+
+
+KEY_ANGLES = (("HT_X_elevation", "HT elevation"), ("GH_phadke_X_elevation", "GH elevation (Phadke)"),
+              ("ST_X_upward_rotation", "ST upward rotation"), ("SC_X_elevation", "SC elevation"),
+              ("elbow_flexion", "elbow flexion"))
+"""The angles page 1 draws: what a shoulder study reads first."""
+
+REASONS_ON_PAGE_1 = 7
+REASON_CHARS_PER_LINE = 175  # about what a 7-point line of page 1 holds (for the spacing; the text wraps itself)
+
+
+def _key_angles(fig: Figure, recons: Sequence[Reconstruction], angles: dict[str, Angles], summaries: dict) -> None:
+    """Page 1's picture: the key anatomical angles of the first method over time, in colour where
+    measured, grey where modelled or not measured (legend says which)."""
+    method = recons[0].method if recons[0].method in angles else next(iter(angles))
+    a = angles[method]
+    ax = fig.add_axes([0.07, 0.06, 0.66, 0.26])
+    palette = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown")
+    for (name, label), colour in zip(KEY_ANGLES, palette):
+        if name not in a.names:
+            continue
+        j = a.names.index(name)
+        deg = np.degrees(a.values_rad[:, j])
+        ok = a.measured(j)
+        if name in ("HT_X_elevation", "GH_phadke_X_elevation", "ST_X_upward_rotation", "SC_X_elevation"):
+            deg = -deg  # raw ISB sign: elevation and upward rotation are negative; drawn as positive
+            label += " (-raw)"
+        ax.plot(a.time_s, np.where(ok, deg, np.nan), color=colour, lw=1.4, label=label)
+        if (~ok).any():
+            ax.plot(a.time_s, np.where(ok, np.nan, deg), color="silver", lw=1.4)
+    if any((~a.measured(a.names.index(n))).any() for n, _ in KEY_ANGLES if n in a.names):
+        ax.plot([], [], color="silver", lw=1.4, label="not a measurement")
+    ax.set_xlabel("time (s)", fontsize=7)
+    ax.set_ylabel("deg", fontsize=7)
+    ax.tick_params(labelsize=6.5)
+    ax.grid(alpha=0.3)
+    ax.set_title(f"key anatomical angles ({method.upper()}; every angle: page 2)", fontsize=8)
+    ax.legend(fontsize=6.5, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
 
 
 class _BisectWrapText(Text):
