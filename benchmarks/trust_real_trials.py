@@ -50,11 +50,13 @@ def runs() -> list[dict]:
                 "protocol": None})
     out.append({"trial": c3d / "bioptim_exo_F0_boire_05.c3d", "static_frames": "0:20", "protocol": None})
     # a static of the other session of the same subject (markers re-placed between them)
+    # (each trial's and each static's own label fix applied to it alone: --relabel / --static-relabel)
+    swap = {"RADIUS": "ULNA", "ULNA": "RADIUS"}  # the kinova_martin session's labelling slip
     for name in ("aisselle", "dent", "manger", "tete"):
         out.append({"trial": c3d / f"bioptim_exo_kinova_martin_{name}_f3_1.c3d", "static": c3d / "bioptim_exo_martin_statique.c3d",
-                    "protocol": SESSION, "cross": True})
+                    "protocol": None, "cross": True, "relabel": swap})
     out.append({"trial": c3d / "bioptim_exo_martin_dynamique.c3d", "static": c3d / "bioptim_exo_kinova_martin_statique.c3d",
-                "protocol": None, "cross": True})
+                "protocol": None, "cross": True, "static_relabel": swap})
     for name in ("ABD01", "FLX01"):
         out.append({"trial": SHARED / "trc" / f"tsm_rmr_{name}.trc", "static_frames": "0:50", "protocol": TRC_PROTOCOL})
     return out
@@ -66,12 +68,18 @@ def run_one(spec: dict, work: Path) -> dict:
     out_dir = work / f"{spec['trial'].stem}_{'session' if spec['protocol'] == SESSION else 'shipped'}{'_cross' if spec.get('cross') else ''}"
     extra, model_path = {}, None
     if spec.get("static"):  # the session's static trial: calibration, its label checks, the reference
-        model_path, _, extra["calibration"] = calibrate_session(spec["static"], out_dir, "static",
+        static = spec["static"]
+        if spec.get("static_relabel"):
+            from exubio.io.trial import read_trial
+            from exubio.protocol import relabel_trajectories
+
+            static = relabel_trajectories(read_trial(static), spec["static_relabel"])
+        model_path, _, extra["calibration"] = calibrate_session(static, out_dir, "static",
                                                                 protocol_path=spec["protocol"],
                                                                 functional_path=spec.get("functional"))
     result = run_job(TrialJob(spec["trial"], out_dir, methods=("pf", "ls"), model=model_path, protocol=spec["protocol"],
                               static_frames=spec.get("static_frames"), calibration=extra.get("calibration"),
-                              report=False))
+                              report=False, **({"relabel": spec["relabel"]} if spec.get("relabel") else {})))
     model = load_model(model_path) if model_path else None
     rec = {"trial": spec["trial"].name, "static": Path(spec["static"]).name if spec.get("static") else spec.get("static_frames"),
            "protocol": ("session relabel" if spec["protocol"] == SESSION else Path(spec["protocol"] or "upper_limb_21").stem)
@@ -103,6 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--only", default="", help="run the trials whose file name contains this")
     ap.add_argument("--json", action="store_true", help="one JSON line per run on stdout")
+    ap.add_argument("--cross-only", action="store_true", help="only the trials with the other session's static")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.ERROR)
     if not SHARED.is_dir():
@@ -111,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
     err = sys.stderr
     with tempfile.TemporaryDirectory() as tmp:
         for spec in runs():
-            if args.only and args.only not in spec["trial"].name:
+            if args.only and args.only not in spec["trial"].name or args.cross_only and not spec.get("cross"):
                 continue
             rec = run_one(spec, Path(tmp))
             if args.json:

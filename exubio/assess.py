@@ -120,18 +120,40 @@ def agreement_on_measured(model: Model, a: Reconstruction, da: AngleDeterminacy,
             for j, n in enumerate(da.names)}
 
 
+_POSTURES: dict[bytes, np.ndarray] = {}
+_POSTURES_SIZE = 8
+
+
+def reference_postures_of(model: Model, /) -> np.ndarray:
+    """exubio.simulate.reference_postures of the model (the q = 0 posture where its girdle cannot be
+    driven on the rhythm), computed once per process for a given geometry (it takes ~0.3 s)."""
+    from exubio.labels import _content_digest
+    from exubio.simulate import reference_postures
+
+    try:
+        key = _content_digest(model.segments, model.ellipsoid)
+    except TypeError:
+        key = None
+    if key is not None and key in _POSTURES:
+        return _POSTURES[key]
+    try:
+        q = reference_postures(model)
+    except Exception:  # noqa: BLE001 - a model whose girdle the rhythm cannot drive: judge the reference posture
+        q = np.zeros((1, model.n_coordinates))
+    if key is not None:
+        if len(_POSTURES) >= _POSTURES_SIZE:
+            _POSTURES.pop(next(iter(_POSTURES)))
+        _POSTURES[key] = q
+    return q
+
+
 def angle_status_of_protocol(model: Model, protocol: Protocol, /, *, kin: Kinematics | None = None) -> dict[str, str]:
     """What the protocol's markers can do for each anatomical angle, known before any trial: its
     status over the reference postures (exubio.simulate.reference_postures: elevation in three
     planes, HT 10-120 deg) with every non-optional marker present: 'measured' (in every posture),
     'modelled', 'not measured', or 'partly ...' (in some postures)."""
-    from exubio.simulate import reference_postures
-
     kin = kin or Kinematics(model)
-    try:
-        q = reference_postures(model)
-    except Exception:  # noqa: BLE001 - a model whose girdle the rhythm cannot drive: judge the reference posture
-        q = np.zeros((1, model.n_coordinates))
+    q = reference_postures_of(model)
     present = np.tile([not m.optional for m in protocol.markers], (q.shape[0], 1))
     held = held_mask(model, protocol)
     locked = not_solved_mask(model, protocol, kin) & ~held
@@ -144,13 +166,8 @@ def coordinates_not_measured_by_protocol(model: Model, protocol: Protocol, /, *,
     """The model coordinates the protocol's markers leave undetermined (noise gain above the
     threshold) in most reference postures (exubio.simulate.reference_postures), known before any
     trial: e.g. the clavicle's axial rotation seen by two markers near its axis."""
-    from exubio.simulate import reference_postures
-
     kin = kin or Kinematics(model)
-    try:
-        q = reference_postures(model)
-    except Exception:  # noqa: BLE001 - as angle_status_of_protocol
-        q = np.zeros((1, model.n_coordinates))
+    q = reference_postures_of(model)
     present = np.tile([not m.optional for m in protocol.markers], (q.shape[0], 1))
     det = determinacy(kin, tracked_points(kin, protocol), q, present, protocol.weights,
                       excluded=not_solved_mask(model, protocol, kin))
