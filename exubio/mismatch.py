@@ -1,0 +1,143 @@
+"""Model mismatch from the residuals: does a segment's marker cluster say the model (its ellipsoid,
+segment lengths, joint centres, marker places) is not the subject's?
+
+Pure numpy on a reconstruction's joint coordinates and the targets it tracked (no solver). Per
+segment with markers, from the residual e_k(t) = R_s(t)^T (M_k(t) - R_k(t)) of each of its markers
+expressed in the segment's frame (mm):
+
+* ``residual_rms_mm``: RMS of |e_k| over its markers and frames;
+* ``bias_mm``: RMS over its markers of |mean_t e_k|, the part of the residual fixed on the segment
+  over the whole trial (a marker the model places elsewhere than it is, or a pose the chain cannot
+  reach in a consistent direction);
+* ``pose_gap_deg`` (segments with >= 3 markers): RMS over frames of the rotation between the
+  segment's orientation in the chain and the orientation its markers alone give it (a rigid
+  least-squares fit of its model points onto its markers, Kabsch): how far the model's chain and
+  constraints hold the segment from where its own markers put it;
+* ``rigid_rms_mm``: the residual of that free rigid fit (what no rigid segment could remove: noise,
+  skin motion between the markers, a marker placed wrong relative to the others);
+* ``normal_mm`` (segments carrying an ellipsoid contact point): the mean residual of its markers
+  along the ellipsoid's outward normal at the model point (+: the markers lie outside the model).
+
+The decision (``mismatch_findings``) and its threshold are below, with the rates they were chosen
+by (benchmarks/model_mismatch.py; benchmarks/README.md, "Model mismatch").
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from exubio.kinematics import Kinematics, PointSet
+
+__all__ = ["SegmentEvidence", "segment_evidence"]
+
+MIN_RIGID_MARKERS = 3
+
+
+@dataclass(frozen=True)
+class SegmentEvidence:
+    """What the residuals of one segment's markers say (see the module docstring; mm, deg)."""
+
+    segment: str
+    markers: tuple[str, ...]
+    frames: int
+    residual_rms_mm: float
+    bias_mm: float
+    worst_bias_marker: str
+    worst_bias_mm: float
+    pose_gap_deg: float | None = None
+    pose_gap_p90_deg: float | None = None
+    rigid_rms_mm: float | None = None
+    normal_mm: float | None = None
+
+    def to_dict(self) -> dict:
+        def r(x):
+            return None if x is None else round(float(x), 3)
+        return {"segment": self.segment, "markers": list(self.markers), "frames": self.frames,
+                "residual_rms_mm": r(self.residual_rms_mm), "bias_mm": r(self.bias_mm),
+                "worst_bias_marker": self.worst_bias_marker, "worst_bias_mm": r(self.worst_bias_mm),
+                "pose_gap_deg": r(self.pose_gap_deg), "pose_gap_p90_deg": r(self.pose_gap_p90_deg),
+                "rigid_rms_mm": r(self.rigid_rms_mm), "normal_mm": r(self.normal_mm)}
+
+
+def _kabsch(local: np.ndarray, measured: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rotations R (n, 3, 3) and translations t (n, 3) minimising sum |R local + t - measured|^2
+    per frame; local (k, 3), measured (n, k, 3)."""
+    cl = local.mean(axis=0)
+    cm = measured.mean(axis=1)
+    H = np.einsum("ki,nkj->nij", local - cl, measured - cm[:, None, :])
+    U, _, Vt = np.linalg.svd(H)
+    d = np.sign(np.linalg.det(np.swapaxes(Vt, -1, -2) @ np.swapaxes(U, -1, -2)))
+    D = np.zeros_like(H)
+    D[:, 0, 0] = 1.0
+    D[:, 1, 1] = 1.0
+    D[:, 2, 2] = d
+    R = np.swapaxes(Vt, -1, -2) @ D @ np.swapaxes(U, -1, -2)
+    t = cm - np.einsum("nij,j->ni", R, cl)
+    return R, t
+
+
+def _rotation_angle(R: np.ndarray) -> np.ndarray:
+    c = np.clip((np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
+    return np.arccos(c)
+
+
+def segment_evidence(kin: Kinematics, points: PointSet, q: np.ndarray, measured_m: np.ndarray, /, *,
+                     segments: Sequence[int] | None = None) -> dict[str, SegmentEvidence]:
+    """Per segment carrying markers (the fixed root excluded): its SegmentEvidence.
+
+    points: the tracked model points (``exubio.methods.common.tracked_points``); q (n, m) rad;
+    measured_m (n, k, 3) the targets in the thorax frame, NaN in gaps. ``segments``: only these
+    segment indices. Frames where a segment lacks a marker are left out of its rigid fit."""
+    model = kin.model
+    q = np.asarray(q, dtype=float)
+    meas = np.asarray(measured_m, dtype=float)
+    fr = kin.frames(q)
+    model_pts = kin.points(q, points, frames=fr)
+    seg_idx = np.asarray(points.segment_index)
+    names = points.names or tuple(f"marker{i}" for i in range(seg_idx.size))
+    ell = model.ellipsoid
+    contact_segments = {model.segment_index(s) for s, _ in ell.contact_points}
+    wanted = sorted(set(int(s) for s in seg_idx) - {0}) if segments is None else list(segments)
+    out: dict[str, SegmentEvidence] = {}
+    for s in wanted:
+        cols = np.flatnonzero(seg_idx == s)
+        if cols.size == 0:
+            continue
+        Rs = fr.R[:, s]
+        e = np.einsum("nji,nkj->nki", Rs, meas[:, cols] - model_pts[:, cols]) * 1e3  # segment frame, mm
+        ok = np.isfinite(e).all(axis=2)
+        if not ok.any():
+            continue
+        mag2 = np.where(ok, np.sum(np.where(ok[..., None], e, 0.0) ** 2, axis=2), np.nan)
+        rms = float(np.sqrt(np.nanmean(mag2)))
+        with np.errstate(invalid="ignore"):
+            mean_e = np.array([np.nanmean(e[ok[:, i], i], axis=0) if ok[:, i].any() else np.full(3, np.nan)
+                               for i in range(cols.size)])
+        bias_each = np.linalg.norm(mean_e, axis=1)
+        worst = int(np.nanargmax(bias_each))
+        ev = dict(segment=model.segments[s].name, markers=tuple(names[c] for c in cols), frames=int(ok.all(axis=1).sum()),
+                  residual_rms_mm=rms, bias_mm=float(np.sqrt(np.nanmean(bias_each ** 2))),
+                  worst_bias_marker=names[cols[worst]], worst_bias_mm=float(bias_each[worst]))
+        full = ok.all(axis=1)
+        if cols.size >= MIN_RIGID_MARKERS and full.sum() >= 1:
+            local = points.local_m[cols]
+            Rf, tf = _kabsch(local, meas[full][:, cols])
+            gap = np.degrees(_rotation_angle(np.swapaxes(Rs[full], -1, -2) @ Rf))
+            fit = np.einsum("nij,kj->nki", Rf, local) + tf[:, None, :]
+            ev.update(pose_gap_deg=float(np.sqrt(np.mean(gap ** 2))), pose_gap_p90_deg=float(np.percentile(gap, 90)),
+                      rigid_rms_mm=float(np.sqrt(np.mean(np.sum((meas[full][:, cols] - fit) ** 2, axis=2))) * 1e3))
+        if s in contact_segments:
+            r = model_pts[:, cols] - ell.centre_m
+            nrm = r * ell.a_diag
+            nrm /= np.linalg.norm(nrm, axis=-1, keepdims=True)
+            along = np.sum((meas[:, cols] - model_pts[:, cols]) * nrm, axis=-1) * 1e3
+            ev["normal_mm"] = float(np.nanmean(along))
+        out[ev["segment"]] = SegmentEvidence(**ev)
+    return out
+
+
+def evidence_table(evidence: Mapping[str, SegmentEvidence], /) -> list[dict]:
+    """The evidence as plain rows (for JSON and tables)."""
+    return [ev.to_dict() for ev in evidence.values()]
