@@ -15,6 +15,13 @@ Usage:
     python benchmarks/model_mismatch.py                      # the grid, LS, 5 s at 50 Hz (~10 min on 1 core)
     python benchmarks/model_mismatch.py --only ellipsoid --json out.jsonl
     python benchmarks/model_mismatch.py --seeds 5 --only none
+    python benchmarks/model_mismatch.py --real-refit   # the real trials: evidence before/after refitting the ellipsoid
+
+``--real-refit``: every real trial of ../shared/data (calibrated as benchmarks/trust_real_trials.py
+does, relabelled where its session needs it) is reconstructed (LS), then again with the thorax
+ellipsoid refitted (exubio.calibration.ellipsoid.fit_ellipsoid_poses) through the contact points TS
+and AI of the scapula's own rigid fit to its markers in every frame: if the scapula evidence was
+a wrong ellipsoid, it drops, and the ST angles move by what the first reconstruction had wrong.
 """
 from __future__ import annotations
 
@@ -106,6 +113,67 @@ def run(name: str, pert: ModelPerturbation, motion: str, artefact: str, *, metho
     return rec
 
 
+def real_refit() -> None:
+    """See the module docstring (--real-refit)."""
+    import tempfile
+    from pathlib import Path
+
+    import dataclasses
+
+    from exubio.calibration.ellipsoid import fit_ellipsoid_poses
+    from exubio.io.trial import read_trial
+    from exubio.mismatch import _kabsch
+    from exubio.model import load_model
+    from exubio.pipeline import protocol_for_model
+    from exubio.session import calibrate_session
+    from exubio.validation.trials import real_trial
+
+    root = Path(__file__).resolve().parents[1]
+    shared = root.parent / "shared" / "data"
+    session = root / "protocols" / "examples" / "kinova_martin_session.yaml"
+    c3d = shared / "c3d"
+    specs = [(c3d / f"bioptim_exo_kinova_martin_{n}_f3_1.c3d", c3d / "bioptim_exo_kinova_martin_statique.c3d", session)
+             for n in ("aisselle", "dent", "manger", "tete")]
+    specs.append((c3d / "bioptim_exo_martin_dynamique.c3d", c3d / "bioptim_exo_martin_statique.c3d", None))
+    with tempfile.TemporaryDirectory() as tmp:
+        runs = []
+        for trial, static, prot in specs:
+            mf, _, _ = calibrate_session(static, Path(tmp) / trial.stem, "static", protocol_path=prot)
+            model = load_model(mf)
+            protocol = protocol_for_model(model, prot)
+            runs.append((trial.name, model, protocol, prepare_targets(read_trial(trial), protocol)))
+        for name in ("abduction", "flexion"):
+            got = real_trial(name)
+            if got is not None:
+                runs.append((f"TRC {name}", got[0], got[1], got[2]))
+        for label, model, protocol, targets in runs:
+            kin = Kinematics(model)
+            points = tracked_points(kin, protocol)
+            r1 = reconstruct(model, protocol, targets, method="ls")
+            ev1 = segment_evidence(kin, points, r1.q_rad, targets.positions_m)["scapula"]
+            si = model.segment_index("scapula")
+            cols = np.flatnonzero(points.segment_index == si)
+            ok = np.isfinite(targets.positions_m[:, cols]).all(axis=(1, 2))
+            Rf, tf = _kabsch(points.local_m[cols], targets.positions_m[ok][:, cols])
+            contacts = [np.einsum("nij,j->ni", Rf, np.asarray(model.segment(s).points[p])) + tf
+                        for s, p in model.ellipsoid.contact_points]
+            ell, k = fit_ellipsoid_poses(model.ellipsoid, np.concatenate(contacts))
+            model2 = dataclasses.replace(model, ellipsoid=ell)
+            kin2 = Kinematics(model2)
+            r2 = reconstruct(model2, protocol, targets, method="ls")
+            ev2 = segment_evidence(kin2, tracked_points(kin2, protocol), r2.q_rad, targets.positions_m)["scapula"]
+            names, a1 = anatomical_table(model, r1.q_rad)
+            _, a2 = anatomical_table(model2, r2.q_rad)
+            d = np.degrees(a2 - a1)
+            st = {n: float(np.sqrt(np.mean(d[:, j] ** 2))) for j, n in enumerate(names) if n.startswith(("ST_", "GH_"))}
+            moved = np.asarray(ell.centre_m) - np.asarray(model.ellipsoid.centre_m)
+            print(f"{label:40s} scapula gap {ev1.pose_gap_deg:.1f} -> {ev2.pose_gap_deg:.1f} deg, bias {ev1.bias_mm:.1f} -> "
+                  f"{ev2.bias_mm:.1f} mm, normal {ev1.normal_mm:+.1f} -> {ev2.normal_mm:+.1f} mm, residual "
+                  f"{ev1.residual_rms_mm:.1f} -> {ev2.residual_rms_mm:.1f} mm; ellipsoid moved "
+                  f"{np.round(moved * 1e3, 1).tolist()} mm, radii x{k:.3f}; angle change RMS (deg): "
+                  + ", ".join(f"{n} {v:.1f}" for n, v in st.items() if v > 1.0), flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--only", default="", help="perturbations whose name contains this (comma-separated)")
@@ -116,8 +184,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rate", type=float, default=50.0)
     ap.add_argument("--seeds", type=int, default=1, help="noise/STA realisations of each run with artefact")
     ap.add_argument("--json", default="", help="append one JSON line per run to this file")
+    ap.add_argument("--real-refit", action="store_true", help="the real trials, before/after refitting the ellipsoid")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.ERROR)
+    if args.real_refit:
+        real_refit()
+        return 0
     only = [s for s in args.only.split(",") if s]
     methods = tuple(args.methods.split(","))
     sink = open(args.json, "a") if args.json else None

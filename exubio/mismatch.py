@@ -16,7 +16,12 @@ expressed in the segment's frame (mm):
 * ``rigid_rms_mm``: the residual of that free rigid fit (what no rigid segment could remove: noise,
   skin motion between the markers, a marker placed wrong relative to the others);
 * ``normal_mm`` (segments carrying an ellipsoid contact point): the mean residual of its markers
-  along the ellipsoid's outward normal at the model point (+: the markers lie outside the model).
+  along the ellipsoid's outward normal at the model point (+: the markers lie outside the model);
+* ``contact_offset_mm`` (the same segments, >= 3 markers): RMS over frames and contact points of the
+  signed distance from the thorax ellipsoid (along the ray from its centre, + outside) of the
+  contact points (TS, AI) where the segment's own rigid fit puts them: the chain holds them on the
+  ellipsoid, so this is how far the ellipsoid is from where the markers say the scapula glides;
+  ``contact_offset_mean_mm`` its signed mean.
 
 The decision (``mismatch_findings``) and its threshold are below, with the rates they were chosen
 by (benchmarks/model_mismatch.py; benchmarks/README.md, "Model mismatch").
@@ -30,7 +35,8 @@ import numpy as np
 
 from exubio.kinematics import Kinematics, PointSet
 
-__all__ = ["SegmentEvidence", "segment_evidence"]
+__all__ = ["MismatchAssessment", "MismatchFinding", "SegmentEvidence", "assess_mismatch", "mismatch_findings",
+           "mismatch_reasons", "segment_evidence"]
 
 MIN_RIGID_MARKERS = 3
 
@@ -50,6 +56,8 @@ class SegmentEvidence:
     pose_gap_p90_deg: float | None = None
     rigid_rms_mm: float | None = None
     normal_mm: float | None = None
+    contact_offset_mm: float | None = None
+    contact_offset_mean_mm: float | None = None
 
     def to_dict(self) -> dict:
         def r(x):
@@ -58,7 +66,8 @@ class SegmentEvidence:
                 "residual_rms_mm": r(self.residual_rms_mm), "bias_mm": r(self.bias_mm),
                 "worst_bias_marker": self.worst_bias_marker, "worst_bias_mm": r(self.worst_bias_mm),
                 "pose_gap_deg": r(self.pose_gap_deg), "pose_gap_p90_deg": r(self.pose_gap_p90_deg),
-                "rigid_rms_mm": r(self.rigid_rms_mm), "normal_mm": r(self.normal_mm)}
+                "rigid_rms_mm": r(self.rigid_rms_mm), "normal_mm": r(self.normal_mm),
+                "contact_offset_mm": r(self.contact_offset_mm), "contact_offset_mean_mm": r(self.contact_offset_mean_mm)}
 
 
 def _kabsch(local: np.ndarray, measured: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -81,6 +90,14 @@ def _kabsch(local: np.ndarray, measured: np.ndarray) -> tuple[np.ndarray, np.nda
 def _rotation_angle(R: np.ndarray) -> np.ndarray:
     c = np.clip((np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
     return np.arccos(c)
+
+
+def surface_distance_m(centre_m: np.ndarray, radii_m: np.ndarray, points_m: np.ndarray, /) -> np.ndarray:
+    """Signed distance (m) of points (..., 3) from the ellipsoid along the ray from its centre
+    (positive outside); the same measure as exubio.calibration.ellipsoid.surface_distance."""
+    d = np.asarray(points_m, dtype=float) - np.asarray(centre_m, dtype=float)
+    f = np.sqrt(((d / np.asarray(radii_m, dtype=float)) ** 2).sum(axis=-1))
+    return np.linalg.norm(d, axis=-1) * (1.0 - 1.0 / f)
 
 
 def segment_evidence(kin: Kinematics, points: PointSet, q: np.ndarray, measured_m: np.ndarray, /, *,
@@ -128,6 +145,12 @@ def segment_evidence(kin: Kinematics, points: PointSet, q: np.ndarray, measured_
             fit = np.einsum("nij,kj->nki", Rf, local) + tf[:, None, :]
             ev.update(pose_gap_deg=float(np.sqrt(np.mean(gap ** 2))), pose_gap_p90_deg=float(np.percentile(gap, 90)),
                       rigid_rms_mm=float(np.sqrt(np.mean(np.sum((meas[full][:, cols] - fit) ** 2, axis=2))) * 1e3))
+            contacts = [np.asarray(model.segments[s].points[p], dtype=float) for seg, p in ell.contact_points
+                        if model.segment_index(seg) == s]
+            if contacts:
+                c = np.einsum("nij,kj->nki", Rf, np.array(contacts)) + tf[:, None, :]
+                dist = surface_distance_m(ell.centre_m, ell.radii_m, c) * 1e3
+                ev.update(contact_offset_mm=float(np.sqrt(np.mean(dist ** 2))), contact_offset_mean_mm=float(np.mean(dist)))
         if s in contact_segments:
             r = model_pts[:, cols] - ell.centre_m
             nrm = r * ell.a_diag
@@ -141,3 +164,91 @@ def segment_evidence(kin: Kinematics, points: PointSet, q: np.ndarray, measured_
 def evidence_table(evidence: Mapping[str, SegmentEvidence], /) -> list[dict]:
     """The evidence as plain rows (for JSON and tables)."""
     return [ev.to_dict() for ev in evidence.values()]
+
+
+# ----------------------------------------------------------------------------- the decision
+POSE_GAP_DEG = 6.0
+"""A segment whose own markers (>= 3) place it more than this far (RMS over the trial) from where
+the model's chain holds it: check. PLACEHOLDER, set from benchmarks/model_mismatch.py."""
+
+SCAPULA_NORMAL_MM = 4.0
+"""Mean residual of the scapula's markers along the ellipsoid's outward normal beyond this (either
+sign): the thorax ellipsoid does not carry the scapula where its markers are. PLACEHOLDER."""
+
+EVIDENCE_EVERY_S = 0.05
+"""The evidence is computed on frames this far apart (statistics over the trial; at 200 Hz every
+10th frame), so a long trial costs little and no per-marker array of the whole trial is built."""
+
+
+@dataclass(frozen=True)
+class MismatchFinding:
+    """One segment the residuals say the model does not fit: what and how much."""
+
+    segment: str
+    evidence: str  # the sentence of the verdict's reason
+    pose_gap_deg: float | None = None
+    normal_mm: float | None = None
+    contact_offset_mm: float | None = None
+    contact_offset_mean_mm: float | None = None
+
+    def to_dict(self) -> dict:
+        return {"segment": self.segment, "evidence": self.evidence,
+                "pose_gap_deg": None if self.pose_gap_deg is None else round(self.pose_gap_deg, 2),
+                "normal_mm": None if self.normal_mm is None else round(self.normal_mm, 2)}
+
+
+@dataclass(frozen=True)
+class MismatchAssessment:
+    """The evidence per segment and what the detector makes of it."""
+
+    evidence: Mapping[str, SegmentEvidence]
+    findings: tuple[MismatchFinding, ...]
+
+    def to_dict(self) -> dict:
+        return {"definition": (f"check when a segment's own markers (>= {MIN_RIGID_MARKERS}) place it more than "
+                               f"{POSE_GAP_DEG:g} deg (RMS) from where the model's chain holds it, or the scapula's "
+                               f"markers lie on average more than {SCAPULA_NORMAL_MM:g} mm off the ellipsoid's "
+                               "surface (along its normal) than the model puts them"),
+                "findings": [f.to_dict() for f in self.findings],
+                "evidence": evidence_table(self.evidence)}
+
+
+def mismatch_findings(evidence: Mapping[str, SegmentEvidence], /) -> tuple[MismatchFinding, ...]:
+    """The segments whose evidence crosses a threshold (see POSE_GAP_DEG, SCAPULA_NORMAL_MM)."""
+    out = []
+    for seg, ev in evidence.items():
+        parts = []
+        gap = ev.pose_gap_deg if ev.pose_gap_deg is not None and ev.pose_gap_deg > POSE_GAP_DEG else None
+        nrm = ev.normal_mm if ev.normal_mm is not None and abs(ev.normal_mm) > SCAPULA_NORMAL_MM else None
+        if gap is not None:
+            parts.append(f"its markers ({', '.join(ev.markers)}) alone place it {gap:.1f} deg RMS "
+                         f"(90th percentile {ev.pose_gap_p90_deg:.1f} deg) from where the model's chain holds it "
+                         f"(check above {POSE_GAP_DEG:g} deg)")
+        if nrm is not None:
+            parts.append(f"its markers lie {abs(nrm):.1f} mm {'outside' if nrm > 0 else 'inside'} the thorax ellipsoid "
+                         f"relative to the model on average (check above {SCAPULA_NORMAL_MM:g} mm)")
+        if parts:
+            out.append(MismatchFinding(seg, "; ".join(parts), pose_gap_deg=gap, normal_mm=nrm))
+    return tuple(out)
+
+
+def assess_mismatch(kin: Kinematics, points: PointSet, q: np.ndarray, measured_m: np.ndarray, time_s: np.ndarray,
+                    /) -> MismatchAssessment:
+    """segment_evidence on frames EVIDENCE_EVERY_S apart, and its findings."""
+    n = q.shape[0]
+    dt = float(np.median(np.diff(time_s))) if n > 1 else 1.0
+    step = max(1, int(round(EVIDENCE_EVERY_S / dt)))
+    ev = segment_evidence(kin, points, q[::step], measured_m[::step])
+    return MismatchAssessment(ev, mismatch_findings(ev))
+
+
+def mismatch_reasons(assessment: MismatchAssessment | None, /) -> list:
+    """The verdict's reasons (exubio.quality.Reason, code "model_mismatch", level check)."""
+    from exubio.quality import Reason
+
+    if assessment is None:
+        return []
+    return [Reason("model_mismatch", "check", f"model mismatch on the {f.segment}: {f.evidence}: the model (its "
+                   f"ellipsoid, segment lengths, joint centres or marker places) may not fit this subject, or the "
+                   f"{f.segment}'s markers move on the skin; angles of the {f.segment} can be off by more than 5 deg")
+            for f in assessment.findings]
