@@ -191,7 +191,10 @@ def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recon
     static_labels = [f for f in (calibration or {}).get("labels", []) if not _same_finding(f, label_findings)]
     common = (Q.label_reasons(label_findings) + Q.label_reasons(static_labels, prefix="static trial: ")
               + Q.calibration_reasons(report, scale_bounds=SCALE_BOUNDS, off_segment=off))
-    mismatch = {r.method: assess_mismatch(kin, points, r.q_rad, targets.positions_m, targets.time_s) for r in recons}
+    named = sorted({m for f in label_findings if _finding_dict(f).get("severity") not in ("info", "note")
+                    for m in _finding_dict(f).get("markers", ())})  # their residuals are the label's, not the model's
+    mismatch = {r.method: assess_mismatch(kin, points, r.q_rad, targets.positions_m, targets.time_s, skip_markers=named)
+                for r in recons}
     quality = {}
     for r in recons:
         reasons = list(common)
