@@ -15,6 +15,8 @@ Usage:
     python benchmarks/model_mismatch.py                      # the grid, LS, 5 s at 50 Hz (~10 min on 1 core)
     python benchmarks/model_mismatch.py --only ellipsoid --json out.jsonl
     python benchmarks/model_mismatch.py --seeds 5 --only none
+    python benchmarks/model_mismatch.py --artefacts clean,noise1_sta10,noise1_sta20 --seeds 3 --json grid.jsonl
+    python benchmarks/model_mismatch.py --summary grid.jsonl   # rates per perturbation
     python benchmarks/model_mismatch.py --real-refit   # the real trials: evidence before/after refitting the ellipsoid
 
 ``--real-refit``: every real trial of ../shared/data (calibrated as benchmarks/trust_real_trials.py
@@ -52,6 +54,9 @@ PERTURBATIONS: dict[str, ModelPerturbation] = {
     "ellipsoid_post10": P(ellipsoid_centre_mm=(-10, 0, 0)),
     "ellipsoid_8pc": P(ellipsoid_radii_scale=(1.08,) * 3),
     "ellipsoid_ant10_minus8pc": P(ellipsoid_centre_mm=(10, 0, 0), ellipsoid_radii_scale=(0.92,) * 3),
+    "ellipsoid_y_radius_1.15": P(ellipsoid_radii_scale=(1.0, 1.15, 1.0)),
+    "ellipsoid_x_radius_1.15": P(ellipsoid_radii_scale=(1.15, 1.0, 1.0)),
+    "ellipsoid_sup15": P(ellipsoid_centre_mm=(0, 15, 0)),
     "length_clavicle_1.10": P(segment_length_scale={"clavicle": 1.10}),
     "length_clavicle_0.90": P(segment_length_scale={"clavicle": 0.90}),
     "length_scapula_1.10": P(segment_length_scale={"scapula": 1.10}),
@@ -83,18 +88,25 @@ def measured_angle_errors(model, truth_model, q_rec, q_true, status) -> dict[str
     return out
 
 
-def run(name: str, pert: ModelPerturbation, motion: str, artefact: str, *, methods, duration, rate, seed) -> dict:
+def run(name: str, pert: ModelPerturbation, motion: str, artefact: str, *, methods, duration, rate, seed,
+        calibrate: bool = False) -> dict:
     model, protocol = load_model_and_protocol()
     noise, sta = ARTEFACTS[artefact]
     sim = simulate_trial(model, motion, duration_s=duration, rate_hz=rate, noise_mm=noise, sta_mm=sta, seed=seed,
                          perturbation=pert)
     targets = prepare_targets(sim.trajectories, protocol)
+    if calibrate:  # as a lab would: the generic model calibrated on the trial's first, still, frames
+        from exubio.calibration import calibrate_model, calibrated_protocol
+
+        model, _ = calibrate_model(model, protocol, sim.trajectories, frames=slice(0, max(2, int(0.1 * rate))),
+                                   targets=targets)
+        protocol = calibrated_protocol(protocol, model)
     recons = [reconstruct(model, protocol, targets, method=m) for m in methods]
     assessment = assess_trial(model, protocol, targets, recons)
     kin = Kinematics(model)
     points = tracked_points(kin, protocol)
     rec = {"perturbation": name, "words": list(pert.words()), "motion": motion, "artefact": artefact, "seed": seed,
-           "methods": {}}
+           "calibrated": calibrate, "methods": {}}
     for r in recons:
         ang = assessment.angles[r.method]
         errs = measured_angle_errors(model, sim.model, r.q_rad, sim.q_true, ang.status)
@@ -174,6 +186,31 @@ def real_refit() -> None:
                   + ", ".join(f"{n} {v:.1f}" for n, v in st.items() if v > 1.0), flush=True)
 
 
+def summarise(path: str) -> None:
+    """Per perturbation: what it costs (clean runs), how often the check names it, which segment."""
+    import collections
+
+    rows = [json.loads(line) for line in open(path)]
+    by = collections.defaultdict(list)
+    for r in rows:
+        by[r["perturbation"]].append(r)
+    cost = {(r["perturbation"], r["motion"], m): v["worst_rmse_deg"] for r in rows if r["artefact"] == "clean"
+            for m, v in r["methods"].items()}
+    print(f"{'perturbation':26s} {'cost clean (deg)':17s} {'worst with artefact':20s} {'flagged':9s} "
+          f"{'costly & flagged':17s} segments named")
+    for name, rs in by.items():
+        runs = [(r, m, v) for r in rs for m, v in r["methods"].items()]
+        cc = [v["worst_rmse_deg"] for r, m, v in runs if r["artefact"] == "clean"]
+        allw = [v["worst_rmse_deg"] for r, m, v in runs]
+        flagged = [(r, m, v) for r, m, v in runs if v["mismatch_reasons"]]
+        costly = [(r, m, v) for r, m, v in runs if cost.get((r["perturbation"], r["motion"], m), 0) > 5.0]
+        caught = [x for x in costly if x[2]["mismatch_reasons"]]
+        segs = sorted({reason.split(":")[0].replace("model mismatch on the ", "") for _, _, v in flagged
+                       for reason in v["mismatch_reasons"]})
+        print(f"{name:26s} {min(cc):5.1f}-{max(cc):5.1f}       {min(allw):5.1f}-{max(allw):5.1f}          "
+              f"{len(flagged):3d}/{len(runs):<3d}  {len(caught):3d}/{len(costly):<3d}          {', '.join(segs)}")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--only", default="", help="perturbations whose name contains this (comma-separated)")
@@ -182,11 +219,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--methods", default="ls")
     ap.add_argument("--duration", type=float, default=5.0)
     ap.add_argument("--rate", type=float, default=50.0)
+    ap.add_argument("--calibrate", action="store_true",
+                    help="reconstruct with the generic model calibrated on the trial's first 0.1 s (its static pose)")
     ap.add_argument("--seeds", type=int, default=1, help="noise/STA realisations of each run with artefact")
     ap.add_argument("--json", default="", help="append one JSON line per run to this file")
     ap.add_argument("--real-refit", action="store_true", help="the real trials, before/after refitting the ellipsoid")
+    ap.add_argument("--summary", default="", help="summarise a --json file (rates per perturbation) and exit")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.ERROR)
+    if args.summary:
+        summarise(args.summary)
+        return 0
     if args.real_refit:
         real_refit()
         return 0
@@ -201,7 +244,7 @@ def main(argv: list[str] | None = None) -> int:
                 for seed in range(args.seeds if artefact != "clean" else 1):
                     t0 = time.perf_counter()
                     rec = run(name, pert, motion, artefact, methods=methods, duration=args.duration, rate=args.rate,
-                              seed=seed)
+                              seed=seed, calibrate=args.calibrate)
                     if sink:
                         sink.write(json.dumps(rec) + "\n")
                         sink.flush()
