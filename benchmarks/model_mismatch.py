@@ -35,16 +35,15 @@ import time
 
 import numpy as np
 
-from exubio.angles import anatomical_table
 from exubio.assess import assess_trial
 from exubio.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.mismatch import segment_evidence
-from exubio.observability import AngleStatus
 from exubio.perturb import ModelPerturbation
 from exubio.pipeline import load_model_and_protocol, reconstruct
 from exubio.preprocess import prepare_targets
 from exubio.simulate import simulate_trial
+from exubio.validation.mismatch import measured_angle_errors
 
 P = ModelPerturbation
 PERTURBATIONS: dict[str, ModelPerturbation] = {
@@ -75,19 +74,6 @@ MOTIONS = ("abduction", "flexion", "scaption")
 ARTEFACTS = {"clean": (0.0, 0.0), "noise1_sta10": (1.0, 10.0), "noise1_sta20": (1.0, 20.0)}
 
 
-def measured_angle_errors(model, truth_model, q_rec, q_true, status) -> dict[str, dict[str, float]]:
-    """RMSE and max |error| (deg) of every angle over the frames where it is measured."""
-    names, rec = anatomical_table(model, q_rec)
-    _, tru = anatomical_table(truth_model, q_true)
-    d = np.degrees(np.angle(np.exp(1j * (rec - tru))))
-    out = {}
-    for j, n in enumerate(names):
-        sel = status[:, j] == AngleStatus.MEASURED
-        if sel.mean() > 0.5:
-            out[n] = {"rmse": float(np.sqrt(np.mean(d[sel, j] ** 2))), "max": float(np.max(np.abs(d[sel, j])))}
-    return out
-
-
 def run(name: str, pert: ModelPerturbation, motion: str, artefact: str, *, methods, duration, rate, seed,
         calibrate: bool = False) -> dict:
     model, protocol = load_model_and_protocol()
@@ -109,7 +95,8 @@ def run(name: str, pert: ModelPerturbation, motion: str, artefact: str, *, metho
            "calibrated": calibrate, "methods": {}}
     for r in recons:
         ang = assessment.angles[r.method]
-        errs = measured_angle_errors(model, sim.model, r.q_rad, sim.q_true, ang.status)
+        errs = {k: {"rmse": v[0], "max": v[1]}
+                for k, v in measured_angle_errors(model, sim.model, r.q_rad, sim.q_true, ang.status).items()}
         worst = max(errs, key=lambda k: errs[k]["rmse"])
         ev = segment_evidence(kin, points, r.q_rad, targets.positions_m)
         q = assessment.quality[r.method]
@@ -132,9 +119,10 @@ def real_refit() -> None:
 
     import dataclasses
 
+    from exubio.angles import anatomical_table
     from exubio.calibration.ellipsoid import fit_ellipsoid_poses
     from exubio.io.trial import read_trial
-    from exubio.mismatch import _kabsch
+    from exubio.mismatch import rigid_fit
     from exubio.model import load_model
     from exubio.pipeline import protocol_for_model
     from exubio.session import calibrate_session
@@ -166,7 +154,7 @@ def real_refit() -> None:
             si = model.segment_index("scapula")
             cols = np.flatnonzero(points.segment_index == si)
             ok = np.isfinite(targets.positions_m[:, cols]).all(axis=(1, 2))
-            Rf, tf = _kabsch(points.local_m[cols], targets.positions_m[ok][:, cols])
+            Rf, tf = rigid_fit(points.local_m[cols], targets.positions_m[ok][:, cols])
             contacts = [np.einsum("nij,j->ni", Rf, np.asarray(model.segment(s).points[p])) + tf
                         for s, p in model.ellipsoid.contact_points]
             ell, k = fit_ellipsoid_poses(model.ellipsoid, np.concatenate(contacts))
@@ -176,7 +164,7 @@ def real_refit() -> None:
             ev2 = segment_evidence(kin2, tracked_points(kin2, protocol), r2.q_rad, targets.positions_m)["scapula"]
             names, a1 = anatomical_table(model, r1.q_rad)
             _, a2 = anatomical_table(model2, r2.q_rad)
-            d = np.degrees(a2 - a1)
+            d = np.degrees(np.angle(np.exp(1j * (a2 - a1))))  # wrapped to +-180
             st = {n: float(np.sqrt(np.mean(d[:, j] ** 2))) for j, n in enumerate(names) if n.startswith(("ST_", "GH_"))}
             moved = np.asarray(ell.centre_m) - np.asarray(model.ellipsoid.centre_m)
             print(f"{label:40s} scapula gap {ev1.pose_gap_deg:.1f} -> {ev2.pose_gap_deg:.1f} deg, bias {ev1.bias_mm:.1f} -> "

@@ -36,7 +36,7 @@ import numpy as np
 from exubio.kinematics import Kinematics, PointSet
 
 __all__ = ["MismatchAssessment", "MismatchFinding", "SegmentEvidence", "assess_mismatch", "mismatch_findings",
-           "mismatch_reasons", "segment_evidence"]
+           "mismatch_reasons", "rigid_fit", "segment_evidence", "surface_distance_m"]
 
 MIN_RIGID_MARKERS = 3
 
@@ -70,7 +70,7 @@ class SegmentEvidence:
                 "contact_offset_mm": r(self.contact_offset_mm), "contact_offset_mean_mm": r(self.contact_offset_mean_mm)}
 
 
-def _kabsch(local: np.ndarray, measured: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def rigid_fit(local: np.ndarray, measured: np.ndarray, /) -> tuple[np.ndarray, np.ndarray]:
     """Rotations R (n, 3, 3) and translations t (n, 3) minimising sum |R local + t - measured|^2
     per frame; local (k, 3), measured (n, k, 3)."""
     cl = local.mean(axis=0)
@@ -140,7 +140,7 @@ def segment_evidence(kin: Kinematics, points: PointSet, q: np.ndarray, measured_
         full = ok.all(axis=1)
         if cols.size >= MIN_RIGID_MARKERS and full.sum() >= 1:
             local = points.local_m[cols]
-            Rf, tf = _kabsch(local, meas[full][:, cols])
+            Rf, tf = rigid_fit(local, meas[full][:, cols])
             gap = np.degrees(_rotation_angle(np.swapaxes(Rs[full], -1, -2) @ Rf))
             fit = np.einsum("nij,kj->nki", Rf, local) + tf[:, None, :]
             ev.update(pose_gap_deg=float(np.sqrt(np.mean(gap ** 2))), pose_gap_p90_deg=float(np.percentile(gap, 90)),
