@@ -511,6 +511,11 @@ def summary_pages(r: ValidationResults) -> list[Figure]:
     key.append(f"• PF vs LS: max joint RMSE {_fmt(agr.max_coordinate_rmse_deg)}° ({per}; coordinates the markers "
                f"determine; paper < 1.87°), max marker trajectory RMSE {_fmt(agr.max_marker_rmse_mm, '.2f')} mm "
                f"(paper < 0.37 mm); see the findings.")
+    if r.mismatch is not None:
+        mm = r.mismatch
+        key.append(f"• Model mismatch (Fig. 7): of {mm.costly} simulated runs whose perturbed generating model costs more "
+                   f"than {mm.cost_limit_deg:g} deg on a measured angle, {mm.caught} get a check naming the segment; "
+                   f"{len(mm.false_alarms)} of {mm.no_mismatch} runs without mismatch do.")
     for name in ("abduction", "flexion"):
         parts = []
         for col, label in (("ST_medRotation_X", "ST upward rotation"), ("SC_elevation_X", "SC elevation")):
