@@ -100,6 +100,7 @@ def run_one(spec: dict, work: Path) -> dict:
             "angles_outside_range_deg": outside,
             "not_measured": s.get("not_measured", []),
             "undetermined": s["determinacy"]["undetermined_for_trial"],
+            "model_mismatch": s.get("model_mismatch"),
         }
     agree = {k: v for k, v in (result.agreement_deg or {}).items() if v == v}
     rec["pf_ls_max_rmse_deg_determined"] = round(max(agree.values()), 2) if agree else None
@@ -134,6 +135,13 @@ def main(argv: list[str] | None = None) -> int:
             for m, v in rec["methods"].items():
                 for r in v["reasons"]:
                     print(f"    [{m}] {r}", file=err)
+                ev = (v.get("model_mismatch") or {}).get("evidence") or []
+                print(f"    [{m}] model-mismatch evidence: " + "; ".join(
+                    f"{e['segment']} bias {e['bias_mm']:.1f} mm ({e['worst_bias_marker']} {e['worst_bias_mm']:.1f})"
+                    + (f" gap {e['pose_gap_deg']:.1f} deg (p90 {e['pose_gap_p90_deg']:.1f})" if e["pose_gap_deg"] is not None else "")
+                    + (f" normal {e['normal_mm']:+.1f} mm" if e["normal_mm"] is not None else "")
+                    + (f" contact offset {e['contact_offset_mm']:.1f} mm (mean {e['contact_offset_mean_mm']:+.1f})"
+                       if e.get("contact_offset_mm") is not None else "") for e in ev), file=err)
     return 0
 
 

@@ -17,6 +17,7 @@ from exubio.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.methods.poses import held_mask
 from exubio.methods.pf import unobserved_segments
+from exubio.mismatch import MismatchAssessment, assess_mismatch, mismatch_reasons
 from exubio.observability import UNDETERMINED_TRIAL_FRACTION, AngleDeterminacy, AngleStatus, Determinacy, angle_determinacy, determinacy
 from exubio.ranges import limit_report
 from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Reconstruction
@@ -37,12 +38,15 @@ class TrialAssessment:
     not_solved: tuple[str, ...]
     angles: Mapping[str, AngleDeterminacy] | None = None  # per method: each anatomical angle's status per frame
     structural: Mapping[str, str] | None = None  # per anatomical angle: what the marker set can do (angle_status_of_protocol)
+    mismatch: Mapping[str, MismatchAssessment] | None = None  # per method: model-mismatch evidence (exubio.mismatch)
 
     def summary_for(self, method: str) -> dict[str, Any]:
         """What goes into that method's summary.json."""
         angles = {} if self.angles is None else {"anatomical_angles": {
             **self.angles[method].to_dict(), "protocol_can": dict(self.structural or {})}}
-        return {**angles,
+        mismatch = {} if not self.mismatch or method not in self.mismatch else {
+            "model_mismatch": self.mismatch[method].to_dict()}
+        return {**angles, **mismatch,
             "quality": self.quality[method].to_dict(),
             "determinacy": self.determinacy[method].to_dict(),
             "limits": [lim.to_dict() for lim in self.limits[method]],
@@ -235,6 +239,10 @@ def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recon
                                                            if m.landmark_offset_mm is not None})
               + Q.session_reasons(session, static_name) + Q.dropped_reasons(dropped)
               + Q.partial_swap_reasons(partial_swaps, repaired))
+    named = sorted({m for f in label_findings if _finding_dict(f).get("severity") not in ("info", "note")
+                    for m in _finding_dict(f).get("markers", ())})  # their residuals are the label's, not the model's
+    mismatch = {r.method: assess_mismatch(kin, points, r.q_rad, targets.positions_m, targets.time_s, skip_markers=named)
+                for r in recons}
     quality = {}
     for r in recons:
         reasons = list(common)
@@ -249,5 +257,7 @@ def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recon
         dt = float(np.median(np.diff(r.time_s))) if r.n_frames > 1 else 1.0
         reasons += Q.gap_reasons(r.gaps, r.n_frames, 1.0 / dt)
         reasons += Q.agreement_reasons(agreement, ())
+        reasons += mismatch_reasons(mismatch[r.method])
         quality[r.method] = Q.Quality.of(reasons)
-    return TrialAssessment(dets, lims, quality, agreement, tuple(label_findings), not_solved, angles, structural)
+    return TrialAssessment(dets, lims, quality, agreement, tuple(label_findings), not_solved, angles, structural,
+                           mismatch)

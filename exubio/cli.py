@@ -57,11 +57,18 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() != ".c3d":
         raise InputError(f"--out {out}: expected a path ending in .c3d")
+    from exubio.perturb import ModelPerturbation
+
     model = load_model(args.model) if args.model else load_model()
+    perturbation = ModelPerturbation.parse(args.perturb) if args.perturb else None
+    if perturbation is not None:
+        perturbation.apply(model)  # bad segment or point names: exit 2 before any work
     out.parent.mkdir(parents=True, exist_ok=True)
     trial = simulate_trial(model, Motion.parse(args.motion), duration_s=args.duration, rate_hz=args.rate,
-                           noise_mm=args.noise_mm, sta_mm=args.sta_mm, seed=args.seed)
+                           noise_mm=args.noise_mm, sta_mm=args.sta_mm, seed=args.seed, perturbation=perturbation)
     c3d, truth = write_simulated_trial(trial, out)
+    if perturbation is not None:
+        print(f"generated with the model perturbed by {' '.join(perturbation.words()) or 'nothing'} (in {truth.name}'s header)")
     print(f"wrote {c3d} ({trial.trajectories.n_markers} markers, {trial.trajectories.n_frames} frames, "
           f"{args.rate:g} Hz, noise {args.noise_mm:g} mm, soft-tissue artefact {args.sta_mm:g} mm)")
     print(f"wrote {truth} (true joint angles, deg)")
@@ -466,6 +473,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--sta-mm", type=float, default=0.0, help="soft-tissue artefact amplitude, mm")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--model", help="model YAML (default: the generic model)")
+    s.add_argument("--perturb", nargs="+", metavar="KEY=VALUE",
+                   help="generate with the model perturbed (mm in the thorax frame; a model mismatch for a reconstruction "
+                        "with the unperturbed model): ellipsoid_centre_mm=DX,DY,DZ ellipsoid_radii_scale=S|SX,SY,SZ "
+                        "length.SEGMENT=S joint.SEGMENT=DX,DY,DZ marker.POINT=DX,DY,DZ; written into the truth file's header")
     s.add_argument("--out", required=True, help="PATH.c3d; PATH.truth.csv is written beside it")
     s.set_defaults(func=cmd_simulate)
 

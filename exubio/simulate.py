@@ -82,6 +82,7 @@ from scipy.interpolate import CubicSpline
 
 from exubio.errors import InputError, ModelError
 from exubio.kinematics import Kinematics, axis_rotation
+from exubio.perturb import ModelPerturbation
 from exubio.reference import ludewig2009_at
 from exubio.types import Model, Trajectories
 
@@ -190,6 +191,8 @@ class SimulatedTrial:
     lab_rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
     lab_origin_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
     marker_segments: tuple[str, ...] = ()
+    perturbation: ModelPerturbation | None = None  # the model was perturbed by this before generating
+    model: Model | None = None  # the model the trial was generated with (perturbed, if so)
 
 
 # --------------------------------------------------------------------------------------------
@@ -565,9 +568,14 @@ def simulate_trial(
     seed: int = 0,
     marker_names: Sequence[str] | None = None,
     lab_transform: bool = True,
+    perturbation: ModelPerturbation | None = None,
 ) -> SimulatedTrial:
-    """Simulate a trial of ``motion`` on ``model`` (see the module docstring)."""
+    """Simulate a trial of ``motion`` on ``model`` (see the module docstring); with
+    ``perturbation``, on ``perturbation.apply(model)`` (exubio.perturb: a model mismatch for a
+    reconstruction with ``model``; the truth is the perturbed model's coordinates)."""
     motion = Motion.parse(motion)
+    if perturbation is not None:
+        model = perturbation.apply(model)
     if not (np.isfinite(duration_s) and duration_s > 0):
         raise InputError(f"duration must be > 0 s, got {duration_s}")
     if not (np.isfinite(rate_hz) and rate_hz > 0):
@@ -613,12 +621,14 @@ def simulate_trial(
             f"seed {seed}; {'lab' if lab_transform else 'thorax'} frame; model {model.name}")
     return SimulatedTrial(trajectories=traj, time_s=t, q_true=q, qd_true=qd, qdd_true=qdd,
                           coordinate_names=model.coordinate_names, sta_m=sta, noise_m=noise, description=desc,
-                          motion=motion, lab_rotation=rot, lab_origin_m=origin, marker_segments=segs)
+                          motion=motion, lab_rotation=rot, lab_origin_m=origin, marker_segments=segs,
+                          perturbation=perturbation, model=model)
 
 
 def write_simulated_trial(trial: SimulatedTrial, path_c3d, /) -> tuple[Path, Path]:
     """Write ``PATH.c3d`` (markers, mm) and ``PATH.truth.csv`` (time_s + every coordinate in
-    degrees). ``path_c3d`` may end in .c3d or not. Returns (c3d path, truth csv path)."""
+    degrees; a perturbed trial's header states its perturbation, ``ModelPerturbation.from_header``).
+    ``path_c3d`` may end in .c3d or not. Returns (c3d path, truth csv path)."""
     from exubio.io.c3d import write_c3d
     from exubio.io.results import write_angles_csv
 
@@ -627,7 +637,8 @@ def write_simulated_trial(trial: SimulatedTrial, path_c3d, /) -> tuple[Path, Pat
     c3d_path = stem.with_name(stem.name + ".c3d")
     csv_path = stem.with_name(stem.name + ".truth.csv")
     write_c3d(c3d_path, trial.trajectories, units="mm")
-    write_angles_csv(csv_path, trial.time_s, trial.coordinate_names, trial.q_true)
+    head = trial.perturbation.header_lines() if trial.perturbation is not None else ()
+    write_angles_csv(csv_path, trial.time_s, trial.coordinate_names, trial.q_true, comments=head)
     return c3d_path, csv_path
 
 

@@ -21,7 +21,7 @@ OWNERS = {
     "pandas": {"api.py"},
 }
 VALIDATION_STUDY = tuple(f"exubio.validation.{m}" for m in ("run", "trials", "determinacy", "sensitivity", "residuals",
-                                                              "sier", "invivo", "c3d_tasks", "agreement"))
+                                                              "sier", "invivo", "c3d_tasks", "agreement", "mismatch"))
 SOLVERS = ("exubio.methods", "exubio.backend", "exudyn", "exubio.pipeline", "exubio.calibration", "exubio.validate",
            *VALIDATION_STUDY)
 

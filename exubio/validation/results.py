@@ -45,7 +45,7 @@ __all__ = [
     "Agreement", "AgreementTrial", "AngleComparison", "C3dTask", "C3dTasks", "CalibrationFrames",
     "CalibrationResidual", "CalibrationSummary", "Check", "CorridorEntry", "CorridorMember", "ElevationComparison",
     "EllipsoidFit", "Failed", "FailedRun", "InvivoComparison", "MasslessDiagnostic", "MasslessFailed", "MeanMax",
-    "MedianMax", "NotCompared", "PaperGhMarker", "PaperMethods", "PaperNumbers", "PaperSensitivity", "PaperTable1Row",
+    "MedianMax", "MismatchRun", "ModelMismatch", "NotCompared", "PaperGhMarker", "PaperMethods", "PaperNumbers", "PaperSensitivity", "PaperTable1Row",
     "ResidualRow", "ResidualStats", "RmsMax", "SchemaError", "Sensitivity", "Sier", "SierMethod", "SierRealisations",
     "SierRun", "SierRunMethod", "SierSummary", "Skipped", "TrialData", "ValidationResults",
 ]
@@ -577,6 +577,58 @@ class Check(Record):
 
 
 # --------------------------------------------------------------------------------------------
+# Model mismatch (exubio.validation.mismatch)
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False, kw_only=True)
+class MismatchRun(Record):
+    """One simulated trial with a perturbed model (``perturbation``: exubio.perturb words),
+    reconstructed by ``method`` with the generic model: the worst measured angle's RMSE and the
+    largest error of any measured angle (deg); ``mismatch_cost_deg``: the worst RMSE of the same
+    case and motion without artefact (what the mismatch alone costs); the verdict, its non-note
+    reasons, the segments the model-mismatch check names and its evidence."""
+
+    case: str
+    perturbation: tuple[str, ...]
+    motion: str
+    artefact: str
+    method: str
+    mismatch_cost_deg: float
+    worst_angle: str
+    worst_rmse_deg: float
+    worst_max_deg: float
+    angle_rmse_deg: dict[str, float]
+    mean_residual_mm: float
+    verdict: str
+    reasons: tuple[str, ...]
+    mismatch_segments: tuple[str, ...]
+    scapula_contact_offset_mean_mm: float
+    bias_mm: dict[str, float]
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class ModelMismatch(Record):
+    """The model-mismatch section: every run; ``costly`` runs whose mismatch costs more than
+    ``cost_limit_deg``, ``caught`` of them with a check naming a segment, the ``missed`` ones;
+    ``no_mismatch`` runs without perturbation, those the mismatch check named anyway
+    (``false_alarms``) and those not ``ok`` for any reason; perturbed runs that cost less than the
+    limit yet were flagged (``flagged_cheap``)."""
+
+    cost_limit_deg: float
+    duration_s: float
+    rate_hz: float
+    noise_mm: float
+    sta_mm: float
+    runs: tuple[MismatchRun, ...]
+    costly: int
+    caught: int
+    missed: tuple[str, ...]
+    no_mismatch: int
+    false_alarms: tuple[str, ...]
+    no_mismatch_not_ok: tuple[str, ...]
+    flagged_cheap: tuple[str, ...]
+
+
+# --------------------------------------------------------------------------------------------
 # Everything
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -607,6 +659,7 @@ class ValidationResults(Record):
     total_wall_s: float
     report_wall_s: float | None = optional()
     ludewig: dict[str, dict[str, np.ndarray]] = array(npz="lud__{}")
+    mismatch: ModelMismatch | None = optional()  # the model-mismatch section (absent in older files)
 
     # files ----------------------------------------------------------------------------------
     def table1_json(self) -> dict[str, Any]:
