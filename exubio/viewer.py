@@ -78,7 +78,7 @@ class _Result:
     recon: Reconstruction
     metadata: dict[str, Any]
     verdict: str = "unknown"
-    reasons: list[str] = field(default_factory=list)
+    reasons: list[Any] = field(default_factory=list)  # as the summary gives them: {code, level, message} (or text)
     verdict_source: str = ""
 
 
@@ -201,7 +201,8 @@ def _load_result(path: Path) -> _Result:
         res.verdict_source = f"{path} (metadata)"
     if isinstance(quality, dict):
         res.verdict = str(quality.get("verdict", "unknown"))
-        res.reasons = [str(r) for r in quality.get("reasons") or []]
+        res.reasons = [{str(k): str(v) for k, v in r.items()} if isinstance(r, dict) else str(r)
+                       for r in quality.get("reasons") or []]
     elif isinstance(quality, str):
         res.verdict = quality
     return res
@@ -675,7 +676,9 @@ def _page(results: list[_Result], trial: str, data: dict, plot_div: str, notes: 
     payload = json.dumps(data, allow_nan=False).replace("</", "<\\/")
     reasons = "".join(
         f"<li><b>{html.escape(r.recon.method.upper())}</b> ({html.escape(r.verdict)}): "
-        + (html.escape("; ".join(r.reasons)) if r.reasons else "no reasons given")
+        + (html.escape("; ".join(f"{x.get('level', '')}: {x.get('message', '')}" if isinstance(x, dict) else x
+                                 for x in r.reasons))
+           if r.reasons else "no reasons given")
         + (f" <small>[{html.escape(r.verdict_source)}]</small>" if r.verdict_source else " <small>[no summary.json found]</small>")
         + "</li>" for r in results)
     note_items = "".join(f"<li>{html.escape(n)}</li>" for n in notes)
