@@ -498,9 +498,25 @@ def model_expectations(model: Model, protocol: Protocol, ranges_rad: np.ndarray 
     relations = np.array(rel, dtype=int).reshape(-1, 3)
 
     rigid, rigid_d = [], []
+    anatomical = [m.landmark is not None for m in protocol.markers]
+    fixed = dmax - dmin < RIGID_MODEL_VARIATION_M
+
+    def axial(a: int, other_segment: str) -> bool:
+        """Marker a's declared point keeps its distance to every marker of other_segment (it lies on
+        the joint axis between them, as the epicondyles lie on the elbow's)."""
+        return all(fixed[a, b] for b in range(k) if segs[b] == other_segment)
+
     for i, j in itertools.combinations(range(k), 2):
         same = segs[i] == segs[j]
-        if same or dmax[i, j] - dmin[i, j] < RIGID_MODEL_VARIATION_M:
+        # across segments a distance is fixed when one marker lies on the joint axis; that marker's
+        # declared point must then be trusted: a landmark's. A technical marker's declared point is a
+        # guess of where it sits; a guess on the axis (an arm marker tied to the elbow centre) would
+        # make it "rigid" with the next segment, which the real marker is not.
+        across = False
+        if not same and fixed[i, j]:
+            on_axis = [a for a, other in ((i, segs[j]), (j, segs[i])) if axial(a, other)]
+            across = any(anatomical[a] for a in on_axis) if on_axis else (anatomical[i] and anatomical[j])
+        if same or across:
             rigid.append((i, j))
             rigid_d.append(0.5 * (dmax[i, j] + dmin[i, j]))
 

@@ -53,3 +53,19 @@ def test_a_three_label_cycle_is_one_permutation_whose_relabel_fixes_it(session, 
     assert _check(model, protocol, ref, fixed) == ()
     reason = Q.label_reasons(findings)[0]
     assert reason.level == "fail" and "--relabel" in reason.message
+
+
+def test_a_technical_marker_declared_on_a_joint_axis_is_not_made_rigid_with_the_next_segment(tmp_path):
+    """A protocol that ties the technical arm marker ARM to the elbow centre (a point on the elbow
+    axis, rigid with the forearm in the model) must not make the real ARM marker look like a label
+    that jumps: across segments only landmark markers' declared points are trusted."""
+    from exubio.resources import shipped_file
+
+    text = shipped_file("exubio.protocols", "upper_limb_21.yaml", "protocols").read_text(encoding="utf-8")
+    tied = text.replace("ARM:        {segment: humerus, point: ARM}", "ARM:        {segment: humerus, point: EJC}")
+    assert tied != text
+    (tmp_path / "axis.yaml").write_text(tied, encoding="utf-8")
+    model, protocol = load_model_and_protocol(protocol_path=tmp_path / "axis.yaml")
+    targets = prepare_targets(read_trial(C3D / "bioptim_exo_martin_dynamique.c3d"), protocol)
+    findings = check_trial(targets, model=model, protocol=protocol, ranges_rad=model.coordinate_ranges_rad)
+    assert not [f for f in findings if "ARM" in f.markers], [(f.kind, f.markers) for f in findings]
