@@ -173,3 +173,21 @@ def test_real_cross_validated_surface(setup):
         after = np.sqrt(np.nanmean(surface_distance(fitted.ellipsoid, pts) ** 2))
         assert after < before
         assert after < 0.012, (cal, after)
+
+
+def test_cli_scapula_trial(tmp_path, capsys):
+    """``exubio calibrate --scapula-trial`` writes a model whose ellipsoid is the motion fit and says so;
+    ``reconstruct --scapula-trial`` without ``--static`` is bad input (exit 2)."""
+    from exubio.cli import main
+    from exubio.model import load_model
+
+    files = _real()
+    protocol = str(shipped_file("exubio.protocols", "thoracoscapular_9.yaml", "protocols"))
+    out = tmp_path / "subject.yaml"
+    assert main(["-q", "calibrate", str(files["FLX01"]), "--protocol", protocol, "--scapula-trial",
+                 str(files["FLX01"]), "--out", str(out)]) == 0
+    assert "scapula postures" in capsys.readouterr().out
+    model = load_model(out)
+    assert model.metadata["calibration"]["functional"]["scapula"]["used"] is True
+    assert main(["-q", "reconstruct", str(files["ABD01"]), "--protocol", protocol, "--scapula-trial",
+                 str(files["FLX01"]), "--out", str(tmp_path / "o")]) == 2
