@@ -46,6 +46,7 @@ __all__ = [
     "CalibrationResidual", "CalibrationSummary", "Check", "CorridorEntry", "CorridorMember", "ElevationComparison",
     "EllipsoidFit", "Failed", "FailedRun", "InvivoComparison", "MasslessDiagnostic", "MasslessFailed", "MeanMax",
     "MedianMax", "NotCompared", "PaperGhMarker", "PaperMethods", "PaperNumbers", "PaperSensitivity", "PaperTable1Row",
+    "Rates", "RatesCondition",
     "ResidualRow", "ResidualStats", "RmsMax", "SchemaError", "Sensitivity", "Sier", "SierMethod", "SierRealisations",
     "SierRun", "SierRunMethod", "SierSummary", "Skipped", "TrialData", "ValidationResults",
 ]
@@ -496,6 +497,48 @@ class Agreement(Record):
 
 
 # --------------------------------------------------------------------------------------------
+# Rates against the truth (exubio.validation.rates)
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False, kw_only=True)
+class RatesCondition(Record):
+    """One simulated trial (noise/STA as given) under every source ("pf", "ls", their q's finite
+    differences "pf_fd", "ls_fd", and noise-free "pf_no_lead_in"): RMSE against the truth per
+    coordinate over the interior frames (q deg, q̇ deg/s, q̈ deg/s^2), the constraint residuals
+    (max |g|, max |G q̇| 1/s, max |G q̈ + eta| 1/s^2), wall times (s), failures."""
+
+    description: str
+    noise_mm: float
+    sta_mm: float
+    frames: int
+    rate_hz: float
+    truth_rms_qd_deg_s: dict[str, float]
+    truth_rms_qdd_deg_s2: dict[str, float]
+    q_rmse_deg: dict[str, dict[str, float]]
+    qd_rmse_deg_s: dict[str, dict[str, float]]
+    qdd_rmse_deg_s2: dict[str, dict[str, float]]
+    max_abs_g: dict[str, float]
+    max_abs_g_qd_1_s: dict[str, float]
+    max_abs_g_qdd_eta_1_s2: dict[str, float]
+    wall_s: dict[str, float]
+    errors: dict[str, str]
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class Rates(Record):
+    """q̇ and q̈ of PF and LS against the simulated truth (``conditions``: "noise_free",
+    "noise_sta"); PF's worst noise-free RMSE over the measured coordinates against the aims."""
+
+    trial: str
+    coordinates: tuple[str, ...]
+    measured_coordinates: tuple[str, ...]
+    conditions: dict[str, RatesCondition]
+    pf_noise_free_max_qd_rmse_deg_s: float
+    pf_noise_free_max_qdd_rmse_deg_s2: float
+    aim_qd_deg_s: float
+    aim_qdd_deg_s2: float
+
+
+# --------------------------------------------------------------------------------------------
 # The paper's numbers, the checks
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -606,6 +649,7 @@ class ValidationResults(Record):
     invivo_aims: tuple[Check, ...]
     total_wall_s: float
     report_wall_s: float | None = optional()
+    rates: Rates | Skipped | None = optional()
     ludewig: dict[str, dict[str, np.ndarray]] = array(npz="lud__{}")
 
     # files ----------------------------------------------------------------------------------
