@@ -13,7 +13,7 @@ A study file (YAML, paths relative to it)::
         model: subject01.yaml       # optional (default: the generic model)
         static: S01/static.c3d      # optional: calibrate the session's model on it first
         functional: S01/move.c3d    # optional, with static: SCoRE glenohumeral centre
-        scapula_trial: S01/raise.c3d  # optional, with static: thorax ellipsoid through its scapula postures
+        scapula_trial: S01/raise.c3d  # optional (or a list), with static: thorax ellipsoid through its scapula postures
         static_frames: "0:50"       # optional, without static: each trial calibrated on its own frames
         trials: ["S01/task_*.c3d"]  # globs
 
@@ -77,7 +77,7 @@ class SessionSpec:
     static: Path | None = None
     functional: Path | None = None
     static_frames: str | None = None
-    scapula_trial: Path | None = None
+    scapula_trials: tuple[Path, ...] = ()
     methods: tuple[str, ...] = ("pf", "ls")
 
 
@@ -210,8 +210,10 @@ def load_study(path: str | Path, /) -> StudySpec:
         if functional is not None and static is None:
             raise InputError(f"{where}.functional: a functional trial refines a calibration on a static trial; give "
                              f"static as well")
-        scapula_trial = _path(s.get("scapula_trial"), base, f"{where}.scapula_trial")
-        if scapula_trial is not None and static is None:
+        raw = s.get("scapula_trial")
+        raw = [] if raw is None else (raw if isinstance(raw, list) else [raw])
+        scapula_trials = tuple(_path(v, base, f"{where}.scapula_trial") for v in raw)
+        if scapula_trials and static is None:
             raise InputError(f"{where}.scapula_trial: a scapula movement trial refines a calibration on a static trial; "
                              f"give static as well")
         frames = s.get("static_frames")
@@ -221,7 +223,7 @@ def load_study(path: str | Path, /) -> StudySpec:
             subject=subject, session=session, trials=tuple(trials),
             protocol=_path(s.get("protocol"), base, f"{where}.protocol"),
             model=_path(s.get("model"), base, f"{where}.model"), static=static, functional=functional,
-            static_frames=None if frames is None else str(frames), scapula_trial=scapula_trial,
+            static_frames=None if frames is None else str(frames), scapula_trials=scapula_trials,
             methods=_methods(s["methods"], f"{where}.methods") if "methods" in s else methods))
     return StudySpec(name=str(data.get("name", path.stem)), source=path, sessions=tuple(sessions), report=report)
 
@@ -309,7 +311,7 @@ def _calibrate_session(s: SessionSpec, folder: Path) -> tuple[str | None, dict |
         tmp.mkdir(parents=True)
         model_tmp, _, summary = calibrate_session(s.static, tmp, s.static.stem, protocol_path=s.protocol,
                                                    model_path=s.model, functional_path=s.functional, overwrite=True,
-                                                   scapula_path=s.scapula_trial)
+                                                   scapula_paths=s.scapula_trials)
         ref = summary.pop("_reference", None)
         from exubio.io.results import write_json
 

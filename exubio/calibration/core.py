@@ -219,7 +219,8 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
                     frames: slice | None = None, scale_groups: Mapping[str, str] = DEFAULT_SCALE_GROUPS,
                     targets: MarkerTargets | None = None, functional: MarkerTargets | None = None,
                     more_statics: Sequence[MarkerTargets] = (),
-                    scapula_motion: MarkerTargets | None = None) -> tuple[Model, CalibrationReport]:
+                    scapula_motion: MarkerTargets | Sequence[MarkerTargets] | None = None
+                    ) -> tuple[Model, CalibrationReport]:
     """Calibrate ``model`` (generic) to the subject of ``trajectories`` (see the module docstring).
 
     frames: the frames of the trial that hold the static pose (their mean is used); None = the
@@ -238,7 +239,7 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
         of the static pose(s) and of every posture of the movement
         (``exubio.calibration.scapula_motion``; ``report.functional["scapula"]``: what was fitted,
         residuals, coverage); a movement that cannot determine it is reported there with the
-        reason and the static ellipsoid is kept.
+        reason and the static ellipsoid is kept. Several movement trials: their postures pooled.
     Returns the calibrated model (its ``metadata["calibration"]`` holds ``report.to_dict()``) and
     the report. The protocol's markers must reference the model (segment names); reconstruct with
     ``calibrated_protocol(protocol, calibrated)`` or reload the protocol with the calibrated
@@ -369,8 +370,8 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
     return calibrated, report
 
 
-def _use_scapula_motion(model: Model, protocol: Protocol, statics: list[np.ndarray], movement: MarkerTargets,
-                        functional_info: dict):
+def _use_scapula_motion(model: Model, protocol: Protocol, statics: list[np.ndarray],
+                        movement: MarkerTargets | Sequence[MarkerTargets], functional_info: dict):
     """The ellipsoid fitted through the scapula postures of ``movement`` and the static pose(s)
     (exubio.calibration.scapula_motion), and ``functional_info`` with its summary under "scapula";
     a movement that cannot determine it keeps the model's ellipsoid, with the reason."""
@@ -381,7 +382,9 @@ def _use_scapula_motion(model: Model, protocol: Protocol, statics: list[np.ndarr
         fit = fit_scapula_motion(model, protocol, statics, movement)
     except InputError as exc:
         log.warning("%s; the thorax ellipsoid stays the static calibration's", exc)
-        info["scapula"] = {"used": False, "trial": movement.source or "scapula trial", "reason": str(exc)}
+        sources = [movement] if isinstance(movement, MarkerTargets) else list(movement)
+        info["scapula"] = {"used": False, "trial": " + ".join(t.source or "scapula trial" for t in sources),
+                           "reason": str(exc)}
         return model.ellipsoid, info
     info["scapula"] = fit.to_dict()
     return fit.ellipsoid, info

@@ -212,18 +212,22 @@ def _rotation_angle_deg(R: np.ndarray, R0: np.ndarray) -> np.ndarray:
 
 
 def fit_scapula_motion(model: Model, protocol: Protocol, static_m: np.ndarray | Sequence[np.ndarray],
-                       movement: MarkerTargets, /) -> ScapulaMotionFit:
+                       movement: MarkerTargets | Sequence[MarkerTargets], /) -> ScapulaMotionFit:
     """Fit the thorax ellipsoid through the scapula contact points of the static pose(s) and of
     every posture of ``movement`` (see the module docstring).
 
     model: the calibrated model (registered points, the static calibration's ellipsoid);
     protocol: bound to it (``calibrated_protocol``); static_m: the static pose's protocol markers
     (k, 3) (or several static poses), thorax frame, m; movement: the movement trial's prepared
-    targets (same protocol, thorax frame). Returns the fit; InputError (naming the trial and the
+    targets (same protocol, thorax frame), or several movement trials (their postures pooled).
+    Returns the fit; InputError (naming the trial and the
     reason) when the movement cannot determine the ellipsoid."""
     from scipy.optimize import least_squares
 
-    src = movement.source or "scapula trial"
+    trials = [movement] if isinstance(movement, MarkerTargets) else list(movement)
+    if not trials:
+        raise InputError("a functional scapula calibration needs a movement trial; none given")
+    src = " + ".join(t.source or "scapula trial" for t in trials)
     statics = [np.asarray(static_m, dtype=float)] if np.ndim(static_m) == 2 else [np.asarray(s, dtype=float)
                                                                                   for s in static_m]
     try:
@@ -232,7 +236,7 @@ def fit_scapula_motion(model: Model, protocol: Protocol, static_m: np.ndarray | 
         raise InputError(f"{src}: {exc}") from None
     names = tuple(protocol.markers[j].name for j in idx)
     contact_names = tuple(name for _, name in model.ellipsoid.contact_points)
-    pos = movement.positions_m
+    pos = np.concatenate([t.positions_m for t in trials], axis=0)
     contacts, R, rms, per_marker = contact_points_over_motion(model, protocol, pos, idx)
     with_pose = np.flatnonzero(np.isfinite(rms))
     if with_pose.size < MIN_POSTURES:
@@ -305,7 +309,7 @@ def fit_scapula_motion(model: Model, protocol: Protocol, static_m: np.ndarray | 
     rigid = {name: float(np.sqrt(np.nanmean(per_marker[used, i] ** 2))) for i, name in enumerate(names)}
     fit = ScapulaMotionFit(
         ellipsoid=fitted, trial=src, frames_used=int(used.size), frames_with_pose=int(with_pose.size),
-        frames_total=int(movement.n_frames), markers=names, rigid_rms_m=rigid,
+        frames_total=int(pos.shape[0]), markers=names, rigid_rms_m=rigid,
         rigid_frame_rms_m=(float(np.median(rms[used])), float(np.max(rms[used]))),
         before_m={"movement": _distances(base, move, contact_names), "static": _distances(base, stat, contact_names)},
         after_m={"movement": _distances(fitted, move, contact_names), "static": _distances(fitted, stat, contact_names)},
