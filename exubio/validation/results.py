@@ -46,7 +46,7 @@ __all__ = [
     "CalibrationResidual", "CalibrationSummary", "Check", "CorridorEntry", "CorridorMember", "ElevationComparison",
     "EllipsoidFit", "Failed", "FailedRun", "InvivoComparison", "MasslessDiagnostic", "MasslessFailed", "MeanMax",
     "MedianMax", "NotCompared", "PaperGhMarker", "PaperMethods", "PaperNumbers", "PaperSensitivity", "PaperTable1Row",
-    "Rates", "RatesCondition",
+    "Rates", "RatesCondition", "ScapulaCrossValidation", "ScapulaDirection", "ScapulaSimulated", "ScapulaVariant",
     "ResidualRow", "ResidualStats", "RmsMax", "SchemaError", "Sensitivity", "Sier", "SierMethod", "SierRealisations",
     "SierRun", "SierRunMethod", "SierSummary", "Skipped", "TrialData", "ValidationResults",
 ]
@@ -539,6 +539,60 @@ class Rates(Record):
 
 
 # --------------------------------------------------------------------------------------------
+# The scapula calibrated over motion, cross-validated (exubio.validation.scapula)
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False, kw_only=True)
+class ScapulaVariant(Record):
+    """One calibration of one direction: whether the motion fit was used ("used", "refused",
+    "none") and its contact-point RMS off the ellipsoid before/after (mm); per method ("pf", "ls")
+    the reconstructed trial's aa/ts/ai RMSE (mm), the model-minus-data ST angles (internal
+    rotation, upward rotation, tilt; deg) RMSE and max over HT 30-120; PF's deviation from
+    Ludewig in his frames per ST key at HT 30/60/90/120 (deg) and the share inside the corridor."""
+
+    motion_fit: str
+    reason: str | None = optional()
+    contact_rms_before_mm: float | None = optional()
+    contact_rms_after_mm: float | None = optional()
+    determined_directions: int | None = optional()
+    marker_rmse_mm: dict[str, dict[str, float]]
+    st_model_minus_data_rmse_deg: dict[str, tuple[float, float, float]]
+    st_model_minus_data_max_deg: dict[str, tuple[float, float, float]]
+    ludewig_deviation_deg: dict[str, tuple[float, ...]]
+    ludewig_share_inside_corridor: dict[str, float]
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class ScapulaDirection(Record):
+    """Calibrated on ``calibration_trial``, reconstructing ``reconstructed_trial``: the variants
+    "own_still", "cal_still", "cal_still_motion", "pooled_not_cross_validated"."""
+
+    calibration_trial: str
+    reconstructed_trial: str
+    variants: dict[str, ScapulaVariant | Skipped]
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class ScapulaSimulated(Record):
+    """The simulated subject whose ellipsoid differs: the second trial's ST max error per angle
+    (deg) and its true contact points' largest distance from the calibrated ellipsoid (mm), for
+    the calibration at rest ("static") and over motion ("static_motion")."""
+
+    description: str
+    st_max_error_deg: dict[str, tuple[float, float, float]]
+    flexion_contacts_max_off_ellipsoid_mm: dict[str, float]
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class ScapulaCrossValidation(Record):
+    """The functional scapula calibration: the simulated subject, and the real TRC subject per
+    direction (e.g. "flexion_to_abduction"; empty when skipped, with the reason in ``real_skipped``)."""
+
+    simulated: ScapulaSimulated
+    real: dict[str, ScapulaDirection]
+    real_skipped: str | None = optional()
+
+
+# --------------------------------------------------------------------------------------------
 # The paper's numbers, the checks
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -650,6 +704,7 @@ class ValidationResults(Record):
     total_wall_s: float
     report_wall_s: float | None = optional()
     rates: Rates | Skipped | None = optional()
+    scapula: ScapulaCrossValidation | None = optional()
     ludewig: dict[str, dict[str, np.ndarray]] = array(npz="lud__{}")
 
     # files ----------------------------------------------------------------------------------
