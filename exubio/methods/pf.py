@@ -262,7 +262,7 @@ def stream_pf(model: Model, protocol: Protocol, targets: MarkerTargets, sink: Ch
     if progress and completed > done[0]:
         progress(completed - done[0])
     if not run.success:
-        _raise_failure(kin, points, targets, run, frames.last_q, lead=lead)
+        _raise_failure(kin, points, targets, run, frames.last_q, lead=lead, qd_last=frames.last_qd)
     total = time.perf_counter() - t0 - frames.sink_s  # the method's own time, not the sink's
     timings = {"equilibrium": t1 - t0, "build": t2 - t1, "integration": total - (t2 - t0) - frames.busy_s,
                "recovery": frames.recovery_s, "residuals": frames.residuals_s, "total": total}
@@ -294,7 +294,7 @@ class _Frames:
         self.kin, self.points, self.targets, self.q0, self.held, self.dt = kin, points, targets, q0, held, dt
         self.lead = lead  # frames of lead-in before the trial's first: unwrapped, not handed on
         self.options, self.sink = options, sink
-        self.last_raw = self.last_unwrapped = self.last_q = self.shift = None  # the frame before this chunk
+        self.last_raw = self.last_unwrapped = self.last_q = self.last_qd = self.shift = None  # the frame before this chunk
         self.raw_g = self.raw_gqd = float("nan")
         self.sum_res, self.n_res = 0.0, 0
         self.sink_s = self.recovery_s = self.residuals_s = 0.0
@@ -329,12 +329,12 @@ class _Frames:
         part = target_chunk(self.targets, start, start + q.shape[0])
         recon = assemble(kin, self.points, part, method="pf", q=q, qd=qd, qdd=qdd,
                          status=np.full(part.n_frames, FrameStatus.CONVERGED), timings_s={}, info={})
-        _check_divergence(recon, self.options.divergence_deflection_m, part)
+        _check_divergence(recon, self.options.divergence_deflection_m, part, kin)
         with np.errstate(all="ignore"):
             ok = ~np.isnan(recon.residuals_m)
             self.sum_res += float(recon.residuals_m[ok].sum())
             self.n_res += int(ok.sum())
-        self.last_q = q[-1]
+        self.last_q, self.last_qd = q[-1], qd[-1]
         tc = time.perf_counter()
         self.sink(recon)
         self.recovery_s += tb - ta
@@ -358,16 +358,34 @@ def _worst(kin: Kinematics, points, targets: MarkerTargets, q: np.ndarray, frame
     return points.names[j], float(d[j])
 
 
-def _raise_failure(kin, points, targets, run, q_last: np.ndarray | None, *, lead: int = 0) -> None:
+def _where(kin: Kinematics, q_last: np.ndarray | None, qd_last: np.ndarray | None) -> str:
+    """Where the state was when the solver stopped: coordinates beyond their range of motion (the
+    limit potential acting) and the fastest coordinate, at the last completed frame."""
+    if q_last is None:
+        return ""
+    names = kin.model.coordinate_names
+    rng = kin.model.coordinate_ranges_rad
+    beyond = [f"{names[j]} {np.degrees(q_last[j]):.0f} deg (range {np.degrees(rng[j, 0]):.0f}..{np.degrees(rng[j, 1]):.0f})"
+              for j in range(len(names)) if q_last[j] < rng[j, 0] or q_last[j] > rng[j, 1]]
+    out = "; beyond their range of motion there: " + ", ".join(beyond) if beyond else ""
+    if qd_last is not None and np.all(np.isfinite(qd_last)):
+        j = int(np.argmax(np.abs(qd_last)))
+        out += f"; fastest coordinate {names[j]} at {abs(qd_last[j]):.1f} rad/s"
+    return out
+
+
+def _raise_failure(kin, points, targets, run, q_last: np.ndarray | None, *, lead: int = 0,
+                   qd_last: np.ndarray | None = None) -> None:
     last = max(run.completed_frames - 1 - lead, 0)
     name, defl = _worst(kin, points, targets, q_last, last) if q_last is not None else ("none", float("nan"))
     raise ReconstructionError(
         f"{targets.source or 'trial'}: the PF solver stopped at t = {targets.time_s[min(last + 1, targets.n_frames - 1)]:.3f} s "
         f"(frame {last + 1} of {targets.n_frames}): {run.message.strip() or 'no convergence'}; worst marker {name} "
-        f"with a spring deflection of {defl * 1000:.1f} mm at the last completed frame")
+        f"with a spring deflection of {defl * 1000:.1f} mm at the last completed frame{_where(kin, q_last, qd_last)}")
 
 
-def _check_divergence(recon: Reconstruction, limit_m: float, targets: MarkerTargets) -> None:
+def _check_divergence(recon: Reconstruction, limit_m: float, targets: MarkerTargets, kin: Kinematics | None = None
+                      ) -> None:
     res = recon.residuals_m
     if not np.any(res > limit_m):
         if np.all(np.isfinite(recon.q_rad)):
@@ -380,7 +398,8 @@ def _check_divergence(recon: Reconstruction, limit_m: float, targets: MarkerTarg
         raise ReconstructionError(f"{targets.source or 'trial'}: the PF solution is not finite from t = {recon.time_s[frame]:.3f} s")
     frame, j = (int(v) for v in bad[0])
     worst = int(np.nanargmax(res[frame]))
+    where = _where(kin, recon.q_rad[frame], recon.qd_rad_s[frame]) if kin is not None else ""
     raise ReconstructionError(
         f"{targets.source or 'trial'}: the PF run diverged at t = {recon.time_s[frame]:.3f} s: spring "
-        f"'{recon.marker_names[worst]}' is {res[frame, worst] * 1000:.0f} mm long (limit {limit_m * 1000:.0f} mm); "
+        f"'{recon.marker_names[worst]}' is {res[frame, worst] * 1000:.0f} mm long (limit {limit_m * 1000:.0f} mm){where}; "
         f"check the marker labels and the model, or raise the spring constants")
