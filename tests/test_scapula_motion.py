@@ -191,3 +191,27 @@ def test_cli_scapula_trial(tmp_path, capsys):
     assert model.metadata["calibration"]["functional"]["scapula"]["used"] is True
     assert main(["-q", "reconstruct", str(files["ABD01"]), "--protocol", protocol, "--scapula-trial",
                  str(files["FLX01"]), "--out", str(tmp_path / "o")]) == 2
+
+
+def test_study_file_scapula_trial(tmp_path):
+    """A session's ``scapula_trial:`` (a path or a list) is read with the session; without a static
+    trial it is refused, naming the key."""
+    from exubio.study import load_study
+
+    for name in ("static.c3d", "raise1.c3d", "raise2.c3d", "task.c3d"):
+        (tmp_path / name).write_bytes(b"")
+
+    def study(session: dict):
+        p = tmp_path / "study.yaml"
+        import yaml
+
+        p.write_text(yaml.safe_dump({"schema_version": 1, "sessions": [{"subject": "S01", "trials": ["task.c3d"],
+                                                                         **session}]}))
+        return p
+
+    spec = load_study(study({"static": "static.c3d", "scapula_trial": "raise1.c3d"}))
+    assert spec.sessions[0].scapula_trials == (tmp_path / "raise1.c3d",)
+    spec = load_study(study({"static": "static.c3d", "scapula_trial": ["raise1.c3d", "raise2.c3d"]}))
+    assert [p.name for p in spec.sessions[0].scapula_trials] == ["raise1.c3d", "raise2.c3d"]
+    with pytest.raises(InputError, match="scapula_trial"):
+        load_study(study({"scapula_trial": "raise1.c3d"}))
