@@ -22,8 +22,9 @@ Algorithm (pure: arrays and a Model in, an Ellipsoid and a typed report out)
    pose(s) (each static pose weighted like ``STATIC_WEIGHT_POSTURES`` postures of the movement:
    the pose the markers were registered in).
 3. The ellipsoid (thorax-axis-aligned, as the model's: centre 3 + radii 3) that brings all these
-   points closest to its surface (radial distance, ``ellipsoid.surface_distance``; a soft-L1 loss
-   of scale ``ROBUST_SCALE_M`` so that a few badly fitted frames do not drag it), with a weak
+   points closest to its surface (radial distance, ``ellipsoid.surface_distance``; soft-L1 weights
+   of scale ``ROBUST_SCALE_M``, iteratively reweighted, so that a few badly fitted frames do not
+   drag it), with a weak
    Gaussian prior on the change from the static calibration's ellipsoid (``PRIOR_CENTRE_SD_M``,
    ``PRIOR_LOG_RADIUS_SD``) that keeps what the postures leave open (a one-sided scapula covers a
    patch of the surface: its centre's lateral position and lateral radius trade off).
@@ -81,6 +82,7 @@ STATIC_WEIGHT_POSTURES = 10.0  # a static pose counts like this many postures of
 PRIOR_CENTRE_SD_M = 0.02  # prior SD of each centre coordinate's change from the static ellipsoid
 PRIOR_LOG_RADIUS_SD = 0.15  # prior SD of each radius's relative change (15 %)
 ROBUST_SCALE_M = 0.005  # soft-L1 scale of the surface distances
+ROBUST_ITERATIONS = 20  # reweighting passes at most
 MIN_CONTACT_SD_M = 0.001  # noise floor of a contact point's distance in the coverage estimate
 MIN_RADIUS_M = 0.03  # a fitted radius outside [MIN_RADIUS_M, MAX_RADIUS_M] is a degenerate fit (a point-like
 MAX_RADIUS_M = 0.5  # or a plane-like surface, not a thorax): refused
@@ -266,15 +268,23 @@ def fit_scapula_motion(model: Model, protocol: Protocol, static_m: np.ndarray | 
         ell = _ellipsoid_of(base, p)
         return np.concatenate([surface_distance(ell, move).ravel(), w_static * surface_distance(ell, stat).ravel()])
 
-    # scale: data in units of ROBUST_SCALE_M (soft-L1 f_scale 1), prior rows in units of its SD
-    def resid(p: np.ndarray) -> np.ndarray:
-        return np.concatenate([data_residual(p) / ROBUST_SCALE_M, p / prior_sd])
+    # iteratively reweighted least squares: soft-L1 weights on the data (scale ROBUST_SCALE_M), the
+    # prior quadratic (a Gaussian prior; scipy's loss would make it robust too)
+    weights = np.ones(move.size // 3 + stat.size // 3)
+    p = np.zeros(6)
+    for _ in range(ROBUST_ITERATIONS):
+        def resid(x: np.ndarray, w=weights) -> np.ndarray:
+            return np.concatenate([w * data_residual(x) / ROBUST_SCALE_M, x / prior_sd])
 
-    sol = least_squares(resid, np.zeros(6), loss="soft_l1", f_scale=1.0, xtol=1e-12, ftol=1e-12, gtol=1e-12,
-                        max_nfev=2000)
-    if not sol.success:
-        raise InputError(f"{src}: the ellipsoid fit through the scapula contact points did not converge: {sol.message}")
-    p = sol.x
+        sol = least_squares(resid, p, xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=2000)
+        if not sol.success:
+            raise InputError(f"{src}: the ellipsoid fit through the scapula contact points did not converge: "
+                             f"{sol.message}")
+        step, p = float(np.abs(sol.x - p).max()), sol.x
+        z = (data_residual(p) / ROBUST_SCALE_M) ** 2
+        weights = (1.0 + z) ** -0.25  # w^2 = rho'(z) of soft-L1: 1 / sqrt(1 + z)
+        if step < 1e-7:
+            break
     fitted = _ellipsoid_of(base, p)
     shift = p[:3]
     scale = np.exp(p[3:])
