@@ -132,6 +132,13 @@ def integration_step(frame_dt_s: float, step_s: float | None, cutoff_hz: float |
     return per * frame_dt_s
 
 
+LEAD_IN_MAX_BEND_M = 0.05
+"""The lead-in extrapolates quadratically unless that bends a marker's path by more than this
+from the straight line over the lead-in (a_0 T^2 / 2: 50 mm at 0.1 s is 10 m/s^2 at the first
+frame, an edge spike of the splines rather than arm motion; the validation's trials bend 4-11 mm);
+then linearly."""
+
+
 def lead_in_frames(lead_in_s: float, frame_dt_s: float, step_s: float, /) -> int:
     """Frames of lead-in for ``lead_in_s``: a whole number of steps (at least one when
     lead_in_s > 0), so that the first frame is a step end."""
@@ -152,6 +159,11 @@ def with_lead_in(targets: MarkerTargets, lead: int, frame_dt_s: float, /) -> Mar
     p0, v0, a0 = (np.nan_to_num(x[:1]) for x in (targets.positions_m, targets.velocities_m_s,
                                                  targets.accelerations_m_s2))
     missing = ~targets.present[:1, :, None]
+    bend = 0.5 * float(np.linalg.norm(np.where(missing, 0.0, a0), axis=-1).max()) * float(t[0, 0, 0]) ** 2
+    if bend > LEAD_IN_MAX_BEND_M:  # an edge acceleration of the splines (noise), not motion: extrapolate linearly
+        log.info("%s: PF lead-in extrapolated linearly (the first frame's accelerations would bend it by %.0f mm)",
+                 targets.source or "trial", bend * 1000)
+        a0 = np.zeros_like(a0)
     pos = np.where(missing, np.nan, p0 + v0 * t + 0.5 * a0 * t**2)
     vel = np.where(missing, np.nan, v0 + a0 * t)
     acc = np.where(missing, np.nan, np.broadcast_to(a0, pos.shape))
