@@ -96,3 +96,31 @@ def test_a_failed_pf_run_says_where():
     msg = str(err.value)
     assert "stopped at t =" in msg or "diverged at t =" in msg
     assert "beyond their range of motion there: gh_internal_rotation" in msg, msg
+
+
+def test_lead_in_extrapolates_the_first_frame_backwards():
+    """The lead-in's targets continue a quadratic path exactly, keep a missing marker missing, and
+    fall back to a straight line when the first frame's acceleration is an edge spike."""
+    from exubio.methods.pf import LEAD_IN_MAX_BEND_M, lead_in_frames, with_lead_in
+    from exubio.types import MarkerTargets
+
+    dt, n = 0.01, 5
+    t = np.arange(n) * dt
+    v, a = np.array([0.1, 0.0, -0.2]), np.array([1.0, -2.0, 0.5])
+    pos = np.stack([np.array([0.1, 0.2, 0.3]) + v * s + 0.5 * a * s**2 for s in t])[:, None, :]
+    pos = np.concatenate([pos, np.full((n, 1, 3), np.nan)], axis=1)  # marker 2 missing
+    vel = np.concatenate([np.stack([v + a * s for s in t])[:, None], np.full((n, 1, 3), np.nan)], axis=1)
+    acc = np.concatenate([np.tile(a, (n, 1))[:, None], np.full((n, 1, 3), np.nan)], axis=1)
+    tg = MarkerTargets(time_s=t, marker_names=("m1", "m2"), positions_m=pos, velocities_m_s=vel, accelerations_m_s2=acc)
+    lead = lead_in_frames(0.1, dt, dt)
+    assert lead == 10 and lead_in_frames(0.1, dt, 2 * dt) == 10 and lead_in_frames(0.0, dt, dt) == 0
+    ext = with_lead_in(tg, lead, dt)
+    s = ext.time_s[:lead][:, None]
+    np.testing.assert_allclose(ext.time_s[lead:], t)
+    np.testing.assert_allclose(ext.positions_m[:lead, 0], 0.1 * np.array([1, 2, 3]) + v * s + 0.5 * a * s**2, atol=1e-15)
+    np.testing.assert_allclose(ext.velocities_m_s[:lead, 0], v + a * s, atol=1e-15)
+    assert np.isnan(ext.positions_m[:lead, 1]).all()
+    spike = MarkerTargets(time_s=t, marker_names=("m1", "m2"), positions_m=pos, velocities_m_s=vel,
+                          accelerations_m_s2=acc * (3 * LEAD_IN_MAX_BEND_M / (0.5 * np.linalg.norm(a) * 0.1**2)))
+    lin = with_lead_in(spike, lead, dt)
+    np.testing.assert_allclose(lin.positions_m[:lead, 0], pos[0, 0] + v * s, atol=1e-15)
