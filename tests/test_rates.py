@@ -124,3 +124,22 @@ def test_lead_in_extrapolates_the_first_frame_backwards():
                           accelerations_m_s2=acc * (3 * LEAD_IN_MAX_BEND_M / (0.5 * np.linalg.norm(a) * 0.1**2)))
     lin = with_lead_in(spike, lead, dt)
     np.testing.assert_allclose(lin.positions_m[:lead, 0], pos[0, 0] + v * s, atol=1e-15)
+
+
+def test_pf_ls_marker_difference_is_inertia_and_damping():
+    """On the real abduction PF's model points differ from LS's by ~1 mm (the paper: < 0.37 mm);
+    with every segment almost massless and the dampers weakened PF comes within the paper's figure:
+    the difference is PF's physics (inertia, damper lag), not an error of either method."""
+    from exubio.pipeline import reconstruct
+    from exubio.validation.agreement import _marker_rmse_causes
+    from exubio.validation.trials import Trial, real_trial, why_no_real_trial
+
+    if why_no_real_trial("abduction"):
+        pytest.skip(why_no_real_trial("abduction"))
+    model, protocol, targets, _ = real_trial("abduction")
+    ls = reconstruct(model, protocol, targets, method="ls")
+    pf = reconstruct(model, protocol, targets, method="pf")
+    full = np.nanmax(np.sqrt(np.nanmean((np.linalg.norm(pf.model_points_m - ls.model_points_m, axis=2)) ** 2, axis=0)))
+    causes = _marker_rmse_causes(Trial("abduction", model, protocol, targets, data=None), ls)
+    assert full > 0.37e-3
+    assert causes["masses_x0.01_dampers_x0.1"] < 0.37 < full * 1000

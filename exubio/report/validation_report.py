@@ -775,7 +775,8 @@ def _check_text(c: Check) -> str:
     if c.kind == "same_sign":
         return (f"• [{flag}] {c.what}: {_fmt(c.value, '+.3f')} vs Ludewig {_fmt(c.limit, '+.3f')} "
                 f"{c.unit}")
-    return f"• [{flag}] {c.what}: {_fmt(c.value, '.3g')} {c.unit} (limit {_fmt(c.limit, '.3g')})"
+    note = f"; {c.note}" if c.note and c.passed is not None else ""
+    return f"• [{flag}] {c.what}: {_fmt(c.value, '.3g')} {c.unit} (limit {_fmt(c.limit, '.3g')}){note}"
 
 
 def _table(ax, cells, col_labels, *, col_widths=None, fontsize=7.0, header_color="#dde6f0", row_scale=1.35,

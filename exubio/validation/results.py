@@ -472,6 +472,8 @@ class AgreementTrial(Record):
     isb_angle_rmse_deg: dict[str, tuple[float, float, float]]
     segment_orientation_difference_deg: dict[str, RmsMax]
     diagnostic_massless_unobserved: MasslessDiagnostic | MasslessFailed | None = optional()
+    marker_rmse_causes_mm: dict[str, float] | None = optional()  # real trials: PF-LS max marker RMSE with
+    # every segment's mass x 0.01 ("masses_x0.01"), and also the dampers x 0.1 (exubio.validation.agreement)
     coord_rmse_deg: np.ndarray = array()
     marker_rmse_series_mm: np.ndarray = array(npz="marker_rmse_mm")
     marker_names: np.ndarray = array()
