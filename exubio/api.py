@@ -51,16 +51,20 @@ def load_protocol(path: str | Path | None = None, /, *, model: Model | None = No
 
 
 def calibrate(static: Trajectories, model: Model | None = None, protocol: Protocol | None = None, /, *,
-              frames: slice | None = None, functional: Trajectories | None = None):
+              frames: slice | None = None, functional: Trajectories | None = None,
+              scapula_motion: Trajectories | None = None):
     """Fit the model to the subject from a static trial (optionally a functional trial for the
-    glenohumeral centre): (calibrated model, protocol bound to it, CalibrationReport)."""
+    glenohumeral centre, and a movement trial whose scapula postures the thorax ellipsoid is fitted
+    through): (calibrated model, protocol bound to it, CalibrationReport)."""
     from exubio.calibration import calibrate_model, calibrated_protocol
     from exubio.preprocess import prepare_targets
 
     model = model if model is not None else load_model()
     protocol = protocol if protocol is not None else load_protocol(model=model)
     fun = prepare_targets(functional, protocol) if functional is not None else None
-    calibrated, report = calibrate_model(model, protocol, static, frames=frames, functional=fun)
+    sca = prepare_targets(scapula_motion, protocol) if scapula_motion is not None else None
+    calibrated, report = calibrate_model(model, protocol, static, frames=frames, functional=fun,
+                                         scapula_motion=sca)
     return calibrated, calibrated_protocol(protocol, calibrated), report
 
 

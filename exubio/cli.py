@@ -155,7 +155,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     _, _, report = calibrate_file(args.static, protocol_path=args.protocol, model_path=args.model,
                                   body_mass_kg=args.body_mass, frames=parse_frames(args.static_frames),
                                   out_path=args.out, overwrite=args.overwrite, functional_path=args.functional,
-                                  more_static_paths=tuple(args.also_static or ()))
+                                  more_static_paths=tuple(args.also_static or ()), scapula_paths=tuple(args.scapula_trial or ()))
     print(format_report(report))
     print(f"wrote {args.out}")
     return EXIT_OK
@@ -215,6 +215,9 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
     if args.functional and not args.static:
         raise InputError(f"--functional {args.functional}: a functional trial refines the calibration on a static "
                          f"trial; give --static STATIC as well")
+    if args.scapula_trial and not args.static:
+        raise InputError(f"--scapula-trial {args.scapula_trial[0]}: a scapula movement trial refines the calibration on a "
+                         f"static trial; give --static STATIC as well")
     if args.jobs < 1:
         raise InputError(f"--jobs {args.jobs}: expected a whole number of processes >= 1")
     seen: dict[str, str] = {}  # file name -> the trial of that name
@@ -239,7 +242,8 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
                                                            protocol_path=args.protocol, model_path=args.model,
                                                            body_mass_kg=args.body_mass, frames_text=args.static_frames,
                                                            overwrite=args.overwrite, functional_path=args.functional,
-                                                           more_static_paths=tuple(args.also_static or ()))
+                                                           more_static_paths=tuple(args.also_static or ()),
+                                                           scapula_paths=tuple(args.scapula_trial or ()))
         if not args.quiet:
             from exubio.calibration import format_report
 
@@ -509,6 +513,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--functional", metavar="TRIAL", help="movement trial of the same session (arm moved in several planes): glenohumeral centre by SCoRE "
                         "(Ehrig et al. 2006) instead of from the generic model; not used, with the reason, if its "
                         "motion does not determine it")
+    r.add_argument("--scapula-trial", metavar="TRIAL", action="append", help="movement trial of the same session (arm raised in one or more "
+                        "planes): the thorax ellipsoid is fitted through the scapula contact points of all its postures "
+                        "and the static pose (repeatable: postures pooled); not used, with the reason, if the movement cannot determine it")
     r.add_argument("--static-frames", help="A:B frames used for the calibration (of --static, or of each trial "
                    "itself when there is no static trial)")
     r.add_argument("--gravity", action="store_true",
@@ -521,6 +528,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--protocol", help="protocol YAML (default: protocols/upper_limb_21.yaml)")
     c.add_argument("--model", help="generic model YAML (default: models/upper_extremity.yaml)")
     c.add_argument("--body-mass", type=float, help="body mass, kg")
+    c.add_argument("--scapula-trial", metavar="TRIAL", action="append", help="movement trial of the same session (arm raised in one or more "
+                        "planes): the thorax ellipsoid is fitted through the scapula contact points of all its postures "
+                        "and the static pose (repeatable: postures pooled); not used, with the reason, if the movement cannot determine it")
     c.add_argument("--static-frames", help="A:B frames to use (default: the longest still stretch)")
     c.add_argument("--also-static", metavar="TRIAL", action="append", help="a further static pose of the session (e.g. arm raised; repeatable): the thorax ellipsoid is "
                         "fitted through the scapula contact points of every static pose")

@@ -51,14 +51,16 @@ def calibrate_file(static_path: str | Path | Trajectories, /, *, protocol_path: 
                    model_path: str | Path | None = None, body_mass_kg: float | None = None,
                    frames: slice | None = None, out_path: str | Path | None = None,
                    overwrite: bool = False, functional_path: str | Path | None = None,
-                   more_static_paths: tuple[str | Path, ...] = ()):
+                   more_static_paths: tuple[str | Path, ...] = (), scapula_paths: tuple[str | Path, ...] = ()):
     """Everything ``exubio calibrate`` does: read the trial, the generic model and the protocol,
     calibrate (``exubio.calibration.calibrate_model``, a pure step), and (with ``out_path``) write
     the calibrated model YAML. Returns (calibrated model, the protocol bound to it, the
     CalibrationReport). An existing ``out_path`` is replaced only with ``overwrite``.
     ``functional_path``: a movement trial of the same session for a functional (SCoRE)
     glenohumeral centre; ``more_static_paths``: further static poses (e.g. arm raised) the
-    thorax ellipsoid is fitted through as well."""
+    thorax ellipsoid is fitted through as well; ``scapula_paths``: movement trials of the session
+    (arm raised in one or more planes) whose scapula postures the thorax ellipsoid is fitted
+    through with the static pose(s) (exubio.calibration.scapula_motion)."""
     from exubio.calibration import calibrate_model, calibrated_protocol
     from exubio.model import save_model
 
@@ -70,8 +72,9 @@ def calibrate_file(static_path: str | Path | Trajectories, /, *, protocol_path: 
     if functional_path is not None:
         functional = prepare_targets(read_trial(functional_path), protocol)
     more = tuple(prepare_targets(read_trial(p), protocol) for p in more_static_paths)
+    scapula = tuple(prepare_targets(read_trial(p), protocol) for p in scapula_paths) or None
     calibrated, report = calibrate_model(model, protocol, _read(static_path), frames=frames, functional=functional,
-                                         more_statics=more)
+                                         more_statics=more, scapula_motion=scapula)
     if out_path is not None:
         save_model(calibrated, out_path, calibration=report.to_dict())
     return calibrated, calibrated_protocol(protocol, calibrated), report
@@ -80,7 +83,8 @@ def calibrate_file(static_path: str | Path | Trajectories, /, *, protocol_path: 
 def calibrate_into(source: str | Path | Trajectories, out_dir: str | Path, stem: str, /, *, protocol_path: str | Path | None = None,
                    model_path: str | Path | None = None, body_mass_kg: float | None = None,
                    frames_text: str | None = None, overwrite: bool = False,
-                   functional_path: str | Path | None = None, more_static_paths: tuple[str | Path, ...] = ()):
+                   functional_path: str | Path | None = None, more_static_paths: tuple[str | Path, ...] = (),
+                   scapula_paths: tuple[str | Path, ...] = ()):
     """Calibrate the model to ``source`` (a static trial, or frames of the trial itself) and write
     ``out_dir/<stem>.model.yaml``; returns (model file, CalibrationReport)."""
     from exubio.calibration import parse_frames
@@ -90,7 +94,8 @@ def calibrate_into(source: str | Path | Trajectories, out_dir: str | Path, stem:
     results.prepare_output_dir(out_dir, [model_file.name], overwrite=overwrite)
     model, _, report = calibrate_file(source, protocol_path=protocol_path, model_path=model_path,
                                       body_mass_kg=body_mass_kg, frames=parse_frames(frames_text),
-                                      functional_path=functional_path, more_static_paths=more_static_paths)
+                                      functional_path=functional_path, more_static_paths=more_static_paths,
+                                      scapula_paths=scapula_paths)
     save_model(model, model_file, calibration=report.to_dict())
     return model_file, report
 
@@ -99,7 +104,8 @@ def calibrate_session(source: str | Path | Trajectories, out_dir: str | Path, st
                       model_path: str | Path | None = None, body_mass_kg: float | None = None,
                       frames_text: str | None = None, overwrite: bool = False,
                       reference: bool = True, functional_path: str | Path | None = None,
-                      more_static_paths: tuple[str | Path, ...] = ()) -> tuple[Path, Any, dict[str, Any]]:
+                      more_static_paths: tuple[str | Path, ...] = (),
+                      scapula_paths: tuple[str | Path, ...] = ()) -> tuple[Path, Any, dict[str, Any]]:
     """calibrate_into plus the static trial's label checks: (model file, report, the calibration
     summary for summary.json). With ``reference`` (a static trial apart from the task trials) the
     summary's private ``_reference`` holds the static's pair distances, which the session's trials
@@ -109,7 +115,8 @@ def calibrate_session(source: str | Path | Trajectories, out_dir: str | Path, st
     source = _read(source)  # read once for the calibration and the checks
     model_file, report = calibrate_into(source, out_dir, stem, protocol_path=protocol_path, model_path=model_path,
                                         body_mass_kg=body_mass_kg, frames_text=frames_text, overwrite=overwrite,
-                                        functional_path=functional_path, more_static_paths=more_static_paths)
+                                        functional_path=functional_path, more_static_paths=more_static_paths,
+                                        scapula_paths=scapula_paths)
     frames = parse_frames(frames_text)
     findings, ref_distances = static_checks(source, protocol_path=protocol_path, model_path=model_path,
                                         frames=slice(*report.frames) if frames is not None else None)

@@ -13,6 +13,7 @@ A study file (YAML, paths relative to it)::
         model: subject01.yaml       # optional (default: the generic model)
         static: S01/static.c3d      # optional: calibrate the session's model on it first
         functional: S01/move.c3d    # optional, with static: SCoRE glenohumeral centre
+        scapula_trial: S01/raise.c3d  # optional (or a list), with static: thorax ellipsoid through its scapula postures
         static_frames: "0:50"       # optional, without static: each trial calibrated on its own frames
         trials: ["S01/task_*.c3d"]  # globs
         relabel: {RADIUS: ULNA, ULNA: RADIUS}   # optional: read these labels as others in every trial
@@ -65,8 +66,8 @@ __all__ = ["StudySpec", "SessionSpec", "TrialTask", "TrialOutcome", "load_study"
 DONE_FILE = "DONE.json"
 _TMP_PREFIX = ".tmp-"
 _STUDY_KEYS = {"schema_version", "name", "methods", "report", "sessions"}
-_SESSION_KEYS = {"subject", "session", "protocol", "model", "static", "functional", "static_frames", "trials",
-                 "methods", "relabel", "static_relabel", "trial_relabel"}
+_SESSION_KEYS = {"subject", "session", "protocol", "model", "static", "functional", "scapula_trial", "static_frames",
+                 "trials", "methods", "relabel", "static_relabel", "trial_relabel"}
 STUDY_COLUMNS = ("subject", "session", "trial", "status", "pf_verdict", "ls_verdict", "frames", "pf_residual_mm",
                  "ls_residual_mm", "pf_ls_max_rmse_deg", "wall_s", "folder", "error")
 
@@ -81,6 +82,7 @@ class SessionSpec:
     static: Path | None = None
     functional: Path | None = None
     static_frames: str | None = None
+    scapula_trials: tuple[Path, ...] = ()
     methods: tuple[str, ...] = ("pf", "ls")
     relabel: Mapping[str, str] = field(default_factory=dict)  # every trial and the static
     static_relabel: Mapping[str, str] | None = None  # the static only (None: relabel)
@@ -231,6 +233,12 @@ def load_study(path: str | Path, /) -> StudySpec:
         if functional is not None and static is None:
             raise InputError(f"{where}.functional: a functional trial refines a calibration on a static trial; give "
                              f"static as well")
+        raw = s.get("scapula_trial")
+        raw = [] if raw is None else (raw if isinstance(raw, list) else [raw])
+        scapula_trials = tuple(_path(v, base, f"{where}.scapula_trial") for v in raw)
+        if scapula_trials and static is None:
+            raise InputError(f"{where}.scapula_trial: a scapula movement trial refines a calibration on a static trial; "
+                             f"give static as well")
         frames = s.get("static_frames")
         if frames is not None and static is not None:
             raise InputError(f"{where}.static_frames: with a static trial the window is found in it; give one of the two")
@@ -252,7 +260,7 @@ def load_study(path: str | Path, /) -> StudySpec:
             trial_relabel=trial_relabel,
             protocol=_path(s.get("protocol"), base, f"{where}.protocol"),
             model=_path(s.get("model"), base, f"{where}.model"), static=static, functional=functional,
-            static_frames=None if frames is None else str(frames),
+            static_frames=None if frames is None else str(frames), scapula_trials=scapula_trials,
             methods=_methods(s["methods"], f"{where}.methods") if "methods" in s else methods))
     return StudySpec(name=str(data.get("name", path.stem)), source=path, sessions=tuple(sessions), report=report)
 
@@ -354,7 +362,8 @@ def _calibrate_session(s: SessionSpec, folder: Path) -> tuple[str | None, dict |
 
             static = relabel_trajectories(read_trial(s.static), static_relabel, option=f"{s.subject}/{s.session} relabel")
         model_tmp, _, summary = calibrate_session(static, tmp, s.static.stem, protocol_path=s.protocol,
-                                                   model_path=s.model, functional_path=s.functional, overwrite=True)
+                                                   model_path=s.model, functional_path=s.functional, overwrite=True,
+                                                   scapula_paths=s.scapula_trials)
         ref = summary.pop("_reference", None)
         from exubio.io.results import write_json
 

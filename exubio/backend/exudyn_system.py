@@ -595,7 +595,8 @@ class PFSystem:
     def run(self, targets_pos: np.ndarray, targets_vel: np.ndarray, active: np.ndarray | None = None, /, *,
             frame_dt_s: float, options: IntegratorOptions = IntegratorOptions(),
             progress: Callable[[int], None] | None = None,
-            on_frames: Callable[[PFRun], None] | None = None, chunk_frames: int = 8000) -> PFRun:
+            on_frames: Callable[[PFRun], None] | None = None, chunk_frames: int = 8000,
+            first_chunk_extra: int = 0) -> PFRun:
         """Integrate the PF system through the measured marker trajectories.
 
         targets_pos, targets_vel: (n, k, 3) marker positions (m) and velocities (m/s) at the frame
@@ -615,7 +616,8 @@ class PFSystem:
         be shorter, and ends at the last frame the solver reached), computed exactly as in one
         pass; the solver keeps only the steps still needed, and the PFRun returned carries the
         statistics with no frames. An exception raised by ``on_frames`` stops the solver and is
-        raised from here. Without it, the PFRun returned holds every frame.
+        raised from here. ``first_chunk_extra``: the first chunk has this many frames more (a
+        lead-in before the frames the caller counts, exubio.methods.pf). Without it, the PFRun returned holds every frame.
         """
         pos = np.asarray(targets_pos, dtype=float)
         vel = np.asarray(targets_vel, dtype=float)
@@ -708,7 +710,8 @@ class PFSystem:
         sd = mbs.systemData
         record_t: list[float] = []  # times of the recorded states: t = 0, then every accepted step
         chunk = n if on_frames is None else max(int(chunk_frames), 1)
-        record = StateRecord(self._n_ode2, capacity=min(n_steps, int(math.ceil(chunk / per_frame)) + 2) + 16)
+        extra = max(int(first_chunk_extra), 0)
+        record = StateRecord(self._n_ode2, capacity=min(n_steps, int(math.ceil((chunk + extra) / per_frame)) + 2) + 16)
         eps = 1e-6 * frame_dt_s
         flushed, accepted, failure = [0], [0], [None]
         parts: list[PFRun] = []  # without on_frames: every frame, joined at the end
@@ -807,7 +810,7 @@ class PFSystem:
             record.append(sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t(), sd.GetODE2Coordinates_tt())
             if t > 0.0:
                 accepted[0] += 1
-            upto = min(flushed[0] + chunk, n)
+            upto = min(flushed[0] + chunk + (extra if flushed[0] == 0 else 0), n)
             if upto < n and t >= (upto - 1) * frame_dt_s - eps and failure[0] is None:
                 try:
                     flush(upto)

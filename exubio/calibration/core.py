@@ -218,7 +218,9 @@ def _use_functional_gh(anchor: _Anchor, model: Model, protocol: Protocol, functi
 def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories, /, *,
                     frames: slice | None = None, scale_groups: Mapping[str, str] = DEFAULT_SCALE_GROUPS,
                     targets: MarkerTargets | None = None, functional: MarkerTargets | None = None,
-                    more_statics: Sequence[MarkerTargets] = ()) -> tuple[Model, CalibrationReport]:
+                    more_statics: Sequence[MarkerTargets] = (),
+                    scapula_motion: MarkerTargets | Sequence[MarkerTargets] | None = None
+                    ) -> tuple[Model, CalibrationReport]:
     """Calibrate ``model`` (generic) to the subject of ``trajectories`` (see the module docstring).
 
     frames: the frames of the trial that hold the static pose (their mean is used); None = the
@@ -232,6 +234,12 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
         used): the thorax ellipsoid is then fitted through the scapula contact points of every
         pose (least squares) instead of through the main static's alone
         (``report.ellipsoid_poses_mm``: each pose's largest contact-point distance from it).
+        scapula_motion: the prepared targets of a movement trial of the session (the arm raised in
+        one or more planes): the thorax ellipsoid is then fitted through the scapula contact points
+        of the static pose(s) and of every posture of the movement
+        (``exubio.calibration.scapula_motion``; ``report.functional["scapula"]``: what was fitted,
+        residuals, coverage); a movement that cannot determine it is reported there with the
+        reason and the static ellipsoid is kept. Several movement trials: their postures pooled.
     Returns the calibrated model (its ``metadata["calibration"]`` holds ``report.to_dict()``) and
     the report. The protocol's markers must reference the model (segment names); reconstruct with
     ``calibrated_protocol(protocol, calibrated)`` or reload the protocol with the calibrated
@@ -306,8 +314,10 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
     pose_contacts, pose_sources = [contacts], [src]
     fit_stop = {"start_pose": start_stop.label, "pose_and_scales": outcome.final_fit.label,
                 "reweighting": outcome.reweighting.label}
+    static_poses = [static]
     for extra in more_statics:
         q_k, stop_k = _extra_static_pose(kin_c, cal_protocol, extra, prior, limits, held)
+        static_poses.append(_nanmean(extra.positions_m[list(_window(extra, None)[0])], axis=0))
         pose_contacts.append(kin_c.points(q_k, kin_c.contacts))
         pose_sources.append(extra.source or "static pose")
         fit_stop[f"pose of {pose_sources[-1]}"] = stop_k.label
@@ -316,6 +326,10 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
     else:
         ellipsoid, k_ell = fit_ellipsoid_poses(calibrated.ellipsoid, np.concatenate(pose_contacts))
     calibrated = dataclasses.replace(calibrated, ellipsoid=ellipsoid)
+    if scapula_motion is not None:
+        ellipsoid, functional_info = _use_scapula_motion(calibrated, cal_protocol, static_poses, scapula_motion,
+                                                         functional_info)
+        calibrated = dataclasses.replace(calibrated, ellipsoid=ellipsoid)
     kin_c = Kinematics(calibrated)
     g_abs = float(np.abs(kin_c.g(q)).max())
     ellipsoid_poses = {name: round(float(np.abs(surface_distance(ellipsoid, c)).max() * 1000), 3)
@@ -380,6 +394,26 @@ def _check_finite(report: CalibrationReport, where: str, /) -> None:
                 f"calibration on {where}: the {what} is not a finite number ({np.round(values, 6).tolist()}); the "
                 f"calibration cannot be used (markers missing or degenerate in those frames? choose other frames "
                 f"with --static-frames)")
+
+
+def _use_scapula_motion(model: Model, protocol: Protocol, statics: list[np.ndarray],
+                        movement: MarkerTargets | Sequence[MarkerTargets], functional_info: dict):
+    """The ellipsoid fitted through the scapula postures of ``movement`` and the static pose(s)
+    (exubio.calibration.scapula_motion), and ``functional_info`` with its summary under "scapula";
+    a movement that cannot determine it keeps the model's ellipsoid, with the reason."""
+    from exubio.calibration.scapula_motion import fit_scapula_motion
+
+    info = dict(functional_info)
+    try:
+        fit = fit_scapula_motion(model, protocol, statics, movement)
+    except InputError as exc:
+        log.warning("%s; the thorax ellipsoid stays the static calibration's", exc)
+        sources = [movement] if isinstance(movement, MarkerTargets) else list(movement)
+        info["scapula"] = {"used": False, "trial": " + ".join(t.source or "scapula trial" for t in sources),
+                           "reason": str(exc)}
+        return model.ellipsoid, info
+    info["scapula"] = fit.to_dict()
+    return fit.ellipsoid, info
 
 
 def _extra_static_pose(kin: Kinematics, protocol: Protocol, targets: MarkerTargets, prior: np.ndarray,

@@ -182,6 +182,17 @@ def format_report(report: CalibrationReport, /) -> str:
                          f"{gh['shift_from_marker_fit_mm']:.1f} mm from the marker fit's")
         else:
             lines.append(f"glenohumeral centre: the functional trial was not used: {gh['reason']}")
+    sc = (report.functional or {}).get("scapula")
+    if sc:
+        if sc.get("used"):
+            b, a = sc["contact_distance_before_mm"]["movement"]["all"], sc["contact_distance_after_mm"]["movement"]["all"]
+            lines.append(f"thorax ellipsoid: through {sc['frames_used']} scapula postures of {sc['trial']} and the "
+                         f"static pose: contact points {b['rms']:.1f} -> {a['rms']:.1f} mm RMS off it (max {b['max']:.0f} "
+                         f"-> {a['max']:.0f} mm); centre moved {sc['centre_shift_mm']} mm, radii x {sc['radius_scale']}; "
+                         f"{sc['determined_directions']} of 6 parameter directions determined by the postures "
+                         f"(scapula rotation range {sc['scapula_rotation_range_deg']:.0f} deg)")
+        else:
+            lines.append(f"thorax ellipsoid: the scapula trial was not used: {sc['reason']}")
     if len(report.ellipsoid_poses_mm) > 1:
         lines.append("ellipsoid fitted through the contact points of " + ", ".join(
             f"{k} (off by up to {v:.1f} mm)" for k, v in report.ellipsoid_poses_mm.items()))

@@ -15,8 +15,15 @@ Initial state (the paper: "static equilibrium ... unstrained springs at time zer
 have zero rest length, so their static equilibrium at the first frame is the minimum of
 sum_i c_i |R_i - M_i|^2 subject to g = 0, i.e. the weighted LS solution of that frame. The run
 starts there, with the consistent velocity (J q̇ = ṙ_M, G q̇ = 0), so the net spring force is zero
-at t = 0 and q and q̇ start without a transient; q̈ starts at its force-free value and reaches the
-tracked motion within about 0.05 s (the stiff spring-damper mode, d/m ~ 1e3 1/s). Gravity is off by default: with it on, the springs
+at t = 0 and q and q̇ start without a transient; q̈ would start at its force-free value (0) and
+reach the tracked motion within about 0.05 s (the stiff spring-damper mode, d/m ~ 1e3 1/s): measured
+on the simulated abduction, noise-free, up to 80 deg/s^2 of q̈ error in the first 40 ms, 0.02-0.36
+deg/s^2 after it, so that transient was the whole of PF's noise-free q̈ error (RMSE up to 3.8 deg/s^2
+on a 10 s trial instead of 0.36). The run therefore starts ``PFOptions.lead_in_s`` (0.1 s) before
+the first frame, on the targets extrapolated backwards from it with their spline velocity and
+acceleration (r(t) = r_0 + v_0 t + a_0 t^2 / 2, t < 0), from the static equilibrium of that earlier
+instant: by the first frame the springs have settled onto the tracked motion and q̈ starts on it.
+The lead-in frames are not part of the result. Gravity is off by default: with it on, the springs
 must also carry the limb's weight and every model point sags below its marker (about 1-2 mm
 and 1° on the synthetic trials; see the README).
 
@@ -31,6 +38,7 @@ ReconstructionError naming the time and the worst marker.
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -76,12 +84,18 @@ class PFOptions:
         tolerance leaves (|g| ~ 1e-8 noise-free, 1e-7 with filtered noise, more on unfiltered
         noisy targets; index 3 does not hold G q̇, ~1e-5 1/s) and move the angles by < 1e-5 deg
         noise-free. False reports Exudyn's own constraint residuals.
+    lead_in_s: the run starts this long before the first frame, on the targets extrapolated
+        backwards from it (quadratically, with the first frame's spline velocity and acceleration),
+        so that the stiff spring-damper mode has settled by the first frame and q̈ starts on the
+        tracked motion instead of at its force-free value (see the module docstring); rounded to
+        whole steps; 0: no lead-in.
     limit_stiffness_nm_per_rad: k_lim of the range-of-motion limits (the model's coordinate ranges;
         one-sided quadratic potential beyond each limit, the same as LS's: exubio.ranges; the
         Exudyn elements: exubio.backend.exudyn_system.PFSystem).
     """
 
     step_s: float | None = 0.01
+    lead_in_s: float = 0.1  # integrate from this long before the first frame (extrapolated targets)
     spectral_radius: float = 0.5
     newton_relative_tolerance: float = 1e-5
     modified_newton: bool = True
@@ -116,6 +130,47 @@ def integration_step(frame_dt_s: float, step_s: float | None, cutoff_hz: float |
     while per > 1 and not (cutoff_hz is not None and cutoff_hz <= 1.0 / (4.0 * per * frame_dt_s)):
         per -= 1
     return per * frame_dt_s
+
+
+LEAD_IN_MAX_BEND_M = 0.05
+"""The lead-in extrapolates quadratically unless that bends a marker's path by more than this
+from the straight line over the lead-in (a_0 T^2 / 2: 50 mm at 0.1 s is 10 m/s^2 at the first
+frame, an edge spike of the splines rather than arm motion; the validation's trials bend 4-11 mm);
+then linearly."""
+
+
+def lead_in_frames(lead_in_s: float, frame_dt_s: float, step_s: float, /) -> int:
+    """Frames of lead-in for ``lead_in_s``: a whole number of steps (at least one when
+    lead_in_s > 0), so that the first frame is a step end."""
+    if not lead_in_s > 0:
+        return 0
+    per = max(int(round(step_s / frame_dt_s)), 1)  # frames per step (1 with sub-steps)
+    steps = max(int(math.ceil(lead_in_s / (per * frame_dt_s) - 1e-9)), 1)
+    return steps * per
+
+
+def with_lead_in(targets: MarkerTargets, lead: int, frame_dt_s: float, /) -> MarkerTargets:
+    """``targets`` with ``lead`` frames before the first, extrapolated backwards from it:
+    r(t) = r_0 + v_0 t + a_0 t^2 / 2, v(t) = v_0 + a_0 t, a(t) = a_0 (t < 0; the first frame's
+    spline values; a marker missing there is missing in the lead-in)."""
+    if lead <= 0:
+        return targets
+    t = (np.arange(-lead, 0) * frame_dt_s)[:, None, None]
+    p0, v0, a0 = (np.nan_to_num(x[:1]) for x in (targets.positions_m, targets.velocities_m_s,
+                                                 targets.accelerations_m_s2))
+    missing = ~targets.present[:1, :, None]
+    bend = 0.5 * float(np.linalg.norm(np.where(missing, 0.0, a0), axis=-1).max()) * float(t[0, 0, 0]) ** 2
+    if bend > LEAD_IN_MAX_BEND_M:  # an edge acceleration of the splines (noise), not motion: extrapolate linearly
+        log.info("%s: PF lead-in extrapolated linearly (the first frame's accelerations would bend it by %.0f mm)",
+                 targets.source or "trial", bend * 1000)
+        a0 = np.zeros_like(a0)
+    pos = np.where(missing, np.nan, p0 + v0 * t + 0.5 * a0 * t**2)
+    vel = np.where(missing, np.nan, v0 + a0 * t)
+    acc = np.where(missing, np.nan, np.broadcast_to(a0, pos.shape))
+    return dataclasses.replace(
+        targets, time_s=np.concatenate([targets.time_s[0] + t[:, 0, 0], targets.time_s]),
+        positions_m=np.concatenate([pos, targets.positions_m]), velocities_m_s=np.concatenate([vel, targets.velocities_m_s]),
+        accelerations_m_s2=np.concatenate([acc, targets.accelerations_m_s2]), gaps=())
 
 
 def unobserved_segments(kin: Kinematics, points, /) -> tuple[int, ...]:
@@ -179,7 +234,12 @@ def stream_pf(model: Model, protocol: Protocol, targets: MarkerTargets, sink: Ch
     damping = np.array([m.damping_ns_per_m for m in protocol.markers])
     held = held_mask(model, protocol)
     limits = Limits.of(model, protocol, options.limit_stiffness_nm_per_rad)
-    q0, qd0 = initial_state(kin, points, targets, stiffness, held=held, limits=limits)
+    cutoff_hz = (max(targets.cutoff_hz.values(), default=None) if protocol.cutoff_hz == "auto"  # widest applied
+                 else protocol.cutoff_hz)
+    step = integration_step(dt, options.step_s, cutoff_hz)
+    lead = lead_in_frames(options.lead_in_s, dt, step)
+    run_targets = with_lead_in(targets, lead, dt)
+    q0, qd0 = initial_state(kin, points, run_targets, stiffness, held=held, limits=limits)
     locked = unobserved_segments(kin, points)
     for i in locked:  # held at their start value, like LS does through its regularisation
         qd0[kin.joint_coordinate_indices(i)] = 0.0
@@ -190,26 +250,31 @@ def stream_pf(model: Model, protocol: Protocol, targets: MarkerTargets, sink: Ch
                       limits_rad=model.coordinate_ranges_rad if limits is not None else None,
                       limit_stiffness_nm_per_rad=limits_stiffness(options))
     t2 = time.perf_counter()
-    cutoff_hz = (max(targets.cutoff_hz.values(), default=None) if protocol.cutoff_hz == "auto"  # widest applied
-                 else protocol.cutoff_hz)
-    integ = IntegratorOptions(step_s=integration_step(dt, options.step_s, cutoff_hz),
+    integ = IntegratorOptions(step_s=step,
                               spectral_radius=options.spectral_radius,
                               newton_relative_tolerance=options.newton_relative_tolerance,
                               modified_newton=options.modified_newton, timing_breakdown=options.timing_breakdown)
     done = [0]
 
-    def tick(n: int) -> None:
-        done[0] += n
-        if progress:
-            progress(n)
+    seen = [0]
 
-    frames = _Frames(kin, points, targets, q0, held, options, sink, dt)
-    run = system.run(targets.positions_m, targets.velocities_m_s, targets.present, frame_dt_s=dt, options=integ,
-                     progress=tick, on_frames=frames, chunk_frames=chunk_frames)
-    if progress and run.completed_frames > done[0]:
-        progress(run.completed_frames - done[0])
+    def tick(n: int) -> None:  # frames of the trial (the lead-in's are not counted)
+        seen[0] += n
+        k = min(max(seen[0] - lead, 0), targets.n_frames) - done[0]
+        if k > 0:
+            done[0] += k
+            if progress:
+                progress(k)
+
+    frames = _Frames(kin, points, targets, q0, held, options, sink, dt, lead=lead)
+    run = system.run(run_targets.positions_m, run_targets.velocities_m_s, run_targets.present, frame_dt_s=dt,
+                     options=integ, progress=tick, on_frames=frames, chunk_frames=chunk_frames,
+                     first_chunk_extra=lead)
+    completed = max(run.completed_frames - lead, 0)
+    if progress and completed > done[0]:
+        progress(completed - done[0])
     if not run.success:
-        _raise_failure(kin, points, targets, run, frames.last_q)
+        _raise_failure(kin, points, targets, run, frames.last_q, lead=lead, qd_last=frames.last_qd)
     total = time.perf_counter() - t0 - frames.sink_s  # the method's own time, not the sink's
     timings = {"equilibrium": t1 - t0, "build": t2 - t1, "integration": total - (t2 - t0) - frames.busy_s,
                "recovery": frames.recovery_s, "residuals": frames.residuals_s, "total": total}
@@ -224,7 +289,8 @@ def stream_pf(model: Model, protocol: Protocol, targets: MarkerTargets, sink: Ch
         "exudyn_max_abs_g": frames.raw_g,  # before the final projection (NaN without it)
         "exudyn_max_abs_G_qd": frames.raw_gqd,
         "options": options.__dict__,
-        "initial_q_rad": q0.tolist(),
+        "initial_q_rad": q0.tolist(),  # at the start of the lead-in
+        "lead_in_s": lead * dt,
         "limit_active_s": dict(run.limit_active_s),  # per joint with a range: time its limit element was on
     }
     return timings, info
@@ -236,10 +302,11 @@ class _Frames:
     their rates, the projection on the constraints, model points and residuals, the divergence check."""
 
     def __init__(self, kin: Kinematics, points, targets: MarkerTargets, q0: np.ndarray, held: np.ndarray,
-                 options: PFOptions, sink: ChunkSink, dt: float):
+                 options: PFOptions, sink: ChunkSink, dt: float, *, lead: int = 0):
         self.kin, self.points, self.targets, self.q0, self.held, self.dt = kin, points, targets, q0, held, dt
+        self.lead = lead  # frames of lead-in before the trial's first: unwrapped, not handed on
         self.options, self.sink = options, sink
-        self.last_raw = self.last_unwrapped = self.last_q = self.shift = None  # the frame before this chunk
+        self.last_raw = self.last_unwrapped = self.last_q = self.last_qd = self.shift = None  # the frame before this chunk
         self.raw_g = self.raw_gqd = float("nan")
         self.sum_res, self.n_res = 0.0, 0
         self.sink_s = self.recovery_s = self.residuals_s = 0.0
@@ -260,20 +327,26 @@ class _Frames:
         self.last_raw, self.last_unwrapped = raw[-1], q[-1]
         q = q - self.shift
         qd, qdd = kin.coordinate_rates(q, run.angular_velocities_rad_s, run.angular_accelerations_rad_s2)
+        start = int(round(run.time_s[0] / self.dt)) - self.lead  # the chunk's first frame in the trial
+        if start < 0:  # drop the lead-in frames
+            skip = min(-start, q.shape[0])
+            q, qd, qdd, start = q[skip:], qd[skip:], qdd[skip:], start + skip
+            if q.shape[0] == 0:
+                self.recovery_s += time.perf_counter() - ta
+                return
         if self.options.project_constraints:
             q, qd, qdd, (g, gqd) = project_on_constraints(kin, q, qd, qdd, held=self.held)
             self.raw_g, self.raw_gqd = _nanmax(self.raw_g, g), _nanmax(self.raw_gqd, gqd)
         tb = time.perf_counter()
-        start = int(round(run.time_s[0] / self.dt))  # the chunk's first frame
-        part = target_chunk(self.targets, start, start + run.n_frames)
+        part = target_chunk(self.targets, start, start + q.shape[0])
         recon = assemble(kin, self.points, part, method="pf", q=q, qd=qd, qdd=qdd,
                          status=np.full(part.n_frames, FrameStatus.CONVERGED), timings_s={}, info={})
-        _check_divergence(recon, self.options.divergence_deflection_m, part)
+        _check_divergence(recon, self.options.divergence_deflection_m, part, kin)
         with np.errstate(all="ignore"):
             ok = ~np.isnan(recon.residuals_m)
             self.sum_res += float(recon.residuals_m[ok].sum())
             self.n_res += int(ok.sum())
-        self.last_q = q[-1]
+        self.last_q, self.last_qd = q[-1], qd[-1]
         tc = time.perf_counter()
         self.sink(recon)
         self.recovery_s += tb - ta
@@ -297,16 +370,34 @@ def _worst(kin: Kinematics, points, targets: MarkerTargets, q: np.ndarray, frame
     return points.names[j], float(d[j])
 
 
-def _raise_failure(kin, points, targets, run, q_last: np.ndarray | None) -> None:
-    last = max(run.completed_frames - 1, 0)
+def _where(kin: Kinematics, q_last: np.ndarray | None, qd_last: np.ndarray | None) -> str:
+    """Where the state was when the solver stopped: coordinates beyond their range of motion (the
+    limit potential acting) and the fastest coordinate, at the last completed frame."""
+    if q_last is None:
+        return ""
+    names = kin.model.coordinate_names
+    rng = kin.model.coordinate_ranges_rad
+    beyond = [f"{names[j]} {np.degrees(q_last[j]):.0f} deg (range {np.degrees(rng[j, 0]):.0f}..{np.degrees(rng[j, 1]):.0f})"
+              for j in range(len(names)) if q_last[j] < rng[j, 0] or q_last[j] > rng[j, 1]]
+    out = "; beyond their range of motion there: " + ", ".join(beyond) if beyond else ""
+    if qd_last is not None and np.all(np.isfinite(qd_last)):
+        j = int(np.argmax(np.abs(qd_last)))
+        out += f"; fastest coordinate {names[j]} at {abs(qd_last[j]):.1f} rad/s"
+    return out
+
+
+def _raise_failure(kin, points, targets, run, q_last: np.ndarray | None, *, lead: int = 0,
+                   qd_last: np.ndarray | None = None) -> None:
+    last = max(run.completed_frames - 1 - lead, 0)
     name, defl = _worst(kin, points, targets, q_last, last) if q_last is not None else ("none", float("nan"))
     raise ReconstructionError(
         f"{targets.source or 'trial'}: the PF solver stopped at t = {targets.time_s[min(last + 1, targets.n_frames - 1)]:.3f} s "
         f"(frame {last + 1} of {targets.n_frames}): {run.message.strip() or 'no convergence'}; worst marker {name} "
-        f"with a spring deflection of {defl * 1000:.1f} mm at the last completed frame")
+        f"with a spring deflection of {defl * 1000:.1f} mm at the last completed frame{_where(kin, q_last, qd_last)}")
 
 
-def _check_divergence(recon: Reconstruction, limit_m: float, targets: MarkerTargets) -> None:
+def _check_divergence(recon: Reconstruction, limit_m: float, targets: MarkerTargets, kin: Kinematics | None = None
+                      ) -> None:
     res = recon.residuals_m
     if not np.any(res > limit_m):
         if np.all(np.isfinite(recon.q_rad)):
@@ -319,7 +410,8 @@ def _check_divergence(recon: Reconstruction, limit_m: float, targets: MarkerTarg
         raise ReconstructionError(f"{targets.source or 'trial'}: the PF solution is not finite from t = {recon.time_s[frame]:.3f} s")
     frame, j = (int(v) for v in bad[0])
     worst = int(np.nanargmax(res[frame]))
+    where = _where(kin, recon.q_rad[frame], recon.qd_rad_s[frame]) if kin is not None else ""
     raise ReconstructionError(
         f"{targets.source or 'trial'}: the PF run diverged at t = {recon.time_s[frame]:.3f} s: spring "
-        f"'{recon.marker_names[worst]}' is {res[frame, worst] * 1000:.0f} mm long (limit {limit_m * 1000:.0f} mm); "
+        f"'{recon.marker_names[worst]}' is {res[frame, worst] * 1000:.0f} mm long (limit {limit_m * 1000:.0f} mm){where}; "
         f"check the marker labels and the model, or raise the spring constants")

@@ -3,6 +3,8 @@ the aims of the like-for-like comparison with Ludewig et al. 2009 (``invivo_aims
 the typed results alone (no solver)."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from exubio.validation.results import (
@@ -58,6 +60,15 @@ def paper_checks(sier: Sier, realisations: SierRealisations, agreement: Agreemen
           agreement.max_coordinate_rmse_deg, paper.pf_ls_max_joint_rmse_deg, "deg")
     check("PF vs LS: max marker-trajectory RMSE over all motions", agreement.max_marker_rmse_mm,
           paper.pf_ls_max_marker_rmse_mm, "mm")
+    causes = {n: a.marker_rmse_causes_mm for n, a in agreement.trials.items()
+              if getattr(a, "marker_rmse_causes_mm", None)}
+    if causes:  # why it is not met, measured (issue 21): the check stays as it is
+        out[-1] = dataclasses.replace(out[-1], note="measured causes, PF-LS max marker RMSE with every segment's mass "
+                                      "x 0.01 / and the dampers x 0.1: " + "; ".join(
+                                          f"{n} {c['masses_x0.01']:.2f} / {c['masses_x0.01_dampers_x0.1']:.2f} mm"
+                                          for n, c in causes.items())
+                                      + " (inertia of the arm, then PF's damper lag d/c on markers the rigid model "
+                                        "cannot fit exactly)")
     check("sensitivity study: 32 PF runs, total wall time", sensitivity.total_wall_s, SENSITIVITY_WALL_LIMIT_S, "s")
     for name in ("abduction", "flexion"):
         angles = invivo[name].pf.angles if invivo[name].pf is not None else {}

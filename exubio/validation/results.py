@@ -45,7 +45,9 @@ __all__ = [
     "Agreement", "AgreementTrial", "AngleComparison", "C3dTask", "C3dTasks", "CalibrationFrames",
     "CalibrationResidual", "CalibrationSummary", "Check", "CorridorEntry", "CorridorMember", "ElevationComparison",
     "EllipsoidFit", "Failed", "FailedRun", "InvivoComparison", "MasslessDiagnostic", "MasslessFailed", "MeanMax",
-    "MedianMax", "MismatchRun", "ModelMismatch", "NotCompared", "PaperGhMarker", "PaperMethods", "PaperNumbers", "PaperSensitivity", "PaperTable1Row",
+    "MedianMax", "MismatchRun", "ModelMismatch", "NotCompared", "PaperGhMarker", "PaperMethods", "PaperNumbers",
+    "PaperSensitivity", "PaperTable1Row",
+    "Rates", "RatesCondition", "ScapulaCrossValidation", "ScapulaDirection", "ScapulaSimulated", "ScapulaVariant",
     "ResidualRow", "ResidualStats", "RmsMax", "SchemaError", "Sensitivity", "Sier", "SierMethod", "SierRealisations",
     "SierRun", "SierRunMethod", "SierSummary", "Skipped", "TrialData", "ValidationResults",
 ]
@@ -471,6 +473,8 @@ class AgreementTrial(Record):
     isb_angle_rmse_deg: dict[str, tuple[float, float, float]]
     segment_orientation_difference_deg: dict[str, RmsMax]
     diagnostic_massless_unobserved: MasslessDiagnostic | MasslessFailed | None = optional()
+    marker_rmse_causes_mm: dict[str, float] | None = optional()  # real trials: PF-LS max marker RMSE with
+    # every segment's mass x 0.01 ("masses_x0.01"), and also the dampers x 0.1 (exubio.validation.agreement)
     coord_rmse_deg: np.ndarray = array()
     marker_rmse_series_mm: np.ndarray = array(npz="marker_rmse_mm")
     marker_names: np.ndarray = array()
@@ -493,6 +497,102 @@ class Agreement(Record):
     trials: dict[str, AgreementTrial | NotCompared] = flat()
     max_coordinate_rmse_deg: float
     max_marker_rmse_mm: float
+
+
+# --------------------------------------------------------------------------------------------
+# Rates against the truth (exubio.validation.rates)
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False, kw_only=True)
+class RatesCondition(Record):
+    """One simulated trial (noise/STA as given) under every source ("pf", "ls", their q's finite
+    differences "pf_fd", "ls_fd", and noise-free "pf_no_lead_in"): RMSE against the truth per
+    coordinate over the interior frames (q deg, q̇ deg/s, q̈ deg/s^2), the constraint residuals
+    (max |g|, max |G q̇| 1/s, max |G q̈ + eta| 1/s^2), wall times (s), failures."""
+
+    description: str
+    noise_mm: float
+    sta_mm: float
+    frames: int
+    rate_hz: float
+    truth_rms_qd_deg_s: dict[str, float]
+    truth_rms_qdd_deg_s2: dict[str, float]
+    q_rmse_deg: dict[str, dict[str, float]]
+    qd_rmse_deg_s: dict[str, dict[str, float]]
+    qdd_rmse_deg_s2: dict[str, dict[str, float]]
+    max_abs_g: dict[str, float]
+    max_abs_g_qd_1_s: dict[str, float]
+    max_abs_g_qdd_eta_1_s2: dict[str, float]
+    wall_s: dict[str, float]
+    errors: dict[str, str]
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class Rates(Record):
+    """q̇ and q̈ of PF and LS against the simulated truth (``conditions``: "noise_free",
+    "noise_sta"); PF's worst noise-free RMSE over the measured coordinates against the aims."""
+
+    trial: str
+    coordinates: tuple[str, ...]
+    measured_coordinates: tuple[str, ...]
+    conditions: dict[str, RatesCondition]
+    pf_noise_free_max_qd_rmse_deg_s: float
+    pf_noise_free_max_qdd_rmse_deg_s2: float
+    aim_qd_deg_s: float
+    aim_qdd_deg_s2: float
+
+
+# --------------------------------------------------------------------------------------------
+# The scapula calibrated over motion, cross-validated (exubio.validation.scapula)
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False, kw_only=True)
+class ScapulaVariant(Record):
+    """One calibration of one direction: whether the motion fit was used ("used", "refused",
+    "none") and its contact-point RMS off the ellipsoid before/after (mm); per method ("pf", "ls")
+    the reconstructed trial's aa/ts/ai RMSE (mm), the model-minus-data ST angles (internal
+    rotation, upward rotation, tilt; deg) RMSE and max over HT 30-120; PF's deviation from
+    Ludewig in his frames per ST key at HT 30/60/90/120 (deg) and the share inside the corridor."""
+
+    motion_fit: str
+    reason: str | None = optional()
+    contact_rms_before_mm: float | None = optional()
+    contact_rms_after_mm: float | None = optional()
+    determined_directions: int | None = optional()
+    marker_rmse_mm: dict[str, dict[str, float]]
+    st_model_minus_data_rmse_deg: dict[str, tuple[float, float, float]]
+    st_model_minus_data_max_deg: dict[str, tuple[float, float, float]]
+    ludewig_deviation_deg: dict[str, tuple[float, ...]]
+    ludewig_share_inside_corridor: dict[str, float]
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class ScapulaDirection(Record):
+    """Calibrated on ``calibration_trial``, reconstructing ``reconstructed_trial``: the variants
+    "own_still", "cal_still", "cal_still_motion", "pooled_not_cross_validated"."""
+
+    calibration_trial: str
+    reconstructed_trial: str
+    variants: dict[str, ScapulaVariant | Skipped]
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class ScapulaSimulated(Record):
+    """The simulated subject whose ellipsoid differs: the second trial's ST max error per angle
+    (deg) and its true contact points' largest distance from the calibrated ellipsoid (mm), for
+    the calibration at rest ("static") and over motion ("static_motion")."""
+
+    description: str
+    st_max_error_deg: dict[str, tuple[float, float, float]]
+    flexion_contacts_max_off_ellipsoid_mm: dict[str, float]
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class ScapulaCrossValidation(Record):
+    """The functional scapula calibration: the simulated subject, and the real TRC subject per
+    direction (e.g. "flexion_to_abduction"; empty when skipped, with the reason in ``real_skipped``)."""
+
+    simulated: ScapulaSimulated
+    real: dict[str, ScapulaDirection]
+    real_skipped: str | None = optional()
 
 
 # --------------------------------------------------------------------------------------------
@@ -658,6 +758,8 @@ class ValidationResults(Record):
     invivo_aims: tuple[Check, ...]
     total_wall_s: float
     report_wall_s: float | None = optional()
+    rates: Rates | Skipped | None = optional()
+    scapula: ScapulaCrossValidation | None = optional()
     ludewig: dict[str, dict[str, np.ndarray]] = array(npz="lud__{}")
     mismatch: ModelMismatch | None = optional()  # the model-mismatch section (absent in older files)
 

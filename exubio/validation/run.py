@@ -13,6 +13,9 @@ Sections (paper figure in brackets), one module each:
 5. PF vs LS agreement [Fig. 6] (``.agreement``).
 6. model mismatch [Fig. 7] (``.mismatch``): trials generated with a perturbed model, reconstructed
    with the generic one: the measured angles' errors and the verdict's model-mismatch check.
+7. rates against the truth [Fig. 8] (``.rates``): q̇, q̈ of PF and LS and of finite differences
+   of their q against a simulated trial's exact rates, noise-free and with noise and STA.
+8. the scapula calibrated over motion, cross-validated (``.scapula``).
 
 then the checks against the paper and the in vivo aims (``.checks``). The trials are real where
 the data allow (``.trials``).
@@ -34,6 +37,8 @@ from exubio.validation.checks import invivo_aims, paper_checks
 from exubio.validation.codec import decode
 from exubio.validation.invivo import invivo_comparison, ludewig_means
 from exubio.validation.mismatch import mismatch_study
+from exubio.validation.rates import rates_against_truth, rates_checks
+from exubio.validation.scapula import scapula_checks, scapula_cross_validation
 from exubio.validation.paths import portable_paths
 from exubio.validation.residuals import residual_table
 from exubio.validation.results import METHODS, AgreementTrial, PaperNumbers, ValidationResults
@@ -96,6 +101,9 @@ def run_validation(out_dir: str | Path = "reports/validation", /, *, quick: bool
             invivo[name], undetermined_isb_angles=a.undetermined_isb_angles if isinstance(a, AgreementTrial) else ())
     say("model mismatch (perturbed generating model)")
     mismatch = mismatch_study(s, say)
+    say("rates against the truth")
+    rates = rates_against_truth(s, say)
+    scapula = scapula_cross_validation(s, say)
     paper = decode(PaperNumbers, PAPER)
     results = ValidationResults(
         exubio_version=exubio.__version__, python=platform.python_version(),
@@ -105,7 +113,9 @@ def run_validation(out_dir: str | Path = "reports/validation", /, *, quick: bool
         reconstruction_errors={name: dict(tr.errors) for name, tr in trials.items() if tr.errors},
         sensitivity=sensitivity, table1=table1, sier=sier, sier_realisations=realisations, invivo=invivo,
         agreement=agreement, c3d_tasks=c3d_tasks, truth_rmse_deg=_truth_rmse_deg(trials), paper=paper,
-        checks=paper_checks(sier, realisations, agreement, sensitivity, invivo, paper),
+        checks=paper_checks(sier, realisations, agreement, sensitivity, invivo, paper) + rates_checks(rates)
+        + scapula_checks(scapula),
+        rates=rates, scapula=scapula,
         invivo_aims=invivo_aims(invivo), total_wall_s=time.perf_counter() - t_start, ludewig=ludewig,
         mismatch=mismatch)
     results = _portable(results)
