@@ -279,7 +279,9 @@ def test_ctrl_c_of_reconstruct_is_one_line_exit_130_and_leaves_sets_complete_or_
     code, err, stopped = _interrupt(cmd, delay)
     assert code == 130, err
     assert "interrupted" in one_error_line(err)
-    assert stopped < 2.0, stopped  # about a second (0.1-0.2 s measured on an idle machine)
+    # how long it takes (0.1-0.2 s measured on an idle machine) is a benchmark's figure, not asserted:
+    # tests never assert wall-clock limits (a loaded machine takes seconds)
+    del stopped
     for stem in ("long", "other"):
         for m in ("pf", "ls"):
             assert set_state(out, stem, m) in ("complete", "absent")
@@ -302,7 +304,7 @@ def test_ctrl_c_of_a_study_with_2_jobs_is_one_line_exit_130(tmp_path, long_trial
     code, err, stopped = _interrupt(cmd, 4.0)
     assert code == 130, err
     assert "interrupted" in one_error_line(err)
-    assert stopped < 2.0, stopped
+    del stopped  # the time it takes is not asserted (see above)
     for trial_dir in (out / "S01" / "s1").iterdir():
         assert trial_dir.name.startswith(".tmp-") is False, trial_dir  # the stopped workers' folders went
         assert (trial_dir / "DONE.json").is_file()
