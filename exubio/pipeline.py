@@ -230,7 +230,6 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
 def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, stems, parts, sink_type, /, *,
                           method_options, summary_extra, progress_factory, calibration, static_reference,
                           chunk_frames) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
-    from exubio.angles import ANGLE_NAMES, ISB_SEQUENCES, isb_table, measured_isb_joints
     from exubio.assess import assess_trial, trial_label_findings
 
     recons, sinks = [], []
@@ -247,8 +246,22 @@ def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, ste
     findings = trial_label_findings(inputs.model, inputs.protocol, inputs.targets, reference=static_reference)
     assessment = assess_trial(inputs.model, inputs.protocol, inputs.targets, recons, label_findings=findings,
                               calibration=calibration)
+    return write_assessed(inputs, trial_path, out_dir, methods, stems, recons, assessment, summary_extra=summary_extra,
+                          model_points=[sink.model_points for sink in sinks])
+
+
+def write_assessed(inputs: TrialInputs, trial_path: str | Path, out_dir: str | Path, methods: list[Method],
+                   stems: list[str], recons: list[Reconstruction], assessment: Any, /, *,
+                   summary_extra: dict[str, Any] | None = None,
+                   model_points: list[Any] | None = None) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
+    """Write every method's result files (exubio.pipeline.write_outputs, with the ISB angles and the
+    assessment's verdict in summary.json); ``model_points``: per method, the streamed model points
+    (exubio.io.streamed) when the reconstructions do not hold them. Returns (reconstruction, paths,
+    summary) per method."""
+    from exubio.angles import ANGLE_NAMES, ISB_SEQUENCES, isb_table, measured_isb_joints
+
     out = []
-    for method, stem, recon, sink in zip(methods, stems, recons, sinks):
+    for i, (method, stem, recon) in enumerate(zip(methods, stems, recons)):
         meta = run_metadata(inputs, trial_path, method)
         extra = {"unused_trial_labels": _unused(inputs), **(summary_extra or {})}
         if isinstance(extra.get("calibration"), dict):  # private entries (the static's distances) stay out
@@ -273,7 +286,7 @@ def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, ste
         paths = write_outputs(recon, out_dir, stem, metadata=meta, summary_data=summ,
                               undetermined=assessment.determinacy[recon.method].undetermined, isb=isb,
                               isb_comments=isb_header(extra["isb_angles"], Path(trial_path).name, method.value),
-                              streamed={"model_points_m": sink.model_points})
+                              streamed=None if model_points is None else {"model_points_m": model_points[i]})
         out.append((recon, paths, summ))
     return out
 

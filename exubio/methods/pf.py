@@ -150,6 +150,45 @@ def initial_state(kin: Kinematics, points, targets: MarkerTargets, stiffness: np
     return q0[0], qd0[0]
 
 
+@dataclass(frozen=True)
+class PFSetup:
+    """What a PF run starts from: the kinematics, tracked points, held mask, the start state (q0, qd0)
+    and the Exudyn system built on it (shared by the offline run and the live one, exubio.live)."""
+
+    kin: Kinematics
+    points: object
+    held: np.ndarray
+    q0: np.ndarray
+    qd0: np.ndarray
+    system: PFSystem
+    equilibrium_s: float
+    build_s: float
+
+
+def pf_setup(model: Model, protocol: Protocol, targets: MarkerTargets, options: PFOptions = PFOptions(), /, *,
+             kin: Kinematics | None = None) -> PFSetup:
+    """The start of a PF run on ``targets`` (only its first frame is used): the static equilibrium of the
+    springs there with its consistent velocity, the locked segments, and the PFSystem."""
+    t0 = time.perf_counter()
+    kin = kin or Kinematics(model)
+    points = tracked_points(kin, protocol)
+    stiffness = np.array([m.stiffness_n_per_m for m in protocol.markers])
+    damping = np.array([m.damping_ns_per_m for m in protocol.markers])
+    held = held_mask(model, protocol)
+    limits = Limits.of(model, protocol, options.limit_stiffness_nm_per_rad)
+    q0, qd0 = initial_state(kin, points, targets, stiffness, held=held, limits=limits)
+    locked = unobserved_segments(kin, points)
+    for i in locked:  # held at their start value, like LS does through its regularisation
+        qd0[kin.joint_coordinate_indices(i)] = 0.0
+    t1 = time.perf_counter()
+    springs = SpringSet.from_points(points, stiffness_n_per_m=stiffness, damping_ns_per_m=damping)
+    system = PFSystem(model, springs, q0=q0, qd0=qd0, gravity=options.gravity, kinematics=kin,
+                      locked_segments=locked, held_coordinates=np.flatnonzero(held),
+                      limits_rad=model.coordinate_ranges_rad if limits is not None else None,
+                      limit_stiffness_nm_per_rad=limits_stiffness(options))
+    return PFSetup(kin, points, held, q0, qd0, system, t1 - t0, time.perf_counter() - t1)
+
+
 def reconstruct_pf(model: Model, protocol: Protocol, targets: MarkerTargets, /, *,
                    options: PFOptions = PFOptions(),
                    progress: Callable[[int], None] | None = None) -> Reconstruction:
@@ -173,23 +212,9 @@ def stream_pf(model: Model, protocol: Protocol, targets: MarkerTargets, sink: Ch
     dt = float(np.median(np.diff(targets.time_s)))
     if np.abs(np.diff(targets.time_s) - dt).max() > 1e-6 * dt:
         raise ReconstructionError(f"{targets.source or 'trial'}: frames are not evenly spaced in time")
-    kin = Kinematics(model)
-    points = tracked_points(kin, protocol)
-    stiffness = np.array([m.stiffness_n_per_m for m in protocol.markers])
-    damping = np.array([m.damping_ns_per_m for m in protocol.markers])
-    held = held_mask(model, protocol)
-    limits = Limits.of(model, protocol, options.limit_stiffness_nm_per_rad)
-    q0, qd0 = initial_state(kin, points, targets, stiffness, held=held, limits=limits)
-    locked = unobserved_segments(kin, points)
-    for i in locked:  # held at their start value, like LS does through its regularisation
-        qd0[kin.joint_coordinate_indices(i)] = 0.0
-    t1 = time.perf_counter()
-    springs = SpringSet.from_points(points, stiffness_n_per_m=stiffness, damping_ns_per_m=damping)
-    system = PFSystem(model, springs, q0=q0, qd0=qd0, gravity=options.gravity, kinematics=kin,
-                      locked_segments=locked, held_coordinates=np.flatnonzero(held),
-                      limits_rad=model.coordinate_ranges_rad if limits is not None else None,
-                      limit_stiffness_nm_per_rad=limits_stiffness(options))
-    t2 = time.perf_counter()
+    setup = pf_setup(model, protocol, targets, options)
+    kin, points, held, q0, system = setup.kin, setup.points, setup.held, setup.q0, setup.system
+    t1, t2 = t0 + setup.equilibrium_s, t0 + setup.equilibrium_s + setup.build_s
     cutoff_hz = (max(targets.cutoff_hz.values(), default=None) if protocol.cutoff_hz == "auto"  # widest applied
                  else protocol.cutoff_hz)
     integ = IntegratorOptions(step_s=integration_step(dt, options.step_s, cutoff_hz),
@@ -249,24 +274,48 @@ class _Frames:
         return self.recovery_s + self.residuals_s
 
     def __call__(self, run) -> None:
+        start = int(round(run.time_s[0] / self.dt))  # the chunk's first frame
+        recon = self.recover(run, target_chunk(self.targets, start, start + run.n_frames))
+        tc = time.perf_counter()
+        self.sink(recon)
+        self.sink_s += time.perf_counter() - tc
+
+    def recover(self, run, part: MarkerTargets) -> Reconstruction:
+        """The Reconstruction of the frames of ``run`` (consecutive to the frames before), ``part`` their
+        targets; raises ReconstructionError on a divergence."""
+        q = self.coordinates(run)
+        q, qd, qdd = self.rates(q, run)
+        return self.finish(q, qd, qdd, part)
+
+    def coordinates(self, run) -> np.ndarray:
+        """Joint coordinates (n, m) of the frames of ``run`` on the start posture's branch (unwrapped
+        across chunks), before the projection on the constraints."""
         ta = time.perf_counter()
-        kin = self.kin
-        raw = kin.coordinates_from_rotations(run.rotations)
+        raw = self.kin.coordinates_from_rotations(run.rotations)
         if self.last_raw is None:
             q = np.unwrap(raw, axis=0)
             self.shift = 2.0 * np.pi * np.round((q[0] - self.q0) / (2.0 * np.pi))  # same branch as the start posture
         else:  # continue the unwrapping of the frames before
             q = np.unwrap(np.vstack([self.last_raw[None], raw]), axis=0)[1:] + (self.last_unwrapped - self.last_raw)
         self.last_raw, self.last_unwrapped = raw[-1], q[-1]
-        q = q - self.shift
-        qd, qdd = kin.coordinate_rates(q, run.angular_velocities_rad_s, run.angular_accelerations_rad_s2)
+        self.recovery_s += time.perf_counter() - ta
+        return q - self.shift
+
+    def rates(self, q: np.ndarray, run) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """q, q̇, q̈ of the frames of ``run``, projected on the constraints if the options say so."""
+        ta = time.perf_counter()
+        qd, qdd = self.kin.coordinate_rates(q, run.angular_velocities_rad_s, run.angular_accelerations_rad_s2)
         if self.options.project_constraints:
-            q, qd, qdd, (g, gqd) = project_on_constraints(kin, q, qd, qdd, held=self.held)
+            q, qd, qdd, (g, gqd) = project_on_constraints(self.kin, q, qd, qdd, held=self.held)
             self.raw_g, self.raw_gqd = _nanmax(self.raw_g, g), _nanmax(self.raw_gqd, gqd)
+        self.recovery_s += time.perf_counter() - ta
+        return q, qd, qdd
+
+    def finish(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, part: MarkerTargets) -> Reconstruction:
+        """Model points, residuals and constraint residuals of q (the frames of ``part``); the
+        divergence check."""
         tb = time.perf_counter()
-        start = int(round(run.time_s[0] / self.dt))  # the chunk's first frame
-        part = target_chunk(self.targets, start, start + run.n_frames)
-        recon = assemble(kin, self.points, part, method="pf", q=q, qd=qd, qdd=qdd,
+        recon = assemble(self.kin, self.points, part, method="pf", q=q, qd=qd, qdd=qdd,
                          status=np.full(part.n_frames, FrameStatus.CONVERGED), timings_s={}, info={})
         _check_divergence(recon, self.options.divergence_deflection_m, part)
         with np.errstate(all="ignore"):
@@ -274,11 +323,8 @@ class _Frames:
             self.sum_res += float(recon.residuals_m[ok].sum())
             self.n_res += int(ok.sum())
         self.last_q = q[-1]
-        tc = time.perf_counter()
-        self.sink(recon)
-        self.recovery_s += tb - ta
-        self.residuals_s += tc - tb
-        self.sink_s += time.perf_counter() - tc
+        self.residuals_s += time.perf_counter() - tb
+        return recon
 
     def mean_deflection_m(self) -> float:
         return self.sum_res / self.n_res if self.n_res else float("nan")
