@@ -402,6 +402,7 @@ class PFSystem:
         mbs.Assemble()
         sd = mbs.systemData
         self._ltg = [None] + [np.asarray(sd.GetNodeLTGODE2(n), dtype=int) for n in self._nodes[1:]]
+        self._ltg_all = np.array(self._ltg[1:], dtype=int).reshape(len(self._ltg) - 1, -1)
         self._aux_ltg = [np.asarray(sd.GetNodeLTGODE2(n), dtype=int) for n in self._aux_nodes]
         self._n_ode2 = sd.ODE2Size()
         self.build_time_s = time.perf_counter() - t_build
@@ -1070,22 +1071,23 @@ class PFSystem:
         return s
 
     def _decode(self, X, Xt, Xtt, frame_dt_s, *, first: int = 0) -> PFRun:
-        """The segment motion of frames first ... first + len(X) - 1 from the system coordinates."""
+        """The segment motion of frames first ... first + len(X) - 1 from the system coordinates
+        (vectorised over the segments: a live run decodes one frame at a time)."""
+        X, Xt, Xtt = (np.asarray(a) for a in (X, Xt, Xtt))
         n = X.shape[0]
         n_seg = len(self.model.segments)
-        R = np.zeros((n, n_seg, 3, 3))
+        L = self._ltg_all  # (n_seg - 1, 7): each movable segment's node coordinates
+        x, xt, xtt = X[:, L], Xt[:, L], Xtt[:, L]  # (n, n_seg - 1, 7)
+        ep = x[..., 3:] + self._ep_ref[1:]
+        G = ep_G(ep / np.linalg.norm(ep, axis=-1, keepdims=True))
+        R = np.empty((n, n_seg, 3, 3))
         R[:, 0] = np.eye(3)
+        R[:, 1:] = ep_rotation(ep)
         p, v, a, w, al = (np.zeros((n, n_seg, 3)) for _ in range(5))
-        for i in range(1, n_seg):
-            ltg = self._ltg[i]
-            x, xt, xtt = X[:, ltg], Xt[:, ltg], Xtt[:, ltg]
-            ep = x[:, 3:] + self._ep_ref[i]
-            G = ep_G(ep / np.linalg.norm(ep, axis=-1, keepdims=True))
-            R[:, i] = ep_rotation(ep)
-            p[:, i] = x[:, :3] + self._p_ref[i]
-            v[:, i], a[:, i] = xt[:, :3], xtt[:, :3]
-            w[:, i] = np.einsum("nij,nj->ni", G, xt[:, 3:])
-            al[:, i] = np.einsum("nij,nj->ni", G, xtt[:, 3:])
+        p[:, 1:] = x[..., :3] + self._p_ref[1:]
+        v[:, 1:], a[:, 1:] = xt[..., :3], xtt[..., :3]
+        w[:, 1:] = np.einsum("nsij,nsj->nsi", G, xt[..., 3:])
+        al[:, 1:] = np.einsum("nsij,nsj->nsi", G, xtt[..., 3:])
         return PFRun(
             time_s=(first + np.arange(n)) * frame_dt_s, rotations=R, origins_m=p, velocities_m_s=v,
             accelerations_m_s2=a, angular_velocities_rad_s=w, angular_accelerations_rad_s2=al, completed_frames=n,

@@ -45,29 +45,29 @@ def run_live(model: Model, protocol: Protocol, source, /, *, out_dir: str | Path
     write the recording into ``out_dir/name`` when the stream ends or on Ctrl-C (the first Ctrl-C
     ends the session cleanly, a second one aborts)."""
     publisher = None
-    if publish_name:
+    publisher_box: dict[str, Any] = {}
+
+    def ready(session: LiveSession) -> None:
+        if not publish_name:
+            return
         from exubio.live.transport import LSLPublisher
 
-        publisher_box: dict[str, Any] = {}
+        publisher_box["pub"] = LSLPublisher(
+            publish_name, OUTPUT_CHANNELS(session.marker_names), session.rate,
+            metadata={"model": session.model.source or session.model.name,
+                      "protocol": session.protocol.source or session.protocol.name,
+                      "input_stream": session.info.name,
+                      "angles": "ISB (Wu et al. 2005) SC, AC, ST Y-X'-Z''; GH X-Z'-Y''; HT Y-X'-Y''; degrees",
+                      "rates": "backward differences of the published angles",
+                      "processing": options.causal.describe()},
+            source_id=f"exubio-{session.info.source_id or session.info.name}")
 
-        def publish(row, ts):
-            pub = publisher_box.get("pub")
-            if pub is None:
-                pub = publisher_box["pub"] = LSLPublisher(
-                    publish_name, OUTPUT_CHANNELS(session.marker_names), session.rate,
-                    metadata={"model": session.model.source or session.model.name,
-                              "protocol": session.protocol.source or session.protocol.name,
-                              "input_stream": session.info.name,
-                              "angles": "ISB (Wu et al. 2005) SC, AC, ST Y-X'-Z''; GH X-Z'-Y''; HT Y-X'-Y''; degrees",
-                              "rates": "backward differences of the published angles",
-                              "processing": options.causal.describe()},
-                    source_id=f"exubio-{session.info.source_id or session.info.name}")
-            pub(row, ts)
-
-        publisher = publish
+    if publish_name:
+        def publisher(row, ts):
+            publisher_box["pub"](row, ts)
 
     def event(e: Event) -> None:
-        pub = publisher_box.get("pub") if publish_name else None
+        pub = publisher_box.get("pub")
         if pub is not None:
             pub.event(e)
         if on_event is not None:
@@ -77,7 +77,8 @@ def run_live(model: Model, protocol: Protocol, source, /, *, out_dir: str | Path
     kwargs = {"clock": clock} if callable(clock) else {}
     session = LiveSession(model, protocol, source, options=options, publish=publisher, on_event=event,
                           on_status=on_status, static_frames=static_frames,
-                          calibrate=calibrator(model, protocol) if static_frames is not None else None, **kwargs)
+                          calibrate=calibrator(model, protocol) if static_frames is not None else None,
+                          on_ready=ready, **kwargs)
     timer = None
     if duration_s is not None:
         timer = threading.Timer(duration_s, session.stop)

@@ -13,10 +13,11 @@ reported live (``on_event``) and kept in the recording.
 
 Falling behind. Frames are processed in order as they come; when the solver is slower than the
 stream, samples queue up and are all processed as fast as possible (the backlog is reported, in
-frames and seconds, on every frame's output). A backlog beyond ``max_behind_s`` is never carried
-on: the queued frames are skipped (recorded as missing, an Event says how many) and a new PF run
-starts at the newest frame. With the default 0.5 s, the angles are never more than about 0.5 s
-late.
+frames, on every frame's output). A backlog beyond ``max_behind_s`` is not carried on: the queued
+frames are skipped (recorded as missing, an Event says how many) and a new PF run starts at the
+newest frame. A run's first ``catch_up_s`` seconds (2 s) are exempt: its start-up backlog is
+worked off at the solver's full speed. With the defaults the angles are never more than about
+0.5 s late after that.
 
 Labels. A label swap in the stream shows as two markers far from their model points but each
 close to the other's: where that holds for LABEL_SWAP_FRAMES frames in a row, both springs are
@@ -101,7 +102,9 @@ class LiveOptions:
         gone) longer than this ends the PF run; a new one starts from the LS pose.
     stall_s: no sample for this long is reported as a stall.
     end_after_s: no sample for this long ends the stream (None: wait for ever, end with Ctrl-C).
-    max_behind_s: a backlog longer than this is skipped (see the module docstring).
+    max_behind_s: a backlog longer than this is skipped (see the module docstring), except during the
+        first ``catch_up_s`` seconds of a PF run, in which the start's backlog (the LS pose, the
+        system built, the first solves) is worked off.
     verdict_every_s: the running verdict is re-evaluated this often.
     open_timeout_s: how long to wait for the stream to appear.
     """
@@ -112,6 +115,7 @@ class LiveOptions:
     stall_s: float = 0.1
     end_after_s: float | None = 5.0
     max_behind_s: float = 0.5
+    catch_up_s: float = 2.0
     verdict_every_s: float = 0.5
     open_timeout_s: float = 10.0
 
@@ -261,11 +265,12 @@ class LiveSession:
                  on_status: Callable[[dict], None] | None = None, status_every_s: float = 0.2,
                  static_frames: slice | None = None,
                  calibrate: Callable[[Trajectories, slice], tuple[Model, Protocol, Any]] | None = None,
-                 clock: Callable[[], float] = time.perf_counter):
+                 clock: Callable[[], float] = time.perf_counter,
+                 on_ready: Callable[["LiveSession"], None] | None = None):
         self.model, self.protocol, self.source, self.options = model, protocol, source, options
         self.publish, self.on_event, self.on_status = publish, on_event, on_status
         self.status_every_s, self.static_frames, self.calibrate = status_every_s, static_frames, calibrate
-        self.clock = clock
+        self.clock, self.on_ready = clock, on_ready
         self._stop = threading.Event()
 
     # ------------------------------------------------------------------ control
@@ -349,7 +354,7 @@ class LiveSession:
             self.causal.restart()
             raise _EndRun
         behind = self.queue[-1].index - g
-        if behind > self.max_behind:
+        if behind > self.max_behind and self.clock() - self.run_started > self.options.catch_up_s:
             newest = self.queue[-1]
             self._event("skip", g, f"{behind} frames ({behind / self.rate:.2f} s) behind, more than "
                         f"{self.options.max_behind_s:g} s: frames {g}..{newest.index - 1} skipped, a new PF run "
@@ -633,6 +638,7 @@ class LiveSession:
         setup = self.setup
         frames = _Frames(setup.kin, setup.points, None, setup.q0, setup.held, self.options.pf, None, 1.0 / self.rate)
         self.run_id += 1
+        self.run_started = self.clock()
         self.tracking = True
         self._event("run_start", g0, f"PF run {self.run_id} starts from the LS pose of frame {g0}")
         state = {"end": None, "last": g0 - 1, "idle": 0}
@@ -784,6 +790,7 @@ class LiveSession:
         self.det_every = max(int(round(DETERMINACY_PERIOD_S * self.rate)), 1)
         self.det_due = 0
         self.run_id = -1
+        self.run_started = self.clock()
         self.n_frames = 0
         self.tracking = False
         self.last_isb = None
@@ -838,6 +845,8 @@ class LiveSession:
         self._open()
         self._held_back: list[_Sample] = []
         report = None
+        if self.static_frames is None:
+            self._bind()  # before the first sample: the stream's start is not kept waiting
         if not self._pull(1.0) or not self.queue:
             if not self._wait_for_sample():
                 raise InputError(f"{self.info.name}: no sample came within {self.options.end_after_s} s of opening "
@@ -846,7 +855,9 @@ class LiveSession:
             if self.calibrate is None:
                 raise InputError("static_frames given without a calibrate function")
             report = self._calibrate_from_stream()
-        self._bind()
+            self._bind()
+        if self.on_ready is not None:
+            self.on_ready(self)
         self._check_units()
         g = 0
         try:

@@ -50,7 +50,7 @@ TTLOverride = 0
 [lab]
 KnownPeers = {127.0.0.1}
 [log]
-level = -2
+level = -3
 """
 
 _pylsl: Any = None
@@ -206,12 +206,17 @@ class LSLSource:
         labels, units = marker_labels(_channels(full), full.channel_count(), full.name())
         if not full.nominal_srate() > 0:
             raise InputError(f"stream '{full.name()}': irregular rate; a marker stream needs its nominal rate")
-        self.inlet.open_stream(timeout=timeout_s)
+        self._opened = False  # the data connection opens at the first pull: a sender that waits for its
+        # consumer starts only once this side is ready
+        self._open_timeout = timeout_s
         self.info = StreamInfo(name=full.name(), labels=labels, rate_hz=float(full.nominal_srate()), units=units,
                                source_id=full.source_id())
         return self.info
 
     def pull(self, timeout_s: float) -> list[tuple[float, np.ndarray]] | None:
+        if not self._opened:
+            self.inlet.open_stream(timeout=self._open_timeout)
+            self._opened = True
         sample, ts = self.inlet.pull_sample(timeout=timeout_s)
         if sample is None:
             return []
