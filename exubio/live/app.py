@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 import signal
 import threading
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -15,7 +16,11 @@ from exubio.types import Model, Protocol, Trajectories
 
 log = logging.getLogger(__name__)
 
-__all__ = ["LiveRun", "calibrator", "run_live", "stream_file"]
+__all__ = ["LiveRun", "calibrator", "run_live", "stream_file", "LINGER_S"]
+
+LINGER_S = 1.0
+"""``exubio stream`` keeps its outlet this long after the last frame (destroyed at once, the last
+samples may never leave it)."""
 
 
 @dataclass(frozen=True)
@@ -120,6 +125,8 @@ def stream_file(trial: Trajectories, /, *, name: str, speed: float = 1.0, units:
     try:
         if wait_s > 0 and not out.wait_for_consumer(wait_s):
             log.warning("no consumer of stream '%s' after %g s; sending anyway", name, wait_s)
-        return out.send(trial.positions_m, speed=speed, stop=stop)
+        sent = out.send(trial.positions_m, speed=speed, stop=stop)
+        time.sleep(LINGER_S)  # the last samples reach the consumers before the outlet goes
+        return sent
     finally:
         out.close()

@@ -349,6 +349,7 @@ class LiveSession:
             self._event("resumed", head.index, f"samples again after {head.index - g} missing frame(s)")
         if self._restart_pending is not None and head.index >= self._restart_pending:
             self._restart_pending = None
+            self._restarted = True
             self._event("restart", head.index, "the stream's timestamps went back (the sender restarted); "
                         f"frames {g}..{head.index - 1} missing, the PF run restarts from the LS pose")
             self.causal.restart()
@@ -574,6 +575,11 @@ class LiveSession:
         for (a, b), since in self.swapped.items():
             reasons.append(Q.Reason("label", "fail", f"markers {names_m[a]} and {names_m[b]} look swapped since "
                                     f"t = {since / self.rate:.2f} s (springs off)"))
+        if self.n_dropped:
+            reasons.append(Q.Reason("live_dropped", "note", f"{self.n_dropped} frame(s) never came (springs off there; "
+                                    "see the events)"))
+        if self.n_late:
+            reasons.append(Q.Reason("live_late", "note", f"{self.n_late} sample(s) came late and were dropped"))
         if self.n_skipped:
             reasons.append(Q.Reason("live_skip", "check", f"{self.n_skipped} frames skipped: the solver fell more than "
                                     f"{self.options.max_behind_s:g} s behind"))
@@ -629,6 +635,7 @@ class LiveSession:
         frame = CausalFrame(np.full((len(self.marker_names), 3), np.nan), np.zeros((len(self.marker_names), 3)),
                             np.zeros((len(self.marker_names), 3)), np.zeros(len(self.marker_names), dtype=bool))
         self.current_sample = None
+        self.causal.restart()  # the next sample has no predecessor: no velocity from across the hole
         self._record_input(g, nan, None, frame, blank=True)
         self.rec["active"].set(g, frame.present)
         self._output(g, None)
@@ -716,10 +723,11 @@ class LiveSession:
             return -1
         if state["end"] == "hole" and self.queue:
             nxt = self.queue[0].index
-            if not self._restart_pending and nxt - (state["last"] + 1) > self.coast_frames:
+            if not self._restarted and nxt - (state["last"] + 1) > self.coast_frames:
                 self._event("run_end", state["last"] + 1, f"{nxt - state['last'] - 1} frames "
                             f"({(nxt - state['last'] - 1) / self.rate:.2f} s) without samples, more than "
                             f"{self.options.max_coast_s:g} s: the PF run ends")
+            self._restarted = False
             for i in range(self.n_frames, nxt):
                 self._blank(i)
             return nxt
@@ -737,6 +745,7 @@ class LiveSession:
         self.last_index = -1
         self.restart_pad = int(math.ceil(self.options.max_coast_s * self.rate)) + 1
         self._restart_pending: int | None = None
+        self._restarted = False
         self.last_arrival = self.clock()
         self.stalled = False
         self.ended_by = ""
