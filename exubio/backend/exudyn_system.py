@@ -89,7 +89,7 @@ from exudyn.advancedUtilities import CreateSymbolicUserFunction
 from exudyn.rigidBodyUtilities import RotationMatrix2EulerParameters
 
 from exubio.backend.pf_numerics import (LimitElement, StateRecord, ep_G, ep_rotation, frame_with_z, frames_from_steps,
-                                       hermite, limit_window)
+                                       hermite, limit_window, quintic)
 from exubio.errors import ModelError
 from exubio.kinematics import axis_rotation, Kinematics, PointSet
 from exubio.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD  # k_lim, shared with LS
@@ -855,8 +855,9 @@ class PFSystem:
 
         The steps are those of ``run`` with step_s = frame_dt_s (the same pre-step, limit switching
         and solver settings; a step the solver halves gets its targets by cubic Hermite interpolation
-        between the two frames it lies between, both already received), so a run through the same
-        frames gives the same motion as ``run``. An exception raised by either function stops the
+        between the two frames it lies between, both already received, and the frames the steps
+        then no longer end on are the quintic Hermite interpolation of the two step states around
+        them, as ``run`` does), so a run through the same frames gives the same motion as ``run``. An exception raised by either function stops the
         solver and is raised from here. Ctrl-C (SIGINT, main thread) stops the solver at the next step
         and raises KeyboardInterrupt from here; ``interrupt`` is called from the signal handler (e.g.
         to wake a next_frame that waits for data). Returns the run's statistics
@@ -870,7 +871,7 @@ class PFSystem:
         native, symbolic_targets = self._native, self._targets
         mbs, sd = self._mbs, self._mbs.systemData
         springs, set_parameter = self._spring_objects, mbs.SetObjectParameter
-        frames: dict[int, tuple] = {}  # the last two frames received: i -> (pos, vel, active)
+        frames: dict[int, tuple] = {}  # the last frames received: i -> (pos, vel, active)
 
         def fetch(i):
             got = next_frame(i)
@@ -884,7 +885,7 @@ class PFSystem:
             if np.any(a & ~(np.isfinite(p).all(axis=1) & np.isfinite(v).all(axis=1))):
                 raise ValueError(f"run_live: a marker is active but not finite at frame {i}")
             frames[i] = (np.where(a[:, None], p, 0.0), np.where(a[:, None], v, 0.0), a)
-            frames.pop(i - 2, None)
+            frames.pop(i - 8, None)  # a rejected step may be retried over earlier frames: keep a few
             return True
 
         def set_targets(p, v):
@@ -938,23 +939,33 @@ class PFSystem:
                 return False
             return True
 
+        previous: list = [None]  # (t, X, Xt, Xtt) of the last accepted step
+
         def post_step(mbs, t):
             last_t[0] = t
             if t > 0.0:
                 accepted[0] += 1
-            x = t / frame_dt_s
-            i = int(round(x))
-            if abs(x - i) < eps and i == done[0] and i <= received[0] and not ended[0] and failure[0] is None:
-                # (Exudyn may still finish the step after a pre-step returned False: not a frame)
-                try:
-                    X = np.asarray(sd.GetODE2Coordinates())[None]
-                    Xt = np.asarray(sd.GetODE2Coordinates_t())[None]
-                    Xtt = np.asarray(sd.GetODE2Coordinates_tt())[None]
-                    on_frame(i, self._decode(X, Xt, Xtt, frame_dt_s, first=i))
+            if failure[0] is not None or ended[0]:  # (Exudyn may finish a step after a pre-step said stop)
+                return True
+            cur = (t, np.asarray(sd.GetODE2Coordinates()), np.asarray(sd.GetODE2Coordinates_t()),
+                   np.asarray(sd.GetODE2Coordinates_tt()))
+            try:  # every frame this step reached: its state, or inside the step (after a reduced step)
+                # the quintic Hermite of the two step states, as run's frames_from_steps
+                while done[0] <= received[0] and done[0] * frame_dt_s <= t + eps * frame_dt_s:
+                    i = done[0]
+                    ti = i * frame_dt_s
+                    if abs(ti - t) <= eps * frame_dt_s or previous[0] is None:
+                        X, Xt, Xtt = cur[1], cur[2], cur[3]
+                    else:
+                        t0_, X0, V0, A0 = previous[0]
+                        h = t - t0_
+                        X, Xt, Xtt = quintic(X0, V0, A0, cur[1], cur[2], cur[3], (ti - t0_) / h, h)
+                    on_frame(i, self._decode(X[None], Xt[None], Xtt[None], frame_dt_s, first=i))
                     done[0] = i + 1
-                except BaseException as exc:
-                    failure[0] = exc
-                    return False
+            except BaseException as exc:
+                failure[0] = exc
+                return False
+            previous[0] = cur
             return True
 
         mbs.SetPreStepUserFunction(pre_step)

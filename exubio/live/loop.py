@@ -397,7 +397,7 @@ class LiveSession:
         names = self.marker_names
         if dropped:
             return
-        for j in np.flatnonzero(~present & ~self.in_gap):
+        for j in np.flatnonzero(~present & ~self.in_gap & self.in_stream):
             self.in_gap[j] = True
             self.gap_start[j] = g
             self._event("gap", g, f"marker {names[j]} missing: its spring is off", (names[j],))
@@ -417,10 +417,10 @@ class LiveSession:
         return frame, active
 
     # ------------------------------------------------------------------ outputs
-    def _output(self, g: int, recon: Reconstruction | None) -> None:
+    def _output(self, g: int, recon: Reconstruction | None, status: FrameStatus = FrameStatus.TOO_FEW_MARKERS) -> None:
         """A frame no PF run holds (before a run starts, a failed frame): published and recorded empty."""
         self._publish(g, None, None)
-        self._record_output(g, recon)
+        self._record_output(g, recon, status)
 
     def _publish(self, g: int, q: np.ndarray | None, measured_m: np.ndarray | None) -> None:
         """The frame's output row: the ISB angles of q, their rates (backward differences of the
@@ -451,7 +451,8 @@ class LiveSession:
         if sample is not None:
             self.latency.append(now - sample.received)
 
-    def _record_output(self, g: int, recon: Reconstruction | None) -> None:
+    def _record_output(self, g: int, recon: Reconstruction | None,
+                       status: FrameStatus = FrameStatus.TOO_FEW_MARKERS) -> None:
         r = self.rec
         if recon is not None:
             q = recon.q_rad[0]
@@ -468,9 +469,12 @@ class LiveSession:
             self._label_check(g, recon)
             self._running(g, q, recon.residuals_m[0])
         else:
-            r["status"].set(g, int(FrameStatus.TOO_FEW_MARKERS))
+            r["status"].set(g, int(status))
             r["run"].set(g, -1)
-            self.n_no_state += 1
+            if status == FrameStatus.NOT_CONVERGED:
+                self.n_failed += 1
+            else:
+                self.n_no_state += 1
         r["isb"].set(g, self.out_isb)
         r["isb_rate"].set(g, self.out_rate)
         r["measured"].set(g, self.measured)
@@ -693,10 +697,9 @@ class LiveSession:
             try:
                 recon = frames.finish(q, qd, qdd, targets)
             except ReconstructionError as exc:
-                self.n_failed += 1
                 self._event("diverged", g, f"{exc}; the PF run restarts from the LS pose")
                 state["end"] = "diverged"
-                self._record_output(g, None)
+                self._record_output(g, None, FrameStatus.NOT_CONVERGED)
                 return
             state["last"] = g
             self._record_output(g, recon)
@@ -712,10 +715,8 @@ class LiveSession:
         self.tracking = False
         for g in sorted(self.pending):  # a frame taken but not solved (the solver stopped)
             self.pending.pop(g)
-            self.n_failed += 1
-            self._output(g, None)
+            self._output(g, None, FrameStatus.NOT_CONVERGED)
         if run.message and state["end"] is None and not self._stop.is_set():
-            self.n_failed += 1
             self._event("diverged", state["last"] + 1, f"the PF solver stopped: {run.message.strip()}; "
                         "the PF run restarts from the LS pose")
             state["end"] = "solver"
@@ -785,6 +786,7 @@ class LiveSession:
         self.swap_count: dict = {}
         self.swapped: dict = {}
         self.in_gap = np.zeros(k, dtype=bool)
+        self.in_stream = self.causal.columns >= 0  # optional markers the stream does not carry: no gap events
         self.gap_start = np.zeros(k, dtype=int)
         self.gaps: list[Gap] = []
         self.pending: dict[int, CausalFrame] = {}
