@@ -8,8 +8,9 @@ arrival - push, per frame (the same clock: one machine). Everything stays on 127
 loopback lsl_api.cfg of exubio.live.transport, used by both processes).
 
 Figures: p50 / p99 / max latency over the run, frames that never arrived, and the live process's
-own summary (frames skipped when it fell behind). A rate "keeps up" when no frame was skipped and
-the latency p99 stays below one second.
+own summary (frames skipped when it fell behind, its CPU time per frame). A rate "keeps up" when no
+frame was skipped and the latency p99 stays below one second. The machine is shared: the load
+average during a run is printed with it (the figures of a loaded machine are its, not exubio's).
 
     python benchmarks/bench_live.py                      # 60 s at 200 Hz, then 1000 Hz
     python benchmarks/bench_live.py --rates 200 400 600 --duration 20 --runs 3
@@ -118,6 +119,7 @@ def run_once(trial, *, core: int | None, out: Path, tag: str) -> dict:
         "max_ms": float(lat[got].max()) if got.any() else None,
         "steady_p99_ms": float(np.percentile(lat[steady], 99)) if steady.any() else None,
         "skipped": fig.get("skipped"), "dropped": fig.get("dropped"), "runs": fig.get("runs"),
+        "cpu_ms_per_frame": fig.get("cpu_ms_per_frame"),
         "keeps_up": bool(fig.get("skipped") == 0 and got.any() and np.percentile(lat[got], 99) < 1000.0),
         "exit": proc.returncode, "stderr_tail": stderr.strip().splitlines()[-3:] if proc.returncode else [],
     }
@@ -139,18 +141,24 @@ def main(argv=None) -> int:
         for rate in args.rates:
             trial = simulated_trial(rate, args.duration)
             for r in range(args.runs):
+                load = os.getloadavg()[0]
                 row = run_once(trial, core=None if args.core < 0 else args.core, out=Path(tmp),
                                tag=f"r{int(rate)}_{r}_{os.getpid()}")
+                row["load_before"] = load
+                row["load_after"] = os.getloadavg()[0]
                 rows.append(row)
-                print(f"{rate:6.0f} Hz run {r + 1}: {row['markers']} markers, {row['arrived']}/{row['frames']} frames "
+                print(f"{rate:6.0f} Hz run {r + 1} (load average {load:.1f} -> {row['load_after']:.1f}): {row['markers']} markers, {row['arrived']}/{row['frames']} frames "
                       f"arrived; latency p50 {row['p50_ms']:.2f} ms, p99 {row['p99_ms']:.2f} ms, max {row['max_ms']:.1f} ms "
                       f"(after the first 2 s: p99 {row['steady_p99_ms']:.2f} ms); skipped {row['skipped']}, "
-                      f"PF runs {row['runs']}: {'keeps up' if row['keeps_up'] else 'does NOT keep up'}", flush=True)
+                      f"PF runs {row['runs']}; live CPU {row['cpu_ms_per_frame'] or float('nan'):.2f} ms/frame: "
+                      f"{'keeps up' if row['keeps_up'] else 'does NOT keep up'}", flush=True)
     for rate in args.rates:
         rs = [r for r in rows if r["rate_hz"] == rate]
-        med = {k: float(np.median([r[k] for r in rs if r[k] is not None])) for k in ("p50_ms", "p99_ms", "max_ms", "steady_p99_ms")}
+        med = {k: float(np.median([r[k] for r in rs if r[k] is not None] or [np.nan]))
+               for k in ("p50_ms", "p99_ms", "max_ms", "steady_p99_ms", "cpu_ms_per_frame")}
         print(f"median of {len(rs)} run(s) at {rate:g} Hz: p50 {med['p50_ms']:.2f} ms, p99 {med['p99_ms']:.2f} ms, "
-              f"max {med['max_ms']:.1f} ms, steady p99 {med['steady_p99_ms']:.2f} ms; keeps up in "
+              f"max {med['max_ms']:.1f} ms, steady p99 {med['steady_p99_ms']:.2f} ms; live CPU {med['cpu_ms_per_frame']:.2f} "
+              f"ms/frame (a dedicated core keeps up to ~{1000 / med['cpu_ms_per_frame']:.0f} Hz); keeps up in "
               f"{sum(r['keeps_up'] for r in rs)}/{len(rs)}")
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))

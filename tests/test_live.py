@@ -136,6 +136,23 @@ def test_live_loop_equals_the_batch_pf_run(clean_run, model_protocol):
     assert rec.live_quality.verdict == "ok"
 
 
+REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "c3d" / "bioptim_exo_martin_dynamique.c3d"
+
+
+@pytest.mark.skipif(not REAL.is_file(), reason="../shared/data absent")
+def test_live_loop_equals_the_batch_pf_run_on_a_real_trial(model_protocol):
+    """A real 21-marker trial (optional ELB absent, a step the solver halves): the live loop and the
+    batch run still integrate the same motion, frames inside a reduced step interpolated alike."""
+    from exubio.methods.pf import PFOptions, reconstruct_pf
+
+    model, protocol = model_protocol
+    rec = reconstruct_causal(read_trial(REAL), model, protocol)
+    assert rec.n_frames == 837 and rec.stats["runs"] == 1 and (rec.status == 0).all()
+    assert not _kinds(rec, "gap")  # ELB is optional and not in the trial: no gap, it is absent
+    batch = reconstruct_pf(model, protocol, rec.targets(), options=PFOptions(step_s=None, project_constraints=False))
+    assert np.abs(batch.q_rad - rec.q_rad).max() < 1e-9
+
+
 def test_stopping_early_gives_the_first_frames_of_the_full_run(short_trial, model_protocol, clean_run, tmp_path):
     """Causal: a session stopped after about a second (Ctrl-C, here stop()) holds exactly the first
     frames of the uninterrupted run, and its recording is complete."""
