@@ -179,6 +179,22 @@ def test_stopping_early_gives_the_first_frames_of_the_full_run(short_trial, mode
     assert np.array_equal(again.positions_m, short_trial.positions_m[:n], equal_nan=True)
 
 
+def test_calibration_from_the_streams_first_frames(short_trial, model_protocol, tmp_path):
+    """--static-frames: the first frames calibrate the model, then every frame is reconstructed;
+    the live verdict carries the calibration's findings as the recording's assessment does."""
+    from exubio.live.app import calibrator
+
+    model, protocol = model_protocol
+    rec = reconstruct_causal(short_trial, model, protocol, static_frames=slice(0, 50), calibrate=calibrator(model, protocol))
+    assert rec.n_frames == N_SHORT and rec.model.metadata.get("calibration") and rec.calibration is not None
+    assert np.isfinite(rec.q_rad).all()
+    folder = write_recording(rec, tmp_path, "cal", report=False)
+    summ = json.loads((folder / "cal.pf.summary.json").read_text())
+    offline = {r["message"] for r in summ["quality"]["reasons"] if r["code"].startswith("calibration")}
+    live = {r.message for r in rec.live_quality.reasons if r.code.startswith("calibration")}
+    assert offline and offline == live  # (the example's first 0.5 s is no still window: both say so)
+
+
 def test_dropped_frames(short_trial, model_protocol, clean_run):
     rec = reconstruct_causal(short_trial, *model_protocol, faults=Faults(drop=(100, 101, 102)))
     ev = _kinds(rec, "dropped")

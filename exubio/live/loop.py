@@ -559,7 +559,7 @@ class LiveSession:
         live loop saw (stalls, restarts, skips, label swaps)."""
         self.verdict_due = g + self.verdict_every
         n = g + 1
-        reasons: list[Q.Reason] = []
+        reasons: list[Q.Reason] = list(self.calibration_reasons)
         if self.res_n.any():
             with np.errstate(all="ignore"):
                 rmse = np.sqrt(self.res_sq / self.res_n) * 1e3
@@ -855,6 +855,7 @@ class LiveSession:
         """Run until the stream ends or ``stop()``; returns the recording (also after Ctrl-C)."""
         self._open()
         self._held_back: list[_Sample] = []
+        self.calibration_reasons: list[Q.Reason] = []
         report = None
         if self.static_frames is None:
             self._bind()  # before the first sample: the stream's start is not kept waiting
@@ -867,6 +868,10 @@ class LiveSession:
                 raise InputError("static_frames given without a calibrate function")
             report = self._calibrate_from_stream()
             self._bind()
+            from exubio.calibration import SCALE_BOUNDS
+
+            self.calibration_reasons = Q.calibration_reasons(  # as exubio.assess does for the recording
+                report.to_dict(), scale_bounds=SCALE_BOUNDS, off_segment=Q.off_segment_markers(self.model, self.protocol))
         if self.on_ready is not None:
             self.on_ready(self)
         self._check_units()
