@@ -284,6 +284,7 @@ def test_falling_behind_skips_and_says_so(short_trial, model_protocol):
     rec = LiveSession(model, protocol, src, options=LiveOptions(end_after_s=1.0, max_behind_s=0.1, catch_up_s=0.0)).run()
     skips = _kinds(rec, "skip")
     assert skips and rec.stats["skipped"] > 0 and rec.n_frames == N_SHORT
+    assert _kinds(rec, "behind")  # said before it skipped
     assert any(r.code == "live_skip" for r in rec.live_quality.reasons)
 
 
@@ -412,3 +413,11 @@ def shutil_which(name: str):
     import shutil
 
     return shutil.which(name)
+
+
+def test_live_without_a_stream_is_bad_input(tmp_path):
+    _lsl_or_skip()
+    env = _env(tmp_path)
+    p = subprocess.run([sys.executable, "-m", "exubio.cli", "live", "--stream", f"absent_{os.getpid()}", "--timeout", "1",
+                        "--out", str(tmp_path)], env=env, capture_output=True, text=True, timeout=60)
+    assert p.returncode == 2 and "no LSL marker stream" in p.stderr

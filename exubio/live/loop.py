@@ -65,6 +65,9 @@ trial's mean residual is already a check (quality.RESIDUAL_MEAN_MM)."""
 LABEL_SWAP_RATIO = 0.5
 """Swapped, the pair's residuals must sum to less than this fraction of the unswapped sum."""
 VERDICT_CODES = {"ok": 0, "check": 1, "fail": 2}
+BEHIND_REPORT_S = 0.05
+"""A backlog longer than this (50 ms: a tenth of the skip limit) is reported as an event (once, until
+caught up); every frame's output carries the backlog anyway."""
 
 ISB_NAMES = tuple(c for cols in ISB_COLUMNS.values() for c in cols)
 ISB_JOINT_OF = tuple(j for j, cols in ISB_COLUMNS.items() for _ in cols)
@@ -123,8 +126,8 @@ class LiveOptions:
 @dataclass(frozen=True)
 class Event:
     """Something the live loop saw and handled: ``kind`` (gap, gap_end, dropped, late, stall,
-    resumed, restart, run_start, run_end, behind, skip, label_swap, label_swap_end, diverged,
-    verdict, end), at ``frame`` (stream frame index) and ``time_s`` (its time on the frame grid)."""
+    resumed, restart, run_start, run_end, behind, caught_up, skip, label_swap, label_swap_end,
+    diverged, verdict, end), at ``frame`` (stream frame index) and ``time_s`` (its time on the frame grid)."""
 
     kind: str
     frame: int
@@ -442,6 +445,13 @@ class LiveSession:
         ok = np.isfinite(res)
         mean_res = float(res[ok].mean()) * 1e3 if ok.any() else np.nan
         self.out_mean_res, self.out_behind = mean_res, behind
+        if behind > self.behind_frames and not self.is_behind:
+            self.is_behind = True
+            self._event("behind", g, f"{behind} frames ({behind / self.rate * 1e3:.0f} ms) behind the stream: "
+                        f"catching up (every frame processed; skipped beyond {self.options.max_behind_s:g} s)")
+        elif behind <= 1 and self.is_behind:
+            self.is_behind = False
+            self._event("caught_up", g, "caught up with the stream")
         if self.publish is not None:
             row = np.concatenate([np.degrees(isb), np.degrees(rate), self.measured.astype(float), res * 1e3,
                                   [mean_res, VERDICT_CODES[self.quality.verdict], float(q is not None), behind, g, ts]])
@@ -802,6 +812,8 @@ class LiveSession:
         self.det_due = 0
         self.run_id = -1
         self.run_started = self.clock()
+        self.is_behind = False
+        self.behind_frames = max(int(round(BEHIND_REPORT_S * self.rate)), 2)
         self.n_frames = 0
         self.tracking = False
         self.last_isb = None
