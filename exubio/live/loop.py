@@ -65,6 +65,10 @@ trial's mean residual is already a check (quality.RESIDUAL_MEAN_MM)."""
 LABEL_SWAP_RATIO = 0.5
 """Swapped, the pair's residuals must sum to less than this fraction of the unswapped sum."""
 VERDICT_CODES = {"ok": 0, "check": 1, "fail": 2}
+DEFER_FRAMES = 16
+"""Frames whose bookkeeping (rates, constraint residuals, noise gains, running figures, the record)
+is done together, vectorised, after their angles went out (a fixed count: the same batches live and
+offline)."""
 BEHIND_REPORT_S = 0.05
 """A backlog longer than this (50 ms: a tenth of the skip limit) is reported as an event (once, until
 caught up); every frame's output carries the backlog anyway."""
@@ -238,6 +242,14 @@ class LiveRecording:
             timings_s={"total": float(np.nansum(self.published_s - self.received_s))},
             info={"live": True, "causal": self.options.causal.describe(), "runs": int(self.run.max() + 1) if self.n_frames else 0,
                   "options": dataclasses.asdict(self.options.pf)}, gaps=t.gaps)
+
+
+class _Motion:
+    """The segment rates of a batch of frames, as _Frames.rates reads them from a PFRun."""
+    __slots__ = ("angular_velocities_rad_s", "angular_accelerations_rad_s2")
+
+    def __init__(self, w, a):
+        self.angular_velocities_rad_s, self.angular_accelerations_rad_s2 = w, a
 
 
 class _Sample:
@@ -433,19 +445,21 @@ class LiveSession:
             isb = self._isb(q)
             rate = (isb - self.last_isb_row) * self.rate if self.last_isb_row is not None else np.zeros_like(isb)
             self.last_isb_row = isb
-            res = np.linalg.norm(self.kin.points(q[None], self.points)[0] - measured_m, axis=1)
+            pts = self.kin.points(q[None], self.points)[0]
+            res = np.linalg.norm(pts - measured_m, axis=1)
         else:
             isb = rate = np.full(len(ISB_NAMES), np.nan)
             res = np.full(k, np.nan)
+            pts = None
             self.last_isb_row = None
-        self.out_isb, self.out_rate = isb, rate
+        self.out_isb = isb
         behind = (self.queue[-1].index - g) if self.queue else 0
         sample = self.current_sample
         ts = np.nan if sample is None else sample.timestamp
         ok = np.isfinite(res)
         mean_res = float(res[ok].mean()) * 1e3 if ok.any() else np.nan
         self.out_mean_res, self.out_behind = mean_res, behind
-        if behind > self.behind_frames and not self.is_behind:
+        if behind > self.behind_frames and not self.is_behind and not math.isinf(self.max_behind):  # (no clock offline)
             self.is_behind = True
             self._event("behind", g, f"{behind} frames ({behind / self.rate * 1e3:.0f} ms) behind the stream: "
                         f"catching up (every frame processed; skipped beyond {self.options.max_behind_s:g} s)")
@@ -460,24 +474,63 @@ class LiveSession:
         self.rec["published"].set(g, now)
         if sample is not None:
             self.latency.append(now - sample.received)
+        self.rec["isb"].set(g, isb)
+        self.rec["isb_rate"].set(g, rate)
+        self.rec["measured"].set(g, self.measured)
+        return res, pts
 
-    def _record_output(self, g: int, recon: Reconstruction | None,
+    def _flush(self, frames) -> None:
+        """The deferred frames' rates, model points, residuals and constraint residuals, vectorised
+        over the batch, then recorded in order."""
+        if not self.deferred:
+            return
+        batch, self.deferred = self.deferred, []
+        gs = [b[0] for b in batch]
+        if batch[0][4] is not None:  # rates computed (and projected) before publishing
+            q, qd, qdd = (np.vstack([b[4][k] for b in batch]) for k in range(3))
+        else:
+            q = np.vstack([b[1] for b in batch])
+            motion = _Motion(np.concatenate([b[2].angular_velocities_rad_s for b in batch]),
+                             np.concatenate([b[2].angular_accelerations_rad_s2 for b in batch]))
+            q, qd, qdd = frames.rates(q, motion)
+        targets = MarkerTargets(time_s=np.array(gs) / self.rate, marker_names=self.marker_names,
+                                positions_m=np.stack([b[3].positions_m for b in batch]),
+                                velocities_m_s=np.stack([b[3].velocities_m_s for b in batch]),
+                                accelerations_m_s2=np.stack([b[3].accelerations_m_s2 for b in batch]))
+        recon = frames.finish(q, qd, qdd, targets)  # diverged frames never get here (checked at publishing)
+        for i, g in enumerate(gs):
+            self._record_output(g, (recon.q_rad[i], recon.qd_rad_s[i], recon.qdd_rad_s2[i], recon.model_points_m[i],
+                                    recon.residuals_m[i], recon.constraint[i], recon.constraint_velocity[i]))
+
+    def _diverged(self, g: int, q: np.ndarray, res: np.ndarray, present: np.ndarray) -> str:
+        """Why the run diverged at this frame ("" if not): exubio.methods.pf's criterion, a spring
+        longer than divergence_deflection_m or angles that are not finite."""
+        if not np.isfinite(q).all():
+            return f"the PF solution is not finite at t = {g / self.rate:.3f} s"
+        limit = self.options.pf.divergence_deflection_m
+        bad = present & ~(res <= limit)
+        if bad.any():
+            j = int(np.flatnonzero(bad)[np.argmax(res[bad])])
+            return (f"the PF run diverged at t = {g / self.rate:.3f} s: spring '{self.marker_names[j]}' is "
+                    f"{res[j] * 1e3:.0f} mm long (limit {limit * 1e3:.0f} mm)")
+        return ""
+
+    def _record_output(self, g: int, out: tuple | None,
                        status: FrameStatus = FrameStatus.TOO_FEW_MARKERS) -> None:
         r = self.rec
-        if recon is not None:
-            q = recon.q_rad[0]
+        if out is not None:
+            q, qd, qdd, points, res, con, conv = out
             r["q"].set(g, q)
-            r["qd"].set(g, recon.qd_rad_s[0])
-            r["qdd"].set(g, recon.qdd_rad_s2[0])
-            r["points"].set(g, recon.model_points_m[0])
-            r["res"].set(g, recon.residuals_m[0])
-            r["g"].set(g, recon.constraint[0])
-            r["gv"].set(g, recon.constraint_velocity[0])
+            r["qd"].set(g, qd)
+            r["qdd"].set(g, qdd)
+            r["points"].set(g, points)
+            r["res"].set(g, res)
+            r["g"].set(g, con)
+            r["gv"].set(g, conv)
             r["status"].set(g, int(FrameStatus.CONVERGED))
             r["run"].set(g, self.run_id)
             self._determinacy(g, q)
-            self._label_check(g, recon)
-            self._running(g, q, recon.residuals_m[0])
+            self._running(g, q, res)
         else:
             r["status"].set(g, int(status))
             r["run"].set(g, -1)
@@ -485,9 +538,6 @@ class LiveSession:
                 self.n_failed += 1
             else:
                 self.n_no_state += 1
-        r["isb"].set(g, self.out_isb)
-        r["isb_rate"].set(g, self.out_rate)
-        r["measured"].set(g, self.measured)
         self.n_frames = g + 1
         if self.verdict_due <= g:
             self._verdict(g)
@@ -516,10 +566,9 @@ class LiveSession:
         self.measured = angles_measured(self.model, self.not_solved, und)
         self.undetermined_frames += det.undetermined[0]
 
-    def _label_check(self, g: int, recon: Reconstruction) -> None:
-        """A swapped pair: both far from their own model points, each close to the other's."""
-        res = recon.residuals_m[0]
-        pts, meas = recon.model_points_m[0], recon.measured_m[0]
+    def _label_check(self, g: int, res: np.ndarray, pts: np.ndarray, meas: np.ndarray) -> None:
+        """A swapped pair: both far from their own model points, each close to the other's (residuals
+        res (k,), model points and measured positions (k, 3) of this frame)."""
         far = np.flatnonzero(res > LABEL_SWAP_MIN_MM * 1e-3)
         seen = set()
         for a_i, a in enumerate(far):
@@ -663,7 +712,6 @@ class LiveSession:
         self.tracking = True
         self._event("run_start", g0, f"PF run {self.run_id} starts from the LS pose of frame {g0}")
         state = {"end": None, "last": g0 - 1, "idle": 0}
-        names = self.marker_names
 
         def next_frame(i: int):
             if self._stop.is_set():
@@ -693,35 +741,39 @@ class LiveSession:
         def on_frame(i: int, part) -> None:
             g = g0 + i
             frame = self.pending.pop(g)
-            targets = MarkerTargets(time_s=np.array([g / self.rate]), marker_names=names,
-                                    positions_m=frame.positions_m[None], velocities_m_s=frame.velocities_m_s[None],
-                                    accelerations_m_s2=frame.accelerations_m_s2[None])
-            # the angles first (published at once), the rest of the frame's bookkeeping after
+            # the angles first (published at once); what does not steer the next steps (rates,
+            # constraint residuals, noise gains, running figures) a batch of frames at a time
             q = frames.coordinates(part)
-            projected = self.options.pf.project_constraints
-            if projected:  # the published angles are the projected ones
-                q, qd, qdd = frames.rates(q, part)
-            self._publish(g, q[0], frame.positions_m)
-            if not projected:
-                q, qd, qdd = frames.rates(q, part)
-            try:
-                recon = frames.finish(q, qd, qdd, targets)
-            except ReconstructionError as exc:
-                self._event("diverged", g, f"{exc}; the PF run restarts from the LS pose")
+            rates = frames.rates(q, part) if projected else None  # the published angles are the projected ones
+            if rates is not None:
+                q = rates[0]
+            res, pts = self._publish(g, q[0], frame.positions_m)
+            why = self._diverged(g, q[0], res, frame.present)
+            if why:
+                self._flush(frames)
+                self._event("diverged", g, f"{why}; the PF run restarts from the LS pose")
                 state["end"] = "diverged"
                 self._record_output(g, None, FrameStatus.NOT_CONVERGED)
                 return
+            self._label_check(g, res, pts, frame.positions_m)
             state["last"] = g
-            self._record_output(g, recon)
+            self.deferred.append((g, q, part, frame, rates))
+            if len(self.deferred) >= DEFER_FRAMES:
+                self._flush(frames)
 
+        projected = self.options.pf.project_constraints
         from exubio.backend.exudyn_system import IntegratorOptions
 
         pf = self.options.pf
         integ = IntegratorOptions(step_s=None, spectral_radius=pf.spectral_radius,
                                   newton_relative_tolerance=pf.newton_relative_tolerance,
                                   modified_newton=pf.modified_newton, timing_breakdown=False)
-        run = setup.system.run_live(next_frame, on_frame, frame_dt_s=1.0 / self.rate, options=integ,
-                                    interrupt=self.stop)
+        self.frames_state = frames
+        try:
+            run = setup.system.run_live(next_frame, on_frame, frame_dt_s=1.0 / self.rate, options=integ,
+                                        interrupt=self.stop)
+        finally:
+            self._flush(frames)
         self.tracking = False
         for g in sorted(self.pending):  # a frame taken but not solved (the solver stopped)
             self.pending.pop(g)
@@ -800,6 +852,7 @@ class LiveSession:
         self.gap_start = np.zeros(k, dtype=int)
         self.gaps: list[Gap] = []
         self.pending: dict[int, CausalFrame] = {}
+        self.deferred: list = []
         self.latency: list[float] = []
         self.res_sum, self.res_sq, self.res_n = np.zeros(k), np.zeros(k), np.zeros(k, dtype=int)
         self.frame_means: list[float] = []
