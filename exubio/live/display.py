@@ -18,13 +18,23 @@ def _num(x: float, fmt: str) -> str:
 
 
 class Display:
+    """A status line rewritten in place on a terminal; on a file or pipe one line every
+    ``PIPE_EVERY_S`` seconds of the stream."""
+
+    PIPE_EVERY_S = 2.0
+
     def __init__(self, out: TextIO, /, *, quiet: bool = False):
         self.out, self.quiet, self.line = out, quiet, False
         self.tty = bool(getattr(out, "isatty", lambda: False)())
+        self.next_t = 0.0
 
     def status(self, s: dict) -> None:
         if self.quiet:
             return
+        if not self.tty:
+            if s["time_s"] < self.next_t:
+                return
+            self.next_t = s["time_s"] + self.PIPE_EVERY_S
         angles = "  ".join(f"{_SHORT[k]} {_num(v, '6.1f')}" for k, v in s["angles_deg"].items())
         text = (f"t {s['time_s']:7.2f} s | latency {_num(s['latency_ms_p50'], '.2f')} ms (max {_num(s['latency_ms_max'], '.1f')})"
                 f" | behind {s['frames_behind']:3d} | residual {_num(s['residual_mean_mm'], '5.1f')} mm"
