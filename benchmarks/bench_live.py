@@ -61,9 +61,7 @@ def run_once(trial, *, core: int | None, out: Path, tag: str) -> dict:
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     outlet = ReplayOutlet(trial.labels, trial.rate_hz, name=name, units="mm", source_id=name)
     stop = threading.Event()
-    if not outlet.wait_for_consumer(60):
-        proc.kill()
-        raise RuntimeError("exubio live did not connect")
+    connected = threading.Event()
 
     def receive():
         # the output stream appears with the first frame; resolve it while frames go
@@ -80,6 +78,7 @@ def run_once(trial, *, core: int | None, out: Path, tag: str) -> dict:
             labels.append(ch.child_value("label"))
             ch = ch.next_sibling("channel")
         col = labels.index("frame")
+        connected.set()
         while not stop.is_set():
             s, _ = inlet.pull_sample(timeout=0.2)
             if s is None:
@@ -90,7 +89,10 @@ def run_once(trial, *, core: int | None, out: Path, tag: str) -> dict:
                 arrive[i] = t
 
     rx = threading.Thread(target=receive, daemon=True)
-    rx.start()
+    rx.start()  # the output stream appears before live takes its first sample: connect to it first
+    if not connected.wait(60) or not outlet.wait_for_consumer(60):
+        proc.kill()
+        raise RuntimeError("exubio live did not connect")
 
     def noted(i, clock):
         push[i] = clock
@@ -114,6 +116,8 @@ def run_once(trial, *, core: int | None, out: Path, tag: str) -> dict:
     steady[:first_after] = False
     return {
         "rate_hz": trial.rate_hz, "frames": n, "markers": len(trial.labels), "arrived": int(got.sum()),
+        "first_arrived": int(np.argmax(got)) if got.any() else None,
+        "last_arrived": int(n - 1 - np.argmax(got[::-1])) if got.any() else None,
         "p50_ms": float(np.percentile(lat[got], 50)) if got.any() else None,
         "p99_ms": float(np.percentile(lat[got], 99)) if got.any() else None,
         "max_ms": float(lat[got].max()) if got.any() else None,

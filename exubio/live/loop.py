@@ -15,9 +15,9 @@ Falling behind. Frames are processed in order as they come; when the solver is s
 stream, samples queue up and are all processed as fast as possible (the backlog is reported, in
 frames, on every frame's output). A backlog beyond ``max_behind_s`` is not carried on: the queued
 frames are skipped (recorded as missing, an Event says how many) and a new PF run starts at the
-newest frame. A run's first ``catch_up_s`` seconds (2 s) are exempt: its start-up backlog is
+newest frame. The session's first ``catch_up_s`` seconds (2 s) are exempt: the start-up backlog is
 worked off at the solver's full speed. With the defaults the angles are never more than about
-0.5 s late after that.
+0.5 s late after that (a run that starts after a skip starts at the newest frame: no backlog).
 
 Labels. A label swap in the stream shows as two markers far from their model points but each
 close to the other's: where that holds for LABEL_SWAP_FRAMES frames in a row, both springs are
@@ -110,8 +110,8 @@ class LiveOptions:
     stall_s: no sample for this long is reported as a stall.
     end_after_s: no sample for this long ends the stream (None: wait for ever, end with Ctrl-C).
     max_behind_s: a backlog longer than this is skipped (see the module docstring), except during the
-        first ``catch_up_s`` seconds of a PF run, in which the start's backlog (the LS pose, the
-        system built, the first solves) is worked off.
+        first ``catch_up_s`` seconds of the session's first PF run, in which the start's backlog (the
+        stream opened, the LS pose, the system built, the first solves) is worked off.
     verdict_every_s: the running verdict is re-evaluated this often.
     open_timeout_s: how long to wait for the stream to appear.
     """
@@ -370,7 +370,7 @@ class LiveSession:
             self.causal.restart()
             raise _EndRun
         behind = self.queue[-1].index - g
-        if behind > self.max_behind and self.clock() - self.run_started > self.options.catch_up_s:
+        if behind > self.max_behind and (self.run_id > 0 or self.clock() - self.run_started > self.options.catch_up_s):
             newest = self.queue[-1]
             self._event("skip", g, f"{behind} frames ({behind / self.rate:.2f} s) behind, more than "
                         f"{self.options.max_behind_s:g} s: frames {g}..{newest.index - 1} skipped, a new PF run "
@@ -736,6 +736,7 @@ class LiveSession:
                 self._event("run_end", g0 + i, f"no active spring for {state['idle']} frames: the PF run ends")
                 return None
             self.pending[g0 + i] = frame
+            self.n_stepped += 1
             return frame.positions_m, frame.velocities_m_s, active
 
         def on_frame(i: int, part) -> None:
@@ -814,6 +815,7 @@ class LiveSession:
         self.ended_by = ""
         self.n_late = self.n_dropped = self.n_skipped = self.n_failed = self.n_no_state = 0
         self.dropped_run = 0
+        self.n_stepped = 0
         self.coast_frames = max(int(round(self.options.max_coast_s * self.rate)), 1)
         self.max_behind = (math.inf if math.isinf(self.options.max_behind_s)
                            else max(int(round(self.options.max_behind_s * self.rate)), 1))
@@ -924,6 +926,8 @@ class LiveSession:
         report = None
         if self.static_frames is None:
             self._bind()  # before the first sample: the stream's start is not kept waiting
+            if self.on_ready is not None:
+                self.on_ready(self)
         if not self._pull(1.0) or not self.queue:
             if not self._wait_for_sample():
                 raise InputError(f"{self.info.name}: no sample came within {self.options.end_after_s} s of opening "
@@ -937,8 +941,8 @@ class LiveSession:
 
             self.calibration_reasons = Q.calibration_reasons(  # as exubio.assess does for the recording
                 report.to_dict(), scale_bounds=SCALE_BOUNDS, off_segment=Q.off_segment_markers(self.model, self.protocol))
-        if self.on_ready is not None:
-            self.on_ready(self)
+            if self.on_ready is not None:
+                self.on_ready(self)
         self._check_units()
         g = 0
         cpu0, wall0 = time.process_time(), time.perf_counter()
@@ -972,8 +976,9 @@ class LiveSession:
         lat = np.asarray(self.latency) * 1e3
         stats = {"frames": n, "dropped": self.n_dropped, "late": self.n_late, "skipped": self.n_skipped,
                  "failed": self.n_failed, "no_pf_state": self.n_no_state, "runs": self.run_id + 1,
-                 "cpu_ms_per_frame": 1e3 * self.cpu_s / max(n, 1),
-                 "cpu_definition": "the process's CPU time (solver, bookkeeping, LSL threads; waiting excluded) per frame",
+                 "cpu_ms_per_frame": 1e3 * self.cpu_s / max(self.n_stepped, 1),
+                 "cpu_definition": "the process's CPU time (solver, bookkeeping, LSL threads; waiting excluded) per "
+                                   "frame PF stepped through (skipped frames cost nothing)",
                  "loop_latency_ms": {"p50": float(np.percentile(lat, 50)) if lat.size else None,
                                      "p99": float(np.percentile(lat, 99)) if lat.size else None,
                                      "max": float(lat.max()) if lat.size else None,
