@@ -92,7 +92,8 @@ def run_once(trial, *, core: int | None, out: Path, tag: str) -> dict:
     rx.start()  # the output stream appears before live takes its first sample: connect to it first
     if not connected.wait(60) or not outlet.wait_for_consumer(60):
         proc.kill()
-        raise RuntimeError("exubio live did not connect")
+        out_, err_ = proc.communicate()
+        raise RuntimeError(f"exubio live did not connect: {err_[-2000:]}")
 
     def noted(i, clock):
         push[i] = clock

@@ -332,15 +332,17 @@ class LiveSession:
             self.last_arrival = now
         return True
 
-    def _wait_for_sample(self) -> bool:
-        """Block until a sample is queued; False when the stream ended or the session stops."""
+    def _wait_for_sample(self, *, first: bool = False) -> bool:
+        """Block until a sample is queued; False when the stream ended or the session stops (the
+        first sample is waited for ``open_timeout_s``, later ones ``end_after_s``)."""
+        limit = self.options.open_timeout_s if first else self.options.end_after_s
         while not self.queue:
             if self._stop.is_set():
                 self.ended_by = "stopped"
                 return False
             silent = self.clock() - self.last_arrival
-            if self.options.end_after_s is not None and silent > self.options.end_after_s:
-                self.ended_by = f"no sample for {self.options.end_after_s:g} s"
+            if limit is not None and silent > limit:
+                self.ended_by = f"no sample for {limit:g} s"
                 return False
             if silent > self.options.stall_s and not self.stalled:
                 self.stalled = True
@@ -929,9 +931,10 @@ class LiveSession:
             if self.on_ready is not None:
                 self.on_ready(self)
         if not self._pull(1.0) or not self.queue:
-            if not self._wait_for_sample():
-                raise InputError(f"{self.info.name}: no sample came within {self.options.end_after_s} s of opening "
-                                 "the stream")
+            if not self._wait_for_sample(first=True):
+                raise InputError(f"{self.info.name}: no sample came within {self.options.open_timeout_s:g} s of "
+                                 "opening the stream")
+        self.run_started = self.clock()  # the start-up grace counts from the first sample
         if self.static_frames is not None:
             if self.calibrate is None:
                 raise InputError("static_frames given without a calibrate function")

@@ -203,6 +203,10 @@ class LSLSource:
         self.inlet = lsl.StreamInlet(found[0], max_buflen=self.max_buffer_s, recover=True,
                                      processing_flags=lsl.proc_clocksync)
         full = self.inlet.info(timeout=timeout_s)
+        try:  # the first clock-offset estimate takes LSL ~0.5 s of probes: done now, before the data flows
+            self.inlet.time_correction(timeout=timeout_s)
+        except Exception as exc:  # noqa: BLE001 - a timeout here leaves the correction to the first samples
+            log.info("LSL time correction not estimated yet: %s", exc)
         labels, units = marker_labels(_channels(full), full.channel_count(), full.name())
         if not full.nominal_srate() > 0:
             raise InputError(f"stream '{full.name()}': irregular rate; a marker stream needs its nominal rate")
