@@ -69,6 +69,9 @@ DEFER_FRAMES = 16
 """Frames whose bookkeeping (rates, constraint residuals, noise gains, running figures, the record)
 is done together, vectorised, after their angles went out (a fixed count: the same batches live and
 offline)."""
+PULL_EVERY_S = 0.005
+"""The source's own buffer is drained at least this often while frames are processed, so a backlog
+that waits there (an LSL inlet's) is seen and counted."""
 BEHIND_REPORT_S = 0.05
 """A backlog longer than this (50 ms: a tenth of the skip limit) is reported as an event (once, until
 caught up); every frame's output carries the backlog anyway."""
@@ -308,9 +311,9 @@ class LiveSession:
     def _pull(self, timeout_s: float) -> bool:
         """Take what the source has into the queue; False at the end of the stream."""
         got = self.source.pull(timeout_s)
+        now = self.last_pull = self.clock()
         if got is None:
             return False
-        now = self.clock()
         for ts, values in got:
             raw = np.asarray(values, dtype=float).reshape(self.n_labels, 3) * self.scale
             ts = float(ts)
@@ -356,8 +359,8 @@ class LiveSession:
         """The raw frame g: its sample, or all-missing if it never came. Raises _EndRun where the
         current PF run must end (a hole longer than max_coast_s, a restart, a skipped backlog) and
         StopIteration at the end."""
-        if not self.queue:
-            self._pull(0.0)
+        if not self.queue or self.clock() - self.last_pull > PULL_EVERY_S:  # what waits in the source's buffer
+            self._pull(0.0)  # counts as backlog too
         if not self.queue and not self._wait_for_sample():
             raise StopIteration
         head = self.queue[0]
@@ -812,7 +815,7 @@ class LiveSession:
         self.restart_pad = int(math.ceil(self.options.max_coast_s * self.rate)) + 1
         self._restart_pending: int | None = None
         self._restarted = False
-        self.last_arrival = self.clock()
+        self.last_arrival = self.last_pull = self.clock()
         self.stalled = False
         self.ended_by = ""
         self.n_late = self.n_dropped = self.n_skipped = self.n_failed = self.n_no_state = 0
