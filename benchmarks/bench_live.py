@@ -9,7 +9,7 @@ loopback lsl_api.cfg of exubio.live.transport, used by both processes).
 
 Figures: p50 / p99 / max latency over the run, frames that never arrived, and the live process's
 own summary (frames skipped when it fell behind, its CPU time per frame). A rate "keeps up" when no
-frame was skipped and the latency p99 stays below one second. The machine is shared: the load
+frame was skipped and the median latency after the first 2 s stays below KEEPS_UP_MS (10 ms). The machine is shared: the load
 average during a run is printed with it (the figures of a loaded machine are its, not exubio's).
 
     python benchmarks/bench_live.py                      # 60 s at 200 Hz, then 1000 Hz
@@ -29,6 +29,11 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+
+KEEPS_UP_MS = 10.0
+"""A rate is kept up with when no frame is skipped and, after the first 2 s, the median latency stays
+below this: the solver is not queueing frames (a backlog shows as a median of tens to hundreds of ms)."""
 
 
 def simulated_trial(rate_hz: float, duration_s: float):
@@ -125,7 +130,7 @@ def run_once(trial, *, core: int | None, out: Path, tag: str) -> dict:
         "steady_p99_ms": float(np.percentile(lat[steady], 99)) if steady.any() else None,
         "skipped": fig.get("skipped"), "dropped": fig.get("dropped"), "runs": fig.get("runs"),
         "cpu_ms_per_frame": fig.get("cpu_ms_per_frame"),
-        "keeps_up": bool(fig.get("skipped") == 0 and got.any() and np.percentile(lat[got], 99) < 1000.0),
+        "keeps_up": bool(fig.get("skipped") == 0 and steady.any() and np.percentile(lat[steady], 50) < KEEPS_UP_MS),
         "exit": proc.returncode, "stderr_tail": stderr.strip().splitlines()[-3:] if proc.returncode else [],
     }
 
