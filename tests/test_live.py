@@ -232,7 +232,8 @@ def test_a_stall_ends_the_pf_run_and_a_new_one_starts(short_trial, model_protoco
     # 50 of 400 frames without a PF state: the convergence criterion of exubio.quality decides
     expected = "fail" if 50 / 400 > NOT_CONVERGED_FRACTION[1] else "check"
     assert rec.live_quality.verdict == expected
-    folder = write_recording(rec, tmp_path, "stall", report=False)
+    folder = write_recording(rec, tmp_path, "stall", report=True)  # the trial report too, with the empty frames
+    assert (folder / "stall.report.pdf").stat().st_size > 0 and (folder / "stall.report.png").stat().st_size > 0
     summ = json.loads((folder / "stall.pf.summary.json").read_text())
     assert summ["quality"]["verdict"] == expected  # the same checks on the recording
     assert any("50 of 400 frames" in r["message"] for r in summ["quality"]["reasons"])
