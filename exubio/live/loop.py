@@ -437,12 +437,12 @@ class LiveSession:
         return frame, active
 
     # ------------------------------------------------------------------ outputs
-    def _output(self, g: int, recon: Reconstruction | None, status: FrameStatus = FrameStatus.TOO_FEW_MARKERS) -> None:
+    def _empty(self, g: int, status: FrameStatus = FrameStatus.TOO_FEW_MARKERS) -> None:
         """A frame no PF run holds (before a run starts, a failed frame): published and recorded empty."""
         self._publish(g, None, None)
-        self._record_output(g, recon, status)
+        self._record_output(g, None, status)
 
-    def _publish(self, g: int, q: np.ndarray | None, measured_m: np.ndarray | None) -> None:
+    def _publish(self, g: int, q: np.ndarray | None, measured_m: np.ndarray | None) -> tuple:
         """The frame's output row: the ISB angles of q, their rates (backward differences of the
         published angles), the measured flags, the residuals, the running verdict."""
         k = len(self.marker_names)
@@ -694,7 +694,7 @@ class LiveSession:
                     return g
                 except ReconstructionError as exc:
                     log.debug("no LS start at frame %d: %s", g, exc)
-            self._output(g, None)
+            self._empty(g)
             g += 1
 
     def _blank(self, g: int) -> None:
@@ -706,7 +706,7 @@ class LiveSession:
         self.causal.restart()  # the next sample has no predecessor: no velocity from across the hole
         self._record_input(g, nan, None, frame, blank=True)
         self.rec["active"].set(g, frame.present)
-        self._output(g, None)
+        self._empty(g)
 
     def _run_pf(self, g0: int) -> int:
         """One PF run from frame g0 until it must end; returns the next frame to start from."""
@@ -740,13 +740,13 @@ class LiveSession:
                 state["end"] = "no marker"
                 self._event("run_end", g0 + i, f"no active spring for {state['idle']} frames: the PF run ends")
                 return None
-            self.pending[g0 + i] = frame
+            self.pending[g0 + i] = (frame, self.current_sample)
             self.n_stepped += 1
             return frame.positions_m, frame.velocities_m_s, active
 
         def on_frame(i: int, part) -> None:
             g = g0 + i
-            frame = self.pending.pop(g)
+            frame, self.current_sample = self.pending.pop(g)  # (a reduced step may have fetched the next)
             # the angles first (published at once); what does not steer the next steps (rates,
             # constraint residuals, noise gains, running figures) a batch of frames at a time
             q = frames.coordinates(part)
@@ -782,8 +782,8 @@ class LiveSession:
             self._flush(frames)
         self.tracking = False
         for g in sorted(self.pending):  # a frame taken but not solved (the solver stopped)
-            self.pending.pop(g)
-            self._output(g, None, FrameStatus.NOT_CONVERGED)
+            _, self.current_sample = self.pending.pop(g)
+            self._empty(g, FrameStatus.NOT_CONVERGED)
         if run.message and state["end"] is None and not self._stop.is_set():
             self._event("diverged", state["last"] + 1, f"the PF solver stopped: {run.message.strip()}; "
                         "the PF run restarts from the LS pose")
@@ -858,7 +858,7 @@ class LiveSession:
         self.in_stream = self.causal.columns >= 0  # optional markers the stream does not carry: no gap events
         self.gap_start = np.zeros(k, dtype=int)
         self.gaps: list[Gap] = []
-        self.pending: dict[int, CausalFrame] = {}
+        self.pending: dict[int, tuple] = {}  # frame -> (CausalFrame, its sample) taken, not yet solved
         self.deferred: list = []
         self.latency: list[float] = []
         self.res_sum, self.res_sq, self.res_n = np.zeros(k), np.zeros(k), np.zeros(k, dtype=int)
