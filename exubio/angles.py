@@ -218,11 +218,12 @@ def segment_anatomical_rotations(model: Model, q: np.ndarray, /, *, kinematics: 
 
 
 def isb_angles(model: Model, q: np.ndarray, /, *, kinematics: Kinematics | None = None,
-               unwrap: bool = True) -> dict[str, np.ndarray]:
+               unwrap: bool = True, frames: Mapping[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
     """ISB angles (radians) of every frame of q (n, m) or (m,): a dict with "SC", "AC", "ST",
     "GH" (X-Z'-Y'') and "HT" (Y-X'-Y'', middle angle <= 0), each (n, 3) (or (3,)); signs in the
-    module docstring. ``unwrap``: remove 2 pi jumps along the frames (for plotting)."""
-    Rg = segment_anatomical_rotations(model, q, kinematics=kinematics)
+    module docstring. ``unwrap``: remove 2 pi jumps along the frames (for plotting). ``frames``:
+    ``anatomical_frames(model)`` computed once by a caller that asks frame by frame (live)."""
+    Rg = segment_anatomical_rotations(model, q, kinematics=kinematics, frames=frames)
     out = {}
     for joint, (prox, dist) in _JOINTS.items():
         Rrel = np.swapaxes(Rg[prox], -1, -2) @ Rg[dist]
@@ -241,20 +242,20 @@ def humerothoracic_elevation(model: Model, q: np.ndarray, /, *, kinematics: Kine
     return np.arccos(cos)
 
 
-def isb_table(model: Model, q: np.ndarray, /, *, kinematics: Kinematics | None = None
-              ) -> tuple[tuple[str, ...], np.ndarray]:
+def isb_table(model: Model, q: np.ndarray, /, *, kinematics: Kinematics | None = None,
+              frames: Mapping[str, np.ndarray] | None = None) -> tuple[tuple[str, ...], np.ndarray]:
     """The ISB angles of q (n, m) as one table: (column names of ISB_COLUMNS, angles (n, 15) rad),
     unwrapped along the frames; computed ISB_BLOCK_FRAMES frames at a time (the segment frames of a
     whole long trial would take ~2 kB per frame)."""
     names = tuple(c for joint in _JOINTS for c in ISB_COLUMNS[joint])
     q = np.asarray(q, dtype=float)
     if q.ndim == 1:
-        ang = isb_angles(model, q, kinematics=kinematics)
+        ang = isb_angles(model, q, kinematics=kinematics, frames=frames)
         return names, np.concatenate([ang[joint] for joint in _JOINTS], axis=-1)
     kin = kinematics or Kinematics(model)
     table = np.empty((q.shape[0], len(names)))
     for a in range(0, q.shape[0], ISB_BLOCK_FRAMES):
-        ang = isb_angles(model, q[a:a + ISB_BLOCK_FRAMES], kinematics=kin, unwrap=False)
+        ang = isb_angles(model, q[a:a + ISB_BLOCK_FRAMES], kinematics=kin, unwrap=False, frames=frames)
         table[a:a + ISB_BLOCK_FRAMES] = np.concatenate([ang[joint] for joint in _JOINTS], axis=-1)
     if q.shape[0] > 1:  # each joint's angles, as isb_angles unwraps them
         table = np.unwrap(table, axis=0)

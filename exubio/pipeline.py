@@ -289,7 +289,6 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
 def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, stems, parts, sink_type, /, *,
                           method_options, summary_extra, progress_factory, calibration, static_reference,
                           chunk_frames, overwrite) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
-    from exubio.angles import ANATOMICAL_ANGLES, anatomical_table
     from exubio.assess import assess_trial, trial_label_findings
 
     recons, sinks, done, failures = [], [], [], {}
@@ -327,8 +326,29 @@ def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, ste
                               calibration=calibration, session=session, dropped=inputs.dropped,
                               partial_swaps=inputs.partial_swaps, repaired=inputs.repaired,
                               static_name=getattr(static_reference, "source", "") or "")
+    out = write_assessed(inputs, trial_path, out_dir, methods, stems, recons, assessment, summary_extra=summary_extra,
+                         model_points=[sink.model_points for sink in sinks], failures=failures, overwrite=overwrite)
+    if failures:
+        raise PartialReconstructionError(
+            "; ".join(f"{m.upper()} failed: {reason}" for m, reason in failures.items())
+            + f" ({', '.join(r.method.upper() for r, _, _ in out)} written)", outputs=out, failures=failures)
+    return out
+
+
+def write_assessed(inputs: TrialInputs, trial_path: str | Path, out_dir: str | Path, methods: list[Method],
+                   stems: list[str], recons: list[Reconstruction], assessment: Any, /, *,
+                   summary_extra: dict[str, Any] | None = None, model_points: list[Any] | None = None,
+                   failures: dict[str, str] | None = None,
+                   overwrite: bool = True) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
+    """Write every method's result set (write_outputs: the anatomical angles with their status, the
+    assessment's verdict in summary.json); ``model_points``: per method, the streamed model points
+    (exubio.io.streamed) when the reconstructions do not hold them; ``failures``: the methods of the
+    run that failed, named in each summary. Returns (reconstruction, paths, summary) per method."""
+    from exubio.angles import ANATOMICAL_ANGLES, anatomical_table
+
+    failures = failures or {}
     out = []
-    for method, stem, recon, sink in zip(methods, stems, recons, sinks):
+    for i, (method, stem, recon) in enumerate(zip(methods, stems, recons)):
         meta = run_metadata(inputs, trial_path, method)
         extra = {"unused_trial_labels": _unused(inputs), **(summary_extra or {})}
         if isinstance(extra.get("calibration"), dict):  # private entries (the static's distances) stay out
@@ -356,12 +376,9 @@ def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, ste
                               angle_header(det, Path(trial_path).name, method.value, inputs.protocol.side))
         paths = write_outputs(recon, out_dir, stem, metadata=meta, summary_data=summ, angles=angles,
                               undetermined=assessment.determinacy[recon.method].undetermined,
-                              streamed={"model_points_m": sink.model_points}, overwrite=overwrite)
+                              streamed=None if model_points is None else {"model_points_m": model_points[i]},
+                              overwrite=overwrite)
         out.append((recon, paths, summ))
-    if failures:
-        raise PartialReconstructionError(
-            "; ".join(f"{m.upper()} failed: {reason}" for m, reason in failures.items())
-            + f" ({', '.join(r.method.upper() for r, _, _ in out)} written)", outputs=out, failures=failures)
     return out
 
 

@@ -19,6 +19,7 @@ OWNERS = {
     "distributed": {"study.py"},
     "dask": {"study.py"},
     "pandas": {"api.py"},
+    "pylsl": {"live/transport.py"},
 }
 VALIDATION_STUDY = tuple(f"exubio.validation.{m}" for m in ("run", "trials", "determinacy", "sensitivity", "residuals",
                                                               "sier", "invivo", "c3d_tasks", "agreement", "mismatch"))

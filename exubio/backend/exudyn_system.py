@@ -89,7 +89,7 @@ from exudyn.advancedUtilities import CreateSymbolicUserFunction
 from exudyn.rigidBodyUtilities import RotationMatrix2EulerParameters
 
 from exubio.backend.pf_numerics import (LimitElement, StateRecord, ep_G, ep_rotation, frame_with_z, frames_from_steps,
-                                       hermite, limit_window)
+                                       hermite, limit_window, quintic)
 from exubio.errors import ModelError
 from exubio.kinematics import axis_rotation, Kinematics, PointSet
 from exubio.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD  # k_lim, shared with LS
@@ -402,6 +402,7 @@ class PFSystem:
         mbs.Assemble()
         sd = mbs.systemData
         self._ltg = [None] + [np.asarray(sd.GetNodeLTGODE2(n), dtype=int) for n in self._nodes[1:]]
+        self._ltg_all = np.array(self._ltg[1:], dtype=int).reshape(len(self._ltg) - 1, -1)
         self._aux_ltg = [np.asarray(sd.GetNodeLTGODE2(n), dtype=int) for n in self._aux_nodes]
         self._n_ode2 = sd.ODE2Size()
         self.build_time_s = time.perf_counter() - t_build
@@ -735,46 +736,8 @@ class PFSystem:
             else:
                 on_frames(part)
 
-        # range-of-motion limits: a joint's limit element is on while one of its angles is within
-        # `margin` (one step of travel at the largest rate) of a limit or beyond it, judged from the
-        # state at the start of each step; a joint d > margin away is looked at again only once it
-        # may have come within the margin, i.e. after (d - margin) / rate
         limits = self._limits
-        rate = self.limit_max_rate_rad_s
-        margin = rate * per_frame * frame_dt_s
-        get_output, rotation_output = mbs.GetObjectOutput, exu.OutputVariableType.Rotation
-        next_limit_check = [math.inf]
-
-        def check_limits(t_start):
-            first = math.inf
-            for e in limits:
-                if e.next_check <= t_start:
-                    branch = e.branch
-                    d = e.distance(get_output(e.obj, rotation_output))
-                    if e.branch != branch:
-                        set_parameter(e.obj, "offset", [e.branch, 0.0, 0.0, 0.0, 0.0, 0.0])
-                    if (d < margin) != e.active:
-                        e.active = not e.active
-                        set_parameter(e.obj, "activeConnector", e.active)
-                        if e.active:
-                            e.on_since = t_start
-                        else:
-                            e.active_s += t_start - e.on_since
-                    e.next_check = t_start + (d - margin) / rate
-                if e.next_check < first:
-                    first = e.next_check
-            next_limit_check[0] = first
-
-        for e in limits:
-            e.active, e.next_check, e.on_since, e.active_s = False, -math.inf, 0.0, 0.0
-            set_parameter(e.obj, "activeConnector", False)
-            if e.branches is not None:
-                e.branch = 1.0
-                set_parameter(e.obj, "offset", [1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
-        if limits:  # from the initial state, before the initial accelerations are computed
-            sd.SetODE2Coordinates(sd.GetODE2Coordinates(configuration=exu.ConfigurationType.Initial),
-                                  configuration=exu.ConfigurationType.Current)
-            check_limits(0.0)
+        check_limits, next_limit_check = self._limit_switching(per_frame * frame_dt_s)
 
         interrupted = [False]
 
@@ -878,6 +841,222 @@ class PFSystem:
             solver_times_s=times, newton_iterations=int(it.newtonStepsCount), jacobian_updates=int(it.newtonJacobiCount),
             steps=accepted[0], step_s=float(per_frame * frame_dt_s), limit_active_s=active_s)
 
+    def run_live(self, next_frame: Callable[[int], tuple | None], on_frame: Callable[[int, PFRun], None], /, *,
+                 frame_dt_s: float, options: IntegratorOptions = IntegratorOptions(),
+                 interrupt: Callable[[], None] | None = None) -> PFRun:
+        """Integrate the PF system through marker frames as they come (live, causal): one step per
+        frame, frame i at t = i * frame_dt_s, from (q0, qd0) at frame 0.
+
+        next_frame(i): the targets of frame i = 0, 1, 2, ... as (positions (k, 3) m, velocities
+            (k, 3) m/s, active (k,) bool), or None to end the run there. It is called once per frame,
+            in order, when the step that ends on frame i is about to be solved (so it may block until
+            the frame arrives); frame 0 before the start. A spring is used in a step only if its marker
+            is active at both frames the step joins (as ``run``).
+        on_frame(i, state): the segment motion of frame i (a PFRun of one frame, ``time_s`` = [i dt]) as
+            soon as the solver has accepted the step that ends on it; frame 0 once the initial
+            accelerations are computed.
+
+        The steps are those of ``run`` with step_s = frame_dt_s (the same pre-step, limit switching
+        and solver settings; a step the solver halves gets its targets by cubic Hermite interpolation
+        between the two frames it lies between, both already received, and the frames the steps
+        then no longer end on are the quintic Hermite interpolation of the two step states around
+        them, as ``run`` does), so a run through the same frames gives the same motion as ``run``. An exception raised by either function stops the
+        solver and is raised from here. Ctrl-C (SIGINT, main thread) stops the solver at the next step
+        and raises KeyboardInterrupt from here; ``interrupt`` is called from the signal handler (e.g.
+        to wake a next_frame that waits for data). Returns the run's statistics
+        (no frames); ``completed_frames`` = the frames handed to on_frame.
+        """
+        if not frame_dt_s > 0:
+            raise ValueError(f"run_live: frame_dt_s must be > 0, got {frame_dt_s}")
+        k = self.n_springs
+        d_over_c = np.divide(self.springs.damping_ns_per_m, self.springs.stiffness_n_per_m,
+                             out=np.zeros(k), where=self.springs.stiffness_n_per_m > 0)[:, None]
+        native, symbolic_targets = self._native, self._targets
+        mbs, sd = self._mbs, self._mbs.systemData
+        springs, set_parameter = self._spring_objects, mbs.SetObjectParameter
+        frames: dict[int, tuple] = {}  # the last frames received: i -> (pos, vel, active)
+
+        def fetch(i):
+            got = next_frame(i)
+            if got is None:
+                return False
+            p, v, a = (np.asarray(x) for x in got)
+            a = a.astype(bool)
+            if p.shape != (k, 3) or v.shape != (k, 3) or a.shape != (k,):
+                raise ValueError(f"run_live: frame {i} must be positions ({k}, 3), velocities ({k}, 3), active ({k},); "
+                                 f"got {p.shape}, {v.shape}, {a.shape}")
+            if np.any(a & ~(np.isfinite(p).all(axis=1) & np.isfinite(v).all(axis=1))):
+                raise ValueError(f"run_live: a marker is active but not finite at frame {i}")
+            frames[i] = (np.where(a[:, None], p, 0.0), np.where(a[:, None], v, 0.0), a)
+            frames.pop(i - 8, None)  # a rejected step may be retried over earlier frames: keep a few
+            return True
+
+        def set_targets(p, v):
+            row = (p + d_over_c * v).tolist() if native else np.concatenate([p, v], axis=-1).tolist()
+            if native:
+                for j in range(k):
+                    set_parameter(springs[j], "offset", row[j])
+            else:
+                for j in range(k):
+                    symbolic_targets[j].SetVector(row[j])
+
+        failure: list = [None]
+        if not fetch(0):
+            return self._decode(*(np.zeros((0, self._n_ode2)) for _ in range(3)), frame_dt_s, first=0)
+        state = frames[0][2].copy()
+        set_targets(frames[0][0], frames[0][1])
+        for j in range(k):
+            set_parameter(springs[j], "activeConnector", bool(state[j]))
+        limits = self._limits
+        check_limits, next_limit_check = self._limit_switching(frame_dt_s)
+        received, last_t, done, ended = [0], [0.0], [0], [False]
+        interrupted = [False]
+        accepted = [0]
+        eps = 1e-6
+
+        def pre_step(mbs, t):
+            if interrupted[0] or failure[0] is not None or ended[0]:
+                return False
+            try:
+                if limits and last_t[0] >= next_limit_check[0]:
+                    check_limits(last_t[0])
+                x = t / frame_dt_s
+                i = int(math.ceil(x - eps))
+                while received[0] < i:  # the frame this step ends on (or lies before)
+                    if not fetch(received[0] + 1):
+                        ended[0] = True
+                        return False
+                    received[0] += 1
+                lo = int(math.floor(last_t[0] / frame_dt_s + eps))
+                now = frames[i][2] & frames[max(lo, i - 1)][2] if i - 1 >= lo else frames[i][2]
+                for j in np.flatnonzero(now != state):
+                    set_parameter(springs[j], "activeConnector", bool(now[j]))
+                state[:] = now
+                if abs(x - i) < eps:
+                    set_targets(frames[i][0], frames[i][1])
+                else:  # a reduced step between frames i - 1 and i
+                    (p0, v0, _), (p1, v1, _) = frames[i - 1], frames[i]
+                    set_targets(*hermite(p0, v0, p1, v1, x - (i - 1), frame_dt_s))
+            except BaseException as exc:
+                failure[0] = exc
+                return False
+            return True
+
+        previous: list = [None]  # (t, X, Xt, Xtt) of the last accepted step
+
+        def post_step(mbs, t):
+            last_t[0] = t
+            if t > 0.0:
+                accepted[0] += 1
+            if failure[0] is not None or ended[0]:  # (Exudyn may finish a step after a pre-step said stop)
+                return True
+            cur = (t, np.asarray(sd.GetODE2Coordinates()), np.asarray(sd.GetODE2Coordinates_t()),
+                   np.asarray(sd.GetODE2Coordinates_tt()))
+            try:  # every frame this step reached: its state, or inside the step (after a reduced step)
+                # the quintic Hermite of the two step states, as run's frames_from_steps
+                while done[0] <= received[0] and done[0] * frame_dt_s <= t + eps * frame_dt_s:
+                    i = done[0]
+                    ti = i * frame_dt_s
+                    if abs(ti - t) <= eps * frame_dt_s or previous[0] is None:
+                        X, Xt, Xtt = cur[1], cur[2], cur[3]
+                    else:
+                        t0_, X0, V0, A0 = previous[0]
+                        h = t - t0_
+                        X, Xt, Xtt = quintic(X0, V0, A0, cur[1], cur[2], cur[3], (ti - t0_) / h, h)
+                    on_frame(i, self._decode(X[None], Xt[None], Xtt[None], frame_dt_s, first=i))
+                    done[0] = i + 1
+            except BaseException as exc:
+                failure[0] = exc
+                return False
+            previous[0] = cur
+            return True
+
+        mbs.SetPreStepUserFunction(pre_step)
+        mbs.SetPostStepUserFunction(post_step)
+        horizon = 1e9  # steps: the run ends when next_frame says so
+        settings = self._settings(int(horizon), horizon * frame_dt_s, options)
+        solver = exu.MainSolverImplicitSecondOrder()
+        print_before = exu.config.printToConsole
+        exu.config.printToConsole = False
+        message = ""
+        t0 = time.perf_counter()
+        previous_handler = _catch_sigint(interrupted, interrupt)
+        try:
+            success = bool(solver.InitializeSolver(mbs, settings))
+            if success:
+                solver.it.maxStepSize = solver.it.currentStepSize = frame_dt_s
+                success = bool(solver.SolveSteps(mbs, settings))
+                solver.FinalizeSolver(mbs, settings)
+            if not success and not ended[0]:
+                message = solver.GetErrorString() or "solver did not finish"
+        except Exception as exc:
+            success = False
+            message = f"{type(exc).__name__}: {exc}"
+        finally:
+            exu.config.printToConsole = print_before
+            mbs.SetPreStepUserFunction(0)
+            mbs.SetPostStepUserFunction(0)
+            if previous_handler is not None:
+                signal.signal(signal.SIGINT, previous_handler)
+        if interrupted[0]:
+            raise KeyboardInterrupt
+        if failure[0] is not None:
+            raise failure[0]
+        wall = time.perf_counter() - t0
+        it = solver.it
+        active_s = {e.joint: e.active_s + (last_t[0] - e.on_since if e.active else 0.0) for e in limits}
+        empty = self._decode(*(np.zeros((0, self._n_ode2)) for _ in range(3)), frame_dt_s, first=done[0])
+        return dataclasses.replace(
+            empty, completed_frames=int(done[0]), success=bool(ended[0] and not message), message=message,
+            wall_time_s=float(wall), newton_iterations=int(it.newtonStepsCount), jacobian_updates=int(it.newtonJacobiCount),
+            steps=accepted[0], step_s=float(frame_dt_s), limit_active_s=active_s)
+
+    def _limit_switching(self, step_s: float):
+        """Reset the limit elements for a run of steps of ``step_s`` and return (check_limits(t_start),
+        next_limit_check: a one-element list, the earliest time a joint must be looked at again)."""
+        # range-of-motion limits: a joint's limit element is on while one of its angles is within
+        # `margin` (one step of travel at the largest rate) of a limit or beyond it, judged from the
+        # state at the start of each step; a joint d > margin away is looked at again only once it
+        # may have come within the margin, i.e. after (d - margin) / rate
+        limits = self._limits
+        mbs, sd, set_parameter = self._mbs, self._mbs.systemData, self._mbs.SetObjectParameter
+        rate = self.limit_max_rate_rad_s
+        margin = rate * step_s
+        get_output, rotation_output = mbs.GetObjectOutput, exu.OutputVariableType.Rotation
+        next_limit_check = [math.inf]
+
+        def check_limits(t_start):
+            first = math.inf
+            for e in limits:
+                if e.next_check <= t_start:
+                    branch = e.branch
+                    d = e.distance(get_output(e.obj, rotation_output))
+                    if e.branch != branch:
+                        set_parameter(e.obj, "offset", [e.branch, 0.0, 0.0, 0.0, 0.0, 0.0])
+                    if (d < margin) != e.active:
+                        e.active = not e.active
+                        set_parameter(e.obj, "activeConnector", e.active)
+                        if e.active:
+                            e.on_since = t_start
+                        else:
+                            e.active_s += t_start - e.on_since
+                    e.next_check = t_start + (d - margin) / rate
+                if e.next_check < first:
+                    first = e.next_check
+            next_limit_check[0] = first
+
+        for e in limits:
+            e.active, e.next_check, e.on_since, e.active_s = False, -math.inf, 0.0, 0.0
+            set_parameter(e.obj, "activeConnector", False)
+            if e.branches is not None:
+                e.branch = 1.0
+                set_parameter(e.obj, "offset", [1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+        if limits:  # from the initial state, before the initial accelerations are computed
+            sd.SetODE2Coordinates(sd.GetODE2Coordinates(configuration=exu.ConfigurationType.Initial),
+                                  configuration=exu.ConfigurationType.Current)
+            check_limits(0.0)
+        return check_limits, next_limit_check
+
     def _settings(self, n_steps: int, end_time: float, options: IntegratorOptions):
         s = exu.SimulationSettings()
         ti = s.timeIntegration
@@ -906,22 +1085,23 @@ class PFSystem:
         return s
 
     def _decode(self, X, Xt, Xtt, frame_dt_s, *, first: int = 0) -> PFRun:
-        """The segment motion of frames first ... first + len(X) - 1 from the system coordinates."""
+        """The segment motion of frames first ... first + len(X) - 1 from the system coordinates
+        (vectorised over the segments: a live run decodes one frame at a time)."""
+        X, Xt, Xtt = (np.asarray(a) for a in (X, Xt, Xtt))
         n = X.shape[0]
         n_seg = len(self.model.segments)
-        R = np.zeros((n, n_seg, 3, 3))
+        L = self._ltg_all  # (n_seg - 1, 7): each movable segment's node coordinates
+        x, xt, xtt = X[:, L], Xt[:, L], Xtt[:, L]  # (n, n_seg - 1, 7)
+        ep = x[..., 3:] + self._ep_ref[1:]
+        G = ep_G(ep / np.linalg.norm(ep, axis=-1, keepdims=True))
+        R = np.empty((n, n_seg, 3, 3))
         R[:, 0] = np.eye(3)
+        R[:, 1:] = ep_rotation(ep)
         p, v, a, w, al = (np.zeros((n, n_seg, 3)) for _ in range(5))
-        for i in range(1, n_seg):
-            ltg = self._ltg[i]
-            x, xt, xtt = X[:, ltg], Xt[:, ltg], Xtt[:, ltg]
-            ep = x[:, 3:] + self._ep_ref[i]
-            G = ep_G(ep / np.linalg.norm(ep, axis=-1, keepdims=True))
-            R[:, i] = ep_rotation(ep)
-            p[:, i] = x[:, :3] + self._p_ref[i]
-            v[:, i], a[:, i] = xt[:, :3], xtt[:, :3]
-            w[:, i] = np.einsum("nij,nj->ni", G, xt[:, 3:])
-            al[:, i] = np.einsum("nij,nj->ni", G, xtt[:, 3:])
+        p[:, 1:] = x[..., :3] + self._p_ref[1:]
+        v[:, 1:], a[:, 1:] = xt[..., :3], xtt[..., :3]
+        w[:, 1:] = np.einsum("nsij,nsj->nsi", G, xt[..., 3:])
+        al[:, 1:] = np.einsum("nsij,nsj->nsi", G, xtt[..., 3:])
         return PFRun(
             time_s=(first + np.arange(n)) * frame_dt_s, rotations=R, origins_m=p, velocities_m_s=v,
             accelerations_m_s2=a, angular_velocities_rad_s=w, angular_accelerations_rad_s2=al, completed_frames=n,
@@ -1040,7 +1220,7 @@ def _limit_torque(k_lim: float, bounds, three_angles: bool):
     return limit_torque
 
 
-def _catch_sigint(flag: list[bool]):
+def _catch_sigint(flag: list[bool], also: Callable[[], None] | None = None):
     """During a solve, Ctrl-C sets ``flag`` (the step function then stops the solver, and the run
     raises KeyboardInterrupt once Exudyn has returned) instead of raising inside an Exudyn callback,
     where Exudyn would catch it, print it and go on. Returns the previous handler (None when not
@@ -1050,5 +1230,7 @@ def _catch_sigint(flag: list[bool]):
 
     def handler(signum, frame):  # noqa: ARG001
         flag[0] = True
+        if also is not None:
+            also()
 
     return signal.signal(signal.SIGINT, handler)

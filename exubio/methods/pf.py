@@ -215,6 +215,45 @@ def reconstruct_pf(model: Model, protocol: Protocol, targets: MarkerTargets, /, 
     return chunks.reconstruction(targets, timings_s=timings, info=info)
 
 
+@dataclass(frozen=True)
+class PFSetup:
+    """What a PF run starts from: the kinematics, tracked points, held mask, the start state (q0, qd0)
+    and the Exudyn system built on it (shared by the offline run and the live one, exubio.live)."""
+
+    kin: Kinematics
+    points: object
+    held: np.ndarray
+    q0: np.ndarray
+    qd0: np.ndarray
+    system: PFSystem
+    equilibrium_s: float
+    build_s: float
+
+
+def pf_setup(model: Model, protocol: Protocol, targets: MarkerTargets, options: PFOptions = PFOptions(), /, *,
+             kin: Kinematics | None = None) -> PFSetup:
+    """The start of a PF run on ``targets`` (only its first frame is used): the static equilibrium of the
+    springs there with its consistent velocity, the locked segments, and the PFSystem."""
+    t0 = time.perf_counter()
+    kin = kin or Kinematics(model)
+    points = tracked_points(kin, protocol)
+    stiffness = np.array([m.stiffness_n_per_m for m in protocol.markers])
+    damping = np.array([m.damping_ns_per_m for m in protocol.markers])
+    held = held_mask(model, protocol)
+    limits = Limits.of(model, protocol, options.limit_stiffness_nm_per_rad)
+    q0, qd0 = initial_state(kin, points, targets, stiffness, held=held, limits=limits)
+    locked = unobserved_segments(kin, points)
+    for i in locked:  # held at their start value, like LS does through its regularisation
+        qd0[kin.joint_coordinate_indices(i)] = 0.0
+    t1 = time.perf_counter()
+    springs = SpringSet.from_points(points, stiffness_n_per_m=stiffness, damping_ns_per_m=damping)
+    system = PFSystem(model, springs, q0=q0, qd0=qd0, gravity=options.gravity, kinematics=kin,
+                      locked_segments=locked, held_coordinates=np.flatnonzero(held),
+                      limits_rad=model.coordinate_ranges_rad if limits is not None else None,
+                      limit_stiffness_nm_per_rad=limits_stiffness(options))
+    return PFSetup(kin, points, held, q0, qd0, system, t1 - t0, time.perf_counter() - t1)
+
+
 def stream_pf(model: Model, protocol: Protocol, targets: MarkerTargets, sink: ChunkSink, /, *,
               options: PFOptions = PFOptions(), progress: Callable[[int], None] | None = None,
               chunk_frames: int = CHUNK_FRAMES) -> tuple[dict[str, float], dict]:
@@ -352,6 +391,45 @@ class _Frames:
         self.recovery_s += tb - ta
         self.residuals_s += tc - tb
         self.sink_s += time.perf_counter() - tc
+
+    def coordinates(self, run) -> np.ndarray:
+        """Joint coordinates (n, m) of the frames of ``run`` on the start posture's branch (unwrapped
+        across chunks), before the projection on the constraints (the live loop's step 1)."""
+        ta = time.perf_counter()
+        raw = self.kin.coordinates_from_rotations(run.rotations)
+        if self.last_raw is None:
+            q = np.unwrap(raw, axis=0)
+            self.shift = 2.0 * np.pi * np.round((q[0] - self.q0) / (2.0 * np.pi))  # same branch as the start posture
+        else:  # continue the unwrapping of the frames before
+            q = np.unwrap(np.vstack([self.last_raw[None], raw]), axis=0)[1:] + (self.last_unwrapped - self.last_raw)
+        self.last_raw, self.last_unwrapped = raw[-1], q[-1]
+        self.recovery_s += time.perf_counter() - ta
+        return q - self.shift
+
+    def rates(self, q: np.ndarray, run) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """q, q̇, q̈ of the frames of ``run``, projected on the constraints if the options say so."""
+        ta = time.perf_counter()
+        qd, qdd = self.kin.coordinate_rates(q, run.angular_velocities_rad_s, run.angular_accelerations_rad_s2)
+        if self.options.project_constraints:
+            q, qd, qdd, (g, gqd) = project_on_constraints(self.kin, q, qd, qdd, held=self.held)
+            self.raw_g, self.raw_gqd = _nanmax(self.raw_g, g), _nanmax(self.raw_gqd, gqd)
+        self.recovery_s += time.perf_counter() - ta
+        return q, qd, qdd
+
+    def finish(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, part: MarkerTargets) -> Reconstruction:
+        """Model points, residuals and constraint residuals of q (the frames of ``part``); the
+        divergence check."""
+        tb = time.perf_counter()
+        recon = assemble(self.kin, self.points, part, method="pf", q=q, qd=qd, qdd=qdd,
+                         status=np.full(part.n_frames, FrameStatus.CONVERGED), timings_s={}, info={})
+        _check_divergence(recon, self.options.divergence_deflection_m, part, self.kin)
+        with np.errstate(all="ignore"):
+            ok = ~np.isnan(recon.residuals_m)
+            self.sum_res += float(recon.residuals_m[ok].sum())
+            self.n_res += int(ok.sum())
+        self.last_q, self.last_qd = q[-1], qd[-1]
+        self.residuals_s += time.perf_counter() - tb
+        return recon
 
     def mean_deflection_m(self) -> float:
         return self.sum_res / self.n_res if self.n_res else float("nan")

@@ -1,0 +1,28 @@
+"""Live reconstruction from a marker stream (issue 22): causal preprocessing (causal), the live
+loop shared with the offline causal run (loop), marker sources (sources: the interface and an
+in-process replay; transport: Lab Streaming Layer, the only pylsl user), the recording written as
+``exubio reconstruct`` writes a trial (record), the terminal display (display) and what the two
+commands do (app).
+
+``exubio.live.reconstruct_causal(trial, model, protocol)`` is the offline causal PF run (the live
+loop fed by an in-process replay); the names below load their module on first use (importing
+``exubio.live`` loads no solver)."""
+from __future__ import annotations
+
+_LAZY = {"reconstruct_causal": "loop", "LiveOptions": "loop", "LiveSession": "loop", "LiveRecording": "loop",
+         "Event": "loop", "CausalOptions": "causal", "ReplaySource": "sources", "Faults": "sources",
+         "StreamInfo": "sources", "write_recording": "record"}
+
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(f"exubio.live.{_LAZY[name]}"), name)
+    raise AttributeError(f"module 'exubio.live' has no attribute '{name}'")
+
+
+def __dir__():
+    return __all__
