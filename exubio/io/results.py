@@ -321,9 +321,8 @@ class ResultSet:
                     if self.overwrite:
                         os.replace(staged, final)
                     else:
-                        os.link(staged, final)  # FileExistsError when the name is taken: never replaced
+                        _place_new(staged, final)  # FileExistsError when the name is taken: never replaced
                         placed.append(final)
-                        staged.unlink()
                 _fsync_folder(self.folder)
             except OSError as exc:
                 for final in placed:
@@ -348,6 +347,26 @@ class ResultSet:
             self.discard()
         if isinstance(exc, InputError) and str(self.staging) in str(exc):  # name the file, not its staging place
             raise InputError(str(exc).replace(str(self.staging), str(self.folder))) from None
+
+
+def _place_new(staged: Path, final: Path) -> None:
+    """Move ``staged`` to ``final``, which must not exist: a hard link (fails on an existing name,
+    atomically), then the staged name goes. On a file system without hard links (FAT, some network
+    shares) a rename after a check, which another process could race."""
+    import errno
+
+    try:
+        os.link(staged, final)
+    except FileExistsError:
+        raise
+    except OSError as exc:
+        if exc.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.ENOSYS, errno.EMLINK):
+            raise
+        if final.exists():
+            raise FileExistsError(errno.EEXIST, os.strerror(errno.EEXIST), str(final)) from None
+        os.rename(staged, final)
+        return
+    staged.unlink()
 
 
 @contextmanager
