@@ -146,18 +146,33 @@ def _check_raw_header(path: Path) -> None:
         raise InputError(f"{path}: POINT:RATE is {rate_problem(point_rate)}; expected the marker sampling rate in Hz")
 
 
+_TYPE_BYTES = {-1: 1, 1: 1, 2: 2, 4: 4}  # C3D parameter types: char, byte, int16, float
+
+
 def _raw_point_rate(path: Path, byte_order: str, param_block: int, size: int) -> float | None:
-    """POINT:RATE read from the raw parameter section (a float, the first value), None when absent
-    or unreadable: ezc3d crashes on a NaN there, so it is looked at before ezc3d."""
+    """POINT:RATE read from the raw parameter section (a float, the first value), None when absent:
+    ezc3d crashes on a NaN there, so it is looked at before ezc3d. On the way every parameter's
+    declared size is checked against the section (``_raw_parameters``)."""
+    section, params = _raw_parameters(path, byte_order, param_block, size)
+    for group, name, kind, start in params:
+        if group == "POINT" and name == "RATE" and kind == 4 and start + 4 <= len(section):
+            return float(struct.unpack(byte_order + "f", section[start:start + 4])[0])
+    return None
+
+
+def _raw_parameters(path: Path, byte_order: str, param_block: int, size: int
+                    ) -> tuple[bytes, list[tuple[str, str, int, int]]]:
+    """The raw parameter section and its parameters (group, name, type, offset of the data). A
+    parameter whose type is unknown, or whose dimensions declare more data than the section (or the
+    file) holds, is refused: ezc3d reads past its buffer on one (a segmentation fault, measured)."""
     with open(path, "rb") as fh:
         fh.seek((param_block - 1) * 512)
         section = fh.read(min(size - (param_block - 1) * 512, 512 * 255))
     if len(section) < 4:
-        return None
-    n_blocks = section[2]
-    section = section[: max(n_blocks, 1) * 512]
+        return section, []
+    section = section[: max(section[2], 1) * 512]  # byte 3: the section's length in 512-byte blocks
     groups: dict[int, str] = {}
-    params: list[tuple[int, str, int, int]] = []  # group id, name, type, start of its data
+    raw: list[tuple[int, str, int, int, list[int], int]] = []  # group id, name, type, n dims, dims, data start
     pos = 4
     while pos + 2 <= len(section):
         n_chars, ident = struct.unpack("bb", section[pos:pos + 2])
@@ -172,14 +187,21 @@ def _raw_point_rate(path: Path, byte_order: str, param_block: int, size: int) ->
             groups[-ident] = name
         elif here + 4 <= len(section):
             kind, n_dims = struct.unpack("bB", section[here + 2:here + 4])
-            params.append((ident, name, kind, here + 4 + n_dims))
+            raw.append((ident, name, kind, n_dims, list(section[here + 4:here + 4 + n_dims]), here + 4 + n_dims))
         if step <= 0:
             break
         pos = here + step
-    for group, name, kind, start in params:
-        if groups.get(group) == "POINT" and name == "RATE" and kind == 4 and start + 4 <= len(section):
-            return float(struct.unpack(byte_order + "f", section[start:start + 4])[0])
-    return None
+    bad = "not a readable C3D file (the header contradicts the file: parameter"
+    for ident, name, kind, n_dims, dims, start in raw:
+        where = f"{groups.get(ident, f'group {ident}')}:{name}"
+        if kind not in _TYPE_BYTES or n_dims > 7:
+            raise InputError(f"{path}: {bad} {where} has type {kind} and {n_dims} dimensions; expected a type of -1, "
+                             f"1, 2 or 4 and at most 7)")
+        n_bytes = _TYPE_BYTES[kind] * int(np.prod(dims, dtype=np.int64))
+        if start + n_bytes > len(section):
+            raise InputError(f"{path}: {bad} {where} declares dimensions {dims}, {n_bytes} bytes, past the end of the "
+                             f"{len(section)}-byte parameter section)")
+    return section, [(groups.get(g, ""), name, kind, start) for g, name, kind, _, _, start in raw]
 
 
 def _header_count_findings(path: Path, n_read: int) -> list[str]:
