@@ -307,3 +307,27 @@ def test_ctrl_c_of_a_study_with_2_jobs_is_one_line_exit_130(tmp_path, long_trial
     rerun = subprocess.run(cmd, capture_output=True, text=True, encoding="utf-8", timeout=300)
     assert rerun.returncode == 0, rerun.stderr
     assert np.all([(out / "S01" / "s1" / f"t{k}" / "DONE.json").is_file() for k in range(4)])
+
+
+def test_a_lock_is_taken_over_from_a_killed_run_and_from_a_reused_pid_never_from_a_running_one(tmp_path):
+    from exubio.errors import InputError
+    from exubio.io.results import _start_time, claim
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    lock = tmp_path / ".t.ls.lock"
+    lock.write_text(dead.stdout.strip())  # a run that was killed
+    with claim(tmp_path, ["t.ls"]):
+        assert lock.read_text().split()[0] == str(os.getpid())
+        with pytest.raises(InputError, match=rf"another exubio run \(process {os.getpid()}\)"):
+            with claim(tmp_path, ["t.ls"]):
+                pass
+    assert not lock.exists()
+    if _start_time(1) is None:
+        pytest.skip("no /proc: a reused pid cannot be told from its run")
+    lock.write_text(f"1 {_start_time(1) + 1}")  # pid 1 runs, but started after the run that wrote the lock
+    with claim(tmp_path, ["t.ls"]):
+        pass
+    lock.write_text(f"1 {_start_time(1)}")  # the lock's own process, running
+    with pytest.raises(InputError, match=r"another exubio run \(process 1\)"):
+        with claim(tmp_path, ["t.ls"]):
+            pass

@@ -251,11 +251,11 @@ def _lock(path: Path, stem: str) -> Path:
         try:
             fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
         except FileExistsError:
-            pid = _lock_pid(path)
+            pid, started = _lock_owner(path)
             if pid is None and attempt < 4:  # its creator is writing its pid this instant
                 time.sleep(0.02)
                 continue
-            if pid and _process_runs(pid):
+            if pid and _process_runs(pid) and started in (None, _start_time(pid)):  # not a reused pid
                 raise InputError(f"{path.parent / stem}: another exubio run (process {pid}) is writing this result "
                                  f"in {path.parent}; wait for it to end or choose another output folder") from None
             _remove_quietly(path)  # its run was killed
@@ -264,7 +264,8 @@ def _lock(path: Path, stem: str) -> Path:
             raise InputError(f"{path.parent}: cannot write ({exc.strerror or exc})") from None
         in_progress(path)
         try:
-            os.write(fd, str(os.getpid()).encode("ascii"))
+            started = _start_time(os.getpid())
+            os.write(fd, f"{os.getpid()}{'' if started is None else f' {started}'}".encode("ascii"))
         except OSError as exc:
             _remove_quietly(path)
             raise InputError(f"{path.parent}: cannot write ({exc.strerror or exc})") from None
@@ -275,15 +276,32 @@ def _lock(path: Path, stem: str) -> Path:
                      f"to end or choose another output folder")
 
 
-def _lock_pid(path: Path) -> int | None:
-    """The pid in a lock file; None when it is empty (being written) or unreadable; 0 when gone."""
+def _lock_owner(path: Path) -> tuple[int | None, int | None]:
+    """(pid, start time) in a lock file: pid None when it is empty (being written) or unreadable, 0
+    when the lock is gone; start time None where the system does not say (see _start_time)."""
     try:
-        text = path.read_text(encoding="ascii").strip()
+        fields = path.read_text(encoding="ascii").split()
     except FileNotFoundError:
-        return 0
+        return 0, None
+    except (OSError, UnicodeDecodeError):
+        return None, None
+    if not fields or not all(f.isdigit() for f in fields):
+        return None, None
+    return int(fields[0]), (int(fields[1]) if len(fields) > 1 else None)
+
+
+def _start_time(pid: int) -> int | None:
+    """When process ``pid`` started (clock ticks since boot, Linux /proc), so that a lock whose pid
+    was reused by another process after its run was killed is not taken for a running run; None
+    where there is no /proc."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text(encoding="ascii")
     except (OSError, UnicodeDecodeError):
         return None
-    return int(text) if text.isdigit() else None
+    try:
+        return int(stat.rsplit(")", 1)[1].split()[19])  # field 22: starttime (fields after the name)
+    except (IndexError, ValueError):
+        return None
 
 
 class ResultSet:
