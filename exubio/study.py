@@ -38,6 +38,7 @@ import io
 import json
 import logging
 import os
+import re
 import shutil
 import time
 import traceback
@@ -283,15 +284,24 @@ def _write_done(folder: Path, out: TrialOutcome, result: TrialResult) -> None:
 # --------------------------------------------------------------------------------------------
 # The study
 # --------------------------------------------------------------------------------------------
+_TMP_PID = re.compile(rf"^{re.escape(_TMP_PREFIX)}(?:calibration-(?P<cpid>\d+)|.+-(?P<pid>\d+)-\d+)$")
+"""A study's temporary folders: .tmp-<trial>-<pid>-<ns> (a trial), .tmp-calibration-<pid> (a session's calibration)."""
+
+
 def clean_leftovers(out_dir: Path, /) -> list[Path]:
-    """Remove the temporary folders of killed runs (and result folders without DONE.json)."""
+    """Remove the temporary folders and files of killed runs: those whose process (the pid in their
+    name) no longer runs; a running study's (another one into the same folder) are left alone."""
+    from exubio.io.results import _TEMP_NAME, _process_runs
+
     removed = []
     for p in sorted(out_dir.rglob(f"{_TMP_PREFIX}*")):
-        if p.is_dir():
+        m = _TMP_PID.match(p.name)
+        if p.is_dir() and not (m and _process_runs(int(m["pid"] or m["cpid"]))):
             shutil.rmtree(p, ignore_errors=True)
             removed.append(p)
     for p in sorted(out_dir.rglob(".*.tmp*")):  # a file a killed writer left (atomic_write)
-        if p.is_file():
+        m = _TEMP_NAME.match(p.name)
+        if p.is_file() and not (m and _process_runs(int(m["pid"]))):
             p.unlink(missing_ok=True)
             removed.append(p)
     return removed

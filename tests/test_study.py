@@ -76,10 +76,12 @@ def test_same_trial_name_in_two_sessions_and_resume(data, tmp_path):
     assert main(["-q", "study", str(study), "--out", str(out)]) == 0
     assert a.stat().st_mtime_ns == before and {r["status"] for r in _rows(out)} == {"skipped (complete)"}
     (out / "S01" / "day2" / "other" / DONE_FILE).unlink()
-    (out / "S01" / "day1" / ".tmp-trial-1-2").mkdir()
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    leftover = out / "S01" / "day1" / f".tmp-trial-{int(dead.stdout)}-2"  # of a run that was killed
+    leftover.mkdir()
     assert main(["-q", "study", str(study), "--out", str(out)]) == 0
     assert [r["status"] for r in _rows(out)] == ["skipped (complete)", "done", "skipped (complete)"]
-    assert not (out / "S01" / "day1" / ".tmp-trial-1-2").exists()
+    assert not leftover.exists()
     _complete_or_absent(out)
 
 
@@ -213,3 +215,24 @@ def test_local_dask_workers_keep_glibc_malloc_defaults_and_no_profiler():
     out = map_on_scheduler(probe, [0, 1], "local:1", on_error=lambda item, exc: exc)
     inherited = os.environ.get("MALLOC_TRIM_THRESHOLD_")  # (a value set by the user is kept)
     assert out == [(inherited, False), (inherited, False)]
+
+
+def test_leftovers_of_killed_runs_go_a_running_studys_stay(tmp_path):
+    """A second study into the same folder removed every .tmp-* folder, those of a study still at work too."""
+    from exubio.study import clean_leftovers
+
+    dead = int(subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                              text=True).stdout)
+    trial = tmp_path / "S01" / "s1"
+    trial.mkdir(parents=True)
+    killed = [trial / f".tmp-t0-{dead}-123", trial / f".tmp-calibration-{dead}"]
+    running = [trial / f".tmp-t1-{os.getpid()}-456", trial / f".tmp-calibration-{os.getpid()}"]
+    for d in killed + running:
+        d.mkdir()
+    killed_file = trial / f".study.csv.{dead}.0123abcd.tmp.csv"
+    running_file = trial / f".study.csv.{os.getpid()}.0123abcd.tmp.csv"
+    killed_file.write_text("x")
+    running_file.write_text("x")
+    removed = clean_leftovers(tmp_path)
+    assert sorted(removed) == sorted(killed + [killed_file])
+    assert all(p.exists() for p in running + [running_file])
