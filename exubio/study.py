@@ -307,6 +307,19 @@ def clean_leftovers(out_dir: Path, /) -> list[Path]:
     return removed
 
 
+def _remove_after_dask(out_dir: Path, /, *, wait_s: float = 1.0) -> None:
+    """clean_leftovers once the workers named in the leftovers have ended (at most ``wait_s``)."""
+    deadline = time.monotonic() + wait_s
+    from exubio.io.results import _process_runs
+
+    while time.monotonic() < deadline:
+        pids = {int(m["pid"] or m["cpid"]) for p in out_dir.rglob(f"{_TMP_PREFIX}*") if (m := _TMP_PID.match(p.name))}
+        if not any(pid != os.getpid() and _process_runs(pid) for pid in pids):
+            break
+        time.sleep(0.05)
+    clean_leftovers(out_dir)
+
+
 def _calibrate_session(s: SessionSpec, folder: Path) -> tuple[str | None, dict | None, Any, str]:
     """(model file, calibration summary, static reference, error) of a session with a static trial."""
     from exubio.session import calibrate_session
@@ -542,6 +555,17 @@ def _stop_dask(client: Any, cluster: Any, futures: list, /) -> None:
     """After Ctrl-C: cancel the work, close the client and the local cluster within about a second
     each, and say nothing of the connections that close meanwhile (Dask logs them as errors)."""
     _quiet_dask_exit()
+    if cluster is not None:  # a local cluster's worker processes are this process's children: stopped now
+        import multiprocessing
+
+        workers = multiprocessing.active_children()
+        for proc in workers:
+            proc.terminate()
+        deadline = time.monotonic() + STOP_WAIT_S
+        for proc in workers:
+            proc.join(timeout=max(deadline - time.monotonic(), 0.0))
+            if proc.is_alive():
+                proc.kill()
     for step in (lambda: client.cancel(futures, force=True) if client is not None else None,
                  lambda: client.close(timeout=0.5) if client is not None else None,
                  lambda: cluster.close(timeout=0.5) if cluster is not None else None):
@@ -617,7 +641,12 @@ def run_study(spec: StudySpec, out_dir: str | Path, /, *, jobs: int = 1, schedul
             + (f": {o.error}" if o.error else ""))
 
     if tasks:
-        outcomes += (_submit_dask(tasks, scheduler, on_done) if scheduler else _submit_local(tasks, jobs, on_done))
+        try:
+            outcomes += (_submit_dask(tasks, scheduler, on_done) if scheduler else _submit_local(tasks, jobs, on_done))
+        except KeyboardInterrupt:
+            if scheduler:  # Dask's workers were stopped: their unfinished folders go now, not at the next run
+                _remove_after_dask(out)
+            raise
     write_table(out, spec, outcomes)
     if spec.report:
         from exubio.report.study_report import build_study_report

@@ -206,6 +206,32 @@ def remove_leftovers(folder: Path, stems: Sequence[str], /) -> list[Path]:
     return removed
 
 
+def remove_after_interrupt(folder: str | os.PathLike, stems: Sequence[str], /, *, wait_s: float = 1.0) -> list[Path]:
+    """After Ctrl-C stopped workers this process does not own (Dask's): wait up to ``wait_s`` for the
+    processes named in the leftovers of ``stems`` in ``folder`` to end, then remove the leftovers
+    and the locks of runs that no longer run (what the next run would remove)."""
+    import time
+
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    deadline = time.monotonic() + wait_s
+    while time.monotonic() < deadline:
+        pids = {int(m["pid"]) for p in folder.iterdir() if (m := _TEMP_NAME.match(p.name))}
+        pids |= {pid for stem in stems if (pid := _lock_owner(folder / f".{stem}.lock")[0])}
+        if not any(pid != os.getpid() and _process_runs(pid) for pid in pids):
+            break
+        time.sleep(0.05)
+    removed = remove_leftovers(folder, stems)
+    for stem in stems:
+        lock = folder / f".{stem}.lock"
+        pid, started = _lock_owner(lock)
+        if pid and pid != os.getpid() and not (_process_runs(pid) and started in (None, _start_time(pid))):
+            _remove_quietly(lock)
+            removed.append(lock)
+    return removed
+
+
 def _recover_set(staging: Path, folder: Path) -> None:
     """Finish the renames of a set killed while committing (its journal lists them, in order)."""
     journal = staging / _JOURNAL
