@@ -512,7 +512,9 @@ def map_on_scheduler(fn: Callable, items: list, scheduler: str, /, *,
 
         try:
             with dask.config.set(_LOCAL_CLUSTER_CONFIG):  # silence_logs: also the workers' logs (their processes)
-                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                # dashboard_address ":0": Dask's HTTP server on a free port (None still asks for 8787, and
+                # warns on stderr when another cluster holds it)
+                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                                        silence_logs=logging.CRITICAL)
             client = Client(cluster)
         except KeyboardInterrupt:  # Ctrl-C while the cluster starts
