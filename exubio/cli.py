@@ -269,8 +269,17 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
     if args.scheduler:
         from exubio.study import map_on_scheduler
 
-        done = map_on_scheduler(_run_trial, jobs, args.scheduler,
-                                on_error=lambda job, exc: (str(job.trial), None, EXIT_FAILED, f"{type(exc).__name__}: {exc}"))
+        try:
+            done = map_on_scheduler(_run_trial, jobs, args.scheduler,
+                                    on_error=lambda job, exc: (str(job.trial), None, EXIT_FAILED,
+                                                               f"{type(exc).__name__}: {exc}"))
+        except KeyboardInterrupt:  # Dask's workers were stopped: their unfinished files go now
+            from exubio.io.results import remove_after_interrupt
+
+            for job in jobs:
+                remove_after_interrupt(job.out_dir, [f"{job.trial.stem}.{m}" for m in job.methods]
+                                       + [f"{job.trial.stem}.report"])
+            raise
     elif args.jobs > 1:
         from exubio.study import map_in_processes
 

@@ -44,6 +44,7 @@ import io
 import json
 import logging
 import os
+import re
 import shutil
 import time
 import traceback
@@ -329,18 +330,40 @@ def _write_done(folder: Path, out: TrialOutcome, result: TrialResult) -> None:
 # --------------------------------------------------------------------------------------------
 # The study
 # --------------------------------------------------------------------------------------------
+_TMP_PID = re.compile(rf"^{re.escape(_TMP_PREFIX)}(?:calibration-(?P<cpid>\d+)|.+-(?P<pid>\d+)-\d+)$")
+"""A study's temporary folders: .tmp-<trial>-<pid>-<ns> (a trial), .tmp-calibration-<pid> (a session's calibration)."""
+
+
 def clean_leftovers(out_dir: Path, /) -> list[Path]:
-    """Remove the temporary folders of killed runs (and result folders without DONE.json)."""
+    """Remove the temporary folders and files of killed runs: those whose process (the pid in their
+    name) no longer runs; a running study's (another one into the same folder) are left alone."""
+    from exubio.io.results import _TEMP_NAME, _process_runs
+
     removed = []
     for p in sorted(out_dir.rglob(f"{_TMP_PREFIX}*")):
-        if p.is_dir():
+        m = _TMP_PID.match(p.name)
+        if p.is_dir() and not (m and _process_runs(int(m["pid"] or m["cpid"]))):
             shutil.rmtree(p, ignore_errors=True)
             removed.append(p)
     for p in sorted(out_dir.rglob(".*.tmp*")):  # a file a killed writer left (atomic_write)
-        if p.is_file():
+        m = _TEMP_NAME.match(p.name)
+        if p.is_file() and not (m and _process_runs(int(m["pid"]))):
             p.unlink(missing_ok=True)
             removed.append(p)
     return removed
+
+
+def _remove_after_dask(out_dir: Path, /, *, wait_s: float = 1.0) -> None:
+    """clean_leftovers once the workers named in the leftovers have ended (at most ``wait_s``)."""
+    deadline = time.monotonic() + wait_s
+    from exubio.io.results import _process_runs
+
+    while time.monotonic() < deadline:
+        pids = {int(m["pid"] or m["cpid"]) for p in out_dir.rglob(f"{_TMP_PREFIX}*") if (m := _TMP_PID.match(p.name))}
+        if not any(pid != os.getpid() and _process_runs(pid) for pid in pids):
+            break
+        time.sleep(0.05)
+    clean_leftovers(out_dir)
 
 
 def _calibrate_session(s: SessionSpec, folder: Path) -> tuple[str | None, dict | None, Any, str]:
@@ -543,7 +566,9 @@ def map_on_scheduler(fn: Callable, items: list, scheduler: str, /, *,
 
         try:
             with dask.config.set(_LOCAL_CLUSTER_CONFIG):  # silence_logs: also the workers' logs (their processes)
-                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                # dashboard_address ":0": Dask's HTTP server on a free port (None still asks for 8787, and
+                # warns on stderr when another cluster holds it)
+                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                                        silence_logs=logging.CRITICAL)
             client = Client(cluster)
         except KeyboardInterrupt:  # Ctrl-C while the cluster starts
@@ -586,6 +611,17 @@ def _stop_dask(client: Any, cluster: Any, futures: list, /) -> None:
     """After Ctrl-C: cancel the work, close the client and the local cluster within about a second
     each, and say nothing of the connections that close meanwhile (Dask logs them as errors)."""
     _quiet_dask_exit()
+    if cluster is not None:  # a local cluster's worker processes are this process's children: stopped now
+        import multiprocessing
+
+        workers = multiprocessing.active_children()
+        for proc in workers:
+            proc.terminate()
+        deadline = time.monotonic() + STOP_WAIT_S
+        for proc in workers:
+            proc.join(timeout=max(deadline - time.monotonic(), 0.0))
+            if proc.is_alive():
+                proc.kill()
     for step in (lambda: client.cancel(futures, force=True) if client is not None else None,
                  lambda: client.close(timeout=0.5) if client is not None else None,
                  lambda: cluster.close(timeout=0.5) if cluster is not None else None):
@@ -661,7 +697,12 @@ def run_study(spec: StudySpec, out_dir: str | Path, /, *, jobs: int = 1, schedul
             + (f": {o.error}" if o.error else ""))
 
     if tasks:
-        outcomes += (_submit_dask(tasks, scheduler, on_done) if scheduler else _submit_local(tasks, jobs, on_done))
+        try:
+            outcomes += (_submit_dask(tasks, scheduler, on_done) if scheduler else _submit_local(tasks, jobs, on_done))
+        except KeyboardInterrupt:
+            if scheduler:  # Dask's workers were stopped: their unfinished folders go now, not at the next run
+                _remove_after_dask(out)
+            raise
     write_table(out, spec, outcomes)
     if spec.report:
         from exubio.report.study_report import build_study_report

@@ -289,6 +289,35 @@ def test_c3d_header_of_65535_frames_over_100_frames_read_with_a_warning(tmp_path
     assert finding in caplog.text
 
 
+def test_c3d_parameter_dimensions_past_the_parameter_section_refused(tmp_path, c3d, capsys):
+    """POINT:LABELS declared 255 x 255 characters (65 kB) in a 1 kB section: ezc3d read past its
+    buffer and the process died of a segmentation fault."""
+    from exubio.io import c3d as c3d_module
+
+    byte_order, _, header = c3d_module._raw_header(c3d)
+    section, params = c3d_module._raw_parameters(c3d, byte_order, header[0], c3d.stat().st_size)
+    (start,) = [st for group, name, _, st in params if (group, name) == ("POINT", "LABELS")]
+    dims_at = (header[0] - 1) * 512 + start - 2  # a 2-D char array: (label length, number of labels)
+    bad = _patched(c3d, (dims_at, bytes([255, 255])))
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(bad, out), out, "hostile.c3d", "POINT:LABELS declares dimensions [255, 255]",
+            "parameter section")
+
+
+def test_c3d_parameter_turned_into_a_group_by_one_byte_refused(tmp_path, c3d, capsys):
+    """One byte (the group id of ANALOG:LABELS made negative, which marks a group record) crashed
+    ezc3d with a segmentation fault (found by mutating random bytes of the parameter section)."""
+    from exubio.io import c3d as c3d_module
+
+    byte_order, _, header = c3d_module._raw_header(c3d)
+    _, params = c3d_module._raw_parameters(c3d, byte_order, header[0], c3d.stat().st_size)
+    (start,) = [st for group, name, _, st in params if (group, name) == ("ANALOG", "LABELS")]
+    ident_at = (header[0] - 1) * 512 + start - 13  # the record: chars, id, "LABELS", offset (2), type, dims (2)
+    bad = _patched(c3d, (ident_at, bytes([155])))
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(bad, out), out, "hostile.c3d", "parameter section")
+
+
 @pytest.mark.parametrize("value", [-5.0, 0.0, 2.5])
 def test_c3d_point_long_frames_not_a_count_refused(tmp_path, value):
     n = 70_000

@@ -76,10 +76,12 @@ def test_same_trial_name_in_two_sessions_and_resume(data, tmp_path):
     assert main(["-q", "study", str(study), "--out", str(out)]) == 0
     assert a.stat().st_mtime_ns == before and {r["status"] for r in _rows(out)} == {"skipped (complete)"}
     (out / "S01" / "day2" / "other" / DONE_FILE).unlink()
-    (out / "S01" / "day1" / ".tmp-trial-1-2").mkdir()
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    leftover = out / "S01" / "day1" / f".tmp-trial-{int(dead.stdout)}-2"  # of a run that was killed
+    leftover.mkdir()
     assert main(["-q", "study", str(study), "--out", str(out)]) == 0
     assert [r["status"] for r in _rows(out)] == ["skipped (complete)", "done", "skipped (complete)"]
-    assert not (out / "S01" / "day1" / ".tmp-trial-1-2").exists()
+    assert not leftover.exists()
     _complete_or_absent(out)
 
 
@@ -246,3 +248,24 @@ def test_a_relabel_fixes_one_trial_of_a_session_without_touching_the_others(data
     bad.write_text(yaml.safe_dump({"schema_version": 1, "sessions": [
         {**session, "trial_relabel": {"nothere.c3d": {"A": "B"}}}]}), encoding="utf-8")
     assert main(["-q", "study", str(bad), "--out", str(tmp_path / "x")]) == 2
+
+
+def test_leftovers_of_killed_runs_go_a_running_studys_stay(tmp_path):
+    """A second study into the same folder removed every .tmp-* folder, those of a study still at work too."""
+    from exubio.study import clean_leftovers
+
+    dead = int(subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                              text=True).stdout)
+    trial = tmp_path / "S01" / "s1"
+    trial.mkdir(parents=True)
+    killed = [trial / f".tmp-t0-{dead}-123", trial / f".tmp-calibration-{dead}"]
+    running = [trial / f".tmp-t1-{os.getpid()}-456", trial / f".tmp-calibration-{os.getpid()}"]
+    for d in killed + running:
+        d.mkdir()
+    killed_file = trial / f".study.csv.{dead}.0123abcd.tmp.csv"
+    running_file = trial / f".study.csv.{os.getpid()}.0123abcd.tmp.csv"
+    killed_file.write_text("x")
+    running_file.write_text("x")
+    removed = clean_leftovers(tmp_path)
+    assert sorted(removed) == sorted(killed + [killed_file])
+    assert all(p.exists() for p in running + [running_file])

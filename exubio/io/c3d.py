@@ -146,18 +146,41 @@ def _check_raw_header(path: Path) -> None:
         raise InputError(f"{path}: POINT:RATE is {rate_problem(point_rate)}; expected the marker sampling rate in Hz")
 
 
+_TYPE_BYTES = {-1: 1, 1: 1, 2: 2, 4: 4}  # C3D parameter types: char, byte, int16, float
+
+
 def _raw_point_rate(path: Path, byte_order: str, param_block: int, size: int) -> float | None:
-    """POINT:RATE read from the raw parameter section (a float, the first value), None when absent
-    or unreadable: ezc3d crashes on a NaN there, so it is looked at before ezc3d."""
+    """POINT:RATE read from the raw parameter section (a float, the first value), None when absent:
+    ezc3d crashes on a NaN there, so it is looked at before ezc3d. On the way every parameter's
+    declared size is checked against the section (``_raw_parameters``)."""
+    section, params = _raw_parameters(path, byte_order, param_block, size)
+    for group, name, kind, start in params:
+        if group == "POINT" and name == "RATE" and kind == 4 and start + 4 <= len(section):
+            return float(struct.unpack(byte_order + "f", section[start:start + 4])[0])
+    return None
+
+
+def _raw_parameters(path: Path, byte_order: str, param_block: int, size: int
+                    ) -> tuple[bytes, list[tuple[str, str, int, int]]]:
+    """The raw parameter section and its parameters (group, name, type, offset of the data). A
+    section that contradicts itself is refused: a parameter whose type is unknown or whose
+    dimensions declare more data than the section holds, a record whose offset to the next record
+    lies inside it or past the section, a group id defined twice, a parameter of a group no record
+    defines, a name that is no name. ezc3d reads past its buffers on such sections (segmentation
+    faults, measured: a 255 x 255 POINT:LABELS, a parameter turned into a group by one byte)."""
     with open(path, "rb") as fh:
         fh.seek((param_block - 1) * 512)
         section = fh.read(min(size - (param_block - 1) * 512, 512 * 255))
     if len(section) < 4:
-        return None
-    n_blocks = section[2]
-    section = section[: max(n_blocks, 1) * 512]
+        return section, []
+    section = section[: max(section[2], 1) * 512]  # byte 3: the section's length in 512-byte blocks
     groups: dict[int, str] = {}
-    params: list[tuple[int, str, int, int]] = []  # group id, name, type, start of its data
+    raw: list[tuple[int, str, int, int, list[int], int]] = []  # group id, name, type, n dims, dims, data start
+    bad = "not a readable C3D file (the header contradicts the file: parameter section"
+
+    def refuse(what: str) -> None:
+        raise InputError(f"{path}: {bad}: {what})")
+
     pos = 4
     while pos + 2 <= len(section):
         n_chars, ident = struct.unpack("bb", section[pos:pos + 2])
@@ -165,21 +188,40 @@ def _raw_point_rate(path: Path, byte_order: str, param_block: int, size: int) ->
             break
         name = section[pos + 2:pos + 2 + abs(n_chars)].decode("latin-1").upper()
         here = pos + 2 + abs(n_chars)
-        if here + 2 > len(section):
+        if here + 3 > len(section):
             break
+        if ident == 0 or not name.isprintable() or " " in name or not name.isascii():
+            refuse(f"a record at byte {pos} is named {name!r} in group 0 or with characters that are not a name")
         step = struct.unpack(byte_order + "h", section[here:here + 2])[0]
         if ident < 0:
+            if -ident in groups:
+                refuse(f"group id {-ident} is defined twice ({groups[-ident]} and {name})")
             groups[-ident] = name
-        elif here + 4 <= len(section):
+            end = here + 3 + section[here + 2]  # its description
+        else:
             kind, n_dims = struct.unpack("bB", section[here + 2:here + 4])
-            params.append((ident, name, kind, here + 4 + n_dims))
+            dims = list(section[here + 4:here + 4 + n_dims])
+            name = f"{groups.get(ident, f'group {ident}')}:{name}"
+            if kind not in _TYPE_BYTES or n_dims > 7:
+                refuse(f"parameter {name} has type {kind} and {n_dims} dimensions; expected a type of -1, 1, 2 or 4 "
+                       f"and at most 7")
+            start = here + 4 + n_dims
+            n_bytes = _TYPE_BYTES[kind] * int(np.prod(dims, dtype=np.int64))
+            if start + n_bytes + 1 > len(section):
+                refuse(f"parameter {name} declares dimensions {dims}, {n_bytes} bytes, past the end of the "
+                       f"{len(section)}-byte section")
+            end = start + n_bytes + 1 + section[start + n_bytes]  # its description
+            raw.append((ident, name, kind, n_dims, dims, start))
+        if end > len(section) or (step > 0 and here + step < end) or here + step > len(section):
+            refuse(f"the record {name} at byte {pos} ends at byte {end} but its offset to the next record is {step} "
+                   f"(from byte {here}) in a {len(section)}-byte section")
         if step <= 0:
             break
         pos = here + step
-    for group, name, kind, start in params:
-        if groups.get(group) == "POINT" and name == "RATE" and kind == 4 and start + 4 <= len(section):
-            return float(struct.unpack(byte_order + "f", section[start:start + 4])[0])
-    return None
+    for ident, name, _, _, _, _ in raw:
+        if ident not in groups:
+            refuse(f"parameter {name} belongs to group {ident}, which no group record defines")
+    return section, [(groups[g], name.split(":")[-1], kind, start) for g, name, kind, _, _, start in raw]
 
 
 def _header_count_findings(path: Path, n_read: int) -> list[str]:

@@ -206,6 +206,32 @@ def remove_leftovers(folder: Path, stems: Sequence[str], /) -> list[Path]:
     return removed
 
 
+def remove_after_interrupt(folder: str | os.PathLike, stems: Sequence[str], /, *, wait_s: float = 1.0) -> list[Path]:
+    """After Ctrl-C stopped workers this process does not own (Dask's): wait up to ``wait_s`` for the
+    processes named in the leftovers of ``stems`` in ``folder`` to end, then remove the leftovers
+    and the locks of runs that no longer run (what the next run would remove)."""
+    import time
+
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    deadline = time.monotonic() + wait_s
+    while time.monotonic() < deadline:
+        pids = {int(m["pid"]) for p in folder.iterdir() if (m := _TEMP_NAME.match(p.name))}
+        pids |= {pid for stem in stems if (pid := _lock_owner(folder / f".{stem}.lock")[0])}
+        if not any(pid != os.getpid() and _process_runs(pid) for pid in pids):
+            break
+        time.sleep(0.05)
+    removed = remove_leftovers(folder, stems)
+    for stem in stems:
+        lock = folder / f".{stem}.lock"
+        pid, started = _lock_owner(lock)
+        if pid and pid != os.getpid() and not (_process_runs(pid) and started in (None, _start_time(pid))):
+            _remove_quietly(lock)
+            removed.append(lock)
+    return removed
+
+
 def _recover_set(staging: Path, folder: Path) -> None:
     """Finish the renames of a set killed while committing (its journal lists them, in order)."""
     journal = staging / _JOURNAL
@@ -251,11 +277,11 @@ def _lock(path: Path, stem: str) -> Path:
         try:
             fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
         except FileExistsError:
-            pid = _lock_pid(path)
+            pid, started = _lock_owner(path)
             if pid is None and attempt < 4:  # its creator is writing its pid this instant
                 time.sleep(0.02)
                 continue
-            if pid and _process_runs(pid):
+            if pid and _process_runs(pid) and started in (None, _start_time(pid)):  # not a reused pid
                 raise InputError(f"{path.parent / stem}: another exubio run (process {pid}) is writing this result "
                                  f"in {path.parent}; wait for it to end or choose another output folder") from None
             _remove_quietly(path)  # its run was killed
@@ -264,7 +290,8 @@ def _lock(path: Path, stem: str) -> Path:
             raise InputError(f"{path.parent}: cannot write ({exc.strerror or exc})") from None
         in_progress(path)
         try:
-            os.write(fd, str(os.getpid()).encode("ascii"))
+            started = _start_time(os.getpid())
+            os.write(fd, f"{os.getpid()}{'' if started is None else f' {started}'}".encode("ascii"))
         except OSError as exc:
             _remove_quietly(path)
             raise InputError(f"{path.parent}: cannot write ({exc.strerror or exc})") from None
@@ -275,15 +302,32 @@ def _lock(path: Path, stem: str) -> Path:
                      f"to end or choose another output folder")
 
 
-def _lock_pid(path: Path) -> int | None:
-    """The pid in a lock file; None when it is empty (being written) or unreadable; 0 when gone."""
+def _lock_owner(path: Path) -> tuple[int | None, int | None]:
+    """(pid, start time) in a lock file: pid None when it is empty (being written) or unreadable, 0
+    when the lock is gone; start time None where the system does not say (see _start_time)."""
     try:
-        text = path.read_text(encoding="ascii").strip()
+        fields = path.read_text(encoding="ascii").split()
     except FileNotFoundError:
-        return 0
+        return 0, None
+    except (OSError, UnicodeDecodeError):
+        return None, None
+    if not fields or not all(f.isdigit() for f in fields):
+        return None, None
+    return int(fields[0]), (int(fields[1]) if len(fields) > 1 else None)
+
+
+def _start_time(pid: int) -> int | None:
+    """When process ``pid`` started (clock ticks since boot, Linux /proc), so that a lock whose pid
+    was reused by another process after its run was killed is not taken for a running run; None
+    where there is no /proc."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text(encoding="ascii")
     except (OSError, UnicodeDecodeError):
         return None
-    return int(text) if text.isdigit() else None
+    try:
+        return int(stat.rsplit(")", 1)[1].split()[19])  # field 22: starttime (fields after the name)
+    except (IndexError, ValueError):
+        return None
 
 
 class ResultSet:
@@ -321,9 +365,8 @@ class ResultSet:
                     if self.overwrite:
                         os.replace(staged, final)
                     else:
-                        os.link(staged, final)  # FileExistsError when the name is taken: never replaced
+                        _place_new(staged, final)  # FileExistsError when the name is taken: never replaced
                         placed.append(final)
-                        staged.unlink()
                 _fsync_folder(self.folder)
             except OSError as exc:
                 for final in placed:
@@ -348,6 +391,26 @@ class ResultSet:
             self.discard()
         if isinstance(exc, InputError) and str(self.staging) in str(exc):  # name the file, not its staging place
             raise InputError(str(exc).replace(str(self.staging), str(self.folder))) from None
+
+
+def _place_new(staged: Path, final: Path) -> None:
+    """Move ``staged`` to ``final``, which must not exist: a hard link (fails on an existing name,
+    atomically), then the staged name goes. On a file system without hard links (FAT, some network
+    shares) a rename after a check, which another process could race."""
+    import errno
+
+    try:
+        os.link(staged, final)
+    except FileExistsError:
+        raise
+    except OSError as exc:
+        if exc.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.ENOSYS, errno.EMLINK):
+            raise
+        if final.exists():
+            raise FileExistsError(errno.EEXIST, os.strerror(errno.EEXIST), str(final)) from None
+        os.rename(staged, final)
+        return
+    staged.unlink()
 
 
 @contextmanager
