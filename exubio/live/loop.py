@@ -91,13 +91,40 @@ def OUTPUT_CHANNELS(marker_names: Sequence[str]) -> tuple[tuple[str, str], ...]:
     return tuple(ch)
 
 
-def angles_measured(model: Model, not_solved: Sequence[str], undetermined: Sequence[str] = (), /) -> np.ndarray:
+_ISB_AS_ANATOMICAL = {"GH_X_elevation": "GH_phadke_X_elevation", "GH_Z_flexion": "GH_phadke_Z_flexion",
+                      "GH_Y_internal_rotation": "GH_phadke_Y_internal_rotation"}
+"""The ISB table's GH columns (Phadke's sequence) under their anatomical-angle names."""
+
+
+def angles_measured(model: Model, not_solved: Sequence[str], undetermined: Sequence[str] = (), /, *,
+                    protocol: Protocol | None = None, unmeasurable: Sequence[str] = ()) -> np.ndarray:
     """(15,) bool, per ISB angle (ISB_COLUMNS order): measured by the markers. The one place the
-    live output decides it, from exubio.angles.measured_isb_joints: a joint's angles are measured
-    when neither frame's own joint has a coordinate that is not solved (held, locked) or, in this
-    frame, undetermined (exubio.observability's noise gain)."""
-    joints = set(measured_isb_joints(model, set(not_solved) | set(undetermined)))
-    return np.array([j in joints for j in ISB_JOINT_OF], dtype=bool)
+    live output decides it. With ``protocol``: an angle the marker set cannot measure in any
+    reference posture (exubio.assess.angle_status_of_protocol, the status the files give) is not
+    measured; of the others, a joint's angles are not measured in a frame where one of its own
+    coordinates is not solved (held, locked) or undetermined there (exubio.observability's noise
+    gain), ``unmeasurable`` coordinates (the set cannot determine them anyway) left aside."""
+    joints = set(measured_isb_joints(model, set(not_solved) | (set(undetermined) - set(unmeasurable))))
+    out = np.array([j in joints for j in ISB_JOINT_OF], dtype=bool)
+    if protocol is not None:
+        from exubio.assess import angle_status_of_protocol
+
+        status = angle_status_of_protocol(model, protocol)
+        for i, name in enumerate(ISB_NAMES):
+            if status.get(_ISB_AS_ANATOMICAL.get(name, name), "measured") != "measured":
+                out[i] = False
+            elif not any(c in set(not_solved) for c in _joint_coordinates(model, ISB_JOINT_OF[i])) and \
+                    not any(c in set(undetermined) - set(unmeasurable) for c in _joint_coordinates(model, ISB_JOINT_OF[i])):
+                out[i] = True  # the set measures it and nothing of this frame says otherwise
+    return out
+
+
+def _joint_coordinates(model: Model, joint: str) -> tuple[str, ...]:
+    """The model coordinates of the segments an ISB angle set relates (exubio.frame_definitions)."""
+    from exubio.frame_definitions import JOINT_SEGMENTS
+
+    segs = set(JOINT_SEGMENTS[joint]) - {"thorax"}
+    return tuple(c for s in model.segments if s.name in segs and s.joint for c in s.joint.coordinates)
 
 
 @dataclass(frozen=True)
@@ -568,7 +595,8 @@ class LiveSession:
         present = self.rec["active"].a[g][None]
         det = determinacy(self.kin, self.points, q[None], present, self.protocol.weights, excluded=self.excluded)
         und = [n for n, u in zip(self.model.coordinate_names, det.undetermined[0] & ~det.near_gimbal_lock[0]) if u]
-        self.measured = angles_measured(self.model, self.not_solved, und)
+        self.measured = angles_measured(self.model, self.not_solved, und, protocol=self.protocol,
+                                        unmeasurable=self.unmeasurable)
         self.undetermined_frames += det.undetermined[0]
 
     def _label_check(self, g: int, res: np.ndarray, pts: np.ndarray, meas: np.ndarray) -> None:
@@ -635,7 +663,7 @@ class LiveSession:
         lims = [{"coordinate": names[j], "range_deg": [float(np.degrees(self.ranges[j, 0])), float(np.degrees(self.ranges[j, 1]))],
                  "frames_at_limit": int(self.lim_count[j]), "first_frame": int(self.lim_first[j]),
                  "max_beyond_deg": float(np.degrees(self.lim_beyond[j]))} for j in np.flatnonzero(self.lim_count)]
-        reasons += Q.limit_reasons(lims, n)
+        reasons += Q.limit_reasons(lims, n, not_measured=self.unmeasurable)  # as the offline assessment
         open_gaps = [Gap(self.marker_names[j], int(self.gap_start[j]), n) for j in np.flatnonzero(self.in_gap)]
         reasons += Q.gap_reasons(self.gaps + open_gaps, n, self.rate)
         reasons += Q.convergence_reasons({"not_converged": self.n_failed, "too_few_markers": self.n_no_state}, n)
@@ -839,7 +867,11 @@ class LiveSession:
         self.points = tracked_points(self.kin, self.protocol)
         self.excluded = not_solved_mask(self.model, self.protocol, self.kin)
         self.not_solved = tuple(n for n, e in zip(self.model.coordinate_names, self.excluded) if e)
-        self.measured = angles_measured(self.model, self.not_solved)
+        from exubio.assess import coordinates_not_measured_by_protocol
+
+        self.unmeasurable = coordinates_not_measured_by_protocol(self.model, self.protocol, kin=self.kin)
+        self.measured = angles_measured(self.model, self.not_solved, protocol=self.protocol,
+                                        unmeasurable=self.unmeasurable)
         self.ranges = self.model.coordinate_ranges_rad
         self.min_markers = 3
         L = self.n_labels

@@ -3,7 +3,7 @@
 ``<out>/<name>/`` holds: ``<name>.c3d`` (the input markers as received, lab frame, mm; frames that
 never came are missing), ``<name>.markers.npz`` (the same in float64 m with the sample timestamps,
 so the offline causal run can be repeated bit for bit), the result files of
-``exubio reconstruct`` for PF (``<name>.pf.csv``, ``.mot``, ``.isb.csv``, ``.npz``,
+``exubio reconstruct`` for PF (``<name>.pf.csv``, ``.mot``, ``.npz``,
 ``.summary.json``: the offline assessment of the recording, the same checks as a trial's), the
 trial report (``<name>.report.pdf`` / ``.png``, unless ``report=False``) and ``<name>.live.json``
 (the live events, the loop's figures, the running verdict at the end). Everything is written in a
