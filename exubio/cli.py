@@ -4,14 +4,26 @@ result is written), 2 bad input (also an output folder that cannot be written or
 interrupted (Ctrl-C). Results go to files, logs to stderr."""
 from __future__ import annotations
 
-import argparse
-import logging
+import signal
 import sys
-from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Sequence
 
-import exubio
-from exubio.errors import ExubioError, InputError, ModelError, ProtocolError, ReconstructionError
+
+def _interrupted_while_starting(signum, frame) -> None:  # noqa: ARG001
+    """Ctrl-C while this module's own imports run (before main() can catch it): one line, exit 130."""
+    sys.stderr.write("exubio: interrupted; nothing was written\n")
+    raise SystemExit(130)
+
+
+if __name__ == "__main__" and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+    signal.signal(signal.SIGINT, _interrupted_while_starting)
+
+import argparse  # noqa: E402
+import logging  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import TYPE_CHECKING, Callable, Sequence  # noqa: E402
+
+import exubio  # noqa: E402
+from exubio.errors import ExubioError, InputError, ModelError, ProtocolError, ReconstructionError  # noqa: E402
 
 if TYPE_CHECKING:  # the CLI imports the pipeline only when a command runs (fast --help)
     from exubio.jobs import TrialJob, TrialResult
@@ -735,6 +747,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    if signal.getsignal(signal.SIGINT) is _interrupted_while_starting:
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # from here KeyboardInterrupt, caught below
     try:  # Ctrl-C at any moment, also while the command's modules are still being imported: exit 130
         args = build_parser().parse_args(argv)
         logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, stream=sys.stderr,
