@@ -39,6 +39,26 @@ EXIT_CODES_HELP = (
     "that were not complete are not there; the next run removes what was left). With several trials: the worst.")
 
 
+SIMPLE_EXIT_CODES = "exit codes: 0 done; 2 bad input (the file, key or value is named), nothing written; 130 interrupted."
+
+EXAMPLES = {
+    "simulate": "exubio simulate --motion abduction --duration 10 --rate 100 --noise-mm 1 --sta-mm 10 --out abd.c3d",
+    "reconstruct": "exubio reconstruct trial.c3d --static static.c3d --method both --out results/\n"
+                   "  exubio reconstruct trial.trc --protocol thoracoscapular_9 --static-frames 0:50 --out results/",
+    "calibrate": "exubio calibrate static.c3d --out subject.yaml   (then: exubio reconstruct trial.c3d --model subject.yaml ...)",
+    "validate": "exubio validate            (about 4-6 minutes on 2 cores; --quick: a smoke run)",
+    "export-model": "exubio export-model subject.yaml --format osim --out subject.osim   (exubio's .mot plays on it)",
+    "study": "exubio study study.yaml --out results/ --jobs 2   (the study file's format: exubio/study.py's docstring)",
+    "view": "exubio view results/trial.pf.npz --out trial.html",
+    "demo": "exubio demo   (writes ./exubio_demo/)",
+}
+"""An example per command, shown by its --help."""
+
+
+def _epilog(command: str, codes: str = SIMPLE_EXIT_CODES) -> str:
+    return f"example:\n  {EXAMPLES[command]}\n\n{codes}"
+
+
 def _progress_factory(enabled: bool) -> Callable[[str, int], Callable[[int], None]] | None:
     if not enabled:
         return None
@@ -567,7 +587,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars, shorter output")
     sub = p.add_subparsers(dest="command", required=True)
 
-    s = sub.add_parser("simulate", parents=[common], help="write a synthetic trial (C3D) and its true joint angles (CSV)")
+    s = sub.add_parser("simulate", parents=[common], formatter_class=argparse.RawDescriptionHelpFormatter,
+                       epilog=_epilog("simulate"), help="write a synthetic trial (C3D) and its true joint angles (CSV)")
     s.add_argument("--motion", required=True, choices=["abduction", "flexion", "scaption", "sier"])
     s.add_argument("--duration", type=float, default=10.0, help="seconds (default 10)")
     s.add_argument("--rate", type=float, default=100.0, help="sampling rate, Hz (default 100)")
@@ -582,7 +603,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="PATH.c3d; PATH.truth.csv is written beside it")
     s.set_defaults(func=cmd_simulate)
 
-    r = sub.add_parser("reconstruct", parents=[common], help="joint angles from a C3D/TRC trial", epilog=EXIT_CODES_HELP)
+    r = sub.add_parser("reconstruct", parents=[common], help="joint angles from a C3D/TRC trial",
+                       formatter_class=argparse.RawDescriptionHelpFormatter, epilog=_epilog("reconstruct", EXIT_CODES_HELP))
     r.add_argument("trials", nargs="+", metavar="TRIAL", help="trial file(s) (.c3d or .trc); several = a study")
     r.add_argument("--jobs", type=int, default=1, help="trials reconstructed in parallel processes (default 1)")
     r.add_argument("--scheduler", help="reconstruct the trials on Dask: local:N (a local cluster of N workers) or "
@@ -621,7 +643,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "carry the limb's weight and model points sag below their markers")
     r.set_defaults(func=cmd_reconstruct)
 
-    c = sub.add_parser("calibrate", parents=[common], help="fit the model to a subject from a static trial")
+    c = sub.add_parser("calibrate", parents=[common], formatter_class=argparse.RawDescriptionHelpFormatter,
+                       epilog=_epilog("calibrate"), help="fit the model to a subject from a static trial")
     c.add_argument("static", help="static trial (.c3d or .trc)")
     c.add_argument("--protocol", help="protocol YAML (default: protocols/upper_limb_21.yaml)")
     c.add_argument("--model", help="generic model YAML (default: models/upper_extremity.yaml)")
@@ -639,12 +662,14 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--overwrite", action="store_true", help="replace an existing MODEL.yaml")
     c.set_defaults(func=cmd_calibrate)
 
-    v = sub.add_parser("validate", parents=[common], help="the paper's evaluation (Fig. 2-5, Table 1) as a PDF/PNG report")
+    v = sub.add_parser("validate", parents=[common], formatter_class=argparse.RawDescriptionHelpFormatter,
+                       epilog=_epilog("validate"), help="the paper's evaluation (Fig. 2-5, Table 1) as a PDF/PNG report")
     v.add_argument("--out", default="reports/validation", help="output folder (default reports/validation)")
     v.add_argument("--quick", action="store_true", help="short trials (a smoke run, not the report)")
     v.set_defaults(func=cmd_validate)
 
-    e = sub.add_parser("export-model", parents=[common],
+    e = sub.add_parser("export-model", parents=[common], formatter_class=argparse.RawDescriptionHelpFormatter,
+                       epilog=_epilog("export-model"),
                        help="write a model YAML (generic or calibrated) as an OpenSim .osim or a biorbd .bioMod")
     e.add_argument("model", help="model YAML (e.g. models/upper_extremity.yaml or one written by exubio calibrate)")
     e.add_argument("--format", required=True, choices=["osim", "biomod"], help="osim: OpenSim 4; biomod: biorbd")
@@ -655,9 +680,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "as coordinates, so exubio's .mot plays on it) or model (exubio's own joint coordinates)")
     e.set_defaults(func=cmd_export_model)
 
-    st = sub.add_parser("study", parents=[common],
+    st = sub.add_parser("study", parents=[common], formatter_class=argparse.RawDescriptionHelpFormatter,
                         help="run a study file (subjects x sessions x trials); re-running resumes it",
-                        epilog=EXIT_CODES_HELP)
+                        epilog=_epilog("study", EXIT_CODES_HELP))
     st.add_argument("study", help="STUDY.yaml (format: exubio/study.py)")
     st.add_argument("--out", required=True, help="output folder: <subject>/<session>/<trial>/, study.csv, study.json")
     st.add_argument("--jobs", type=int, default=1, help="trials in parallel local processes (default 1)")
@@ -665,7 +690,8 @@ def build_parser() -> argparse.ArgumentParser:
                                         "tcp://HOST:PORT (a running scheduler)")
     st.set_defaults(func=cmd_study)
 
-    w = sub.add_parser("view", parents=[common],
+    w = sub.add_parser("view", parents=[common], formatter_class=argparse.RawDescriptionHelpFormatter,
+                       epilog=_epilog("view"),
                        help="write an interactive 3D view of a reconstruction (one self-contained, offline HTML file)")
     w.add_argument("results", nargs="+", help="<trial>.<method>.npz (the trial's other method beside it is shown too)")
     w.add_argument("--out", required=True, help="the HTML file to write")
@@ -740,7 +766,8 @@ def build_parser() -> argparse.ArgumentParser:
     sm.add_argument("--lsl-config", default="loopback", help="loopback (default), system, or an lsl_api.cfg path")
     sm.set_defaults(func=cmd_stream)
 
-    d = sub.add_parser("demo", parents=[common], help="reconstruct the shipped example trial with PF and LS, compare with its truth")
+    d = sub.add_parser("demo", parents=[common], formatter_class=argparse.RawDescriptionHelpFormatter,
+                       epilog=_epilog("demo"), help="reconstruct the shipped example trial with PF and LS, compare with its truth")
     d.add_argument("--out", default="exubio_demo", help="output folder (default ./exubio_demo)")
     d.set_defaults(func=cmd_demo)
     return p

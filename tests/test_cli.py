@@ -380,3 +380,15 @@ def test_a_static_trc_whose_num_frames_disagrees_is_named_in_the_task_trials_res
     assert finding.startswith("static trial: static.trc: line 3: NumFrames is 51 but the file has 50 data rows")
     assert any(r["code"] == "input_file" and "static trial: static.trc" in r["message"]
                for r in summ["quality"]["reasons"])
+
+
+@pytest.mark.parametrize("command", ["simulate", "reconstruct", "calibrate", "validate", "export-model", "study", "view",
+                                     "demo", "protocols", "model-points", "live", "stream"])
+def test_every_command_help_shows_an_example_and_the_exit_codes(command, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main([command, "--help"])
+    assert exit_info.value.code == 0
+    out = capsys.readouterr().out
+    assert "example" in out and f"exubio {command}" in out
+    if command not in ("protocols", "model-points"):  # these two only print
+        assert "exit codes" in out
