@@ -58,6 +58,26 @@ def _transform_axis(name: str, axis, coordinate: str | None) -> str:
             "\t\t\t\t\t\t</TransformAxis>\n")
 
 
+def _coordinate(name: str, default: str, rng: str) -> str:
+    return (f"\t\t\t\t\t\t<Coordinate name={quoteattr(name)}>\n"
+            f"\t\t\t\t\t\t\t<default_value>{default}</default_value>\n"
+            f"\t\t\t\t\t\t\t<range>{rng}</range>\n"
+            "\t\t\t\t\t\t\t<clamped>false</clamped>\n"
+            "\t\t\t\t\t\t\t<locked>false</locked>\n"
+            "\t\t\t\t\t\t</Coordinate>\n")
+
+
+def _joint_xml(name: str, parent_frame: str, child_frame: str, coords: str, frames: str, axes: str) -> str:
+    """A CustomJoint element: its sockets, coordinates, offset frames and spatial transform."""
+    return (f"\t\t\t\t<CustomJoint name={quoteattr(name)}>\n"
+            f"\t\t\t\t\t<socket_parent_frame>{escape(parent_frame)}</socket_parent_frame>\n"
+            f"\t\t\t\t\t<socket_child_frame>{escape(child_frame)}</socket_child_frame>\n"
+            f"\t\t\t\t\t<coordinates>\n{coords}\t\t\t\t\t</coordinates>\n"
+            f"\t\t\t\t\t<frames>\n{frames}\t\t\t\t\t</frames>\n"
+            f"\t\t\t\t\t<SpatialTransform>\n{axes}\t\t\t\t\t</SpatialTransform>\n"
+            "\t\t\t\t</CustomJoint>\n")
+
+
 def _custom_joint(seg, anatomical: dict | None = None) -> str:
     """A CustomJoint on exubio's joint axes with its coordinates; with ``anatomical`` (the joint's
     entry of _anatomical_joints), on the two segments' ISB frames with the anatomical angles as
@@ -66,31 +86,17 @@ def _custom_joint(seg, anatomical: dict | None = None) -> str:
     offset = f"{seg.parent}_offset"
     if anatomical is not None:
         return _anatomical_joint(seg, offset, **anatomical)
-    coords = "".join(
-        f"\t\t\t\t\t\t<Coordinate name={quoteattr(name)}>\n"
-        "\t\t\t\t\t\t\t<default_value>0</default_value>\n"
-        f"\t\t\t\t\t\t\t<range>{_range(rng)}</range>\n"
-        "\t\t\t\t\t\t\t<clamped>false</clamped>\n"
-        "\t\t\t\t\t\t\t<locked>false</locked>\n"
-        "\t\t\t\t\t\t</Coordinate>\n"
-        for name, rng in zip(joint.coordinates, joint.ranges_rad))
+    coords = "".join(_coordinate(name, "0", _range(rng)) for name, rng in zip(joint.coordinates, joint.ranges_rad))
     basis = complete_basis(joint.axes)
     names = list(joint.coordinates) + [None] * (3 - len(joint.coordinates))
     axes = "".join(_transform_axis(f"rotation{i + 1}", basis[i], names[i]) for i in range(3))
     axes += "".join(_transform_axis(f"translation{i + 1}", np.eye(3)[i], None) for i in range(3))
-    return (f"\t\t\t\t<CustomJoint name={quoteattr(joint.name)}>\n"
-            f"\t\t\t\t\t<socket_parent_frame>{escape(offset)}</socket_parent_frame>\n"
-            f"\t\t\t\t\t<socket_child_frame>/bodyset/{escape(seg.name)}</socket_child_frame>\n"
-            f"\t\t\t\t\t<coordinates>\n{coords}\t\t\t\t\t</coordinates>\n"
-            "\t\t\t\t\t<frames>\n"
-            f"\t\t\t\t\t\t<PhysicalOffsetFrame name={quoteattr(offset)}>\n"
-            f"\t\t\t\t\t\t\t<socket_parent>/bodyset/{escape(seg.parent)}</socket_parent>\n"
-            f"\t\t\t\t\t\t\t<translation>{vec(joint.centre_m)}</translation>\n"
-            "\t\t\t\t\t\t\t<orientation>0 0 0</orientation>\n"
-            "\t\t\t\t\t\t</PhysicalOffsetFrame>\n"
-            "\t\t\t\t\t</frames>\n"
-            f"\t\t\t\t\t<SpatialTransform>\n{axes}\t\t\t\t\t</SpatialTransform>\n"
-            "\t\t\t\t</CustomJoint>\n")
+    frames = (f"\t\t\t\t\t\t<PhysicalOffsetFrame name={quoteattr(offset)}>\n"
+              f"\t\t\t\t\t\t\t<socket_parent>/bodyset/{escape(seg.parent)}</socket_parent>\n"
+              f"\t\t\t\t\t\t\t<translation>{vec(joint.centre_m)}</translation>\n"
+              "\t\t\t\t\t\t\t<orientation>0 0 0</orientation>\n"
+              "\t\t\t\t\t\t</PhysicalOffsetFrame>\n")
+    return _joint_xml(joint.name, offset, f"/bodyset/{seg.name}", coords, frames, axes)
 
 
 def _offset(name: str, body: str, translation, R: np.ndarray) -> str:
@@ -111,27 +117,12 @@ def _anatomical_joint(seg, offset: str, *, parent_frame: np.ndarray, child_frame
     coordinates are exactly the published angles (default: their values in the reference posture)."""
     joint = seg.joint
     child = f"{seg.name}_isb"
-    coords = "".join(
-        f"\t\t\t\t\t\t<Coordinate name={quoteattr(name)}>\n"
-        f"\t\t\t\t\t\t\t<default_value>{fmt(d)}</default_value>\n"
-        f"\t\t\t\t\t\t\t<range>{vec([-UNLIMITED_RAD, UNLIMITED_RAD])}</range>\n"
-        "\t\t\t\t\t\t\t<clamped>false</clamped>\n"
-        "\t\t\t\t\t\t\t<locked>false</locked>\n"
-        "\t\t\t\t\t\t</Coordinate>\n"
-        for name, d in zip(names, defaults))
+    coords = "".join(_coordinate(name, fmt(d), vec([-UNLIMITED_RAD, UNLIMITED_RAD])) for name, d in zip(names, defaults))
     unit = {"X": np.eye(3)[0], "Y": np.eye(3)[1], "Z": np.eye(3)[2]}
     axes = "".join(_transform_axis(f"rotation{i + 1}", unit[sequence[i]], names[i]) for i in range(3))
     axes += "".join(_transform_axis(f"translation{i + 1}", np.eye(3)[i], None) for i in range(3))
-    return (f"\t\t\t\t<CustomJoint name={quoteattr(joint.name)}>\n"
-            f"\t\t\t\t\t<socket_parent_frame>{escape(offset)}</socket_parent_frame>\n"
-            f"\t\t\t\t\t<socket_child_frame>{escape(child)}</socket_child_frame>\n"
-            f"\t\t\t\t\t<coordinates>\n{coords}\t\t\t\t\t</coordinates>\n"
-            "\t\t\t\t\t<frames>\n"
-            + _offset(offset, seg.parent, joint.centre_m, parent_frame)
-            + _offset(child, seg.name, np.zeros(3), child_frame)
-            + "\t\t\t\t\t</frames>\n"
-            f"\t\t\t\t\t<SpatialTransform>\n{axes}\t\t\t\t\t</SpatialTransform>\n"
-            "\t\t\t\t</CustomJoint>\n")
+    frames = _offset(offset, seg.parent, joint.centre_m, parent_frame) + _offset(child, seg.name, np.zeros(3), child_frame)
+    return _joint_xml(joint.name, offset, child, coords, frames, axes)
 
 
 ANATOMICAL_JOINTS = {"clavicle": ("YXZ", ("SC_Y_protraction", "SC_X_elevation", "SC_Z_posterior_rotation")),

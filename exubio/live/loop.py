@@ -36,7 +36,7 @@ import math
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -97,19 +97,23 @@ _ISB_AS_ANATOMICAL = {"GH_X_elevation": "GH_phadke_X_elevation", "GH_Z_flexion":
 
 
 def angles_measured(model: Model, not_solved: Sequence[str], undetermined: Sequence[str] = (), /, *,
-                    protocol: Protocol | None = None, unmeasurable: Sequence[str] = ()) -> np.ndarray:
+                    protocol: Protocol | None = None, unmeasurable: Sequence[str] = (),
+                    structural: Mapping[str, str] | None = None) -> np.ndarray:
     """(15,) bool, per ISB angle (ISB_COLUMNS order): measured by the markers. The one place the
     live output decides it. With ``protocol``: an angle the marker set cannot measure in any
     reference posture (exubio.assess.angle_status_of_protocol, the status the files give) is not
     measured; of the others, a joint's angles are not measured in a frame where one of its own
     coordinates is not solved (held, locked) or undetermined there (exubio.observability's noise
-    gain), ``unmeasurable`` coordinates (the set cannot determine them anyway) left aside."""
+    gain), ``unmeasurable`` coordinates (the set cannot determine them anyway) left aside.
+    ``structural``: that status, computed once by a caller that asks frame after frame."""
     joints = set(measured_isb_joints(model, set(not_solved) | (set(undetermined) - set(unmeasurable))))
     out = np.array([j in joints for j in ISB_JOINT_OF], dtype=bool)
-    if protocol is not None:
+    if structural is None and protocol is not None:
         from exubio.assess import angle_status_of_protocol
 
-        status = angle_status_of_protocol(model, protocol)
+        structural = angle_status_of_protocol(model, protocol)
+    if structural is not None:
+        status = structural
         for i, name in enumerate(ISB_NAMES):
             if status.get(_ISB_AS_ANATOMICAL.get(name, name), "measured") != "measured":
                 out[i] = False
@@ -595,8 +599,8 @@ class LiveSession:
         present = self.rec["active"].a[g][None]
         det = determinacy(self.kin, self.points, q[None], present, self.protocol.weights, excluded=self.excluded)
         und = [n for n, u in zip(self.model.coordinate_names, det.undetermined[0] & ~det.near_gimbal_lock[0]) if u]
-        self.measured = angles_measured(self.model, self.not_solved, und, protocol=self.protocol,
-                                        unmeasurable=self.unmeasurable)
+        self.measured = angles_measured(self.model, self.not_solved, und, unmeasurable=self.unmeasurable,
+                                        structural=self.structural)
         self.undetermined_frames += det.undetermined[0]
 
     def _label_check(self, g: int, res: np.ndarray, pts: np.ndarray, meas: np.ndarray) -> None:
@@ -867,11 +871,12 @@ class LiveSession:
         self.points = tracked_points(self.kin, self.protocol)
         self.excluded = not_solved_mask(self.model, self.protocol, self.kin)
         self.not_solved = tuple(n for n, e in zip(self.model.coordinate_names, self.excluded) if e)
-        from exubio.assess import coordinates_not_measured_by_protocol
+        from exubio.assess import angle_status_of_protocol, coordinates_not_measured_by_protocol
 
         self.unmeasurable = coordinates_not_measured_by_protocol(self.model, self.protocol, kin=self.kin)
-        self.measured = angles_measured(self.model, self.not_solved, protocol=self.protocol,
-                                        unmeasurable=self.unmeasurable)
+        self.structural = angle_status_of_protocol(self.model, self.protocol, kin=self.kin)  # once, not per frame
+        self.measured = angles_measured(self.model, self.not_solved, unmeasurable=self.unmeasurable,
+                                        structural=self.structural)
         self.ranges = self.model.coordinate_ranges_rad
         self.min_markers = 3
         L = self.n_labels

@@ -267,28 +267,14 @@ def stream_pf(model: Model, protocol: Protocol, targets: MarkerTargets, sink: Ch
     dt = float(np.median(np.diff(targets.time_s)))
     if np.abs(np.diff(targets.time_s) - dt).max() > 1e-6 * dt:
         raise ReconstructionError(f"{targets.source or 'trial'}: frames are not evenly spaced in time")
-    kin = Kinematics(model)
-    points = tracked_points(kin, protocol)
-    stiffness = np.array([m.stiffness_n_per_m for m in protocol.markers])
-    damping = np.array([m.damping_ns_per_m for m in protocol.markers])
-    held = held_mask(model, protocol)
-    limits = Limits.of(model, protocol, options.limit_stiffness_nm_per_rad)
     cutoff_hz = (max(targets.cutoff_hz.values(), default=None) if protocol.cutoff_hz == "auto"  # widest applied
                  else protocol.cutoff_hz)
     step = integration_step(dt, options.step_s, cutoff_hz)
     lead = lead_in_frames(options.lead_in_s, dt, step)
     run_targets = with_lead_in(targets, lead, dt)
-    q0, qd0 = initial_state(kin, points, run_targets, stiffness, held=held, limits=limits)
-    locked = unobserved_segments(kin, points)
-    for i in locked:  # held at their start value, like LS does through its regularisation
-        qd0[kin.joint_coordinate_indices(i)] = 0.0
-    t1 = time.perf_counter()
-    springs = SpringSet.from_points(points, stiffness_n_per_m=stiffness, damping_ns_per_m=damping)
-    system = PFSystem(model, springs, q0=q0, qd0=qd0, gravity=options.gravity, kinematics=kin,
-                      locked_segments=locked, held_coordinates=np.flatnonzero(held),
-                      limits_rad=model.coordinate_ranges_rad if limits is not None else None,
-                      limit_stiffness_nm_per_rad=limits_stiffness(options))
-    t2 = time.perf_counter()
+    setup = pf_setup(model, protocol, run_targets, options)  # the start state at the lead-in's first frame
+    kin, points, held, q0, system = setup.kin, setup.points, setup.held, setup.q0, setup.system
+    t1, t2 = t0 + setup.equilibrium_s, t0 + setup.equilibrium_s + setup.build_s
     integ = IntegratorOptions(step_s=step,
                               spectral_radius=options.spectral_radius,
                               newton_relative_tolerance=options.newton_relative_tolerance,
@@ -355,17 +341,9 @@ class _Frames:
         return self.recovery_s + self.residuals_s
 
     def __call__(self, run) -> None:
+        q = self.coordinates(run)
         ta = time.perf_counter()
-        kin = self.kin
-        raw = kin.coordinates_from_rotations(run.rotations)
-        if self.last_raw is None:
-            q = np.unwrap(raw, axis=0)
-            self.shift = 2.0 * np.pi * np.round((q[0] - self.q0) / (2.0 * np.pi))  # same branch as the start posture
-        else:  # continue the unwrapping of the frames before
-            q = np.unwrap(np.vstack([self.last_raw[None], raw]), axis=0)[1:] + (self.last_unwrapped - self.last_raw)
-        self.last_raw, self.last_unwrapped = raw[-1], q[-1]
-        q = q - self.shift
-        qd, qdd = kin.coordinate_rates(q, run.angular_velocities_rad_s, run.angular_accelerations_rad_s2)
+        qd, qdd = self.kin.coordinate_rates(q, run.angular_velocities_rad_s, run.angular_accelerations_rad_s2)
         start = int(round(run.time_s[0] / self.dt)) - self.lead  # the chunk's first frame in the trial
         if start < 0:  # drop the lead-in frames
             skip = min(-start, q.shape[0])
@@ -373,24 +351,18 @@ class _Frames:
             if q.shape[0] == 0:
                 self.recovery_s += time.perf_counter() - ta
                 return
-        if self.options.project_constraints:
-            q, qd, qdd, (g, gqd) = project_on_constraints(kin, q, qd, qdd, held=self.held)
-            self.raw_g, self.raw_gqd = _nanmax(self.raw_g, g), _nanmax(self.raw_gqd, gqd)
-        tb = time.perf_counter()
-        part = target_chunk(self.targets, start, start + q.shape[0])
-        recon = assemble(kin, self.points, part, method="pf", q=q, qd=qd, qdd=qdd,
-                         status=np.full(part.n_frames, FrameStatus.CONVERGED), timings_s={}, info={})
-        _check_divergence(recon, self.options.divergence_deflection_m, part, kin)
-        with np.errstate(all="ignore"):
-            ok = ~np.isnan(recon.residuals_m)
-            self.sum_res += float(recon.residuals_m[ok].sum())
-            self.n_res += int(ok.sum())
-        self.last_q, self.last_qd = q[-1], qd[-1]
+        q, qd, qdd = self._project(q, qd, qdd)
+        self.recovery_s += time.perf_counter() - ta
+        recon = self.finish(q, qd, qdd, target_chunk(self.targets, start, start + q.shape[0]))
         tc = time.perf_counter()
         self.sink(recon)
-        self.recovery_s += tb - ta
-        self.residuals_s += tc - tb
         self.sink_s += time.perf_counter() - tc
+
+    def _project(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if self.options.project_constraints:
+            q, qd, qdd, (g, gqd) = project_on_constraints(self.kin, q, qd, qdd, held=self.held)
+            self.raw_g, self.raw_gqd = _nanmax(self.raw_g, g), _nanmax(self.raw_gqd, gqd)
+        return q, qd, qdd
 
     def coordinates(self, run) -> np.ndarray:
         """Joint coordinates (n, m) of the frames of ``run`` on the start posture's branch (unwrapped
@@ -410,9 +382,7 @@ class _Frames:
         """q, q̇, q̈ of the frames of ``run``, projected on the constraints if the options say so."""
         ta = time.perf_counter()
         qd, qdd = self.kin.coordinate_rates(q, run.angular_velocities_rad_s, run.angular_accelerations_rad_s2)
-        if self.options.project_constraints:
-            q, qd, qdd, (g, gqd) = project_on_constraints(self.kin, q, qd, qdd, held=self.held)
-            self.raw_g, self.raw_gqd = _nanmax(self.raw_g, g), _nanmax(self.raw_gqd, gqd)
+        q, qd, qdd = self._project(q, qd, qdd)
         self.recovery_s += time.perf_counter() - ta
         return q, qd, qdd
 
