@@ -796,5 +796,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_FAILED
 
 
+def run() -> None:
+    """The ``exubio`` command (console script and ``python -m exubio.cli``): main(), then exit with its
+    code. Once main() has returned the work is done and written; a Ctrl-C during the interpreter's
+    teardown (it restores the default handler there, which would kill the process with -SIGINT, no
+    message, though every result is complete) is then ignored."""
+    code = main()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    sys.exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    run()
