@@ -31,7 +31,7 @@ from pathlib import Path
 
 import yaml
 
-from exubio.model import load_model
+from exubio.model.load import load_model
 from exubio.simulate import simulate_trial, write_simulated_trial
 
 

@@ -13,7 +13,7 @@ import warnings
 
 import numpy as np
 
-from exubio.angles import anatomical_table
+from exubio.model.angles import anatomical_table
 from exubio.methods.ls import reconstruct_ls
 from exubio.pipeline import load_model_and_protocol
 from exubio.preprocess import prepare_targets

@@ -36,7 +36,7 @@ import time
 import numpy as np
 
 from exubio.assess import assess_trial
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.mismatch import segment_evidence
 from exubio.perturb import ModelPerturbation
@@ -119,11 +119,11 @@ def real_refit() -> None:
 
     import dataclasses
 
-    from exubio.angles import anatomical_table
+    from exubio.model.angles import anatomical_table
     from exubio.calibration.ellipsoid import fit_ellipsoid_poses
     from exubio.io.trial import read_trial
     from exubio.mismatch import rigid_fit
-    from exubio.model import load_model
+    from exubio.model.load import load_model
     from exubio.pipeline import protocol_for_model
     from exubio.session import calibrate_session
     from exubio.validation.trials import real_trial

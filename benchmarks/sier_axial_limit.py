@@ -43,7 +43,7 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 from scipy.linalg import null_space
 
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.methods.poses import held_mask
 from exubio.pipeline import load_model_and_protocol, reconstruct

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from exubio.io.results import read_npz
-from exubio.model import load_model
+from exubio.model.load import load_model
 from exubio.jobs import TrialJob, run_job
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -37,7 +37,7 @@ def read_trial(path: str | Path, /) -> Trajectories:
 
 def load_model(path: str | Path | None = None, /, *, body_mass_kg: float | None = None) -> Model:
     """A model YAML (default: the shipped generic right-arm model), or a calibrated one."""
-    from exubio.model import load_model as _load
+    from exubio.model.load import load_model as _load
 
     return _load(path, body_mass_kg=body_mass_kg) if path is not None else _load(body_mass_kg=body_mass_kg)
 
@@ -85,8 +85,8 @@ def reconstruct(trial: Trajectories | MarkerTargets | str | Path, model: Model |
 
 def isb_angles(model: Model, reconstruction: Reconstruction | np.ndarray, /) -> dict[str, np.ndarray]:
     """ISB angles (radians, (n, 3) per joint: SC, AC, ST, GH, HT; sequences and signs in
-    exubio.angles) of a reconstruction or of coordinates q (n, m)."""
-    from exubio.angles import isb_angles as _isb
+    exubio.model.angles) of a reconstruction or of coordinates q (n, m)."""
+    from exubio.model.angles import isb_angles as _isb
 
     q = reconstruction.q_rad if isinstance(reconstruction, Reconstruction) else reconstruction
     return _isb(model, q)
@@ -97,7 +97,7 @@ def angle_status(reconstruction: Reconstruction, model: Model | None = None, pro
     modelled by a named rule, or not measured) for a reconstruction made with ``protocol``; the
     frames where a marker was missing are those whose residual is NaN."""
     from exubio.assess import not_solved_mask
-    from exubio.kinematics import Kinematics
+    from exubio.model.kinematics import Kinematics
     from exubio.methods.common import tracked_points
     from exubio.methods.poses import held_mask
     from exubio.observability import angle_determinacy
@@ -115,13 +115,13 @@ def angle_status(reconstruction: Reconstruction, model: Model | None = None, pro
 
 def to_dataframe(reconstruction: Reconstruction, /, *, model: Model | None = None,
                  protocol: Protocol | None = None) -> "pandas.DataFrame":
-    """The reconstruction's anatomical angles (exubio.angles.ANATOMICAL_ANGLES) as a pandas
+    """The reconstruction's anatomical angles (exubio.model.angles.ANATOMICAL_ANGLES) as a pandas
     DataFrame indexed by time (s): ``<angle>_deg`` in degrees and ``<angle>_status`` (measured,
     modelled, not measured: a categorical column), as in the CSV; ``df.attrs`` holds the method,
     units and each angle's definition. The model coordinates stay in the reconstruction."""
     import pandas as pd
 
-    from exubio.angles import ANATOMICAL_ANGLES, anatomical_table
+    from exubio.model.angles import ANATOMICAL_ANGLES, anatomical_table
     from exubio.observability import AngleStatus
 
     r = reconstruction
@@ -143,7 +143,7 @@ def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str
     """Write ``<stem>.<method>.csv`` and ``.mot`` (the anatomical angles, each one's status in the
     header), ``.npz`` and ``.summary.json`` into out_dir, as one set complete or absent; refuses to
     replace earlier results unless ``overwrite``. Returns the paths by kind."""
-    from exubio.angles import anatomical_table
+    from exubio.model.angles import anatomical_table
     from exubio.evaluate import summary
     from exubio.io import results
     from exubio.pipeline import AngleOutputs, angle_header, write_outputs

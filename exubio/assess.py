@@ -1,6 +1,6 @@
 """Everything measured about one trial's reconstructions to decide whether to trust them: which
 coordinates the markers determine (exubio.observability), frames at a range limit
-(exubio.ranges), PF-LS agreement on determined coordinates, the label checks and the calibration;
+(exubio.model.ranges), PF-LS agreement on determined coordinates, the label checks and the calibration;
 turned into one quality verdict per method (exubio.quality). No solver is run here."""
 from __future__ import annotations
 
@@ -13,13 +13,13 @@ import numpy as np
 from exubio import quality as Q
 from exubio.calibration import SCALE_BOUNDS
 from exubio.evaluate import per_frame_residuals_mm, residual_statistics
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.methods.poses import held_mask
 from exubio.methods.pf import unobserved_segments
 from exubio.mismatch import MismatchAssessment, assess_mismatch, mismatch_reasons
 from exubio.observability import UNDETERMINED_TRIAL_FRACTION, AngleDeterminacy, AngleStatus, Determinacy, angle_determinacy, determinacy
-from exubio.ranges import limit_report
+from exubio.model.ranges import limit_report
 from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Reconstruction
 
 
@@ -73,7 +73,7 @@ def generic_model_and_protocol(model: Model, protocol: Protocol, /) -> tuple[Mod
     """The generic model a calibrated model was made from (its file, else the shipped one) and the
     protocol bound to it: what the label checks expect, since a calibration registers every marker
     where the static trial had it, right or wrong."""
-    from exubio.model import DEFAULT_MODEL, load_model
+    from exubio.model.load import DEFAULT_MODEL, load_model
     from exubio.pipeline import protocol_for_model
 
     cal = model.metadata.get("calibration")
@@ -114,7 +114,7 @@ def agreement_on_measured(model: Model, a: Reconstruction, da: AngleDeterminacy,
                           db: AngleDeterminacy, /) -> dict[str, float]:
     """PF-LS RMSE (deg) of every anatomical angle over the frames where both measure it (NaN where
     none does)."""
-    from exubio.angles import anatomical_table
+    from exubio.model.angles import anatomical_table
 
     _, ta = anatomical_table(model, a.q_rad)
     _, tb = anatomical_table(model, b.q_rad)

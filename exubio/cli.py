@@ -83,7 +83,7 @@ def _methods(value: str) -> list[str]:
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
-    from exubio.model import load_model
+    from exubio.model.load import load_model
     from exubio.simulate import Motion, simulate_trial, write_simulated_trial
 
     out = Path(args.out)
@@ -357,9 +357,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     outputs = reconstruct_file(c3d, out, methods=["pf", "ls"], overwrite=True,
                                progress_factory=_progress_factory(not args.quiet))
     t_true, names, q_true = read_angles_csv(truth_csv)
-    from exubio.angles import anatomical_table
+    from exubio.model.angles import anatomical_table
     from exubio.io.results import read_npz_arrays
-    from exubio.model import load_model
+    from exubio.model.load import load_model
     from exubio.observability import AngleStatus
 
     angle_names, true_angles = anatomical_table(load_model(), q_true)
@@ -407,7 +407,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 def cmd_protocols(args: argparse.Namespace) -> int:
     from exubio.pipeline import protocol_for_model
-    from exubio.model import load_model
+    from exubio.model.load import load_model
     from exubio.protocol import read_protocol_mapping, resolve_protocol, shipped_protocols
 
     if not args.name:
@@ -432,7 +432,7 @@ def cmd_protocols(args: argparse.Namespace) -> int:
 
 
 def cmd_model_points(args: argparse.Namespace) -> int:
-    from exubio.model import load_model
+    from exubio.model.load import load_model
 
     model = load_model(args.model)
     segments = [s for s in model.segments if args.segment in (None, s.name)]
@@ -452,7 +452,7 @@ def cmd_model_points(args: argparse.Namespace) -> int:
 
 def cmd_export_model(args: argparse.Namespace) -> int:
     from exubio.export import write_biomod, write_osim
-    from exubio.model import load_model
+    from exubio.model.load import load_model
 
     model = load_model(args.model)
     if args.format == "osim":

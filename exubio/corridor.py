@@ -4,7 +4,7 @@ all expressed in one target definition (e.g. Ludewig et al. 2009's frames and se
 Studies build their frames from different landmarks and decompose in different sequences, so
 their numbers are not comparable as published. A study's curve is brought into the target
 definition on the model's bone geometry: with the study's frames P_s (proximal) and C_s (distal)
-and the target's P_t, C_t, all built on the model's landmarks (``exubio.angles.definition_frame``),
+and the target's P_t, C_t, all built on the model's landmarks (``exubio.model.angles.definition_frame``),
 the same bone rotation reads R_t = (P_s^T P_t)^T R_s (C_s^T C_t), decomposed in the target's
 sequence. This needs all three of the study's angles, unless the study's frames and sequence are
 the target's (then each angle is taken as published). The frame offsets are those of the model's
@@ -22,8 +22,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from exubio.angles import definition_frame, euler_angles, rotation_from_euler
-from exubio.frame_definitions import JointDefinition, NotBuildable
+from exubio.model.angles import definition_frame, euler_angles, rotation_from_euler
+from exubio.model.frame_definitions import JointDefinition, NotBuildable
 from exubio.reference import LUDEWIG_ID, ReferenceCurve, Study, load_corpus, study_definition
 from exubio.types import Model
 

@@ -18,10 +18,10 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from exubio.angles import humerothoracic_elevation, isb_angles, joint_angles
+from exubio.model.angles import humerothoracic_elevation, isb_angles, joint_angles
 from exubio.corridor import HT_GRID_DEG, Corridor, build_corridor, share_inside, target_definition
-from exubio.frame_definitions import JOINT_SEGMENTS
-from exubio.kinematics import Kinematics
+from exubio.model.frame_definitions import JOINT_SEGMENTS
+from exubio.model.kinematics import Kinematics
 from exubio.reference import LUDEWIG_ID, load_corpus
 from exubio.types import Model, Protocol
 

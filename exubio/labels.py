@@ -54,7 +54,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from exubio.errors import InputError
-from exubio.kinematics import Kinematics, PointSet
+from exubio.model.kinematics import Kinematics, PointSet
 from exubio.types import MarkerTargets, Model, Protocol
 
 __all__ = [

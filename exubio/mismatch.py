@@ -33,7 +33,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from exubio.kinematics import Kinematics, PointSet
+from exubio.model.kinematics import Kinematics, PointSet
 
 __all__ = ["MismatchAssessment", "MismatchFinding", "SegmentEvidence", "assess_mismatch", "mismatch_findings",
            "mismatch_reasons", "rigid_fit", "segment_evidence", "surface_distance_m"]

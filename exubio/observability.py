@@ -24,7 +24,7 @@ from typing import Mapping
 
 import numpy as np
 
-from exubio.kinematics import Kinematics, PointSet
+from exubio.model.kinematics import Kinematics, PointSet
 
 UNDETERMINED_DEG_PER_MM = 2.0
 """Noise gain above which a coordinate counts as undetermined. Skin-marker errors on the shoulder
@@ -298,11 +298,11 @@ def _covariance(N, M, S, m: int, free: np.ndarray, prior: float | None):
 def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present: np.ndarray, weights: np.ndarray, /,
                       *, held: np.ndarray, locked: np.ndarray, every: int = 1,
                       rules: Mapping[str, str] | None = None) -> AngleDeterminacy:
-    """Measured / modelled / not measured for every anatomical angle (exubio.angles.ANATOMICAL_ANGLES)
+    """Measured / modelled / not measured for every anatomical angle (exubio.model.angles.ANATOMICAL_ANGLES)
     in the frames of q (n, m), computed every ``every``-th frame and copied to the frames between.
     held: (m,) bool, coordinates a protocol rule holds; locked: (m,) bool, coordinates of segments
     no marker observes; rules: the rule's name per held coordinate (default 'hold')."""
-    from exubio.angles import anatomical_table
+    from exubio.model.angles import anatomical_table
 
     model = kin.model
     n, m = q.shape

@@ -21,7 +21,7 @@ from exubio.errors import InputError, PartialReconstructionError, ProtocolError,
 from exubio.evaluate import summary
 from exubio.io import results
 from exubio.io.trial import read_trial
-from exubio.model import DEFAULT_MODEL, load_model
+from exubio.model.load import DEFAULT_MODEL, load_model
 from exubio.preprocess import prepare_targets
 from exubio.protocol import check_landmarks, load_protocol
 from exubio.resources import shipped_file
@@ -188,7 +188,7 @@ def output_stem(trial_path: str | Path, method: Method | str) -> str:
 @dataclass(frozen=True)
 class AngleOutputs:
     """The anatomical angles of one reconstruction as the files carry them: names
-    (exubio.angles.ANATOMICAL_COLUMNS), values (n, a) rad, status (n, a) AngleStatus codes, the
+    (exubio.model.angles.ANATOMICAL_COLUMNS), values (n, a) rad, status (n, a) AngleStatus codes, the
     comment lines that describe them (``angle_header``)."""
 
     names: tuple[str, ...]
@@ -344,7 +344,7 @@ def write_assessed(inputs: TrialInputs, trial_path: str | Path, out_dir: str | P
     assessment's verdict in summary.json); ``model_points``: per method, the streamed model points
     (exubio.io.streamed) when the reconstructions do not hold them; ``failures``: the methods of the
     run that failed, named in each summary. Returns (reconstruction, paths, summary) per method."""
-    from exubio.angles import ANATOMICAL_ANGLES, anatomical_table
+    from exubio.model.angles import ANATOMICAL_ANGLES, anatomical_table
 
     failures = failures or {}
     out = []
@@ -409,7 +409,7 @@ MAX_STATUS_RUNS = 12
 def angle_header(det, trial: str, method: str, side: str) -> tuple[str, ...]:
     """Comment lines of ``<trial>.<method>.csv``: what the angles are (definition, sign), and each
     one's status (exubio.observability.AngleStatus) with the frame ranges where it changes."""
-    from exubio.angles import ANATOMICAL_ANGLES
+    from exubio.model.angles import ANATOMICAL_ANGLES
     from exubio.observability import AngleStatus
 
     lines = [f"exubio anatomical joint angles of {trial} ({method.upper()}); angles in degrees, time in seconds",

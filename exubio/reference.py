@@ -6,7 +6,7 @@
   ``models/sources/spartacus_corpus.py``; cite Moissenet et al. 2025, doi
   10.1016/j.jbiomech.2025.112642, and each study shown): 16 studies' SC, AC, ST and GH rotation
   curves against humerothoracic elevation, each with how the study built its segment frames
-  (``Study.frames``, in the grammar of ``exubio.frame_definitions``) and its Euler sequence.
+  (``Study.frames``, in the grammar of ``exubio.model.frame_definitions``) and its Euler sequence.
 
 Numbers are the raw Euler angles of the study's own frames and sequence: the published value
 times the study's sign correction (``corrections.csv``), so that the same decomposition of the
@@ -21,7 +21,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from exubio.frame_definitions import JOINT_SEGMENTS, FrameDefinition, JointDefinition, sequence_letters
+from exubio.model.frame_definitions import JOINT_SEGMENTS, FrameDefinition, JointDefinition, sequence_letters
 from exubio.resources import shipped_file
 
 __all__ = ["Study", "ReferenceCurve", "load_corpus", "load_ludewig2009", "ludewig2009_at", "study_definition",

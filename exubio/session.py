@@ -62,7 +62,7 @@ def calibrate_file(static_path: str | Path | Trajectories, /, *, protocol_path: 
     (arm raised in one or more planes) whose scapula postures the thorax ellipsoid is fitted
     through with the static pose(s) (exubio.calibration.scapula_motion)."""
     from exubio.calibration import calibrate_model, calibrated_protocol
-    from exubio.model import save_model
+    from exubio.model.load import save_model
 
     if out_path is not None and Path(out_path).exists() and not overwrite:
         raise InputError(f"{out_path}: the model file already exists; pass --overwrite to replace it")
@@ -88,7 +88,7 @@ def calibrate_into(source: str | Path | Trajectories, out_dir: str | Path, stem:
     """Calibrate the model to ``source`` (a static trial, or frames of the trial itself) and write
     ``out_dir/<stem>.model.yaml``; returns (model file, CalibrationReport)."""
     from exubio.calibration import parse_frames
-    from exubio.model import save_model
+    from exubio.model.load import save_model
 
     model_file = Path(out_dir) / f"{stem}.model.yaml"
     results.prepare_output_dir(out_dir, [model_file.name], overwrite=overwrite)

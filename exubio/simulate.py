@@ -81,7 +81,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from exubio.errors import InputError, ModelError
-from exubio.kinematics import Kinematics, axis_rotation
+from exubio.model.kinematics import Kinematics, axis_rotation
 from exubio.perturb import ModelPerturbation
 from exubio.reference import ludewig2009_at
 from exubio.types import Model, Trajectories
@@ -237,7 +237,7 @@ def _sc_in_isb_frame(kin: Kinematics, splines: dict[str, CubicSpline]) -> dict[s
     model's SC coordinates, splined over HT elevation. (Applied to the model's axes directly, a
     clavicle elevation change about thorax -X also turns the clavicle about its own oblique axis,
     and the acromion ends up lower than Ludewig's clavicle at high elevation.)"""
-    from exubio.angles import anatomical_frames, euler_angles, rotation_from_euler
+    from exubio.model.angles import anatomical_frames, euler_angles, rotation_from_euler
 
     model = kin.model
     A = anatomical_frames(model)["clavicle"]  # ISB clavicle frame at q = 0 (segment = thorax axes)
@@ -379,7 +379,7 @@ def rhythm_poses(model: Model, plane: str, ht_deg: np.ndarray, /) -> np.ndarray:
     Ludewig's ST changes, applied to the model's reference ISB scapula frame (scapula_isb_angles).
     Arm coordinates zero. The contact points of these postures are what a thorax ellipsoid must
     carry (``exubio.calibration.ellipsoid.fit_ellipsoid_to_points``)."""
-    from exubio.angles import rotation_from_euler
+    from exubio.model.angles import rotation_from_euler
 
     kin = Kinematics(model)
     splines = _sc_in_isb_frame(kin, _rhythm_splines(plane))

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from exubio.errors import InputError
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.protocol import resolve_labels
 from exubio.types import Model, Protocol, Trajectories
 

@@ -17,7 +17,7 @@ Hand-writing WebGL/three.js code would mean shipping and maintaining our own ren
 What is drawn (everything from the result files plus the model file the run names):
 - bones: for every segment a line from its origin (its joint centre; IJ for the thorax) to the
   joint centre of each child and to each of its anatomical landmarks (model points that are not
-  markers of the result), at the reconstructed q (``exubio.kinematics``);
+  markers of the result), at the reconstructed q (``exubio.model.kinematics``);
 - measured markers: the targets the method tracked (thorax frame, filtered), ``measured_m``;
 - model points: ``model_points_m``, coloured by the segment they move rigidly with;
 - residual lines: measured marker to model point, per frame (the springs of PF);
@@ -236,7 +236,7 @@ def _model_candidates(res: _Result) -> list[Path]:
 
 
 def _load_model(res: _Result, model_path: str | os.PathLike | None) -> tuple[Model, Path]:
-    from exubio.model import DEFAULT_MODEL, load_model
+    from exubio.model.load import DEFAULT_MODEL, load_model
 
     if model_path is not None:
         chosen = Path(model_path)
@@ -406,7 +406,7 @@ def _build_page(results: list[_Result], model: Model, model_file: Path, *,
     """The HTML page and the data summary embedded in it."""
     import plotly.io as pio
 
-    from exubio.kinematics import Kinematics
+    from exubio.model.kinematics import Kinematics
 
     kin = Kinematics(model)
     first = results[0].recon

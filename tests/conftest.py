@@ -1,8 +1,8 @@
 """Fixtures shared by the test modules: the generic model and its kinematics."""
 import pytest
 
-from exubio.kinematics import Kinematics
-from exubio.model import load_model
+from exubio.model.kinematics import Kinematics
+from exubio.model.load import load_model
 
 
 @pytest.fixture(scope="module")

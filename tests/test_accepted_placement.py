@@ -6,7 +6,7 @@ import pytest
 from exubio import quality as Q
 from exubio.calibration import SCALE_BOUNDS
 from exubio.errors import ProtocolError
-from exubio.model import load_model
+from exubio.model.load import load_model
 from exubio.pipeline import protocol_for_model
 from exubio.resources import shipped_file
 

@@ -6,9 +6,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from exubio.angles import ANATOMICAL_COLUMNS, anatomical_table
+from exubio.model.angles import ANATOMICAL_COLUMNS, anatomical_table
 from exubio.assess import angle_status_of_protocol, not_solved_mask
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.methods.poses import held_mask
 from exubio.observability import MODELLED_SHARE, AngleStatus, angle_determinacy

@@ -1,4 +1,4 @@
-"""ISB angles (exubio.angles): Euler/Cardan round trips, gimbal lock, anatomical frames, known
+"""ISB angles (exubio.model.angles): Euler/Cardan round trips, gimbal lock, anatomical frames, known
 rotations giving known ISB angles, and the sign conventions of Ludewig et al. 2009."""
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from exubio.angles import (
+from exubio.model.angles import (
     ISB_SEQUENCES,
     anatomical_frames,
     euler_angles,
@@ -16,7 +16,7 @@ from exubio.angles import (
     rotation_from_euler,
 )
 from exubio.errors import InputError
-from exubio.kinematics import axis_rotation
+from exubio.model.kinematics import axis_rotation
 from exubio.simulate import scapula_isb_angles, simulate_trial
 
 TAIT_BRYAN = ["XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX"]
@@ -162,7 +162,7 @@ def test_coronal_abduction_with_the_scapula_fixed(model, kin):
     np.testing.assert_allclose(np.degrees(ang["HT"][:2]), [0.0, -60.0 - np.degrees(ht0)], atol=1e-9)
     # GH: the humerus turns by exactly 60 deg relative to the fixed scapula, mostly as (negative)
     # X angle (the ISB scapula frame is internally rotated from the thorax's, so not all of it)
-    from exubio.angles import rotation_from_euler
+    from exubio.model.angles import rotation_from_euler
 
     R0, R1 = rotation_from_euler(ref["GH"], "XZY"), rotation_from_euler(ang["GH"], "XZY")
     turn = np.degrees(np.arccos(np.clip((np.trace(R1 @ R0.T) - 1.0) / 2.0, -1.0, 1.0)))

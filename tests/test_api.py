@@ -30,7 +30,7 @@ def test_readme_api_example_runs(tmp_path, monkeypatch, capsys):
     exec(compile(_example(), "README.md", "exec"), scope)
     df, rec, paths = scope["df"], scope["rec"], scope["paths"]
     assert isinstance(rec, exubio.Reconstruction) and len(df) == rec.n_frames == 200
-    from exubio.angles import anatomical_table
+    from exubio.model.angles import anatomical_table
     from exubio.io.results import read_angles_csv
 
     names, ang = anatomical_table(scope["model"], rec.q_rad)

@@ -12,9 +12,9 @@ import yaml
 
 from exubio.cli import main
 from exubio.io.c3d import write_c3d
-from exubio.angles import anatomical_table
+from exubio.model.angles import anatomical_table
 from exubio.io.results import read_angles_csv
-from exubio.model import load_model
+from exubio.model.load import load_model
 from exubio.pipeline import reconstruct
 from exubio.preprocess import prepare_targets
 from exubio.protocol import read_protocol_mapping

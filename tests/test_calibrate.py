@@ -19,8 +19,8 @@ from exubio.calibration import (
 from exubio.errors import InputError
 from exubio.evaluate import residual_statistics
 from exubio.io.c3d import write_c3d
-from exubio.kinematics import Kinematics
-from exubio.model import load_model, save_model
+from exubio.model.kinematics import Kinematics
+from exubio.model.load import load_model, save_model
 from exubio.pipeline import load_model_and_protocol, reconstruct, reconstruct_file
 from exubio.preprocess import prepare_targets
 from exubio.protocol import load_protocol
@@ -443,7 +443,7 @@ def test_functional_gh_centre_is_found_by_score_and_used(generic):
     """A subject whose glenohumeral centre is 15 mm from the generic one (lateral and down): the
     static pose alone leaves it where the generic model has it relative to the scapula markers; a
     functional trial (abduction then flexion, 1 mm noise) puts it within 2 mm of the truth."""
-    from exubio.kinematics import Kinematics
+    from exubio.model.kinematics import Kinematics
     from exubio.types import Trajectories
 
     model, protocol = generic
@@ -475,7 +475,7 @@ def test_a_second_static_pose_fits_the_ellipsoid_through_both(generic):
     fitted through both poses' contact points and the subject's true contact points of both lie
     close to it."""
     from exubio.calibration.ellipsoid import surface_distance
-    from exubio.kinematics import Kinematics
+    from exubio.model.kinematics import Kinematics
     from exubio.types import Trajectories
 
     subject, protocol = generic

@@ -9,7 +9,7 @@ import pytest
 from exubio.cli import main
 from exubio.io.c3d import write_c3d
 from exubio.io.results import read_angles_csv, read_mot, read_npz
-from exubio.model import load_model
+from exubio.model.load import load_model
 from exubio.simulate import Motion, simulate_trial
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
@@ -29,7 +29,7 @@ def c3d(tmp_path, trial):
 def test_reconstruct_writes_all_outputs_with_consistent_content(tmp_path, c3d, trial, capsys):
     out = tmp_path / "out"
     assert main(["-q", "reconstruct", str(c3d), "--method", "ls", "--out", str(out)]) == 0
-    from exubio.angles import ANATOMICAL_COLUMNS, anatomical_table
+    from exubio.model.angles import ANATOMICAL_COLUMNS, anatomical_table
 
     t, names, ang = read_angles_csv(out / "abd.ls.csv")
     assert names == tuple(f"{n}_deg" for n in ANATOMICAL_COLUMNS)  # the anatomical angles, unit in the name
@@ -254,7 +254,7 @@ def test_angle_status_is_the_same_in_every_file(tmp_path, c3d):
     """Each anatomical angle's status (measured, modelled, not measured) is the same in the CSV
     header, the .mot header, summary.json and the .npz; with the shipped protocol the clavicle's
     axial rotation is solved but named not measured, its SC elevation and protraction measured."""
-    from exubio.angles import ANATOMICAL_COLUMNS
+    from exubio.model.angles import ANATOMICAL_COLUMNS
     from exubio.io.results import read_npz_arrays
     from exubio.observability import AngleStatus
 

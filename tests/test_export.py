@@ -11,8 +11,8 @@ import pytest
 from exubio.calibration import marker_point_names
 from exubio.errors import InputError, ModelError
 from exubio.export import marker_table, write_biomod, write_osim
-from exubio.kinematics import Kinematics
-from exubio.model import load_model
+from exubio.model.kinematics import Kinematics
+from exubio.model.load import load_model
 from exubio.io.results import read_npz
 from exubio.pipeline import protocol_for_model, reconstruct_file
 from exubio.session import calibrate_file
@@ -202,7 +202,7 @@ def test_reconstruct_mot_plays_on_exported_osim(exported, reconstruction, tmp_pa
     """exubio's .mot carries the anatomical angles; the anatomical .osim (SC, AC, GH between the ISB
     frames, the angles as its coordinates) replays it: its markers at the .mot's angles are the
     model points exubio tracked."""
-    from exubio.angles import anatomical_table
+    from exubio.model.angles import anatomical_table
 
     opensim = pytest.importorskip("opensim")
     rec, mot = reconstruction[exported.name]

@@ -7,8 +7,8 @@ pytest.importorskip("exudyn")
 
 from exubio.backend.exudyn_system import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD, IntegratorOptions, PFSystem, SpringSet  # noqa: E402
 from exubio.errors import ModelError  # noqa: E402
-from exubio.kinematics import Kinematics  # noqa: E402
-from exubio.model import load_model  # noqa: E402
+from exubio.model.kinematics import Kinematics  # noqa: E402
+from exubio.model.load import load_model  # noqa: E402
 
 RATE_HZ = 200.0
 JOINT_CENTRES = {"SC", "AC", "GH", "EJC", "RH", "WJC"}

@@ -1,5 +1,5 @@
-"""Frame definitions as data (exubio.frame_definitions), angles in a study's definition
-(exubio.angles.joint_angles), the shipped Spartacus corpus (exubio.reference) and corridors
+"""Frame definitions as data (exubio.model.frame_definitions), angles in a study's definition
+(exubio.model.angles.joint_angles), the shipped Spartacus corpus (exubio.reference) and corridors
 (exubio.corridor): frames built from landmarks against hand computations, known rotations giving
 known angles, conversions between definitions against a direct computation."""
 from __future__ import annotations
@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from exubio.angles import anatomical_frames, definition_frame, isb_angles, joint_angles, ISB_SEQUENCES
+from exubio.model.angles import anatomical_frames, definition_frame, isb_angles, joint_angles, ISB_SEQUENCES
 from exubio.corridor import build_corridor, convert_angles, share_inside, target_definition, HT_GRID_DEG
-from exubio.frame_definitions import (ISB_WU2005, FrameDefinition, JointDefinition, NotBuildable, build_frame,
+from exubio.model.frame_definitions import (ISB_WU2005, FrameDefinition, JointDefinition, NotBuildable, build_frame,
                                       sequence_letters)
 from exubio.reference import load_corpus, load_ludewig2009
 

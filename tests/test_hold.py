@@ -6,7 +6,7 @@ import pytest
 
 from exubio.backend.exudyn_system import PFSystem, SpringSet
 from exubio.errors import ModelError, ProtocolError
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.pipeline import DEFAULT_PROTOCOL, load_model_and_protocol, reconstruct
 from exubio.preprocess import prepare_targets

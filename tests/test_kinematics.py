@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from exubio.kinematics import Kinematics, axis_rotation
-from exubio.model import load_model
+from exubio.model.kinematics import Kinematics, axis_rotation
+from exubio.model.load import load_model
 
 RNG_SEEDS = [0, 1, 2, 3, 4]
 H = 1e-6

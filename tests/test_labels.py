@@ -16,7 +16,7 @@ import pytest
 from exubio import labels as L
 from exubio.calibration import scale_model
 from exubio.errors import InputError
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.pipeline import protocol_for_model
 from exubio.simulate import simulate_trial
 
@@ -127,7 +127,7 @@ def test_pair_distances_equal_the_marker_by_marker_computation(sim):
 
 
 def test_expectations_are_computed_once_per_content_and_bound_to_the_objects_given(model, protocol, expect):
-    from exubio.model import load_model
+    from exubio.model.load import load_model
 
     other_model = load_model()  # the same file, loaded again: another object, the same content
     other_protocol = protocol_for_model(other_model)

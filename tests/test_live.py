@@ -110,7 +110,7 @@ def test_measured_angles_follow_the_hold_and_the_determinacy(model_protocol):
     """The live flags say what the files say: with the shipped 21-marker set (nothing held) the
     clavicle's axial rotation and the AC upward rotation are not measured, SC elevation, ST, GH and
     HT are; a frame where GH's axial rotation is undetermined makes the GH and HT angles not measured."""
-    from exubio.angles import ISB_COLUMNS
+    from exubio.model.angles import ISB_COLUMNS
     from exubio.assess import coordinates_not_measured_by_protocol, not_solved_mask
 
     model, protocol = model_protocol

@@ -4,7 +4,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.methods.ls import LSOptions, reconstruct_ls
 from exubio.pipeline import load_model_and_protocol
@@ -52,7 +52,7 @@ def test_holding_the_clavicle_axial_rotation_leaks_into_the_girdle(motion):
     ~30 deg) leaves residuals the fit spreads over the girdle: noise-free, the measured angles are
     off by up to 0.35-0.62 deg with the hold (0.05 in SIER, whose clavicle barely moves) and exact
     without it."""
-    from exubio.angles import anatomical_table
+    from exubio.model.angles import anatomical_table
 
     model, protocol = load_model_and_protocol()
     assert protocol.held_coordinates == ()

@@ -11,7 +11,7 @@ import pytest
 
 from exubio.assess import assess_trial
 from exubio.calibration.ellipsoid import surface_distance
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.mismatch import BIAS_MM, CONTACT_OFFSET_MM, assess_mismatch, segment_evidence
 from exubio.perturb import ModelPerturbation
@@ -142,7 +142,7 @@ def test_thresholds_sit_between_what_noise_gives_and_what_a_costly_mismatch_give
 ])
 def test_real_trials_with_their_labels_right_raise_no_mismatch(tmp_path, trial, static):
     from exubio.io.trial import read_trial
-    from exubio.model import load_model
+    from exubio.model.load import load_model
     from exubio.pipeline import protocol_for_model
     from exubio.session import calibrate_session
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from exubio.errors import ModelError
-from exubio.model import DEFAULT_MODEL, load_model
+from exubio.model.load import DEFAULT_MODEL, load_model
 
 
 def test_generic_model_masses_follow_winter_and_scale_with_body_mass():
@@ -21,7 +21,7 @@ def test_generic_model_masses_follow_winter_and_scale_with_body_mass():
 
 
 def test_reference_posture_contact_points_lie_on_the_ellipsoid():
-    from exubio.kinematics import Kinematics
+    from exubio.model.kinematics import Kinematics
 
     kin = Kinematics(load_model())
     assert np.abs(kin.g(np.zeros(13))).max() < 1e-6

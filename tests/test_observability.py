@@ -3,7 +3,7 @@ protocol, against what the marker set can see."""
 
 import numpy as np
 
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.observability import UNDETERMINED_DEG_PER_MM, determinacy
 from exubio.pipeline import load_model_and_protocol

@@ -8,8 +8,8 @@ import pytest
 from exubio.cli import main
 from exubio.errors import InputError
 from exubio.io.results import read_angles_csv
-from exubio.kinematics import Kinematics
-from exubio.model import load_model
+from exubio.model.kinematics import Kinematics
+from exubio.model.load import load_model
 from exubio.perturb import ModelPerturbation
 
 

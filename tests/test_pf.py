@@ -9,7 +9,7 @@ import pytest
 pytest.importorskip("exudyn")
 
 from exubio.errors import ReconstructionError  # noqa: E402
-from exubio.kinematics import Kinematics  # noqa: E402
+from exubio.model.kinematics import Kinematics  # noqa: E402
 from exubio.methods.common import tracked_points  # noqa: E402
 from exubio.methods.constraints import project_on_constraints  # noqa: E402
 from exubio.methods.pf import PFOptions, integration_step, reconstruct_pf  # noqa: E402

@@ -5,12 +5,12 @@ import dataclasses
 import numpy as np
 import pytest
 
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.methods.ls import LSOptions, reconstruct_ls
-from exubio.model import load_model, model_to_dict, save_model
+from exubio.model.load import load_model, model_to_dict, save_model
 from exubio.pipeline import load_model_and_protocol
-from exubio.ranges import limit_report, violation, wrap_into_range
+from exubio.model.ranges import limit_report, violation, wrap_into_range
 from exubio.types import MarkerTargets
 
 
@@ -97,7 +97,7 @@ def test_ls_keeps_a_coordinate_driven_beyond_its_range_at_the_limit_potentials_e
     J = kin.point_jacobian(lim.q_rad[:1], pts)[0]
     err = kin.points(lim.q_rad[:1], pts)[0] - targets.positions_m[0]
     grad = np.einsum("kcm,kc,k->m", J, err, protocol.weights)
-    from exubio.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD, penalty_weight
+    from exubio.model.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD, penalty_weight
 
     kappa = penalty_weight(DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD, protocol.default_stiffness_n_per_m)
     assert grad[e] == pytest.approx(-kappa * (lim.q_rad[0, e] - hi), rel=1e-3)

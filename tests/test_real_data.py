@@ -11,7 +11,7 @@ import pytest
 from exubio.calibration import calibrate_model, calibrated_protocol
 from exubio.evaluate import residual_statistics
 from exubio.io.trial import read_trial
-from exubio.model import load_model, save_model
+from exubio.model.load import load_model, save_model
 from exubio.pipeline import load_model_and_protocol, reconstruct
 from exubio.preprocess import prepare_targets
 from exubio.resources import shipped_file
@@ -93,7 +93,7 @@ def test_trc_trials_calibrated_from_their_first_frames(trial):
     idx = [ls.coordinate_names.index(c) for c in UNOBSERVED_ON_TRC]
     assert np.ptp(ls.q_rad[:, idx], axis=0).max() < 1e-6
     # the scapula orientation from LS and PF agrees (the clavicle's does not: see the protocol)
-    from exubio.kinematics import Kinematics
+    from exubio.model.kinematics import Kinematics
 
     kin = Kinematics(cal)
     i = cal.segment_index("scapula")

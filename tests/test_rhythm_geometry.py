@@ -2,13 +2,13 @@
 ``exubio simulate`` in the coronal, scapular and sagittal planes reproduces Ludewig's SC and ST
 angle changes over HT 30-120 deg within 3 deg, with the scapula on the thorax ellipsoid
 (|g| < 1e-9). The references are Ludewig's published numbers (exubio/data/ludewig2009.csv), the
-angles are measured on the simulated truth with exubio.angles (ISB frames from the landmarks)."""
+angles are measured on the simulated truth with exubio.model.angles (ISB frames from the landmarks)."""
 import numpy as np
 import pytest
 
-from exubio.angles import humerothoracic_elevation, isb_angles
-from exubio.kinematics import Kinematics
-from exubio.model import load_model
+from exubio.model.angles import humerothoracic_elevation, isb_angles
+from exubio.model.kinematics import Kinematics
+from exubio.model.load import load_model
 from exubio.reference import load_ludewig2009
 from exubio.resources import shipped_file
 from exubio.simulate import PLANE_OF, Motion, simulate_trial

@@ -8,12 +8,12 @@ import dataclasses
 import numpy as np
 import pytest
 
-from exubio.angles import isb_angles
+from exubio.model.angles import isb_angles
 from exubio.calibration import calibrate_model, calibrated_protocol
 from exubio.calibration.ellipsoid import surface_distance
 from exubio.calibration.scapula_motion import MIN_POSTURES, fit_scapula_motion
 from exubio.errors import InputError
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.pipeline import load_model_and_protocol, reconstruct
 from exubio.preprocess import prepare_targets
 from exubio.resources import shipped_file
@@ -179,7 +179,7 @@ def test_cli_scapula_trial(tmp_path, capsys):
     """``exubio calibrate --scapula-trial`` writes a model whose ellipsoid is the motion fit and says so;
     ``reconstruct --scapula-trial`` without ``--static`` is bad input (exit 2)."""
     from exubio.cli import main
-    from exubio.model import load_model
+    from exubio.model.load import load_model
 
     files = _real()
     protocol = str(shipped_file("exubio.protocols", "thoracoscapular_9.yaml", "protocols"))

@@ -4,7 +4,7 @@ segment frames `local_position_mm` uses."""
 import numpy as np
 
 from exubio.cli import main
-from exubio.model import load_model
+from exubio.model.load import load_model
 from exubio.protocol import resolve_protocol, shipped_protocols
 from exubio.resources import shipped_file
 

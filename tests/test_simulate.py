@@ -94,7 +94,7 @@ def test_abduction_elevates_to_120_in_the_coronal_plane_and_the_scapula_moves(mo
     # the clavicle's ISB posterior rotation follows Ludewig's (about 25 deg over 10-120 deg); the
     # scapula's upward rotation relative to the thorax (ISB, from AA/TS/AI) too: Ludewig's 28 deg
     # over 30-120 deg, about 36 deg over 10-120 (tests/test_rhythm_geometry.py checks both within 3 deg)
-    from exubio.angles import isb_angles
+    from exubio.model.angles import isb_angles
 
     assert np.degrees(np.ptp(isb_angles(model, tr.q_true)["SC"][:, 2])) > 20.0
     st = np.degrees(scapula_isb_angles(kin, tr.q_true))
@@ -130,7 +130,7 @@ def test_sier_rotates_the_humerus_about_its_axis(model, kin):
 def test_isb_sc_angles_follow_the_tabulated_rhythm(model, kin):
     """The ISB SC angles (Y-X'-Z'' of the ISB clavicle frame) change by Ludewig's changes between
     HT 30 and 120 deg."""
-    from exubio.angles import isb_angles
+    from exubio.model.angles import isb_angles
 
     tr = simulate_trial(model, "abduction", duration_s=2.5, rate_hz=1000.0, lab_transform=False)
     ht, _ = _ht_elevation_deg(kin, tr.q_true)

@@ -16,7 +16,7 @@ import pytest
 import yaml
 
 from exubio.cli import main
-from exubio.model import load_model
+from exubio.model.load import load_model
 from exubio.simulate import simulate_trial, write_simulated_trial
 from exubio.study import DONE_FILE, load_study
 

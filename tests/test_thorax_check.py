@@ -12,7 +12,7 @@ from exubio.cli import main
 from exubio.errors import InputError
 from exubio.io.c3d import write_c3d
 from exubio.io.trial import read_trial
-from exubio.model import load_model
+from exubio.model.load import load_model
 from exubio.pipeline import load_inputs, load_model_and_protocol, protocol_for_model
 from exubio.resources import shipped_file
 from exubio.simulate import simulate_trial

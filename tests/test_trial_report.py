@@ -15,7 +15,7 @@ from matplotlib.text import Text
 
 from exubio.cli import main
 from exubio.io.c3d import write_c3d
-from exubio.model import load_model
+from exubio.model.load import load_model
 from exubio.report import trial_report as tr
 from exubio.simulate import simulate_trial
 

@@ -60,7 +60,7 @@ without 30 deg to spare before the wrap, and a spherical joint's middle-angle li
 +-90 deg (that angle never gets there), get no element. A spherical joint with three free
 angles may sit on either branch of its sequence (the principal one, |middle angle| <= 90 deg, or
 the other, (t0 + pi, +-pi - t1, t2 + pi)); the pre-step judges which one lies within the ranges of
-all three coordinates (or nearer them), as exubio.kinematics reports it, and tells the torque
+all three coordinates (or nearer them), as exubio.model.kinematics reports it, and tells the torque
 function through the connector's ``offset[0]`` (+1 / -1), which then measures the angles on that
 branch (the middle angle runs against the principal one there). E.g. the glenohumeral joint at
 more than 90 deg of internal rotation in a palm-down T-pose: before, its principal first and last
@@ -91,8 +91,8 @@ from exudyn.rigidBodyUtilities import RotationMatrix2EulerParameters
 from exubio.backend.pf_numerics import (LimitElement, StateRecord, ep_G, ep_rotation, frame_with_z, frames_from_steps,
                                        hermite, limit_window, quintic)
 from exubio.errors import ModelError
-from exubio.kinematics import axis_rotation, Kinematics, PointSet
-from exubio.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD  # k_lim, shared with LS
+from exubio.model.kinematics import axis_rotation, Kinematics, PointSet
+from exubio.model.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD  # k_lim, shared with LS
 from exubio.types import JointKind, Model
 
 esym = exu.symbolic

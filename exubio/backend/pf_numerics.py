@@ -154,7 +154,7 @@ class LimitElement:
         """Smallest distance (rad) of a limited angle to its nearest limit (< 0 beyond it);
         ``theta``: the connector's Rotation output (a scalar for a torsional spring-damper). A
         spherical joint's angles are taken on the branch that lies within the ranges, or nearer
-        them, as exubio.kinematics reports them (``branch``, which the torque function reads)."""
+        them, as exubio.model.kinematics reports them (``branch``, which the torque function reads)."""
         theta = (theta,) if self.scalar else theta.tolist()  # Python floats: 3x faster than numpy scalars
         if not self.branches:
             return self._distance(theta, self.bounds)
@@ -178,7 +178,7 @@ def limit_window(lo: float, hi: float, kind: str, half: float):
     """(lower, upper, centre) of a range [lo, hi] of a connector angle measured from ``centre``,
     or (None, None, 0) if it cannot be enforced. Exudyn's angles are principal values: the first
     and last (``periodic``) in (-pi, pi], a spherical joint's middle angle (``middle``) in
-    [-pi/2, pi/2] (the branch exubio.kinematics reports), a cardan joint's middle angle
+    [-pi/2, pi/2] (the branch exubio.model.kinematics reports), a cardan joint's middle angle
     (``window``, shiftable) within pi/2 of its centre. The centre is the middle of the range, or a
     quarter window inside a one-sided limit, so the angle wraps as far as possible beyond the
     limits; a range that leaves less than _LIMIT_WRAP_TOLERANCE_RAD beyond either end is not

@@ -74,12 +74,12 @@ from exubio.calibration.report import CalibrationReport, MarkerCalibration
 from exubio.calibration.scaling import DEFAULT_SCALE_GROUPS, _groups, _thorax_scale, scale_model
 from exubio.calibration.window import _nanmean, _window
 from exubio.errors import InputError, ReconstructionError
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.lsq import StopReason
 from exubio.methods.common import tracked_points
 from exubio.methods.poses import Limits, LSOptions, solve_positions
 from exubio.preprocess import prepare_targets
-from exubio.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD
+from exubio.model.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD
 from exubio.types import MarkerTargets, Model, Protocol, Trajectories
 
 log = logging.getLogger(__name__)

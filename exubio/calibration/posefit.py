@@ -9,10 +9,10 @@ from typing import Mapping
 import numpy as np
 
 from exubio.calibration.scaling import SCALE_BOUNDS, SCALE_PRIOR_M2, _scale_design, scale_model
-from exubio.kinematics import Kinematics, PointSet
+from exubio.model.kinematics import Kinematics, PointSet
 from exubio.lsq import Evaluation, Result, Settings, StopReason, levenberg_marquardt
 from exubio.methods.poses import Limits
-from exubio.ranges import AT_LIMIT_TOLERANCE_RAD, violation
+from exubio.model.ranges import AT_LIMIT_TOLERANCE_RAD, violation
 from exubio.types import Model
 
 ROBUST_SCALE_M = 0.02  # Cauchy weight 1 / (1 + (d / ROBUST_SCALE_M)^2) in the anatomical fit
@@ -53,7 +53,7 @@ def _fit_pose(kin: Kinematics, points: PointSet, target: np.ndarray, w: np.ndarr
               prior: np.ndarray, *, limits: Limits | None = None, max_iterations: int = 300,
               tol: float = 1e-10, held: np.ndarray | None = None) -> Result:
     """min_q sum w_i |r_i(q) - m_i|^2 + sum_j prior_j q_j^2 + kappa sum_j v_j(q)^2 (the joint
-    ranges, exubio.ranges) for every start (S, m) at once, Levenberg-Marquardt (exubio.lsq);
+    ranges, exubio.model.ranges) for every start (S, m) at once, Levenberg-Marquardt (exubio.lsq);
     returns the core's result: q (S, m) in ``x``, the cost (S,) in ``evaluation.cost``, why each
     start stopped in ``reason``."""
     m = np.shape(q_starts)[1]

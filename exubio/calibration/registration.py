@@ -9,7 +9,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from exubio.errors import ProtocolError
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.types import Model, Protocol
 
 

@@ -4,7 +4,7 @@ biorbd ``.bioMod`` (:func:`write_biomod`).
 Both are plain text writers (no opensim or biorbd import). They reproduce exubio's forward
 kinematics exactly (joint centres, rotation axes and sequence, segment frames, model points as
 markers, mass, centre of mass and inertia), so that marker positions agree with
-``exubio.kinematics.Kinematics`` for any posture. What neither format can express, the
+``exubio.model.kinematics.Kinematics`` for any posture. What neither format can express, the
 scapulothoracic ellipsoid constraint, is stated in a comment at the top of each file: the exported
 model is an open chain (13 free coordinates); postures reconstructed by exubio already satisfy the
 constraint and replay exactly.

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from exubio.export.common import UNLIMITED_RAD, check_names, complete_basis, ellipsoid_note, marker_table, vec, write_text
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.types import Model
 
 

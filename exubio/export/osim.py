@@ -1,6 +1,6 @@
 """exubio Model -> OpenSim model file (.osim, OpenSim 4 format).
 
-Mapping (exact, checked against ``exubio.kinematics`` by tests/test_export.py):
+Mapping (exact, checked against ``exubio.model.kinematics`` by tests/test_export.py):
 - every segment is a Body with its mass, centre of mass and inertia about the centre of mass
   (``Ixx Iyy Izz Ixy Ixz Iyz``: the entries of exubio's tensor); the body frame is exubio's segment
   frame. The thorax is welded to ground (the thorax frame is exubio's global frame).
@@ -26,7 +26,7 @@ from xml.sax.saxutils import escape, quoteattr
 import numpy as np
 
 from exubio.export.common import UNLIMITED_RAD, check_names, complete_basis, ellipsoid_note, fmt, marker_table, vec, write_text
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.types import Model
 
 
@@ -100,7 +100,7 @@ def _custom_joint(seg, anatomical: dict | None = None) -> str:
 
 
 def _offset(name: str, body: str, translation, R: np.ndarray) -> str:
-    from exubio.angles import euler_angles
+    from exubio.model.angles import euler_angles
 
     xyz = euler_angles(R, "XYZ")  # OpenSim's orientation: body-fixed X-Y-Z angles
     return (f"\t\t\t\t\t\t<PhysicalOffsetFrame name={quoteattr(name)}>\n"
@@ -134,11 +134,11 @@ CustomJoint cannot take, and is in gimbal lock with the arm hanging)."""
 
 DISTAL_NAMES = {"elbow_flexion": "elbow_flexion", "pronation": "forearm_pronation", "wrist_flexion": "wrist_flexion",
                 "wrist_radial_deviation": "wrist_radial_deviation"}
-"""Model coordinate -> its anatomical angle name (exubio.angles.ANATOMICAL_ANGLES)."""
+"""Model coordinate -> its anatomical angle name (exubio.model.angles.ANATOMICAL_ANGLES)."""
 
 
 def _anatomical_joints(model: Model) -> dict[str, dict]:
-    from exubio.angles import anatomical_frames, anatomical_table
+    from exubio.model.angles import anatomical_frames, anatomical_table
 
     frames = anatomical_frames(model)
     names, ref = anatomical_table(model, np.zeros(model.n_coordinates))

@@ -41,7 +41,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from exubio import quality as Q
-from exubio.angles import ISB_COLUMNS, isb_table, measured_isb_joints
+from exubio.model.angles import ISB_COLUMNS, isb_table, measured_isb_joints
 from exubio.assess import DETERMINACY_PERIOD_S, not_solved_mask
 from exubio.errors import InputError, ReconstructionError
 from exubio.live.causal import CausalFrame, CausalOptions, CausalTargets, frame_index
@@ -49,7 +49,7 @@ from exubio.live.sources import UNIT_SCALE, MarkerSource, ReplaySource, StreamIn
 from exubio.methods.pf import PFOptions, _Frames, pf_setup
 from exubio.observability import determinacy
 from exubio.preprocess import PLAUSIBLE_MEDIAN_DISTANCE_M
-from exubio.ranges import AT_LIMIT_TOLERANCE_RAD
+from exubio.model.ranges import AT_LIMIT_TOLERANCE_RAD
 from exubio.types import FrameStatus, Gap, MarkerTargets, Model, Protocol, Reconstruction, Trajectories
 
 log = logging.getLogger(__name__)
@@ -124,8 +124,8 @@ def angles_measured(model: Model, not_solved: Sequence[str], undetermined: Seque
 
 
 def _joint_coordinates(model: Model, joint: str) -> tuple[str, ...]:
-    """The model coordinates of the segments an ISB angle set relates (exubio.frame_definitions)."""
-    from exubio.frame_definitions import JOINT_SEGMENTS
+    """The model coordinates of the segments an ISB angle set relates (exubio.model.frame_definitions)."""
+    from exubio.model.frame_definitions import JOINT_SEGMENTS
 
     segs = set(JOINT_SEGMENTS[joint]) - {"thorax"}
     return tuple(c for s in model.segments if s.name in segs and s.joint for c in s.joint.coordinates)
@@ -858,7 +858,7 @@ class LiveSession:
                            else max(int(round(self.options.max_behind_s * self.rate)), 1))
 
     def _bind(self) -> None:
-        from exubio.kinematics import Kinematics
+        from exubio.model.kinematics import Kinematics
         from exubio.methods.common import tracked_points
 
         self.causal = CausalTargets(self.protocol, self.labels, self.rate, options=self.options.causal,
@@ -915,7 +915,7 @@ class LiveSession:
         self.tracking = False
         self.last_isb = None
         self.last_isb_row = None
-        from exubio.angles import anatomical_frames
+        from exubio.model.angles import anatomical_frames
 
         self.anatomical = anatomical_frames(self.model)
         self.current_sample = None

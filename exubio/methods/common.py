@@ -15,7 +15,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from exubio.kinematics import Kinematics, PointSet
+from exubio.model.kinematics import Kinematics, PointSet
 from exubio.types import Gap, MarkerTargets, Protocol, Reconstruction
 
 

@@ -7,7 +7,7 @@ import logging
 
 import numpy as np
 
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.lsq import NewtonResult, newton
 
 log = logging.getLogger(__name__)

@@ -11,7 +11,7 @@ from typing import Callable
 
 import numpy as np
 
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.lsq import StopReason, stop_counts
 from exubio.methods.common import CHUNK_FRAMES, ChunkSink, Collector, assemble, chunk_bounds, target_chunk, tracked_points
 from exubio.methods.poses import (MIN_MARKERS, RATES_REGULARISATION, Limits, LSOptions, held_mask, solve_positions,

@@ -49,12 +49,12 @@ import numpy as np
 
 from exubio.backend.exudyn_system import IntegratorOptions, PFSystem, SpringSet
 from exubio.errors import ReconstructionError
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.methods.common import CHUNK_FRAMES, ChunkSink, Collector, assemble, target_chunk, tracked_points
 from exubio.methods.constraints import project_on_constraints
 from exubio.lsq import StopReason
 from exubio.methods.poses import RATES_REGULARISATION, Limits, LSOptions, held_mask, solve_positions, solve_rates
-from exubio.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD
+from exubio.model.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD
 from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Reconstruction
 
 log = logging.getLogger(__name__)
@@ -90,7 +90,7 @@ class PFOptions:
         tracked motion instead of at its force-free value (see the module docstring); rounded to
         whole steps; 0: no lead-in.
     limit_stiffness_nm_per_rad: k_lim of the range-of-motion limits (the model's coordinate ranges;
-        one-sided quadratic potential beyond each limit, the same as LS's: exubio.ranges; the
+        one-sided quadratic potential beyond each limit, the same as LS's: exubio.model.ranges; the
         Exudyn elements: exubio.backend.exudyn_system.PFSystem).
     """
 

@@ -2,10 +2,10 @@
 the LS method (exubio.methods.ls), PF's start (exubio.methods.pf.initial_state) and the calibration
 share.
 
-Per frame: minimise sum_i w_i |r_Ri(q) - r_Mi|^2 (+ the joint-range potential, exubio.ranges)
+Per frame: minimise sum_i w_i |r_Ri(q) - r_Mi|^2 (+ the joint-range potential, exubio.model.ranges)
 subject to the two ellipsoid constraints g(q) = 0, with markers missing in that frame left out of
 the sum. Solver: Gauss-Newton SQP on the KKT system [J^T W J + mu I, G^T; G, 0] [dq; lambda] =
-[-J^T W e; -g] with the analytic Jacobians of exubio.kinematics, on the batched core of exubio.lsq;
+[-J^T W e; -g] with the analytic Jacobians of exubio.model.kinematics, on the batched core of exubio.lsq;
 its fixed points satisfy the first-order optimality conditions exactly. A step is kept only if it
 lowers the l1 merit function (cost + rho |g|_1); otherwise the Levenberg-Marquardt damping mu
 grows, which keeps large-residual frames (a generic model on a real subject) convergent.
@@ -26,10 +26,10 @@ from typing import Callable
 
 import numpy as np
 
-from exubio.kinematics import Kinematics, PointSet
+from exubio.model.kinematics import Kinematics, PointSet
 from exubio.lsq import Evaluation, Settings, StopReason, fix_variables, levenberg_marquardt
 from exubio.methods.constraints import project_on_constraints
-from exubio.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD, penalty_weight, violation
+from exubio.model.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD, penalty_weight, violation
 from exubio.types import Model, Protocol
 
 log = logging.getLogger(__name__)
@@ -47,13 +47,13 @@ class LSOptions:
     regularisation: float = 1e-6  # mu (m^2/rad^2): damps steps in weakly observed directions and
     # keeps unobservable coordinates where they were; it does not move the converged optimum
     limit_stiffness_nm_per_rad: float | None = DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD  # k_lim of the
-    # joint ranges (exubio.ranges); None or 0: no ranges in the solve
+    # joint ranges (exubio.model.ranges); None or 0: no ranges in the solve
 
 
 @dataclass(frozen=True)
 class Limits:
     """The joint ranges inside the solve: cost + kappa sum_j v_j(q)^2 with v_j the excursion beyond
-    the range (exubio.ranges; kappa = k_lim / c_default, the same potential as PF's limits)."""
+    the range (exubio.model.ranges; kappa = k_lim / c_default, the same potential as PF's limits)."""
 
     ranges_rad: np.ndarray  # (m, 2)
     kappa: float  # m^2/rad^2

@@ -35,7 +35,7 @@ _COLOURS = {"pf": "black", "ls": "tab:red"}
 _JOINTS = (("SC (ISB Y-X'-Z'')", "SC_"), ("AC (ISB Y-X'-Z'')", "AC_"), ("ST (ISB Y-X'-Z'')", "ST_"),
            ("GH (ISB Y-X'-Y'')", ("GH_Y_", "GH_X_")), ("GH (Phadke X-Z'-Y'')", "GH_phadke_"),
            ("HT (ISB Y-X'-Y'')", "HT_"), ("elbow, forearm,\nwrist", ("elbow_", "forearm_", "wrist_")))
-"""Rows of the angles page: the anatomical angles (exubio.angles.ANATOMICAL_ANGLES) by joint."""
+"""Rows of the angles page: the anatomical angles (exubio.model.angles.ANATOMICAL_ANGLES) by joint."""
 
 
 @dataclass(frozen=True)
@@ -565,7 +565,7 @@ def calibration_page(meta: dict, summaries: dict[str, dict]) -> Figure | None:
 def build_trial_report(npz_paths: Sequence[str | Path], pdf_path: str | Path, /, *,
                        truth: Truth | None = None) -> tuple[Path, Path]:
     """Write ``pdf_path`` and a PNG of its first page (the verdict) beside it (``.png``), atomically.
-    ``truth``: the known anatomical angles of a simulated trial (exubio.angles.anatomical_table of
+    ``truth``: the known anatomical angles of a simulated trial (exubio.model.angles.anatomical_table of
     its true coordinates), compared on page 1 (the measured angles) and drawn."""
     npz_paths = [Path(p) for p in npz_paths]
     recons = [read_npz(p, points=False) for p in npz_paths]  # no page draws the 3-D points: long trials stay light

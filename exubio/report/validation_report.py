@@ -271,7 +271,7 @@ def _masked(y: np.ndarray, mask: np.ndarray) -> np.ndarray:
 
 
 def _definition_note() -> str:
-    return ("Angles in Ludewig et al. 2009's own definitions (from the Spartacus metadata, exubio.frame_definitions): "
+    return ("Angles in Ludewig et al. 2009's own definitions (from the Spartacus metadata, exubio.model.frame_definitions): "
             "thorax and humerus as ISB; clavicle Z SC→AC; scapula Z TS→AC, X normal to AI-TS-AC (built on AC, not "
             "ISB's AA); SC, AC, ST Y-X′-Z″, GH X-Z′-Y″, no sign change (raw Euler angles).")
 
@@ -681,8 +681,8 @@ def summary_pages(r: ValidationResults) -> list[Figure]:
         "use the same model, markers and 2 Hz zero-lag Butterworth-filtered targets (simulated trials: generic "
         "model, upper_limb_21 protocol, 18 tracked markers; real trials: subject-calibrated model, "
         "thoracoscapular_9 protocol, 6 tracked markers). Joint angles for Fig. 5 are computed in Ludewig et al. "
-        "2009's own frame definitions and sequences, read from the Spartacus metadata (exubio.frame_definitions, "
-        "exubio.angles.joint_angles; scapula built on AC, SC and ST Y-X'-Z'', GH X-Z'-Y''), raw Euler angles as "
+        "2009's own frame definitions and sequences, read from the Spartacus metadata (exubio.model.frame_definitions, "
+        "exubio.model.angles.joint_angles; scapula built on AC, SC and ST Y-X'-Z'', GH X-Z'-Y''), raw Euler angles as "
         "Spartacus stores Ludewig's: retraction, clavicle elevation, scapular upward rotation and GH elevation "
         "negative; posterior clavicle rotation and posterior scapular tilt positive. The corridor behind them "
         "holds the comparable studies of the Spartacus corpus converted to the same definitions (exubio.corridor). "

@@ -8,9 +8,9 @@ import dataclasses
 
 import numpy as np
 
-from exubio.angles import isb_angles
+from exubio.model.angles import isb_angles
 from exubio.errors import ReconstructionError
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.pipeline import reconstruct
 from exubio.types import Model
 from exubio.validation.determinacy import trial_undetermined, undetermined_isb, unobserved_segments

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.types import Model, Protocol, Reconstruction
 from exubio.validation.trials import Trial
 

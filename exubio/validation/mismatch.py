@@ -16,7 +16,7 @@ from typing import Callable
 
 import numpy as np
 
-from exubio.angles import anatomical_table
+from exubio.model.angles import anatomical_table
 from exubio.assess import assess_trial
 from exubio.observability import AngleStatus
 from exubio.perturb import ModelPerturbation

@@ -28,7 +28,7 @@ import time
 import numpy as np
 
 from exubio.errors import ReconstructionError
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.pipeline import load_model_and_protocol, reconstruct
 from exubio.simulate import Motion
 from exubio.validation.determinacy import UNDETERMINED_SHARE, undetermined_coordinates

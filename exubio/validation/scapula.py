@@ -28,7 +28,7 @@ import dataclasses
 
 import numpy as np
 
-from exubio.angles import anatomical_frames, euler_angles, humerothoracic_elevation, isb_angles, \
+from exubio.model.angles import anatomical_frames, euler_angles, humerothoracic_elevation, isb_angles, \
     segment_anatomical_rotations
 from exubio.calibration import calibrate_model, calibrated_protocol
 from exubio.calibration.ellipsoid import surface_distance
@@ -37,7 +37,7 @@ from exubio.calibration.scapula_motion import scapula_markers
 from exubio.errors import ExubioError
 from exubio.invivo import compare_elevation
 from exubio.io.trial import read_trial
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.pipeline import load_model_and_protocol, reconstruct
 from exubio.preprocess import prepare_targets
 from exubio.resources import shipped_file

@@ -7,9 +7,9 @@ import time
 
 import numpy as np
 
-from exubio.angles import isb_angles
+from exubio.model.angles import isb_angles
 from exubio.errors import ReconstructionError
-from exubio.kinematics import Kinematics
+from exubio.model.kinematics import Kinematics
 from exubio.pipeline import reconstruct
 from exubio.simulate import Motion
 from exubio.validation.results import (

@@ -24,8 +24,8 @@ import numpy as np
 
 from exubio.calibration import fit_ellipsoid
 from exubio.calibration.ellipsoid import fit_ellipsoid_to_points, surface_distance
-from exubio.kinematics import Kinematics
-from exubio.model import load_model
+from exubio.model.kinematics import Kinematics
+from exubio.model.load import load_model
 from exubio.simulate import rhythm_poses
 
 PLANES = ("frontal", "scapular", "sagittal")

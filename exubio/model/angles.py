@@ -58,10 +58,10 @@ from typing import Mapping
 
 import numpy as np
 
-from exubio.anatomy import ISB_FRAME_SEGMENTS, isb_frame
+from exubio.model.anatomy import ISB_FRAME_SEGMENTS, isb_frame
 from exubio.errors import InputError, ModelError
-from exubio.frame_definitions import JOINT_SEGMENTS, FrameDefinition, JointDefinition, NotBuildable, build_frame
-from exubio.kinematics import Kinematics
+from exubio.model.frame_definitions import JOINT_SEGMENTS, FrameDefinition, JointDefinition, NotBuildable, build_frame
+from exubio.model.kinematics import Kinematics
 from exubio.types import Model
 
 __all__ = [
@@ -194,7 +194,7 @@ def anatomical_frames(model: Model, /) -> dict[str, np.ndarray]:
     humerus as constant rotations A_s (3, 3) relative to each segment's model frame: the columns
     of A_s are the anatomical X, Y, Z axes in segment coordinates, so the anatomical frame at
     posture q is R_s(q) @ A_s. Built from the landmarks SC, AC (clavicle), AA, TS, AI (scapula),
-    GH, EL, EM or EJC (humerus) in the reference posture (``exubio.anatomy``)."""
+    GH, EL, EM or EJC (humerus) in the reference posture (``exubio.model.anatomy``)."""
     where = model.source or model.name
     out = {}
     for name in ISB_FRAME_SEGMENTS:
@@ -279,7 +279,7 @@ def measured_isb_joints(model: Model, not_solved: set[str] | frozenset[str], /) 
 
 
 # --------------------------------------------------------------------------------------------
-# Frames and angles of any study's definition (exubio.frame_definitions)
+# Frames and angles of any study's definition (exubio.model.frame_definitions)
 # --------------------------------------------------------------------------------------------
 def _reference_landmarks(model: Model, segment: str) -> dict[str, np.ndarray]:
     """Every landmark of the model in the reference posture (q = 0), in global coordinates; a

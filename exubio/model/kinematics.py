@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from exubio.errors import ModelError
-from exubio.ranges import violation, wrap_into_range
+from exubio.model.ranges import violation, wrap_into_range
 from exubio.types import JointKind, Model
 
 

@@ -1,6 +1,6 @@
 """The ISB anatomical frames of the shoulder's bones from their landmarks (Wu et al. 2005, J Biomech
 38:981-992), as pure numpy on positions, so the model loader (which sets the joint axes on them)
-and the angle computation (``exubio.angles``) build them the same way.
+and the angle computation (``exubio.model.angles``) build them the same way.
 
 Positions are those of one posture, in any frame whose axes are the ISB thorax frame's (X anterior,
 Y superior, Z right): the model's reference posture, where every segment frame is parallel to the

@@ -18,7 +18,7 @@ Grammar of an axis expression (the Spartacus metadata's):
 ``build_frame`` evaluates the three axes from landmark positions (any consistent frame), normalises
 them and returns the nearest rotation (the columns are the frame's x, y, z); a definition whose
 axes are not orthogonal on the given landmarks by more than ``MAX_SKEW_DEG`` is refused rather than
-silently bent. Pure numpy: the model side (where the landmarks are) is ``exubio.angles``.
+silently bent. Pure numpy: the model side (where the landmarks are) is ``exubio.model.angles``.
 """
 from __future__ import annotations
 
@@ -216,5 +216,5 @@ def _isb() -> dict[str, FrameDefinition]:
 
 
 ISB_WU2005: dict[str, FrameDefinition] = _isb()
-"""The ISB frames (Wu et al. 2005) as definitions; exubio.angles.anatomical_frames is the hand
+"""The ISB frames (Wu et al. 2005) as definitions; exubio.model.angles.anatomical_frames is the hand
 computation of the same frames that the tests compare them with."""

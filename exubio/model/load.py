@@ -12,7 +12,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from exubio.anatomy import isb_frame
+from exubio.model.anatomy import isb_frame
 from exubio.config import check_keys as _check_keys
 from exubio.config import finite_float, read_yaml
 from exubio.resources import resolve, shipped_file
@@ -167,7 +167,7 @@ def load_model(path: str | Path = DEFAULT_MODEL, /, *, body_mass_kg: float | Non
 
 
 def _segment_isb_frame(segment: str, points: Mapping[str, np.ndarray], where: str) -> np.ndarray:
-    """The ISB frame of ``segment`` from its reference-posture landmarks (exubio.anatomy)."""
+    """The ISB frame of ``segment`` from its reference-posture landmarks (exubio.model.anatomy)."""
     return isb_frame(segment, points, fail=lambda msg: ModelError(f"{where}: axes_frame isb: {msg}"))
 
 
@@ -386,7 +386,7 @@ def save_model(model: Model, path: str | Path, *, calibration: Mapping[str, Any]
     path = Path(path)
     data = model_to_dict(model, calibration=calibration)
     header = (
-        f"# exubio model '{model.name}', written by exubio.model.save_model.\n"
+        f"# exubio model '{model.name}', written by exubio.model.load.save_model.\n"
         "# Format: see the top of models/upper_extremity.yaml (positions in mm in the ISB thorax frame in\n"
         "# the reference posture, all coordinates zero). Geometry sources: the generic model it was made\n"
         "# from" + (f" ({model.metadata.get('generic_source')})" if model.metadata.get("generic_source") else "")
