@@ -16,7 +16,7 @@ from exubio.io.trial import read_trial
 from exubio.label_ranges import GAIN_MM, find_partial_swaps
 from exubio.pipeline import load_model_and_protocol, protocol_for_model
 from exubio.protocol import resolve_labels
-from exubio.resources import shipped_file
+from exubio.io.resources import shipped_file
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 SESSION = Path(__file__).resolve().parents[1] / "protocols" / "examples" / "kinova_martin_session.yaml"

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from exubio.io.trial import read_trial
 from exubio.pipeline import load_model_and_protocol, protocol_for_model
-from exubio.resources import shipped_file
+from exubio.io.resources import shipped_file
 from exubio.thorax_check import SWAP_RATIO, thorax_label_fit
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"

@@ -345,7 +345,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     from exubio.io.results import read_angles_csv
     from exubio.pipeline import reconstruct_file
-    from exubio.resources import shipped_file
+    from exubio.io.resources import shipped_file
 
     out = Path(args.out)
     c3d = shipped_file("exubio.data", "example_abduction.c3d", "exubio/data")

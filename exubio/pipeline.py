@@ -24,7 +24,7 @@ from exubio.io.trial import read_trial
 from exubio.model.load import DEFAULT_MODEL, load_model
 from exubio.preprocess import prepare_targets
 from exubio.protocol import check_landmarks, load_protocol
-from exubio.resources import shipped_file
+from exubio.io.resources import shipped_file
 from exubio.types import MarkerTargets, Model, Protocol, Reconstruction, Trajectories
 
 log = logging.getLogger(__name__)

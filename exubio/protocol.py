@@ -1,7 +1,7 @@
 """Read a marker-protocol YAML into a validated :class:`~exubio.types.Protocol`, and match a
 trial's marker labels to it.
 
-YAML is parsed by :mod:`exubio.config`, the one place that calls ``yaml.safe_load``. The file format is documented at
+YAML is parsed by :mod:`exubio.io.yaml`, the one place that calls ``yaml.safe_load``. The file format is documented at
 the top of ``protocols/upper_limb_21.yaml``.
 """
 from __future__ import annotations
@@ -19,9 +19,9 @@ import difflib
 
 from types import MappingProxyType
 
-from exubio.config import _kind, check_keys, finite_float, read_yaml
+from exubio.io.yaml import _kind, check_keys, finite_float, read_yaml
 from exubio.errors import InputError, ProtocolError
-from exubio.resources import resolve, shipped_file, shipped_names
+from exubio.io.resources import resolve, shipped_file, shipped_names
 from exubio.types import MarkerSpec, Protocol, ThoraxFrameSpec, Trajectories
 
 __all__ = [

@@ -22,7 +22,7 @@ from functools import lru_cache
 import numpy as np
 
 from exubio.model.frame_definitions import JOINT_SEGMENTS, FrameDefinition, JointDefinition, sequence_letters
-from exubio.resources import shipped_file
+from exubio.io.resources import shipped_file
 
 __all__ = ["Study", "ReferenceCurve", "load_corpus", "load_ludewig2009", "ludewig2009_at", "study_definition",
            "JOINT_CODES", "PLANES", "CORPUS_CITATION", "LUDEWIG_ID"]

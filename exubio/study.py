@@ -53,7 +53,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
 
-from exubio.config import read_yaml
+from exubio.io.yaml import read_yaml
 from exubio.errors import ExubioError, InputError
 
 if TYPE_CHECKING:

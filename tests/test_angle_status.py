@@ -13,7 +13,7 @@ from exubio.methods.common import tracked_points
 from exubio.methods.poses import held_mask
 from exubio.observability import MODELLED_SHARE, AngleStatus, angle_determinacy
 from exubio.pipeline import load_model_and_protocol, protocol_for_model
-from exubio.resources import shipped_file
+from exubio.io.resources import shipped_file
 from exubio.simulate import reference_postures
 
 SHOULDER_MEASURED = ("SC_Y_protraction", "SC_X_elevation", "ST_Y_internal_rotation", "ST_X_upward_rotation",

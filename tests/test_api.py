@@ -58,7 +58,7 @@ def test_api_names_are_exported():
 
 def test_write_results_refuses_to_overwrite(tmp_path):
     model = exubio.load_model()
-    from exubio.resources import shipped_file
+    from exubio.io.resources import shipped_file
 
     c3d = shipped_file("exubio.data", "example_abduction.c3d", "exubio/data")
     rec = exubio.reconstruct(exubio.read_trial(c3d), model, method="ls")
@@ -68,7 +68,7 @@ def test_write_results_refuses_to_overwrite(tmp_path):
 
 
 def test_calibrate_returns_a_bound_model_and_protocol():
-    from exubio.resources import shipped_file
+    from exubio.io.resources import shipped_file
 
     trial = exubio.read_trial(shipped_file("exubio.data", "example_abduction.c3d", "exubio/data"))
     model, protocol, report = exubio.calibrate(trial, frames=slice(0, 20))
@@ -82,7 +82,7 @@ def test_methods_come_from_one_registry_and_options_are_checked():
     InputError naming it and the method's options (not a TypeError from deep inside)."""
     from exubio.methods import REGISTRY
     from exubio.pipeline import Method
-    from exubio.resources import shipped_file
+    from exubio.io.resources import shipped_file
 
     assert set(REGISTRY) == {m.value for m in Method}
     trial = exubio.read_trial(shipped_file("exubio.data", "example_abduction.c3d", "exubio/data"))
@@ -99,7 +99,7 @@ def test_typed_options_objects_are_accepted_and_checked():
     from exubio.methods.ls import LSOptions
     from exubio.methods.pf import PFOptions
     from exubio.pipeline import load_inputs, reconstruct
-    from exubio.resources import shipped_file
+    from exubio.io.resources import shipped_file
 
     inp = load_inputs(shipped_file("exubio.data", "example_abduction.c3d", "exubio/data"))
     rec = reconstruct(inp.model, inp.protocol, inp.targets, method="ls", options=LSOptions(tol_rad=1e-6))

@@ -18,7 +18,7 @@ from exubio.model.load import load_model
 from exubio.pipeline import reconstruct
 from exubio.preprocess import prepare_targets
 from exubio.protocol import read_protocol_mapping
-from exubio.resources import shipped_file
+from exubio.io.resources import shipped_file
 from exubio.simulate import simulate_trial
 from exubio.types import Trajectories
 

@@ -4,7 +4,7 @@ import numpy as np
 from exubio.cli import EXAMPLE_COMMAND, main
 from exubio.io.c3d import read_c3d
 from exubio.io.results import read_angles_csv
-from exubio.resources import shipped_file
+from exubio.io.resources import shipped_file
 
 
 def test_shipped_example_is_reproduced_by_its_command(tmp_path):

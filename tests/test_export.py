@@ -16,7 +16,7 @@ from exubio.model.load import load_model
 from exubio.io.results import read_npz
 from exubio.pipeline import protocol_for_model, reconstruct_file
 from exubio.session import calibrate_file
-from exubio.resources import shipped_file
+from exubio.io.resources import shipped_file
 
 @pytest.fixture(autouse=True)
 def _keep_the_locale():

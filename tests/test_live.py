@@ -27,7 +27,7 @@ from exubio.live.record import read_recorded_markers, write_recording
 from exubio.live.sources import Faults, ReplaySource, StreamInfo
 from exubio.live.transport import marker_labels
 from exubio.pipeline import load_model_and_protocol
-from exubio.resources import shipped_file
+from exubio.io.resources import shipped_file
 from exubio.types import Trajectories
 
 EXAMPLE = Path(shipped_file("exubio.data", "example_abduction.c3d", "exubio/data"))

@@ -59,7 +59,7 @@ def test_a_technical_marker_declared_on_a_joint_axis_is_not_made_rigid_with_the_
     """A protocol that ties the technical arm marker ARM to the elbow centre (a point on the elbow
     axis, rigid with the forearm in the model) must not make the real ARM marker look like a label
     that jumps: across segments only landmark markers' declared points are trusted."""
-    from exubio.resources import shipped_file
+    from exubio.io.resources import shipped_file
 
     text = shipped_file("exubio.protocols", "upper_limb_21.yaml", "protocols").read_text(encoding="utf-8")
     tied = text.replace("ARM:        {segment: humerus, point: ARM}", "ARM:        {segment: humerus, point: EJC}")

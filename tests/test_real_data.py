@@ -14,7 +14,7 @@ from exubio.io.trial import read_trial
 from exubio.model.load import load_model, save_model
 from exubio.pipeline import load_model_and_protocol, reconstruct
 from exubio.preprocess import prepare_targets
-from exubio.resources import shipped_file
+from exubio.io.resources import shipped_file
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"real data folder {DATA} is absent")

@@ -311,7 +311,7 @@ def test_a_calibrated_trial_report_has_a_calibration_page(tmp_path):
 def test_portable_paths_rewrites_this_machines_paths():
     """Absolute paths of the shared data and of the checkout, inside any string of a JSON-like
     object, become ../shared/data/... and ./...; other strings and numbers are left alone."""
-    from exubio.resources import _CHECKOUT
+    from exubio.io.resources import _CHECKOUT
 
     shared = shared_data_dir()
     obj = {"data": {"abduction": {"source": str(shared / "trc" / "a.trc"), "frames": 10}},

@@ -10,7 +10,7 @@ from exubio.model.angles import humerothoracic_elevation, isb_angles
 from exubio.model.kinematics import Kinematics
 from exubio.model.load import load_model
 from exubio.reference import load_ludewig2009
-from exubio.resources import shipped_file
+from exubio.io.resources import shipped_file
 from exubio.simulate import PLANE_OF, Motion, simulate_trial
 
 # Ludewig column (axis suffix dropped) -> (exubio ISB angle set, index)

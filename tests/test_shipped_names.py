@@ -6,7 +6,7 @@ import numpy as np
 from exubio.cli import main
 from exubio.model.load import load_model
 from exubio.protocol import resolve_protocol, shipped_protocols
-from exubio.resources import shipped_file
+from exubio.io.resources import shipped_file
 
 
 def test_names_resolve_to_the_shipped_files_from_any_folder(tmp_path, monkeypatch, capsys):

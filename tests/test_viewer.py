@@ -24,7 +24,7 @@ from exubio.errors import InputError
 from exubio.io.results import read_npz, read_npz_metadata, write_npz
 from exubio.model.load import DEFAULT_MODEL
 from exubio.pipeline import reconstruct_file
-from exubio.resources import shipped_file
+from exubio.io.resources import shipped_file
 from exubio.viewer import MAX_ANIMATION_FRAMES, find_results, write_view
 
 EXAMPLE = shipped_file("exubio.data", "example_abduction.c3d", "exubio/data")

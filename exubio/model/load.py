@@ -13,9 +13,9 @@ from typing import Any, Mapping
 import numpy as np
 
 from exubio.model.anatomy import isb_frame
-from exubio.config import check_keys as _check_keys
-from exubio.config import finite_float, read_yaml
-from exubio.resources import resolve, shipped_file
+from exubio.io.yaml import check_keys as _check_keys
+from exubio.io.yaml import finite_float, read_yaml
+from exubio.io.resources import resolve, shipped_file
 from exubio.errors import ModelError
 from exubio.types import Ellipsoid, Joint, JointKind, Model, Segment
 
@@ -47,7 +47,7 @@ _NAMED_AXES = {
 
 
 def check_keys(mapping: Any, allowed: set[str], where: str, *, error: type[Exception], required: set[str] = frozenset()) -> None:
-    """Unknown keys (see exubio.config.check_keys), plus: must be a mapping with the required keys."""
+    """Unknown keys (see exubio.io.yaml.check_keys), plus: must be a mapping with the required keys."""
     if not isinstance(mapping, Mapping):
         raise error(f"{where}: expected a mapping, got {type(mapping).__name__}")
     _check_keys(mapping, sorted(allowed), where="", source=where, error=error)

@@ -8,7 +8,7 @@ from exubio.invivo import PLANE_TOLERANCE_DEG, RAISING_MIN_SPAN_DEG, compare_ele
 from exubio.io.trial import read_trial
 from exubio.session import calibrate_file
 from exubio.preprocess import prepare_targets
-from exubio.resources import shipped_file
+from exubio.io.resources import shipped_file
 from exubio.validation.codec import decode
 from exubio.validation.determinacy import trial_undetermined, undetermined_isb
 from exubio.validation.paths import shared_data_dir

@@ -6,7 +6,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from exubio.resources import _CHECKOUT
+from exubio.io.resources import _CHECKOUT
 
 __all__ = ["portable_paths", "shared_data_dir"]
 
