@@ -218,7 +218,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
 def _reconstruct_arms(args: argparse.Namespace, protocols: list[str]) -> int:
     """Both arms of one trial: one protocol per arm (``side: right`` and ``side: left``), each
     reconstructed as its own chain into ``--out/<side>/`` (its calibration too, with --static)."""
-    from exubio.protocol import read_protocol_mapping
+    from exubio.protocol.load import read_protocol_mapping
 
     sides: dict[str, str] = {}
     for path in protocols:
@@ -237,7 +237,7 @@ def _reconstruct_arms(args: argparse.Namespace, protocols: list[str]) -> int:
 
 def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
     from exubio.io.trial import read_trial
-    from exubio.protocol import parse_relabel, relabel_trajectories
+    from exubio.protocol.load import parse_relabel, relabel_trajectories
     from exubio.session import calibrate_session
 
     model_path, extra = args.model, {}
@@ -408,7 +408,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
 def cmd_protocols(args: argparse.Namespace) -> int:
     from exubio.pipeline import protocol_for_model
     from exubio.model.load import load_model
-    from exubio.protocol import read_protocol_mapping, resolve_protocol, shipped_protocols
+    from exubio.protocol.load import read_protocol_mapping, resolve_protocol, shipped_protocols
 
     if not args.name:
         print("shipped protocols (use by name: --protocol NAME, from any folder):")

@@ -20,7 +20,7 @@ from typing import Any, Callable, Mapping
 from exubio.errors import PartialReconstructionError
 from exubio.io import results
 from exubio.io.trial import read_trial
-from exubio.protocol import relabel_trajectories
+from exubio.protocol.load import relabel_trajectories
 from exubio.pipeline import Method, reconstruct_file
 
 
@@ -34,7 +34,7 @@ class TrialJob:
     (exubio.session.calibrate_session), which goes into every summary and verdict;
     static_reference: the session static's pair distances the label checks compare with;
     relabel: this trial's labels read as other labels ({file label: read as}), for this trial only
-    (exubio.protocol.relabel_trajectories), before the protocol's own relabel; repair_labels: exchange
+    (exubio.protocol.load.relabel_trajectories), before the protocol's own relabel; repair_labels: exchange
     back labels exchanged in part of the trial (exubio.label_ranges), reported frame range by range."""
 
     trial: Path

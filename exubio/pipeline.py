@@ -23,7 +23,7 @@ from exubio.io import results
 from exubio.io.trial import read_trial
 from exubio.model.load import DEFAULT_MODEL, load_model
 from exubio.preprocess import prepare_targets
-from exubio.protocol import check_landmarks, load_protocol
+from exubio.protocol.load import check_landmarks, load_protocol
 from exubio.io.resources import shipped_file
 from exubio.types import MarkerTargets, Model, Protocol, Reconstruction, Trajectories
 
@@ -443,7 +443,7 @@ def angle_header(det, trial: str, method: str, side: str) -> tuple[str, ...]:
 
 
 def _unused(inputs: TrialInputs) -> list[str]:
-    from exubio.protocol import resolve_labels
+    from exubio.protocol.load import resolve_labels
 
     match = resolve_labels(inputs.protocol, inputs.trial.labels, source=inputs.trial.source)
     return list(match.unused) + list(inputs.trial.ignored_labels)

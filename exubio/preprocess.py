@@ -16,7 +16,7 @@ from scipy.interpolate import CubicSpline
 from scipy.signal import butter, filtfilt
 
 from exubio.errors import InputError
-from exubio.protocol import resolve_labels
+from exubio.protocol.load import resolve_labels
 from exubio.types import Gap, MarkerTargets, Protocol, Trajectories
 
 __all__ = [

@@ -17,7 +17,7 @@ from exubio.io.results import read_angles_csv
 from exubio.model.load import load_model
 from exubio.pipeline import reconstruct
 from exubio.preprocess import prepare_targets
-from exubio.protocol import read_protocol_mapping
+from exubio.protocol.load import read_protocol_mapping
 from exubio.io.resources import shipped_file
 from exubio.simulate import simulate_trial
 from exubio.types import Trajectories

@@ -10,7 +10,7 @@ from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.pipeline import DEFAULT_PROTOCOL, load_model_and_protocol, reconstruct
 from exubio.preprocess import prepare_targets
-from exubio.protocol import load_protocol
+from exubio.protocol.load import load_protocol
 from exubio.simulate import Motion, simulate_trial
 
 

@@ -533,7 +533,7 @@ def test_real_c3d_smoke(name):
     if not path.exists():
         pytest.skip(f"{path} not available")
     ezc3d = pytest.importorskip("ezc3d")
-    from exubio.protocol import load_protocol
+    from exubio.protocol.load import load_protocol
 
     c3d = ezc3d.c3d(str(path))
     labels = [lab.split(":")[-1] for lab in c3d["parameters"]["POINT"]["LABELS"]["value"]]

@@ -1,4 +1,4 @@
-"""Tests of exubio.protocol: loading and validating protocol YAML files, matching trial labels."""
+"""Tests of exubio.protocol.load: loading and validating protocol YAML files, matching trial labels."""
 from __future__ import annotations
 
 import logging
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from exubio.errors import InputError, ProtocolError
-from exubio.protocol import LabelMatch, check_keys, load_protocol, read_yaml, resolve_labels
+from exubio.protocol.load import LabelMatch, check_keys, load_protocol, read_yaml, resolve_labels
 from exubio.types import ThoraxFrameSpec
 
 REPO = Path(__file__).resolve().parents[1]
@@ -354,7 +354,7 @@ def test_resolve_by_name_alias_optional_and_unused(tmp_path):
 def test_resolve_prefers_name_then_first_alias(tmp_path, caplog):
     prot = load(write(tmp_path, ALIASES))
     labels = ("R_ARM", "RARM", "HAND", "IJ", "PX", "C7", "T8")
-    with caplog.at_level(logging.WARNING, logger="exubio.protocol"):
+    with caplog.at_level(logging.WARNING, logger="exubio.protocol.load"):
         match = resolve_labels(prot, labels)
     assert match.columns["ARM"] == 1  # RARM comes before R_ARM in the aliases
     assert match.unused == ("R_ARM",)
@@ -493,7 +493,7 @@ def test_extends_errors_name_the_file_and_key(tmp_path, files, fragment, where):
 
 
 def test_read_protocol_mapping_merges_the_extends_chain(tmp_path):
-    from exubio.protocol import read_protocol_mapping
+    from exubio.protocol.load import read_protocol_mapping
 
     data = read_protocol_mapping(SESSION_EXAMPLE)
     assert data["markers"]["RADIUS"] == {"segment": "radius", "point": "RADIUS", "landmark": "RS"}
@@ -503,7 +503,7 @@ def test_read_protocol_mapping_merges_the_extends_chain(tmp_path):
 def test_landmark_and_cluster_keys_are_read_and_checked(tmp_path):
     """landmark: names a model point of the marker's segment (checked against the model the
     protocol is used with); cluster: at least 3 markers of one segment; a marker is not both."""
-    from exubio.protocol import check_landmarks
+    from exubio.protocol.load import check_landmarks
 
     base = MINIMAL.replace("  ARM: {segment: humerus, local_position_mm: [10, -200, 30]}\n", "")
     good = write(tmp_path, base + """\

@@ -5,7 +5,7 @@ import numpy as np
 
 from exubio.cli import main
 from exubio.model.load import load_model
-from exubio.protocol import resolve_protocol, shipped_protocols
+from exubio.protocol.load import resolve_protocol, shipped_protocols
 from exubio.io.resources import shipped_file
 
 

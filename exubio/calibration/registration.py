@@ -18,7 +18,7 @@ def _declared_points(protocol: Protocol) -> dict[str, str]:
     src = Path(protocol.source) if protocol.source else None
     if src is None or not src.is_file():
         return {}
-    from exubio.protocol import read_protocol_mapping
+    from exubio.protocol.load import read_protocol_mapping
 
     try:  # a session file's markers may come from the protocol it extends
         raw = read_protocol_mapping(src).get("markers", {}) or {}

@@ -5,7 +5,7 @@ from __future__ import annotations
 from importlib import resources
 from pathlib import Path
 
-_CHECKOUT = Path(__file__).resolve().parent.parent
+_CHECKOUT = Path(__file__).resolve().parents[2]  # exubio/io/resources.py -> the checkout
 
 
 def shipped_file(package: str, name: str, checkout_dir: str) -> Path:

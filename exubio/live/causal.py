@@ -3,7 +3,7 @@
 The offline preprocessing (exubio.preprocess) filters forward and backward (zero lag) and fits
 cubic splines through the whole trial; both look into the future. Here, frame by frame:
 
-1. the stream's labels are matched to the protocol once (exubio.protocol.resolve_labels, the
+1. the stream's labels are matched to the protocol once (exubio.protocol.load.resolve_labels, the
    protocol's ``relabel`` included);
 2. the thorax frame is built from the landmarks of this frame (a landmark missing for up to
    ``max_thorax_gap_s`` is held at its last value: the causal counterpart of the offline bridge;
@@ -30,7 +30,7 @@ from scipy.signal import butter, sosfilt_zi
 
 from exubio.errors import InputError
 from exubio.preprocess import MAX_THORAX_GAP_S, isb_landmarks, thorax_frame
-from exubio.protocol import resolve_labels
+from exubio.protocol.load import resolve_labels
 from exubio.types import Protocol
 
 __all__ = ["CausalOptions", "CausalTargets", "CausalFrame"]

@@ -1,0 +1,1 @@
+"""The protocol layer: a marker set's YAML loaded, checked and bound to a model (``load``)."""
