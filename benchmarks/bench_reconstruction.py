@@ -53,7 +53,7 @@ from typing import Any  # noqa: E402
 import numpy as np  # noqa: E402
 
 from exubio.pipeline import load_model_and_protocol, reconstruct  # noqa: E402
-from exubio.preprocess import prepare_targets  # noqa: E402
+from exubio.prep.targets import prepare_targets  # noqa: E402
 from exubio.simulate import Motion, simulate_trial  # noqa: E402
 
 START_UP_S = 0.1  # the stiff spring-damper mode of the PF start settles within ~0.05 s

@@ -83,7 +83,7 @@ def overheads(out: Path) -> tuple[list[float], list[float]]:
 _STAGES = (("exubio.jobs", "read_trial", "read the trial"),
            ("exubio.pipeline", "read_trial", "read the trial"),
            ("exubio.pipeline", "prepare_targets", "prepare targets (thorax frame, cut-off, filter, splines)"),
-           ("exubio.preprocess", "residual_cutoffs", "  of which the automatic cut-off"),
+           ("exubio.prep.targets", "residual_cutoffs", "  of which the automatic cut-off"),
            ("exubio.pipeline", "stream_reconstruct", "reconstruction (PF)"),
            ("exubio.assess", "trial_label_findings", "label checks"),
            ("exubio.assess", "assess_trial", "assessment (determinacy, limits, verdict)"),

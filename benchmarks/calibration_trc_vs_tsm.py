@@ -24,7 +24,7 @@ import numpy as np
 from exubio.calibration import calibrate_model
 from exubio.io.trial import read_trial
 from exubio.pipeline import load_model_and_protocol
-from exubio.preprocess import prepare_targets
+from exubio.prep.targets import prepare_targets
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "data"

@@ -14,7 +14,7 @@ from pathlib import Path
 from exubio.io.trial import read_trial
 from exubio.labels import pair_distances
 from exubio.pipeline import load_model_and_protocol
-from exubio.preprocess import prepare_targets
+from exubio.prep.targets import prepare_targets
 from exubio.session_check import SHIFT_MM, SHIFT_Z, placed_anew, static_consistency
 from exubio.simulate import simulate_trial
 

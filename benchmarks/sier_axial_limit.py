@@ -47,7 +47,7 @@ from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.methods.poses import held_mask
 from exubio.pipeline import load_model_and_protocol, reconstruct
-from exubio.preprocess import prepare_targets
+from exubio.prep.targets import prepare_targets
 from exubio.simulate import STA_SCALE, Motion, simulate_trial
 from exubio.validation import ValidationSettings
 

@@ -57,7 +57,7 @@ def calibrate(static: Trajectories, model: Model | None = None, protocol: Protoc
     glenohumeral centre, and a movement trial whose scapula postures the thorax ellipsoid is fitted
     through): (calibrated model, protocol bound to it, CalibrationReport)."""
     from exubio.calibration import calibrate_model, calibrated_protocol
-    from exubio.preprocess import prepare_targets
+    from exubio.prep.targets import prepare_targets
 
     model = model if model is not None else load_model()
     protocol = protocol if protocol is not None else load_protocol(model=model)
@@ -73,7 +73,7 @@ def reconstruct(trial: Trajectories | MarkerTargets | str | Path, model: Model |
     """Joint kinematics of one trial by one method ("pf" or "ls"); ``options`` go to the method's
     options (e.g. ``step_s`` for PF). ``trial``: a file, a read trial or prepared targets."""
     from exubio.pipeline import reconstruct as _reconstruct
-    from exubio.preprocess import prepare_targets
+    from exubio.prep.targets import prepare_targets
 
     model = model if model is not None else load_model()
     protocol = protocol if protocol is not None else load_protocol(model=model)

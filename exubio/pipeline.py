@@ -22,7 +22,7 @@ from exubio.evaluate import summary
 from exubio.io import results
 from exubio.io.trial import read_trial
 from exubio.model.load import DEFAULT_MODEL, load_model
-from exubio.preprocess import prepare_targets
+from exubio.prep.targets import prepare_targets
 from exubio.protocol.load import check_landmarks, load_protocol
 from exubio.io.resources import shipped_file
 from exubio.types import MarkerTargets, Model, Protocol, Reconstruction, Trajectories

@@ -11,7 +11,7 @@ from exubio.errors import InputError
 from exubio.io import results
 from exubio.io.trial import read_trial
 from exubio.pipeline import load_model_and_protocol
-from exubio.preprocess import prepare_targets
+from exubio.prep.targets import prepare_targets
 from exubio.types import Trajectories
 
 

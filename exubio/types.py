@@ -285,7 +285,7 @@ class Protocol:
     """A marker set: tracked markers, the thorax frame landmarks and the filter settings.
 
     cutoff_hz: the low-pass cut-off of the marker trajectories (Hz); ``"auto"``: chosen per marker
-    and trial by Winter's residual analysis (:func:`exubio.preprocess.residual_cutoffs`; the
+    and trial by Winter's residual analysis (:func:`exubio.prep.targets.residual_cutoffs`; the
     cut-offs applied are in ``MarkerTargets.cutoff_hz``); None: no filter.
     filter_order: order of the Butterworth design (run forward and backward).
     """

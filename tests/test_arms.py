@@ -16,7 +16,7 @@ from exubio.model.angles import anatomical_table
 from exubio.io.results import read_angles_csv
 from exubio.model.load import load_model
 from exubio.pipeline import reconstruct
-from exubio.preprocess import prepare_targets
+from exubio.prep.targets import prepare_targets
 from exubio.protocol.load import read_protocol_mapping
 from exubio.io.resources import shipped_file
 from exubio.simulate import simulate_trial

@@ -271,7 +271,7 @@ def real():
     if not C3D.is_dir():
         pytest.skip(f"real data folder {C3D} is absent")
     from exubio.io.trial import read_trial
-    from exubio.preprocess import prepare_targets
+    from exubio.prep.targets import prepare_targets
 
     cache = {}
 

@@ -16,7 +16,7 @@ from exubio.methods.common import tracked_points
 from exubio.mismatch import BIAS_MM, CONTACT_OFFSET_MM, assess_mismatch, segment_evidence
 from exubio.perturb import ModelPerturbation
 from exubio.pipeline import load_model_and_protocol, reconstruct
-from exubio.preprocess import prepare_targets
+from exubio.prep.targets import prepare_targets
 from exubio.simulate import reference_postures, simulate_trial
 from exubio.validation.mismatch import measured_angle_errors
 

@@ -11,7 +11,7 @@ from exubio import quality as Q
 from exubio.io.trial import read_trial
 from exubio.labels import check_trial, pair_distances
 from exubio.pipeline import load_model_and_protocol
-from exubio.preprocess import prepare_targets
+from exubio.prep.targets import prepare_targets
 from exubio.protocol.load import relabel_trajectories
 
 C3D = Path(__file__).resolve().parents[2] / "shared" / "data" / "c3d"

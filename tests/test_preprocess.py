@@ -1,4 +1,4 @@
-"""Tests of exubio.preprocess: thorax frame, gaps, zero-lag filter, spline derivatives and the
+"""Tests of exubio.prep.targets: thorax frame, gaps, zero-lag filter, spline derivatives and the
 whole chain to MarkerTargets (unit trap, missing markers, real C3D smoke test)."""
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from exubio.errors import InputError
-from exubio.preprocess import (
+from exubio.prep.targets import (
     detect_gaps,
     fill_short_gaps,
     lowpass,
@@ -269,7 +269,7 @@ def _lowpass_time_first(p, rate_hz, cutoff_hz, order):
     indexed by a list, extended by the cubic end fits and filtered along axis 0."""
     from scipy.signal import butter, filtfilt
 
-    from exubio import preprocess as pp
+    from exubio.prep import targets as pp
 
     s = pp._as_series(p)
     cut = np.broadcast_to(np.asarray(cutoff_hz, dtype=float), (s.shape[1],))

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from exubio.pipeline import load_model_and_protocol
-from exubio.preprocess import prepare_targets
+from exubio.prep.targets import prepare_targets
 from exubio.simulate import simulate_trial
 from exubio.validation.codec import decode
 from exubio.validation.rates import (PF_AIM_QD_DEG_S, PF_AIM_QDD_DEG_S2, finite_differences, rates_against_truth,

@@ -13,7 +13,7 @@ from exubio.evaluate import residual_statistics
 from exubio.io.trial import read_trial
 from exubio.model.load import load_model, save_model
 from exubio.pipeline import load_model_and_protocol, reconstruct
-from exubio.preprocess import prepare_targets
+from exubio.prep.targets import prepare_targets
 from exubio.io.resources import shipped_file
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"

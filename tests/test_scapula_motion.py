@@ -15,7 +15,7 @@ from exubio.calibration.scapula_motion import MIN_POSTURES, fit_scapula_motion
 from exubio.errors import InputError
 from exubio.model.kinematics import Kinematics
 from exubio.pipeline import load_model_and_protocol, reconstruct
-from exubio.preprocess import prepare_targets
+from exubio.prep.targets import prepare_targets
 from exubio.io.resources import shipped_file
 from exubio.simulate import simulate_trial
 from exubio.validation.paths import shared_data_dir

@@ -10,7 +10,7 @@ from exubio.cli import main
 from exubio.io.trial import read_trial
 from exubio.labels import pair_distances
 from exubio.pipeline import load_model_and_protocol
-from exubio.preprocess import prepare_targets
+from exubio.prep.targets import prepare_targets
 from exubio.session_check import placed_anew, static_consistency
 
 C3D = Path(__file__).resolve().parents[2] / "shared" / "data" / "c3d"

@@ -78,7 +78,7 @@ from exubio.model.kinematics import Kinematics
 from exubio.lsq import StopReason
 from exubio.methods.common import tracked_points
 from exubio.methods.poses import Limits, LSOptions, solve_positions
-from exubio.preprocess import prepare_targets
+from exubio.prep.targets import prepare_targets
 from exubio.model.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD
 from exubio.types import MarkerTargets, Model, Protocol, Trajectories
 

@@ -1,6 +1,6 @@
 """Causal processing of a marker stream: each frame from the frames before it only.
 
-The offline preprocessing (exubio.preprocess) filters forward and backward (zero lag) and fits
+The offline preprocessing (exubio.prep.targets) filters forward and backward (zero lag) and fits
 cubic splines through the whole trial; both look into the future. Here, frame by frame:
 
 1. the stream's labels are matched to the protocol once (exubio.protocol.load.resolve_labels, the
@@ -29,7 +29,7 @@ import numpy as np
 from scipy.signal import butter, sosfilt_zi
 
 from exubio.errors import InputError
-from exubio.preprocess import MAX_THORAX_GAP_S, isb_landmarks, thorax_frame
+from exubio.prep.targets import MAX_THORAX_GAP_S, isb_landmarks, thorax_frame
 from exubio.protocol.load import resolve_labels
 from exubio.types import Protocol
 

@@ -48,7 +48,7 @@ from exubio.live.causal import CausalFrame, CausalOptions, CausalTargets, frame_
 from exubio.live.sources import UNIT_SCALE, MarkerSource, ReplaySource, StreamInfo
 from exubio.methods.pf import PFOptions, _Frames, pf_setup
 from exubio.observability import determinacy
-from exubio.preprocess import PLAUSIBLE_MEDIAN_DISTANCE_M
+from exubio.prep.targets import PLAUSIBLE_MEDIAN_DISTANCE_M
 from exubio.model.ranges import AT_LIMIT_TOLERANCE_RAD
 from exubio.types import FrameStatus, Gap, MarkerTargets, Model, Protocol, Reconstruction, Trajectories
 
@@ -260,7 +260,7 @@ class LiveRecording:
 
     def targets(self) -> MarkerTargets:
         """The causal targets the PF tracked, as MarkerTargets (gaps from the missing samples)."""
-        from exubio.preprocess import detect_gaps
+        from exubio.prep.targets import detect_gaps
 
         return MarkerTargets(time_s=self.time_s, marker_names=self.marker_names, positions_m=self.positions_m,
                              velocities_m_s=self.velocities_m_s, accelerations_m_s2=self.accelerations_m_s2,
@@ -946,7 +946,7 @@ class LiveSession:
         return report
 
     def _check_units(self) -> None:
-        """The unit trap, on the first frames that have markers (exubio.preprocess does it offline)."""
+        """The unit trap, on the first frames that have markers (exubio.prep.targets does it offline)."""
         got = [s.raw for s in list(self.queue)[:50]]
         if not got:
             return

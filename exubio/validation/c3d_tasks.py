@@ -7,7 +7,7 @@ from exubio.errors import ExubioError
 from exubio.invivo import PLANE_TOLERANCE_DEG, RAISING_MIN_SPAN_DEG, compare_elevation, inferred_joints
 from exubio.io.trial import read_trial
 from exubio.session import calibrate_file
-from exubio.preprocess import prepare_targets
+from exubio.prep.targets import prepare_targets
 from exubio.io.resources import shipped_file
 from exubio.validation.codec import decode
 from exubio.validation.determinacy import trial_undetermined, undetermined_isb

@@ -21,7 +21,7 @@ from exubio.assess import assess_trial
 from exubio.observability import AngleStatus
 from exubio.perturb import ModelPerturbation
 from exubio.pipeline import load_model_and_protocol, reconstruct
-from exubio.preprocess import prepare_targets
+from exubio.prep.targets import prepare_targets
 from exubio.simulate import simulate_trial
 from exubio.types import Model
 from exubio.validation.results import MismatchRun, ModelMismatch

@@ -20,7 +20,7 @@ import numpy as np
 from exubio.errors import ExubioError, ReconstructionError
 from exubio.io.trial import read_trial
 from exubio.pipeline import load_model_and_protocol, reconstruct
-from exubio.preprocess import prepare_targets
+from exubio.prep.targets import prepare_targets
 from exubio.io.resources import shipped_file
 from exubio.simulate import Motion, SimulatedTrial, simulate_trial
 from exubio.types import MarkerTargets, Model, Protocol, Reconstruction
