@@ -72,7 +72,7 @@ gap is handled, its spring or LS term is off there, and the determinacy check sa
 remaining markers still determine every coordinate)."""
 
 FIT_SETTLED = ("converged", "stalled")
-"""Stop reasons (exubio.lsq.StopReason labels, the calibration report's ``fit_stop``) of a fit
+"""Stop reasons (exubio.methods.lsq.StopReason labels, the calibration report's ``fit_stop``) of a fit
 that reached its optimum. Any other on the final fit of the static pose and scales, on the robust
 reweighting or on a further static's pose (max_iterations, damping_exhausted, not_finite) is a
 'check': the calibrated geometry rests on a pose that is not the optimum. The fits of the start

@@ -277,10 +277,10 @@ def _rhythm_splines(plane: str) -> dict[str, CubicSpline]:
 # Constraint solution
 # --------------------------------------------------------------------------------------------
 def _solve_free(kin: Kinematics, q: np.ndarray, free: np.ndarray, *, max_iter: int = 40) -> np.ndarray:
-    """Newton on g(q) = 0 for the two free coordinates, all frames at once (exubio.lsq.newton; q
+    """Newton on g(q) = 0 for the two free coordinates, all frames at once (exubio.methods.lsq.newton; q
     modified in place; steps limited to 0.1 rad). Raises ModelError naming the frames that do not
     converge and why the iteration stopped."""
-    from exubio.lsq import newton
+    from exubio.methods.lsq import newton
 
     def update(qq: np.ndarray, g: np.ndarray, _) -> np.ndarray:
         G = kin.G(qq)[..., free]

@@ -1,8 +1,8 @@
-"""The least-squares core (exubio.lsq) on problems with a known answer, and why it stops."""
+"""The least-squares core (exubio.methods.lsq) on problems with a known answer, and why it stops."""
 import numpy as np
 import pytest
 
-from exubio.lsq import (Evaluation, Settings, StopReason, damped_step, levenberg_marquardt, newton,
+from exubio.methods.lsq import (Evaluation, Settings, StopReason, damped_step, levenberg_marquardt, newton,
                         stop_counts)
 
 PLAIN = Settings(max_iterations=100, step_tol=1e-12, damping=1e-12, damping_floor=1e-15, accept_rtol=1e-12)

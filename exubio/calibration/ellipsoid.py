@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from exubio.errors import ModelError
-from exubio.lsq import newton
+from exubio.methods.lsq import newton
 from exubio.types import Ellipsoid
 
 ELLIPSOID_RADIUS_WEIGHT_M = 0.3  # in the ellipsoid fit, 10 % of radius costs like 30 mm of centre
@@ -18,7 +18,7 @@ def fit_ellipsoid(ellipsoid: Ellipsoid, contacts_m: np.ndarray, /, *, tol: float
                   max_iterations: int = 60) -> tuple[Ellipsoid, float]:
     """Move the centre in its sagittal plane (x, y) and scale the radii by a common factor k so
     that both contact points (2, 3) lie on the ellipsoid, with the least weighted change
-    (|dc|^2 + (ELLIPSOID_RADIUS_WEIGHT_M * d ln k)^2), by least-norm Newton steps (exubio.lsq.newton)
+    (|dc|^2 + (ELLIPSOID_RADIUS_WEIGHT_M * d ln k)^2), by least-norm Newton steps (exubio.methods.lsq.newton)
     until max |g| <= tol. Returns the new ellipsoid and k. ModelError (saying why Newton stopped) if
     no such ellipsoid is found near the given one (max |g| not below 1e-10)."""
     x = np.asarray(contacts_m, dtype=float)

@@ -1,6 +1,6 @@
 """The anatomical fit: the static pose and the segment scale factors of the scaled generic model
 (without the ellipsoid constraint, robust weights, inside the joint ranges), both by the
-Levenberg-Marquardt core of exubio.lsq (each fit says why it stopped: exubio.lsq.StopReason)."""
+Levenberg-Marquardt core of exubio.methods.lsq (each fit says why it stopped: exubio.methods.lsq.StopReason)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -10,7 +10,7 @@ import numpy as np
 
 from exubio.calibration.scaling import SCALE_BOUNDS, SCALE_PRIOR_M2, _scale_design, scale_model
 from exubio.model.kinematics import Kinematics, PointSet
-from exubio.lsq import Evaluation, Result, Settings, StopReason, levenberg_marquardt
+from exubio.methods.lsq import Evaluation, Result, Settings, StopReason, levenberg_marquardt
 from exubio.methods.poses import Limits
 from exubio.model.ranges import AT_LIMIT_TOLERANCE_RAD, violation
 from exubio.types import Model
@@ -53,7 +53,7 @@ def _fit_pose(kin: Kinematics, points: PointSet, target: np.ndarray, w: np.ndarr
               prior: np.ndarray, *, limits: Limits | None = None, max_iterations: int = 300,
               tol: float = 1e-10, held: np.ndarray | None = None) -> Result:
     """min_q sum w_i |r_i(q) - m_i|^2 + sum_j prior_j q_j^2 + kappa sum_j v_j(q)^2 (the joint
-    ranges, exubio.model.ranges) for every start (S, m) at once, Levenberg-Marquardt (exubio.lsq);
+    ranges, exubio.model.ranges) for every start (S, m) at once, Levenberg-Marquardt (exubio.methods.lsq);
     returns the core's result: q (S, m) in ``x``, the cost (S,) in ``evaluation.cost``, why each
     start stopped in ``reason``."""
     m = np.shape(q_starts)[1]
@@ -155,7 +155,7 @@ class _Anchor:
 
     def fit(self, q: np.ndarray, s: dict[str, float], w: np.ndarray, *, max_iterations: int = 200,
             tol: float = 1e-10) -> tuple[np.ndarray, dict[str, float], float, StopReason]:
-        """Joint Levenberg-Marquardt (exubio.lsq) over the pose and the free scale factors (bounded:
+        """Joint Levenberg-Marquardt (exubio.methods.lsq) over the pose and the free scale factors (bounded:
         a trial step is clipped to SCALE_BOUNDS). Returns q, factors, cost and why the fit stopped."""
         m, free = q.size, self.free
         prior = np.concatenate([self.prior_q, np.full(len(free), SCALE_PRIOR_M2)])

@@ -8,7 +8,7 @@ import logging
 import numpy as np
 
 from exubio.model.kinematics import Kinematics
-from exubio.lsq import NewtonResult, newton
+from exubio.methods.lsq import NewtonResult, newton
 
 log = logging.getLogger(__name__)
 
@@ -90,7 +90,7 @@ def _project_block(kin: Kinematics, q: np.ndarray, qd: np.ndarray | None = None,
     space, every frame at once; only the coordinates g depends on change; ``held`` coordinates are
     not corrected). Without q̇ and q̈ only q is projected. Frames with non-finite values are left
     alone. Returns q, q̇, q̈, (max |g|, max |G q̇|) before the projection, and the Newton
-    iteration's result on g = 0 (exubio.lsq.NewtonResult: whether it reached ``tol`` and max |g|
+    iteration's result on g = 0 (exubio.methods.lsq.NewtonResult: whether it reached ``tol`` and max |g|
     after; None when no frame is finite)."""
     positions_only = qd is None
     if positions_only:

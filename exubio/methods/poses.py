@@ -5,7 +5,7 @@ share.
 Per frame: minimise sum_i w_i |r_Ri(q) - r_Mi|^2 (+ the joint-range potential, exubio.model.ranges)
 subject to the two ellipsoid constraints g(q) = 0, with markers missing in that frame left out of
 the sum. Solver: Gauss-Newton SQP on the KKT system [J^T W J + mu I, G^T; G, 0] [dq; lambda] =
-[-J^T W e; -g] with the analytic Jacobians of exubio.model.kinematics, on the batched core of exubio.lsq;
+[-J^T W e; -g] with the analytic Jacobians of exubio.model.kinematics, on the batched core of exubio.methods.lsq;
 its fixed points satisfy the first-order optimality conditions exactly. A step is kept only if it
 lowers the l1 merit function (cost + rho |g|_1); otherwise the Levenberg-Marquardt damping mu
 grows, which keeps large-residual frames (a generic model on a real subject) convergent.
@@ -13,7 +13,7 @@ grows, which keeps large-residual frames (a generic model on a real subject) con
 Frames are solved in short blocks that run through numpy together: every frame of a block starts
 from the previous block's last solution (the warm start; blocks are ``block_s`` = 0.2 s long) and
 iterates until its step is below ``tol_rad`` or its merit no longer decreases; its stop reason
-says why it stopped (exubio.lsq.StopReason).
+says why it stopped (exubio.methods.lsq.StopReason).
 
 Velocities and accelerations are the consistent linearisations: J q̇ = ṙ_M with G q̇ = 0, and
 J q̈ = r̈_M - J̇ q̇ with G q̈ = -eta (weighted least squares with the same weights).
@@ -27,7 +27,7 @@ from typing import Callable
 import numpy as np
 
 from exubio.model.kinematics import Kinematics, PointSet
-from exubio.lsq import Evaluation, Settings, StopReason, fix_variables, levenberg_marquardt
+from exubio.methods.lsq import Evaluation, Settings, StopReason, fix_variables, levenberg_marquardt
 from exubio.methods.constraints import project_on_constraints
 from exubio.model.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD, penalty_weight, violation
 from exubio.types import Model, Protocol
@@ -132,7 +132,7 @@ def solve_positions(kin: Kinematics, points: PointSet, targets_m: np.ndarray, we
                     progress: Callable[[int], None] | None = None, held: np.ndarray | None = None,
                     limits: Limits | None = None, q_previous: np.ndarray | None = None):
     """q (n, m) per frame, iterations (n,), converged (n,) bool, stop reasons (n,) int8
-    (exubio.lsq.StopReason codes; converged = CONVERGED or STALLED). The first frame is solved from
+    (exubio.methods.lsq.StopReason codes; converged = CONVERGED or STALLED). The first frame is solved from
     several start postures around ``q_start`` (its stop reason is the best start's); with
     ``q_previous`` (the solution of the frame before these, when a trial is solved in chunks) every
     frame is warm-started like the frames after the first, so that chunks starting at 1 + a
@@ -149,7 +149,7 @@ def solve_positions(kin: Kinematics, points: PointSet, targets_m: np.ndarray, we
     block = max(1, int(round(options.block_s / frame_dt)))
 
     def run(idx: slice | np.ndarray, q0: np.ndarray, max_it: int):
-        """Levenberg-Marquardt-safeguarded SQP on the frames ``idx`` from q0 (exubio.lsq): a step
+        """Levenberg-Marquardt-safeguarded SQP on the frames ``idx`` from q0 (exubio.methods.lsq): a step
         is kept only if it lowers the l1 merit cost + rho |g|_1 (rho above the multipliers);
         otherwise the damping grows tenfold. Returns q, iterations, converged, stop reasons."""
         tgt, w = tgt_all[idx], w_all[idx]
