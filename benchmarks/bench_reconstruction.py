@@ -26,7 +26,7 @@ The shipped protocol holds the clavicle's axial rotation (its two markers barely
 simulated clavicle rotates by Ludewig's rhythm, so the held coordinate and the AC angles that absorb
 it are reported apart (``max_joint_rmse_deg_measured`` leaves them out; ``--no-hold`` solves every
 coordinate, the methods' own accuracy). ``checks_ms_per_frame``: what the trust checks cost on top
-(label checks, determinacy, range limits, verdict: exubio.assess), median of the runs.
+(label checks, determinacy, range limits, verdict: exubio.trust.assess), median of the runs.
 
 Usage:
     python benchmarks/bench_reconstruction.py            # 25 s, 200 Hz, 1.5 mm noise, 3 runs
@@ -194,7 +194,7 @@ def main(argv: list[str] | None = None) -> int:
                 rec["pf_ls_rmse_deg"] = {c: round(float(v), 5) for c, v in zip(names, pf_ls)}
 
     if len(results) == len(methods) and results:
-        from exubio.assess import assess_trial, trial_label_findings
+        from exubio.trust.assess import assess_trial, trial_label_findings
 
         check_times = []
         for _ in range(args.runs):

@@ -85,8 +85,8 @@ _STAGES = (("exubio.jobs", "read_trial", "read the trial"),
            ("exubio.pipeline", "prepare_targets", "prepare targets (thorax frame, cut-off, filter, splines)"),
            ("exubio.prep.targets", "residual_cutoffs", "  of which the automatic cut-off"),
            ("exubio.pipeline", "stream_reconstruct", "reconstruction (PF)"),
-           ("exubio.assess", "trial_label_findings", "label checks"),
-           ("exubio.assess", "assess_trial", "assessment (determinacy, limits, verdict)"),
+           ("exubio.trust.assess", "trial_label_findings", "label checks"),
+           ("exubio.trust.assess", "assess_trial", "assessment (determinacy, limits, verdict)"),
            ("exubio.pipeline", "write_outputs", "write the result files"),
            ("exubio.report.trial_report", "build_trial_report", "report (PDF + PNG)"))
 

@@ -65,7 +65,7 @@ def main(argv=None) -> int:
     if not Path(args.trial).is_file():
         print(f"no trial {args.trial} (../shared/data absent?)")
         return 2
-    from exubio.assess import not_solved_mask
+    from exubio.trust.assess import not_solved_mask
     from exubio.io.results import read_npz
     from exubio.io.trial import read_trial
     from exubio.live.causal import CausalOptions

@@ -7,8 +7,8 @@ x artefact (none; noise + soft-tissue artefact), a trial is simulated with the p
 reconstructed with the generic one (LS; ``--methods ls,pf`` adds PF). Printed per run: the RMSE and
 max error (deg) of every anatomical angle over the frames where it is measured (the truth: the
 perturbed model's angles; the anatomical frames are the same in both models for these
-perturbations), and per segment the residual features of exubio.mismatch.segment_evidence, and the
-detector's verdict (exubio.mismatch.mismatch_findings). ``--seeds N`` repeats the no-mismatch runs
+perturbations), and per segment the residual features of exubio.trust.mismatch.segment_evidence, and the
+detector's verdict (exubio.trust.mismatch.mismatch_findings). ``--seeds N`` repeats the no-mismatch runs
 with N noise/STA realisations (the false-alarm rate on simulations).
 
 Usage:
@@ -35,10 +35,10 @@ import time
 
 import numpy as np
 
-from exubio.assess import assess_trial
+from exubio.trust.assess import assess_trial
 from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
-from exubio.mismatch import segment_evidence
+from exubio.trust.mismatch import segment_evidence
 from exubio.perturb import ModelPerturbation
 from exubio.pipeline import load_model_and_protocol, reconstruct
 from exubio.prep.targets import prepare_targets
@@ -122,7 +122,7 @@ def real_refit() -> None:
     from exubio.model.angles import anatomical_table
     from exubio.calibration.ellipsoid import fit_ellipsoid_poses
     from exubio.io.trial import read_trial
-    from exubio.mismatch import rigid_fit
+    from exubio.trust.mismatch import rigid_fit
     from exubio.model.load import load_model
     from exubio.pipeline import protocol_for_model
     from exubio.session import calibrate_session

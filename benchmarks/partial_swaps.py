@@ -1,4 +1,4 @@
-"""Labels exchanged in part of a trial (exubio.label_ranges) on the real C3D/TRC trials of
+"""Labels exchanged in part of a trial (exubio.trust.label_ranges) on the real C3D/TRC trials of
 ../shared/data: as recorded (the largest gain any exchange gives, which the threshold must clear),
 and with pairs of markers exchanged in a frame range (found, and the frames found). Prints one line
 per case.
@@ -13,7 +13,7 @@ import warnings
 from pathlib import Path
 
 from exubio.io.trial import read_trial
-from exubio.label_ranges import GAIN_MM, find_partial_swaps
+from exubio.trust.label_ranges import GAIN_MM, find_partial_swaps
 from exubio.pipeline import load_model_and_protocol, protocol_for_model
 from exubio.protocol.load import resolve_labels
 from exubio.io.resources import shipped_file

@@ -1,5 +1,5 @@
 """Static and task trials of the same and of the other session (../shared/data): the per-segment
-shift and z of exubio.session_check, and whether each pair is flagged; plus simulated trials with
+shift and z of exubio.trust.session_check, and whether each pair is flagged; plus simulated trials with
 10-30 mm of soft-tissue artefact checked against their own first 0.5 s (the same session by
 construction). Prints one line per pair.
 
@@ -12,10 +12,10 @@ import warnings
 from pathlib import Path
 
 from exubio.io.trial import read_trial
-from exubio.labels import pair_distances
+from exubio.trust.labels import pair_distances
 from exubio.pipeline import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
-from exubio.session_check import SHIFT_MM, SHIFT_Z, placed_anew, static_consistency
+from exubio.trust.session_check import SHIFT_MM, SHIFT_Z, placed_anew, static_consistency
 from exubio.simulate import simulate_trial
 
 C3D = Path(__file__).resolve().parents[2] / "shared" / "data" / "c3d"

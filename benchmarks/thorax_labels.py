@@ -1,4 +1,4 @@
-"""The thorax-label check (exubio.thorax_check) on every real trial of ../shared/data, as labelled
+"""The thorax-label check (exubio.trust.thorax_check) on every real trial of ../shared/data, as labelled
 and with two of its thorax landmarks exchanged (every pair): the fit of the file's labels, of the
 best assignment, and whether the trial would be refused. Prints one line per case.
 
@@ -15,7 +15,7 @@ from pathlib import Path
 from exubio.io.trial import read_trial
 from exubio.pipeline import load_model_and_protocol, protocol_for_model
 from exubio.io.resources import shipped_file
-from exubio.thorax_check import SWAP_RATIO, thorax_label_fit
+from exubio.trust.thorax_check import SWAP_RATIO, thorax_label_fit
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 

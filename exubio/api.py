@@ -93,14 +93,14 @@ def isb_angles(model: Model, reconstruction: Reconstruction | np.ndarray, /) -> 
 
 
 def angle_status(reconstruction: Reconstruction, model: Model | None = None, protocol: Protocol | None = None, /):
-    """Every anatomical angle's status per frame (exubio.observability.AngleDeterminacy: measured,
+    """Every anatomical angle's status per frame (exubio.trust.observability.AngleDeterminacy: measured,
     modelled by a named rule, or not measured) for a reconstruction made with ``protocol``; the
     frames where a marker was missing are those whose residual is NaN."""
-    from exubio.assess import not_solved_mask
+    from exubio.trust.assess import not_solved_mask
     from exubio.model.kinematics import Kinematics
     from exubio.methods.common import tracked_points
     from exubio.methods.poses import held_mask
-    from exubio.observability import angle_determinacy
+    from exubio.trust.observability import angle_determinacy
 
     model = model if model is not None else load_model()
     protocol = protocol if protocol is not None else load_protocol(model=model)
@@ -122,7 +122,7 @@ def to_dataframe(reconstruction: Reconstruction, /, *, model: Model | None = Non
     import pandas as pd
 
     from exubio.model.angles import ANATOMICAL_ANGLES, anatomical_table
-    from exubio.observability import AngleStatus
+    from exubio.trust.observability import AngleStatus
 
     r = reconstruction
     model = model if model is not None else load_model()
@@ -144,7 +144,7 @@ def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str
     header), ``.npz`` and ``.summary.json`` into out_dir, as one set complete or absent; refuses to
     replace earlier results unless ``overwrite``. Returns the paths by kind."""
     from exubio.model.angles import anatomical_table
-    from exubio.evaluate import summary
+    from exubio.trust.evaluate import summary
     from exubio.io import results
     from exubio.pipeline import AngleOutputs, angle_header, write_outputs
 

@@ -165,7 +165,7 @@ def _print_quality(method: str, summ: dict) -> None:
 
 def _trial_code(result: TrialResult) -> int:
     """1 when a method failed (the others' results written) or any method's verdict is 'fail'
-    (see exubio.quality), else 0."""
+    (see exubio.trust.quality), else 0."""
     return EXIT_FAILED if result.failed or "fail" in result.verdicts.values() else EXIT_OK
 
 
@@ -360,7 +360,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from exubio.model.angles import anatomical_table
     from exubio.io.results import read_npz_arrays
     from exubio.model.load import load_model
-    from exubio.observability import AngleStatus
+    from exubio.trust.observability import AngleStatus
 
     angle_names, true_angles = anatomical_table(load_model(), q_true)
     for recon, paths, summ in outputs:

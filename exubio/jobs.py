@@ -35,7 +35,7 @@ class TrialJob:
     static_reference: the session static's pair distances the label checks compare with;
     relabel: this trial's labels read as other labels ({file label: read as}), for this trial only
     (exubio.protocol.load.relabel_trajectories), before the protocol's own relabel; repair_labels: exchange
-    back labels exchanged in part of the trial (exubio.label_ranges), reported frame range by range."""
+    back labels exchanged in part of the trial (exubio.trust.label_ranges), reported frame range by range."""
 
     trial: Path
     out_dir: Path

@@ -18,7 +18,7 @@ import numpy as np
 
 import exubio
 from exubio.errors import InputError, PartialReconstructionError, ProtocolError, ReconstructionError
-from exubio.evaluate import summary
+from exubio.trust.evaluate import summary
 from exubio.io import results
 from exubio.io.trial import read_trial
 from exubio.model.load import DEFAULT_MODEL, load_model
@@ -65,7 +65,7 @@ class TrialInfo:
 @dataclass(frozen=True)
 class TrialInputs:
     """A trial ready to reconstruct; ``dropped``: protocol markers the trial lacks, left out because
-    the others still measure every angle (exubio.missing_markers); ``partial_swaps``: labels exchanged
+    the others still measure every angle (exubio.trust.missing_markers); ``partial_swaps``: labels exchanged
 in part of the trial, ``repaired``: exchanged back before preparing (``--repair-labels``)."""
 
     trial: TrialInfo
@@ -73,7 +73,7 @@ in part of the trial, ``repaired``: exchanged back before preparing (``--repair-
     protocol: Protocol
     targets: MarkerTargets
     dropped: tuple[str, ...] = ()
-    partial_swaps: tuple = ()  # labels exchanged in part of the trial (exubio.label_ranges)
+    partial_swaps: tuple = ()  # labels exchanged in part of the trial (exubio.trust.label_ranges)
     repaired: bool = False  # ... and exchanged back (--repair-labels)
 
 
@@ -136,10 +136,10 @@ def load_inputs(trial_path: str | Path | Trajectories, /, *, model_path: str | P
                                                   body_mass_kg=body_mass_kg)
     else:
         protocol = protocol_for_model(model, protocol_path)
-    from exubio.missing_markers import drop_missing_markers
-    from exubio.thorax_check import check_thorax_labels
+    from exubio.trust.missing_markers import drop_missing_markers
+    from exubio.trust.thorax_check import check_thorax_labels
 
-    from exubio.label_ranges import find_partial_swaps, repair_partial_swaps
+    from exubio.trust.label_ranges import find_partial_swaps, repair_partial_swaps
 
     protocol, dropped = drop_missing_markers(traj, protocol, model)
     check_thorax_labels(traj, protocol, model)  # before the thorax frame is built from them
@@ -289,7 +289,7 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
 def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, stems, parts, sink_type, /, *,
                           method_options, summary_extra, progress_factory, calibration, static_reference,
                           chunk_frames, overwrite) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
-    from exubio.assess import assess_trial, trial_label_findings
+    from exubio.trust.assess import assess_trial, trial_label_findings
 
     recons, sinks, done, failures = [], [], [], {}
     for method, stem in zip(methods, stems):
@@ -317,8 +317,8 @@ def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, ste
     findings = trial_label_findings(inputs.model, inputs.protocol, inputs.targets, reference=static_reference)
     session = ()
     if static_reference is not None:  # does the static belong to this trial's session?
-        from exubio.labels import pair_distances
-        from exubio.session_check import placed_anew, static_consistency
+        from exubio.trust.labels import pair_distances
+        from exubio.trust.session_check import placed_anew, static_consistency
 
         trial_pd = pair_distances(inputs.targets.positions_m, inputs.targets.marker_names)
         session = tuple(placed_anew(static_consistency(static_reference, trial_pd, inputs.protocol)))
@@ -384,8 +384,8 @@ def write_assessed(inputs: TrialInputs, trial_path: str | Path, out_dir: str | P
 
 def with_input_findings(quality: dict[str, Any], findings: tuple[str, ...], /) -> dict[str, Any]:
     """A summary's ``quality`` with a note per input finding (what the reader read around: the file is
-    named, the result stands: exubio.quality's "note" level, which leaves the verdict as it is)."""
-    from exubio.quality import Reason
+    named, the result stands: exubio.trust.quality's "note" level, which leaves the verdict as it is)."""
+    from exubio.trust.quality import Reason
 
     notes = [Reason("input_file", "note", f"input file: {f}").to_dict() for f in findings]
     return {**quality, "reasons": list(quality["reasons"]) + notes}
@@ -394,7 +394,7 @@ def with_input_findings(quality: dict[str, Any], findings: tuple[str, ...], /) -
 def with_failed_methods(quality: dict[str, Any], failures: dict[str, str], /) -> dict[str, Any]:
     """A summary's ``quality`` with a note per method of the run that failed (this result stands
     on its own: no PF-LS agreement was measured)."""
-    from exubio.quality import Reason
+    from exubio.trust.quality import Reason
 
     notes = [Reason("method_failed", "note", f"{m.upper()} failed on this trial, so this result is not compared with it "
                     f"(no PF-LS agreement): {reason}").to_dict() for m, reason in failures.items()]
@@ -408,9 +408,9 @@ MAX_STATUS_RUNS = 12
 
 def angle_header(det, trial: str, method: str, side: str) -> tuple[str, ...]:
     """Comment lines of ``<trial>.<method>.csv``: what the angles are (definition, sign), and each
-    one's status (exubio.observability.AngleStatus) with the frame ranges where it changes."""
+    one's status (exubio.trust.observability.AngleStatus) with the frame ranges where it changes."""
     from exubio.model.angles import ANATOMICAL_ANGLES
-    from exubio.observability import AngleStatus
+    from exubio.trust.observability import AngleStatus
 
     lines = [f"exubio anatomical joint angles of {trial} ({method.upper()}); angles in degrees, time in seconds",
              "ISB frames (Wu et al. 2005) from the model's landmarks, intrinsic sequences, raw signs; GH in ISB Y-X'-Y'' "

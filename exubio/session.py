@@ -27,7 +27,7 @@ def calibration_summary(report, /, *, static: str, model_file: str | Path, frame
                         labels: Any = ()) -> dict[str, Any]:
     """The calibration as summary.json records it (the full report dict under ``report``, the
     label findings on the static trial under ``labels``)."""
-    from exubio.assess import _finding_dict
+    from exubio.trust.assess import _finding_dict
 
     return {"static": static, "frames": frames, "model_file": str(model_file),
             "mean_residual_mm": report.mean_residual_mm, "residual_mm": report.to_dict().get("residual_mm"),
@@ -37,8 +37,8 @@ def calibration_summary(report, /, *, static: str, model_file: str | Path, frame
 def static_checks(static_path: str | Path | Trajectories, /, *, protocol_path: str | Path | None = None,
                   model_path: str | Path | None = None, frames: slice | None = None):
     """The label findings on a static trial (against the generic model) and its pair distances,
-    the reference the session's task trials are checked against (exubio.labels)."""
-    from exubio.labels import check_trial, pair_distances
+    the reference the session's task trials are checked against (exubio.trust.labels)."""
+    from exubio.trust.labels import check_trial, pair_distances
 
     model, protocol = load_model_and_protocol(model_path=model_path, protocol_path=protocol_path)
     targets = prepare_targets(_read(static_path), protocol)

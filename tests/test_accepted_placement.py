@@ -1,9 +1,9 @@
 """A lab's placement accepted once in the protocol (``landmark_offset_mm``): the calibration no
 longer names that marker at that distance, still names it well beyond, and names the others as
-before (exubio.quality.calibration_reasons)."""
+before (exubio.trust.quality.calibration_reasons)."""
 import pytest
 
-from exubio import quality as Q
+from exubio.trust import quality as Q
 from exubio.calibration import SCALE_BOUNDS
 from exubio.errors import ProtocolError
 from exubio.model.load import load_model

@@ -1,17 +1,17 @@
 """Each anatomical angle is measured, modelled (by a named rule) or not measured, and the labels
 follow from the markers: the noise-gain criterion on the angle itself, and, for a held coordinate,
-the share of the angle's variance the hold decides (exubio.observability.angle_determinacy)."""
+the share of the angle's variance the hold decides (exubio.trust.observability.angle_determinacy)."""
 import dataclasses
 
 import numpy as np
 import pytest
 
 from exubio.model.angles import ANATOMICAL_COLUMNS, anatomical_table
-from exubio.assess import angle_status_of_protocol, not_solved_mask
+from exubio.trust.assess import angle_status_of_protocol, not_solved_mask
 from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.methods.poses import held_mask
-from exubio.observability import MODELLED_SHARE, AngleStatus, angle_determinacy
+from exubio.trust.observability import MODELLED_SHARE, AngleStatus, angle_determinacy
 from exubio.pipeline import load_model_and_protocol, protocol_for_model
 from exubio.io.resources import shipped_file
 from exubio.simulate import reference_postures

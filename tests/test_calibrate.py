@@ -17,7 +17,7 @@ from exubio.calibration import (
     scale_model,
 )
 from exubio.errors import InputError
-from exubio.evaluate import residual_statistics
+from exubio.trust.evaluate import residual_statistics
 from exubio.io.c3d import write_c3d
 from exubio.model.kinematics import Kinematics
 from exubio.model.load import load_model, save_model
@@ -342,7 +342,7 @@ def test_report_is_a_dataclass_with_plain_data(calibrated):
 def test_the_report_says_how_the_fits_stopped(calibrated):
     """Every fit of the calibration says why it stopped (exubio.methods.lsq.StopReason labels); on the
     simulated subject they all converge and the quality verdict has nothing to say about them."""
-    from exubio import quality as Q
+    from exubio.trust import quality as Q
     from exubio.calibration import SCALE_BOUNDS
 
     cal, report, _ = calibrated
@@ -361,7 +361,7 @@ def test_a_fit_that_did_not_converge_is_a_check(calibrated, fit, stop):
     converge is not judged (it only seeds the final fit)."""
     import dataclasses as dc
 
-    from exubio import quality as Q
+    from exubio.trust import quality as Q
     from exubio.calibration import SCALE_BOUNDS
 
     _, report, _ = calibrated

@@ -256,7 +256,7 @@ def test_angle_status_is_the_same_in_every_file(tmp_path, c3d):
     axial rotation is solved but named not measured, its SC elevation and protraction measured."""
     from exubio.model.angles import ANATOMICAL_COLUMNS
     from exubio.io.results import read_npz_arrays
-    from exubio.observability import AngleStatus
+    from exubio.trust.observability import AngleStatus
 
     out = tmp_path / "st"
     assert main(["-q", "reconstruct", str(c3d), "--method", "ls", "--out", str(out), "--no-report"]) == 0

@@ -1,4 +1,4 @@
-"""Tests of exubio.labels: marker-label checks from the protocol and the model.
+"""Tests of exubio.trust.labels: marker-label checks from the protocol and the model.
 
 Simulated trials (exubio.simulate) run everywhere; the real C3D trials of ../shared/data/c3d
 (Ipuch/bioptim_exo, MIT; see ../shared/data/SOURCES.md) are skipped when absent. The broken
@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from exubio import labels as L
+from exubio.trust import labels as L
 from exubio.calibration import scale_model
 from exubio.errors import InputError
 from exubio.model.kinematics import Kinematics

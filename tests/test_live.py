@@ -111,7 +111,7 @@ def test_measured_angles_follow_the_hold_and_the_determinacy(model_protocol):
     clavicle's axial rotation and the AC upward rotation are not measured, SC elevation, ST, GH and
     HT are; a frame where GH's axial rotation is undetermined makes the GH and HT angles not measured."""
     from exubio.model.angles import ISB_COLUMNS
-    from exubio.assess import coordinates_not_measured_by_protocol, not_solved_mask
+    from exubio.trust.assess import coordinates_not_measured_by_protocol, not_solved_mask
 
     model, protocol = model_protocol
     names = model.coordinate_names
@@ -234,9 +234,9 @@ def test_a_stall_ends_the_pf_run_and_a_new_one_starts(short_trial, model_protoco
     assert [e.frame for e in _kinds(rec, "run_start")] == [0, 200]
     assert "0.50 s" in _kinds(rec, "run_end")[0].message
     assert (rec.status[150:200] == 2).all() and np.isnan(rec.q_rad[150:200]).all() and (rec.status[200:] == 0).all()
-    from exubio.quality import NOT_CONVERGED_FRACTION
+    from exubio.trust.quality import NOT_CONVERGED_FRACTION
 
-    # 50 of 400 frames without a PF state: the convergence criterion of exubio.quality decides
+    # 50 of 400 frames without a PF state: the convergence criterion of exubio.trust.quality decides
     expected = "fail" if 50 / 400 > NOT_CONVERGED_FRACTION[1] else "check"
     assert rec.live_quality.verdict == expected
     folder = write_recording(rec, tmp_path, "stall", report=True)  # the trial report too, with the empty frames

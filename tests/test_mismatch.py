@@ -1,4 +1,4 @@
-"""The model-mismatch check (exubio.mismatch): its evidence measures what it says on constructed
+"""The model-mismatch check (exubio.trust.mismatch): its evidence measures what it says on constructed
 data, a simulated mismatch that costs more than 5 deg on a measured angle is a check naming the
 segment, no mismatch stays ok, and the real trials with their labels right raise none."""
 from __future__ import annotations
@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from exubio.assess import assess_trial
+from exubio.trust.assess import assess_trial
 from exubio.calibration.ellipsoid import surface_distance
 from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
-from exubio.mismatch import BIAS_MM, CONTACT_OFFSET_MM, assess_mismatch, segment_evidence
+from exubio.trust.mismatch import BIAS_MM, CONTACT_OFFSET_MM, assess_mismatch, segment_evidence
 from exubio.perturb import ModelPerturbation
 from exubio.pipeline import load_model_and_protocol, reconstruct
 from exubio.prep.targets import prepare_targets

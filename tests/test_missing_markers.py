@@ -1,6 +1,6 @@
 """A protocol marker the trial lacks is left out with a check naming it when the other markers still
 measure every angle the full set measures, and refused (exit 2, naming it, a near label and the
-angles it would cost) when they do not (exubio.missing_markers)."""
+angles it would cost) when they do not (exubio.trust.missing_markers)."""
 import dataclasses
 import json
 

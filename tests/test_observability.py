@@ -5,7 +5,7 @@ import numpy as np
 
 from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
-from exubio.observability import UNDETERMINED_DEG_PER_MM, determinacy
+from exubio.trust.observability import UNDETERMINED_DEG_PER_MM, determinacy
 from exubio.pipeline import load_model_and_protocol
 
 

@@ -1,5 +1,5 @@
 """Labels exchanged in part of a trial are found per frame range and, with --repair-labels,
-exchanged back and reported (exubio.label_ranges); the trials as recorded have none. Built from
+exchanged back and reported (exubio.trust.label_ranges); the trials as recorded have none. Built from
 the real trials of ../shared/data (skipped when absent)."""
 import json
 from pathlib import Path
@@ -10,7 +10,7 @@ import pytest
 from exubio.cli import main
 from exubio.io.c3d import write_c3d
 from exubio.io.trial import read_trial
-from exubio.label_ranges import find_partial_swaps, repair_partial_swaps
+from exubio.trust.label_ranges import find_partial_swaps, repair_partial_swaps
 from exubio.pipeline import load_model_and_protocol
 
 C3D = Path(__file__).resolve().parents[2] / "shared" / "data" / "c3d"

@@ -1,4 +1,4 @@
-"""Label errors are found as the whole permutation, not pairs only (exubio.labels): three labels
+"""Label errors are found as the whole permutation, not pairs only (exubio.trust.labels): three labels
 permuted in a cycle on a real trial checked against its session's static are named once as a
 permutation with the relabel that undoes it, and that relabel, applied, leaves no finding. Built
 from the real trials of ../shared/data (skipped when absent)."""
@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from exubio import quality as Q
+from exubio.trust import quality as Q
 from exubio.io.trial import read_trial
-from exubio.labels import check_trial, pair_distances
+from exubio.trust.labels import check_trial, pair_distances
 from exubio.pipeline import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.protocol.load import relabel_trajectories

@@ -210,7 +210,7 @@ def test_gaps_are_handled_and_named(tmp_path, trajectories):
 
 
 def test_calibration_criteria_name_scale_at_bound_pose_at_limit_and_moving_window():
-    from exubio import quality as Q
+    from exubio.trust import quality as Q
 
     cal = {"source": "static.c3d", "scale_factors": {"humerus": 0.7, "hand": 1.0},
            "static_pose_at_limit_deg": {"pronation": -20.0}, "window_motion_mm": {"MET2": 9.0, "ARM": 1.0}}

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from exubio.calibration import calibrate_model, calibrated_protocol
-from exubio.evaluate import residual_statistics
+from exubio.trust.evaluate import residual_statistics
 from exubio.io.trial import read_trial
 from exubio.model.load import load_model, save_model
 from exubio.pipeline import load_model_and_protocol, reconstruct

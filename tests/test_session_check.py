@@ -1,4 +1,4 @@
-"""A static trial of another session is named (exubio.session_check), the same session's is not:
+"""A static trial of another session is named (exubio.trust.session_check), the same session's is not:
 built from the real trials of ../shared/data (skipped when absent), the two martin sessions, whose
 markers were placed anew between them (../shared/data/SOURCES.md)."""
 import json
@@ -8,10 +8,10 @@ import pytest
 
 from exubio.cli import main
 from exubio.io.trial import read_trial
-from exubio.labels import pair_distances
+from exubio.trust.labels import pair_distances
 from exubio.pipeline import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
-from exubio.session_check import placed_anew, static_consistency
+from exubio.trust.session_check import placed_anew, static_consistency
 
 C3D = Path(__file__).resolve().parents[2] / "shared" / "data" / "c3d"
 pytestmark = pytest.mark.skipif(not C3D.is_dir(), reason=f"real data folder {C3D} is absent")

@@ -1,4 +1,4 @@
-"""Thorax landmarks are label-checked before the thorax frame is built (exubio.thorax_check): two
+"""Thorax landmarks are label-checked before the thorax frame is built (exubio.trust.thorax_check): two
 exchanged landmarks are refused with one error naming them and the relabel that fixes them; the
 files as labelled pass. Built from the real trials of ../shared/data (skipped when absent) and a
 simulated trial."""
@@ -16,7 +16,7 @@ from exubio.model.load import load_model
 from exubio.pipeline import load_inputs, load_model_and_protocol, protocol_for_model
 from exubio.io.resources import shipped_file
 from exubio.simulate import simulate_trial
-from exubio.thorax_check import check_thorax_labels, thorax_label_fit
+from exubio.trust.thorax_check import check_thorax_labels, thorax_label_fit
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"real data folder {DATA} is absent")

@@ -40,14 +40,14 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from exubio import quality as Q
+from exubio.trust import quality as Q
 from exubio.model.angles import ISB_COLUMNS, isb_table, measured_isb_joints
-from exubio.assess import DETERMINACY_PERIOD_S, not_solved_mask
+from exubio.trust.assess import DETERMINACY_PERIOD_S, not_solved_mask
 from exubio.errors import InputError, ReconstructionError
 from exubio.live.causal import CausalFrame, CausalOptions, CausalTargets, frame_index
 from exubio.live.sources import UNIT_SCALE, MarkerSource, ReplaySource, StreamInfo
 from exubio.methods.pf import PFOptions, _Frames, pf_setup
-from exubio.observability import determinacy
+from exubio.trust.observability import determinacy
 from exubio.prep.targets import PLAUSIBLE_MEDIAN_DISTANCE_M
 from exubio.model.ranges import AT_LIMIT_TOLERANCE_RAD
 from exubio.types import FrameStatus, Gap, MarkerTargets, Model, Protocol, Reconstruction, Trajectories
@@ -101,15 +101,15 @@ def angles_measured(model: Model, not_solved: Sequence[str], undetermined: Seque
                     structural: Mapping[str, str] | None = None) -> np.ndarray:
     """(15,) bool, per ISB angle (ISB_COLUMNS order): measured by the markers. The one place the
     live output decides it. With ``protocol``: an angle the marker set cannot measure in any
-    reference posture (exubio.assess.angle_status_of_protocol, the status the files give) is not
+    reference posture (exubio.trust.assess.angle_status_of_protocol, the status the files give) is not
     measured; of the others, a joint's angles are not measured in a frame where one of its own
-    coordinates is not solved (held, locked) or undetermined there (exubio.observability's noise
+    coordinates is not solved (held, locked) or undetermined there (exubio.trust.observability's noise
     gain), ``unmeasurable`` coordinates (the set cannot determine them anyway) left aside.
     ``structural``: that status, computed once by a caller that asks frame after frame."""
     joints = set(measured_isb_joints(model, set(not_solved) | (set(undetermined) - set(unmeasurable))))
     out = np.array([j in joints for j in ISB_JOINT_OF], dtype=bool)
     if structural is None and protocol is not None:
-        from exubio.assess import angle_status_of_protocol
+        from exubio.trust.assess import angle_status_of_protocol
 
         structural = angle_status_of_protocol(model, protocol)
     if structural is not None:
@@ -651,7 +651,7 @@ class LiveSession:
                 self.lim_beyond[j] = max(self.lim_beyond[j], beyond[j])
 
     def _verdict(self, g: int) -> None:
-        """The running verdict: the criteria of exubio.quality on the frames so far, plus what the
+        """The running verdict: the criteria of exubio.trust.quality on the frames so far, plus what the
         live loop saw (stalls, restarts, skips, label swaps)."""
         self.verdict_due = g + self.verdict_every
         n = g + 1
@@ -871,7 +871,7 @@ class LiveSession:
         self.points = tracked_points(self.kin, self.protocol)
         self.excluded = not_solved_mask(self.model, self.protocol, self.kin)
         self.not_solved = tuple(n for n, e in zip(self.model.coordinate_names, self.excluded) if e)
-        from exubio.assess import angle_status_of_protocol, coordinates_not_measured_by_protocol
+        from exubio.trust.assess import angle_status_of_protocol, coordinates_not_measured_by_protocol
 
         self.unmeasurable = coordinates_not_measured_by_protocol(self.model, self.protocol, kin=self.kin)
         self.structural = angle_status_of_protocol(self.model, self.protocol, kin=self.kin)  # once, not per frame
@@ -982,7 +982,7 @@ class LiveSession:
             self._bind()
             from exubio.calibration import SCALE_BOUNDS
 
-            self.calibration_reasons = Q.calibration_reasons(  # as exubio.assess does for the recording
+            self.calibration_reasons = Q.calibration_reasons(  # as exubio.trust.assess does for the recording
                 report.to_dict(), scale_bounds=SCALE_BOUNDS, off_segment=Q.off_segment_markers(self.model, self.protocol))
             if self.on_ready is not None:
                 self.on_ready(self)

@@ -29,7 +29,7 @@ __all__ = ["write_recording", "read_recorded_markers"]
 def write_recording(rec: LiveRecording, out_dir: str | os.PathLike, name: str, /, *, overwrite: bool = False,
                     report: bool = True) -> Path:
     """Write the recording into ``out_dir/name`` (see the module docstring); returns that folder."""
-    from exubio.assess import assess_trial, trial_label_findings
+    from exubio.trust.assess import assess_trial, trial_label_findings
     from exubio.io.c3d import write_c3d
     from exubio.io.results import atomic_write, write_json, writable_folder
     from exubio.pipeline import Method, TrialInfo, TrialInputs, write_assessed

@@ -26,7 +26,7 @@ from matplotlib.text import Text
 from matplotlib.ticker import NullLocator
 from matplotlib.transforms import Bbox
 
-from exubio.evaluate import per_frame_residuals_mm, residual_statistics
+from exubio.trust.evaluate import per_frame_residuals_mm, residual_statistics
 from exubio.errors import InputError
 from exubio.io.results import atomic_write, read_angles_csv, read_npz, read_npz_arrays, read_npz_metadata
 from exubio.types import Reconstruction
@@ -41,7 +41,7 @@ _JOINTS = (("SC (ISB Y-X'-Z'')", "SC_"), ("AC (ISB Y-X'-Z'')", "AC_"), ("ST (ISB
 @dataclass(frozen=True)
 class Angles:
     """The anatomical angles of one method's result: from <trial>.<method>.csv (degrees -> rad)
-    and their status per frame from the .npz (exubio.observability.AngleStatus codes: 0 measured,
+    and their status per frame from the .npz (exubio.trust.observability.AngleStatus codes: 0 measured,
     1 modelled, 2 not measured)."""
 
     time_s: np.ndarray
@@ -274,7 +274,7 @@ def verdict_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[s
                      + (f" frames {cal['frames']}" if cal.get("frames") else "")
                      + f": calibration residual mean {cal.get('mean_residual_mm', float('nan')):.2f} mm")
     lines.append("verdict: ok = nothing found; check = read the reasons before using the angles; "
-                 "fail = the angles are wrong as they stand (exit code 1). Thresholds: exubio/quality.py.")
+                 "fail = the angles are wrong as they stand (exit code 1). Thresholds: exubio/trust/quality.py.")
     _bisect_wrap(fig.text(0.04, max(y, 0.36), "\n".join(lines), fontsize=8, va="top", family="monospace", wrap=True))
     if angles:
         _key_angles(fig, recons, angles, summaries)

@@ -56,11 +56,11 @@ def trial_undetermined(tr: Trial) -> list[str]:
 
 
 def _weakly_determined(tr: Trial, rec: Reconstruction) -> list[str]:
-    """Coordinates the trial's own verdict calls undetermined (exubio.observability: noise gain
+    """Coordinates the trial's own verdict calls undetermined (exubio.trust.observability: noise gain
     above its threshold in most frames), so that Fig. 5 and the PF-LS comparison use the same
     criterion as the quality verdict of a reconstruction."""
     from exubio.methods.common import tracked_points
-    from exubio.observability import determinacy
+    from exubio.trust.observability import determinacy
 
     kin = Kinematics(tr.model)
     names = tr.model.coordinate_names

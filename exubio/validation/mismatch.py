@@ -1,6 +1,6 @@
 """Model mismatch: trials simulated with a perturbed model (exubio.perturb) and reconstructed with
 the generic one; the measured angles' errors against the perturbation, and whether the verdict
-(exubio.assess, its model-mismatch detector exubio.mismatch) says ``check`` where they cost more
+(exubio.trust.assess, its model-mismatch detector exubio.trust.mismatch) says ``check`` where they cost more
 than ``COST_LIMIT_DEG``, and stays ``ok`` without a mismatch.
 
 A run's *mismatch cost* is the worst RMSE over the measured angles (each over the frames where it
@@ -17,8 +17,8 @@ from typing import Callable
 import numpy as np
 
 from exubio.model.angles import anatomical_table
-from exubio.assess import assess_trial
-from exubio.observability import AngleStatus
+from exubio.trust.assess import assess_trial
+from exubio.trust.observability import AngleStatus
 from exubio.perturb import ModelPerturbation
 from exubio.pipeline import load_model_and_protocol, reconstruct
 from exubio.prep.targets import prepare_targets

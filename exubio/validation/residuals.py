@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from exubio.evaluate import per_frame_residuals_mm, residual_statistics
+from exubio.trust.evaluate import per_frame_residuals_mm, residual_statistics
 from exubio.validation.results import METHODS, Failed, ResidualRow, ResidualStats
 from exubio.validation.trials import Trial, plot_stride
 

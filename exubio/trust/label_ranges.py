@@ -7,7 +7,7 @@ segments) against their medians over the trial, as labelled and with i and j exc
 where the exchange brings the distances back by more than ``GAIN_MM`` (RMS over the partners,
 summed over both markers), in runs of at least ``MIN_RUN_FRAMES``, are a partial swap. Medians over
 the trial are the reference because the swap holds in part of it only (a swap over the whole trial
-is the whole-trial check's: exubio.labels). Pure numpy on raw positions (any frame: distances only).
+is the whole-trial check's: exubio.trust.labels). Pure numpy on raw positions (any frame: distances only).
 """
 from __future__ import annotations
 
@@ -77,7 +77,7 @@ def find_partial_swaps(traj: Trajectories, protocol: Protocol, model: Model, /, 
     """The partial swaps of a trial (module docstring), each pair of markers at most once, the
     largest first; a marker takes part in one at most. Memory: a block of frames at a time plus one
     bit per frame and pair."""
-    from exubio.labels import pair_distances
+    from exubio.trust.labels import pair_distances
 
     match = resolve_labels(protocol, traj.labels, source=traj.source)
     markers = [m for m in protocol.markers if match.columns.get(m.name) is not None and m.segment != "thorax"]

@@ -15,7 +15,7 @@ marker pairs:
 A segment whose shift exceeds ``SHIFT_MM`` *and* whose z exceeds ``SHIFT_Z`` looks placed anew;
 when ``MIN_SEGMENTS`` segments or more do, "this static may not belong to this session" (a check
 naming the segments and the pair that changed most on each). A lab that re-places the markers of
-one segment only between sessions is not caught (documented in the README). Pure numpy on pair distances (exubio.labels.PairDistances).
+one segment only between sessions is not caught (documented in the README). Pure numpy on pair distances (exubio.trust.labels.PairDistances).
 """
 from __future__ import annotations
 
@@ -77,7 +77,7 @@ class SegmentShift:
 
 def static_consistency(static, trial, protocol: Protocol, /) -> tuple[SegmentShift, ...]:
     """Every judged segment's shift between the static's pair distances ``static`` and the task
-    trial's ``trial`` (exubio.labels.PairDistances, marker names of ``protocol``)."""
+    trial's ``trial`` (exubio.trust.labels.PairDistances, marker names of ``protocol``)."""
     by_segment: dict[str, list[str]] = {}
     for m in protocol.markers:
         if m.segment != "thorax" and m.name in static.names and m.name in trial.names:

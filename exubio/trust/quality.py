@@ -209,7 +209,7 @@ def dropped_reasons(dropped: Sequence[str]) -> list[Reason]:
 
 def session_reasons(shifts: Sequence[Any], static_name: str) -> list[Reason]:
     """Segments whose markers look placed anew between the static and this trial
-    (exubio.session_check): the static may be of another session: a check with the evidence."""
+    (exubio.trust.session_check): the static may be of another session: a check with the evidence."""
     if not shifts:
         return []
     what = "; ".join(s.describe() for s in shifts)
@@ -290,7 +290,7 @@ def calibration_reasons(cal: Mapping[str, Any] | None, *, scale_bounds: tuple[fl
                         off_segment: Mapping[str, float] | None = None,
                         not_measured: Sequence[str] = (),
                         accepted_offsets_mm: Mapping[str, float] | None = None) -> list[Reason]:
-    """``not_measured``: coordinates the marker set cannot determine (exubio.assess): their range
+    """``not_measured``: coordinates the marker set cannot determine (exubio.trust.assess): their range
     limit holds them, which is a note, not an implausible posture the markers ask for.
     ``accepted_offsets_mm``: per marker, the landmark distance the protocol accepts as the lab's
     placement (``landmark_offset_mm``), instead of LANDMARK_OFFSET_MM."""

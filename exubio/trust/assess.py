@@ -1,7 +1,7 @@
 """Everything measured about one trial's reconstructions to decide whether to trust them: which
-coordinates the markers determine (exubio.observability), frames at a range limit
+coordinates the markers determine (exubio.trust.observability), frames at a range limit
 (exubio.model.ranges), PF-LS agreement on determined coordinates, the label checks and the calibration;
-turned into one quality verdict per method (exubio.quality). No solver is run here."""
+turned into one quality verdict per method (exubio.trust.quality). No solver is run here."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -10,15 +10,15 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from exubio import quality as Q
+from exubio.trust import quality as Q
 from exubio.calibration import SCALE_BOUNDS
-from exubio.evaluate import per_frame_residuals_mm, residual_statistics
+from exubio.trust.evaluate import per_frame_residuals_mm, residual_statistics
 from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.methods.poses import held_mask
 from exubio.methods.pf import unobserved_segments
-from exubio.mismatch import MismatchAssessment, assess_mismatch, mismatch_reasons
-from exubio.observability import UNDETERMINED_TRIAL_FRACTION, AngleDeterminacy, AngleStatus, Determinacy, angle_determinacy, determinacy
+from exubio.trust.mismatch import MismatchAssessment, assess_mismatch, mismatch_reasons
+from exubio.trust.observability import UNDETERMINED_TRIAL_FRACTION, AngleDeterminacy, AngleStatus, Determinacy, angle_determinacy, determinacy
 from exubio.model.ranges import limit_report
 from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Reconstruction
 
@@ -38,7 +38,7 @@ class TrialAssessment:
     not_solved: tuple[str, ...]
     angles: Mapping[str, AngleDeterminacy] | None = None  # per method: each anatomical angle's status per frame
     structural: Mapping[str, str] | None = None  # per anatomical angle: what the marker set can do (angle_status_of_protocol)
-    mismatch: Mapping[str, MismatchAssessment] | None = None  # per method: model-mismatch evidence (exubio.mismatch)
+    mismatch: Mapping[str, MismatchAssessment] | None = None  # per method: model-mismatch evidence (exubio.trust.mismatch)
 
     def summary_for(self, method: str) -> dict[str, Any]:
         """What goes into that method's summary.json."""
@@ -85,9 +85,9 @@ def generic_model_and_protocol(model: Model, protocol: Protocol, /) -> tuple[Mod
 
 
 def trial_label_findings(model: Model, protocol: Protocol, targets: MarkerTargets, /, *, reference: Any = None) -> tuple:
-    """The label checks of exubio.labels on a prepared trial, against the generic model's
-    expectations; ``reference``: the session's static trial's pair distances (exubio.labels.pair_distances)."""
-    from exubio.labels import check_trial
+    """The label checks of exubio.trust.labels on a prepared trial, against the generic model's
+    expectations; ``reference``: the session's static trial's pair distances (exubio.trust.labels.pair_distances)."""
+    from exubio.trust.labels import check_trial
 
     generic, gprot = generic_model_and_protocol(model, protocol)
     return check_trial(targets, model=generic, protocol=gprot, ranges_rad=generic.coordinate_ranges_rad,
@@ -131,7 +131,7 @@ _POSTURES_SIZE = 8
 def reference_postures_of(model: Model, /) -> np.ndarray:
     """exubio.simulate.reference_postures of the model (the q = 0 posture where its girdle cannot be
     driven on the rhythm), computed once per process for a given geometry (it takes ~0.3 s)."""
-    from exubio.labels import _content_digest
+    from exubio.trust.labels import _content_digest
     from exubio.simulate import reference_postures
 
     try:
@@ -203,10 +203,10 @@ def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recon
                  static_name: str = "", dropped: Sequence[str] = (), partial_swaps: Sequence = (),
                  repaired: bool = False) -> TrialAssessment:
     """Assess the reconstructions ``recons`` of one trial (module docstring). ``session``: the
-    segments whose markers look placed anew since the static (exubio.session_check.placed_anew),
+    segments whose markers look placed anew since the static (exubio.trust.session_check.placed_anew),
     named as a check on the static; ``static_name``: that static trial; ``dropped``: protocol markers
-    the trial lacks, left out (exubio.missing_markers): a check naming them; ``partial_swaps``: labels
-    exchanged in part of the trial (exubio.label_ranges): a fail, or with ``repaired`` a check that
+    the trial lacks, left out (exubio.trust.missing_markers): a check naming them; ``partial_swaps``: labels
+    exchanged in part of the trial (exubio.trust.label_ranges): a fail, or with ``repaired`` a check that
     says where they were exchanged back."""
     kin = Kinematics(model)
     if determinacy_every is None:

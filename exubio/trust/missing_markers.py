@@ -1,6 +1,6 @@
 """A marker the protocol needs but the trial lacks (a label typo, a marker that fell off before the
 recording: no label, or a label without a single sample): dropped when the markers left still measure every anatomical angle the full set
-measures (the noise-gain criterion over the reference postures, exubio.assess), else refused with
+measures (the noise-gain criterion over the reference postures, exubio.trust.assess), else refused with
 the angles it would cost. A dropped marker is a ``check`` of the trial naming it."""
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ def drop_missing_markers(traj: Trajectories, protocol: Protocol, model: Model, /
     """(the protocol with the trial's missing non-optional markers made optional, their names);
     InputError naming the file, the markers, a near label the trial has and the angles that would
     no longer be measured, when dropping them costs a measured angle."""
-    from exubio.assess import angle_status_of_protocol
+    from exubio.trust.assess import angle_status_of_protocol
 
     present = _present(protocol, traj)
     missing = tuple(m.name for m in protocol.markers if not m.optional and not present[m.name])

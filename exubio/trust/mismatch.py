@@ -280,8 +280,8 @@ def assess_mismatch(kin: Kinematics, points: PointSet, q: np.ndarray, measured_m
 
 
 def mismatch_reasons(assessment: MismatchAssessment | None, /) -> list:
-    """The verdict's reasons (exubio.quality.Reason, code "model_mismatch", level check)."""
-    from exubio.quality import Reason
+    """The verdict's reasons (exubio.trust.quality.Reason, code "model_mismatch", level check)."""
+    from exubio.trust.quality import Reason
 
     if assessment is None:
         return []
