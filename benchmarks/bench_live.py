@@ -38,7 +38,7 @@ below this: the solver is not queueing frames (a backlog shows as a median of te
 
 def simulated_trial(rate_hz: float, duration_s: float):
     from exubio.model.load import load_model
-    from exubio.simulate import Motion, simulate_trial
+    from exubio.synth.simulate import Motion, simulate_trial
     from exubio.types import Trajectories
 
     trial = simulate_trial(load_model(), Motion.parse("abduction"), duration_s=duration_s, rate_hz=rate_hz,

@@ -1,6 +1,6 @@
 """Benchmark of the reconstruction methods on a simulated abduction trial.
 
-Simulates 25 s of arm abduction at 200 Hz (5000 frames; Ludewig rhythm, exubio.simulate) with
+Simulates 25 s of arm abduction at 200 Hz (5000 frames; Ludewig rhythm, exubio.synth.simulate) with
 1.5 mm Gaussian marker noise, runs the real pipeline (prepare_targets: thorax frame, 2 Hz
 low-pass, spline derivatives; then pipeline.reconstruct) with every method and prints one JSON
 line per method to stdout and a small table to stderr.
@@ -54,7 +54,7 @@ import numpy as np  # noqa: E402
 
 from exubio.pipeline import load_model_and_protocol, reconstruct  # noqa: E402
 from exubio.prep.targets import prepare_targets  # noqa: E402
-from exubio.simulate import Motion, simulate_trial  # noqa: E402
+from exubio.synth.simulate import Motion, simulate_trial  # noqa: E402
 
 START_UP_S = 0.1  # the stiff spring-damper mode of the PF start settles within ~0.05 s
 

@@ -32,7 +32,7 @@ from pathlib import Path
 import yaml
 
 from exubio.model.load import load_model
-from exubio.simulate import simulate_trial, write_simulated_trial
+from exubio.synth.simulate import simulate_trial, write_simulated_trial
 
 
 def make_trials(folder: Path, n: int, duration: float, rate: float) -> Path:

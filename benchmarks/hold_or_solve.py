@@ -17,7 +17,7 @@ from exubio.model.angles import anatomical_table
 from exubio.methods.ls import reconstruct_ls
 from exubio.pipeline import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
-from exubio.simulate import simulate_trial
+from exubio.synth.simulate import simulate_trial
 
 
 def main() -> int:

@@ -1,7 +1,7 @@
 """Model mismatch: what a perturbed generating model costs on the measured angles, and what the
 residuals show of it.
 
-For a grid of perturbations (exubio.perturb.ModelPerturbation: ellipsoid centre and radii, segment
+For a grid of perturbations (exubio.synth.perturb.ModelPerturbation: ellipsoid centre and radii, segment
 lengths, joint centres, marker offsets, each at 2-3 sizes) x motions (abduction, flexion, scaption)
 x artefact (none; noise + soft-tissue artefact), a trial is simulated with the perturbed model and
 reconstructed with the generic one (LS; ``--methods ls,pf`` adds PF). Printed per run: the RMSE and
@@ -39,10 +39,10 @@ from exubio.trust.assess import assess_trial
 from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.trust.mismatch import segment_evidence
-from exubio.perturb import ModelPerturbation
+from exubio.synth.perturb import ModelPerturbation
 from exubio.pipeline import load_model_and_protocol, reconstruct
 from exubio.prep.targets import prepare_targets
-from exubio.simulate import simulate_trial
+from exubio.synth.simulate import simulate_trial
 from exubio.validation.mismatch import measured_angle_errors
 
 P = ModelPerturbation

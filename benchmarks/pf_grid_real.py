@@ -18,7 +18,7 @@ import numpy as np
 from exubio.errors import ReconstructionError
 from exubio.pipeline import load_model_and_protocol, reconstruct
 from exubio.prep.targets import prepare_targets
-from exubio.simulate import simulate_trial
+from exubio.synth.simulate import simulate_trial
 from exubio.validation.sensitivity import with_springs
 from exubio.validation.settings import ValidationSettings
 from exubio.validation.trials import real_trial, why_no_real_trial

@@ -16,7 +16,7 @@ from exubio.trust.labels import pair_distances
 from exubio.pipeline import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.trust.session_check import SHIFT_MM, SHIFT_Z, placed_anew, static_consistency
-from exubio.simulate import simulate_trial
+from exubio.synth.simulate import simulate_trial
 
 C3D = Path(__file__).resolve().parents[2] / "shared" / "data" / "c3d"
 SESSIONS = {"bioptim_exo_kinova_martin_statique.c3d": [f"bioptim_exo_kinova_martin_{n}_f3_1.c3d"

@@ -48,7 +48,7 @@ from exubio.methods.common import tracked_points
 from exubio.methods.poses import held_mask
 from exubio.pipeline import load_model_and_protocol, reconstruct
 from exubio.prep.targets import prepare_targets
-from exubio.simulate import STA_SCALE, Motion, simulate_trial
+from exubio.synth.simulate import STA_SCALE, Motion, simulate_trial
 from exubio.validation import ValidationSettings
 
 S = ValidationSettings()
@@ -64,7 +64,7 @@ SENS_STRIDE = 20  # frames between linearisations (every 0.1 s at 200 Hz)
 def inverse_variance_weights(noise_mm: float, sta_mm: float) -> dict[str, float]:
     """Gauss-Markov weights per segment, 1 / (noise variance + expected STA variance) per
     coordinate, normalised to 1 for the least-affected segment. The STA variance is the PRIOR the
-    artefact model states (module docstring of exubio.simulate: peak A_s = sta_mm x STA_SCALE[s],
+    artefact model states (module docstring of exubio.synth.simulate: peak A_s = sta_mm x STA_SCALE[s],
     humerus 1, scapula 0.6, clavicle 0.3, forearm/hand 0.25; a peak-A sinusoid along a random
     direction has variance A^2/6 per coordinate), i.e. the ordering humerus > scapula > forearm that
     the STA literature reports; it does not use what any realisation actually got (in SIER the

@@ -84,12 +84,12 @@ def _methods(value: str) -> list[str]:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     from exubio.model.load import load_model
-    from exubio.simulate import Motion, simulate_trial, write_simulated_trial
+    from exubio.synth.simulate import Motion, simulate_trial, write_simulated_trial
 
     out = Path(args.out)
     if out.suffix.lower() != ".c3d":
         raise InputError(f"--out {out}: expected a path ending in .c3d")
-    from exubio.perturb import ModelPerturbation
+    from exubio.synth.perturb import ModelPerturbation
 
     model = load_model(args.model) if args.model else load_model()
     perturbation = ModelPerturbation.parse(args.perturb) if args.perturb else None

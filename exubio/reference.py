@@ -1,7 +1,7 @@
 """Published in vivo shoulder kinematics shipped with exubio.
 
 * Ludewig et al. 2009 mean curves (``exubio/data/ludewig2009.csv``; the file's header cites the
-  sources), used by ``exubio.simulate`` for the shoulder rhythm;
+  sources), used by ``exubio.synth.simulate`` for the shoulder rhythm;
 * the corpus of the Spartacus shoulder kinematics dataset (``exubio/data/spartacus/``, built by
   ``models/sources/spartacus_corpus.py``; cite Moissenet et al. 2025, doi
   10.1016/j.jbiomech.2025.112642, and each study shown): 16 studies' SC, AC, ST and GH rotation

@@ -14,7 +14,7 @@ from exubio.methods.poses import held_mask
 from exubio.trust.observability import MODELLED_SHARE, AngleStatus, angle_determinacy
 from exubio.pipeline import load_model_and_protocol, protocol_for_model
 from exubio.io.resources import shipped_file
-from exubio.simulate import reference_postures
+from exubio.synth.simulate import reference_postures
 
 SHOULDER_MEASURED = ("SC_Y_protraction", "SC_X_elevation", "ST_Y_internal_rotation", "ST_X_upward_rotation",
                      "ST_Z_posterior_tilt", "GH_phadke_X_elevation", "GH_phadke_Z_flexion",

@@ -19,7 +19,7 @@ from exubio.pipeline import reconstruct
 from exubio.prep.targets import prepare_targets
 from exubio.protocol.load import read_protocol_mapping
 from exubio.io.resources import shipped_file
-from exubio.simulate import simulate_trial
+from exubio.synth.simulate import simulate_trial
 from exubio.types import Trajectories
 
 BASE = shipped_file("exubio.protocols", "upper_limb_21.yaml", "protocols")

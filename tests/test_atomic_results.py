@@ -20,7 +20,7 @@ from exubio.cli import main
 from exubio.io.c3d import write_c3d
 from exubio.io.results import read_npz
 from exubio.model.load import load_model
-from exubio.simulate import Motion, simulate_trial
+from exubio.synth.simulate import Motion, simulate_trial
 
 SET_FILES = ("csv", "mot", "npz", "summary.json")  # one method's result set
 TIMEOUT = 120

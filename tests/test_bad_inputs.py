@@ -21,7 +21,7 @@ from exubio.io.c3d import read_c3d, write_c3d
 from exubio.io.trc import write_trc
 from exubio.model.load import DEFAULT_MODEL, load_model
 from exubio.pipeline import DEFAULT_PROTOCOL
-from exubio.simulate import Motion, simulate_trial
+from exubio.synth.simulate import Motion, simulate_trial
 from exubio.types import Trajectories
 
 HUGE = 10**400  # a YAML integer no float holds

@@ -25,7 +25,7 @@ from exubio.pipeline import load_model_and_protocol, reconstruct, reconstruct_fi
 from exubio.prep.targets import prepare_targets
 from exubio.protocol.load import load_protocol
 from exubio.io.resources import shipped_file
-from exubio.simulate import simulate_trial
+from exubio.synth.simulate import simulate_trial
 from exubio.types import Trajectories
 
 TRUE_SCALE = {"thorax": 1.05, "humerus": 1.10, "ulna": 0.95, "radius": 0.95, "hand": 1.05}

@@ -10,7 +10,7 @@ from exubio.cli import main
 from exubio.io.c3d import write_c3d
 from exubio.io.results import read_angles_csv, read_mot, read_npz
 from exubio.model.load import load_model
-from exubio.simulate import Motion, simulate_trial
+from exubio.synth.simulate import Motion, simulate_trial
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 PROTOCOL = Path(__file__).resolve().parents[1] / "protocols" / "upper_limb_21.yaml"

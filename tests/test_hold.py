@@ -11,7 +11,7 @@ from exubio.methods.common import tracked_points
 from exubio.pipeline import DEFAULT_PROTOCOL, load_model_and_protocol, reconstruct
 from exubio.prep.targets import prepare_targets
 from exubio.protocol.load import load_protocol
-from exubio.simulate import Motion, simulate_trial
+from exubio.synth.simulate import Motion, simulate_trial
 
 
 @pytest.fixture(scope="module")

@@ -1,6 +1,6 @@
 """Tests of exubio.trust.labels: marker-label checks from the protocol and the model.
 
-Simulated trials (exubio.simulate) run everywhere; the real C3D trials of ../shared/data/c3d
+Simulated trials (exubio.synth.simulate) run everywhere; the real C3D trials of ../shared/data/c3d
 (Ipuch/bioptim_exo, MIT; see ../shared/data/SOURCES.md) are skipped when absent. The broken
 trials are built here from correct ones: labels exchanged, a label moved onto a marker of another
 segment or jumping for part of the trial, a marker moved, another subject's static as reference.
@@ -18,7 +18,7 @@ from exubio.calibration import scale_model
 from exubio.errors import InputError
 from exubio.model.kinematics import Kinematics
 from exubio.pipeline import protocol_for_model
-from exubio.simulate import simulate_trial
+from exubio.synth.simulate import simulate_trial
 
 REPO = Path(__file__).resolve().parents[1]
 C3D = Path(__file__).resolve().parents[2] / "shared" / "data" / "c3d"

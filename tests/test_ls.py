@@ -9,7 +9,7 @@ from exubio.methods.common import tracked_points
 from exubio.methods.ls import LSOptions, reconstruct_ls
 from exubio.pipeline import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
-from exubio.simulate import Motion, simulate_trial
+from exubio.synth.simulate import Motion, simulate_trial
 from exubio.types import MarkerTargets
 
 

@@ -14,10 +14,10 @@ from exubio.calibration.ellipsoid import surface_distance
 from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.trust.mismatch import BIAS_MM, CONTACT_OFFSET_MM, assess_mismatch, segment_evidence
-from exubio.perturb import ModelPerturbation
+from exubio.synth.perturb import ModelPerturbation
 from exubio.pipeline import load_model_and_protocol, reconstruct
 from exubio.prep.targets import prepare_targets
-from exubio.simulate import reference_postures, simulate_trial
+from exubio.synth.simulate import reference_postures, simulate_trial
 from exubio.validation.mismatch import measured_angle_errors
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -9,7 +9,7 @@ import pytest
 from exubio.cli import main
 from exubio.io.c3d import write_c3d
 from exubio.model.load import load_model
-from exubio.simulate import simulate_trial
+from exubio.synth.simulate import simulate_trial
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""Model perturbations (exubio.perturb): the perturbed model is what was asked, the words and the
+"""Model perturbations (exubio.synth.perturb): the perturbed model is what was asked, the words and the
 truth file's header read back to the same perturbation, bad values are refused naming the key."""
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from exubio.errors import InputError
 from exubio.io.results import read_angles_csv
 from exubio.model.kinematics import Kinematics
 from exubio.model.load import load_model
-from exubio.perturb import ModelPerturbation
+from exubio.synth.perturb import ModelPerturbation
 
 
 @pytest.fixture(scope="module")

@@ -15,7 +15,7 @@ from exubio.methods.constraints import project_on_constraints  # noqa: E402
 from exubio.methods.pf import PFOptions, integration_step, reconstruct_pf  # noqa: E402
 from exubio.pipeline import load_model_and_protocol, reconstruct  # noqa: E402
 from exubio.prep.targets import prepare_targets  # noqa: E402
-from exubio.simulate import Motion, simulate_trial  # noqa: E402
+from exubio.synth.simulate import Motion, simulate_trial  # noqa: E402
 from exubio.types import MarkerTargets  # noqa: E402
 
 RATE_HZ = 200.0
@@ -208,7 +208,7 @@ def test_unobserved_segments_are_held_at_their_start_posture():
 
     from exubio.pipeline import load_model_and_protocol, reconstruct
     from exubio.prep.targets import prepare_targets
-    from exubio.simulate import Motion, simulate_trial
+    from exubio.synth.simulate import Motion, simulate_trial
 
     model, protocol = load_model_and_protocol()
     girdle_arm = dataclasses.replace(protocol, markers=tuple(

@@ -10,7 +10,7 @@ import pytest
 from exubio.cli import main
 from exubio.io.c3d import write_c3d
 from exubio.model.load import load_model
-from exubio.simulate import Motion, simulate_trial
+from exubio.synth.simulate import Motion, simulate_trial
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "c3d"
 

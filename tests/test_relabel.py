@@ -10,7 +10,7 @@ from exubio.errors import InputError
 from exubio.io.c3d import write_c3d
 from exubio.model.load import load_model
 from exubio.protocol.load import parse_relabel, relabel_trajectories
-from exubio.simulate import simulate_trial
+from exubio.synth.simulate import simulate_trial
 
 
 def _swap(traj, a, b):

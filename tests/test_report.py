@@ -289,7 +289,7 @@ def test_a_calibrated_trial_report_has_a_calibration_page(tmp_path):
     from exubio.cli import main
     from exubio.io.c3d import write_c3d
     from exubio.model.load import load_model
-    from exubio.simulate import simulate_trial
+    from exubio.synth.simulate import simulate_trial
 
     trial = simulate_trial(load_model(), "abduction", duration_s=1.0, rate_hz=100.0, noise_mm=0.5, seed=2)
     path = write_c3d(tmp_path / "t.c3d", trial.trajectories)

@@ -1,4 +1,4 @@
-"""Simulated trials (exubio.simulate): exact constraints and rates of the truth, the rhythm, the
+"""Simulated trials (exubio.synth.simulate): exact constraints and rates of the truth, the rhythm, the
 markers, noise and soft-tissue artefact, and the files."""
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 
 from exubio.errors import InputError
 from exubio.prep.targets import thorax_frame
-from exubio.simulate import (
+from exubio.synth.simulate import (
     DEFAULT_MARKERS,
     LUDEWIG_2009,
     LUDEWIG_HT_DEG,

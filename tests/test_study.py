@@ -17,7 +17,7 @@ import yaml
 
 from exubio.cli import main
 from exubio.model.load import load_model
-from exubio.simulate import simulate_trial, write_simulated_trial
+from exubio.synth.simulate import simulate_trial, write_simulated_trial
 from exubio.study import DONE_FILE, load_study
 
 MODEL = Path(__file__).resolve().parents[1] / "models" / "upper_extremity.yaml"

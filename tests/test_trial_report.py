@@ -17,7 +17,7 @@ from exubio.cli import main
 from exubio.io.c3d import write_c3d
 from exubio.model.load import load_model
 from exubio.report import trial_report as tr
-from exubio.simulate import simulate_trial
+from exubio.synth.simulate import simulate_trial
 
 
 def _without_date(pdf: bytes) -> bytes:

@@ -698,7 +698,7 @@ def summary_pages(r: ValidationResults) -> list[Figure]:
     if sim_sc:
         sc_note = (f"\nSC elevation on the simulated {' and '.join(sim_sc)}: already the simulated TRUTH lowers the "
                    "clavicle at high arm elevation (ISB SC X' rises), against Ludewig's elevation, so the SC-elevation "
-                   "trend check fails for a reason upstream of PF/LS: exubio.simulate puts Ludewig's SC angle changes "
+                   "trend check fails for a reason upstream of PF/LS: exubio.synth.simulate puts Ludewig's SC angle changes "
                    "on the model's SC coordinates, whose axes are parallel to the thorax frame rather than to the ISB "
                    "clavicle frame (retracted ~18 deg and elevated ~7 deg in the reference posture), so the "
                    "posterior rotation about the thorax Z axis also depresses the lateral clavicle.")
@@ -734,7 +734,7 @@ def summary_pages(r: ValidationResults) -> list[Figure]:
         ("\n".join(f"• {f}" for f in findings) + "\n" if findings else "") + f"{MESKERS_NOTE}{sc_note}\nLudewig et al. 2009 is available as means only (no SD): {LUDEWIG_CITATION}; bundled as "
         "exubio/data/ludewig2009.csv. The paper's text gives k = 10 s for c = 1500 N/m and d = 300 Ns/m; "
         "300/1500 = 0.2 s, which is what exubio uses.\n"
-        + ("Simulated abduction/flexion (exubio.simulate) use the generic model: their shoulder rhythm follows "
+        + ("Simulated abduction/flexion (exubio.synth.simulate) use the generic model: their shoulder rhythm follows "
            "Ludewig et al. only partly (the generic thorax ellipsoid limits scapular upward rotation), so Fig. 5 "
            "compares both the reconstructions and the simulated truth with Ludewig. "
            if any(not r.is_real(n) for n in ("abduction", "flexion")) else "")
@@ -886,7 +886,7 @@ def sier_realisations_page(r: ValidationResults) -> Figure:
     fig.text(0.03, 0.95, f"Fig. 4 (spread) — SIER accuracy over {len(rz.runs)} noise/STA realisations "
              f"({rz.duration_s:g} s at {rz.rate_hz:g} Hz, noise SD {rz.noise_mm:g} mm, "
              f"STA {rz.sta_mm:g} mm)", fontsize=11.5, fontweight="bold")
-    note = ("The soft-tissue artefact of exubio.simulate has a random direction and a random mix of driving joint "
+    note = ("The soft-tissue artefact of exubio.synth.simulate has a random direction and a random mix of driving joint "
             "angles per marker (seeded); its size is fixed (every humerus marker peaks at the STA amplitude). How "
             "much of it leaks into the joint angles depends on that realisation, so one seed (Fig. 4) is not enough: "
             "this table repeats SIER with seeds 0, 1, ... at a lower sampling rate. RMSE against the simulated true "
@@ -1100,7 +1100,7 @@ def fig_mismatch(r: ValidationResults) -> Figure:
             fig.text(0.03, y, part, fontsize=7.5)
             y -= 0.022
         y -= 0.006
-    _footer(fig, "Data: simulated (exubio.simulate with exubio.perturb). " + f"exubio {r.exubio_version}"
+    _footer(fig, "Data: simulated (exubio.synth.simulate with exubio.synth.perturb). " + f"exubio {r.exubio_version}"
             + (" — QUICK RUN (two cases, abduction, LS only)" if r.quick else ""))
     return fig
 

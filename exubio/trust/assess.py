@@ -129,10 +129,10 @@ _POSTURES_SIZE = 8
 
 
 def reference_postures_of(model: Model, /) -> np.ndarray:
-    """exubio.simulate.reference_postures of the model (the q = 0 posture where its girdle cannot be
+    """exubio.synth.simulate.reference_postures of the model (the q = 0 posture where its girdle cannot be
     driven on the rhythm), computed once per process for a given geometry (it takes ~0.3 s)."""
     from exubio.trust.labels import _content_digest
-    from exubio.simulate import reference_postures
+    from exubio.synth.simulate import reference_postures
 
     try:
         key = _content_digest(model.segments, model.ellipsoid)
@@ -153,7 +153,7 @@ def reference_postures_of(model: Model, /) -> np.ndarray:
 
 def angle_status_of_protocol(model: Model, protocol: Protocol, /, *, kin: Kinematics | None = None) -> dict[str, str]:
     """What the protocol's markers can do for each anatomical angle, known before any trial: its
-    status over the reference postures (exubio.simulate.reference_postures: elevation in three
+    status over the reference postures (exubio.synth.simulate.reference_postures: elevation in three
     planes, HT 10-120 deg) with every non-optional marker present: 'measured' (in every posture),
     'modelled', 'not measured', or 'partly ...' (in some postures)."""
     kin = kin or Kinematics(model)
@@ -168,7 +168,7 @@ def angle_status_of_protocol(model: Model, protocol: Protocol, /, *, kin: Kinema
 def coordinates_not_measured_by_protocol(model: Model, protocol: Protocol, /, *,
                                          kin: Kinematics | None = None) -> tuple[str, ...]:
     """The model coordinates the protocol's markers leave undetermined (noise gain above the
-    threshold) in most reference postures (exubio.simulate.reference_postures), known before any
+    threshold) in most reference postures (exubio.synth.simulate.reference_postures), known before any
     trial: e.g. the clavicle's axial rotation seen by two markers near its axis."""
     kin = kin or Kinematics(model)
     q = reference_postures_of(model)

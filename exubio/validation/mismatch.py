@@ -1,4 +1,4 @@
-"""Model mismatch: trials simulated with a perturbed model (exubio.perturb) and reconstructed with
+"""Model mismatch: trials simulated with a perturbed model (exubio.synth.perturb) and reconstructed with
 the generic one; the measured angles' errors against the perturbation, and whether the verdict
 (exubio.trust.assess, its model-mismatch detector exubio.trust.mismatch) says ``check`` where they cost more
 than ``COST_LIMIT_DEG``, and stays ``ok`` without a mismatch.
@@ -19,10 +19,10 @@ import numpy as np
 from exubio.model.angles import anatomical_table
 from exubio.trust.assess import assess_trial
 from exubio.trust.observability import AngleStatus
-from exubio.perturb import ModelPerturbation
+from exubio.synth.perturb import ModelPerturbation
 from exubio.pipeline import load_model_and_protocol, reconstruct
 from exubio.prep.targets import prepare_targets
-from exubio.simulate import simulate_trial
+from exubio.synth.simulate import simulate_trial
 from exubio.types import Model
 from exubio.validation.results import MismatchRun, ModelMismatch
 from exubio.validation.settings import ValidationSettings

@@ -681,7 +681,7 @@ class Check(Record):
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False, kw_only=True)
 class MismatchRun(Record):
-    """One simulated trial with a perturbed model (``perturbation``: exubio.perturb words),
+    """One simulated trial with a perturbed model (``perturbation``: exubio.synth.perturb words),
     reconstructed by ``method`` with the generic model: the worst measured angle's RMSE and the
     largest error of any measured angle (deg); ``mismatch_cost_deg``: the worst RMSE of the same
     case and motion without artefact (what the mismatch alone costs); the verdict, its non-note

@@ -41,7 +41,7 @@ from exubio.model.kinematics import Kinematics
 from exubio.pipeline import load_model_and_protocol, reconstruct
 from exubio.prep.targets import prepare_targets
 from exubio.io.resources import shipped_file
-from exubio.simulate import simulate_trial
+from exubio.synth.simulate import simulate_trial
 from exubio.validation.paths import shared_data_dir
 from exubio.validation.results import (Check, ScapulaCrossValidation, ScapulaDirection, ScapulaSimulated,
                                        ScapulaVariant, Skipped)

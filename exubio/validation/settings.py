@@ -13,7 +13,7 @@ __all__ = ["QUICK_SETTINGS", "ValidationSettings"]
 @dataclass(frozen=True)
 class ValidationSettings:
     """What the study runs. Durations in s, rates in Hz, noise/STA in mm (STA: peak of every
-    humerus marker's artefact, as in exubio.simulate), spring constants in N/m, ratios in s."""
+    humerus marker's artefact, as in exubio.synth.simulate), spring constants in N/m, ratios in s."""
 
     trial_duration_s: float = 25.0  # simulated abduction / flexion (5 cycles of 5 s, as the paper's trials)
     trial_rate_hz: float = 200.0  # the paper's capture rate

@@ -11,7 +11,7 @@ from exubio.model.angles import isb_angles
 from exubio.errors import ReconstructionError
 from exubio.model.kinematics import Kinematics
 from exubio.pipeline import reconstruct
-from exubio.simulate import Motion
+from exubio.synth.simulate import Motion
 from exubio.validation.results import (
     METHODS,
     Failed,

@@ -2,7 +2,7 @@
 
 Abduction and flexion are the real TRC trials of ``../shared/data/trc`` when the subject
 calibration (``exubio.calibration``) and the ``thoracoscapular_9`` protocol are available
-(``real_trial``); otherwise simulated trials (``exubio.simulate``) with noise and STA stand in,
+(``real_trial``); otherwise simulated trials (``exubio.synth.simulate``) with noise and STA stand in,
 and their ``TrialData`` says why. SIER is always simulated.
 """
 from __future__ import annotations
@@ -22,7 +22,7 @@ from exubio.io.trial import read_trial
 from exubio.pipeline import load_model_and_protocol, reconstruct
 from exubio.prep.targets import prepare_targets
 from exubio.io.resources import shipped_file
-from exubio.simulate import Motion, SimulatedTrial, simulate_trial
+from exubio.synth.simulate import Motion, SimulatedTrial, simulate_trial
 from exubio.types import MarkerTargets, Model, Protocol, Reconstruction
 from exubio.validation.codec import decode
 from exubio.validation.paths import shared_data_dir

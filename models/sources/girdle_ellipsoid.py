@@ -1,6 +1,6 @@
 """The generic model's thorax ellipsoid, fitted through the scapula contact points (TS, AI) of the
 model's shoulder girdle driven through Ludewig et al.'s (2009) mean rhythm in the coronal,
-scapular and sagittal planes (HT elevation 0-120 deg every 5 deg; exubio.simulate.rhythm_poses:
+scapular and sagittal planes (HT elevation 0-120 deg every 5 deg; exubio.synth.simulate.rhythm_poses:
 Ludewig's SC and ST changes applied to the reference posture, no constraint), as the paper fitted
 its ellipsoid from several static elevations.
 
@@ -26,7 +26,7 @@ from exubio.calibration import fit_ellipsoid
 from exubio.calibration.ellipsoid import fit_ellipsoid_to_points, surface_distance
 from exubio.model.kinematics import Kinematics
 from exubio.model.load import load_model
-from exubio.simulate import rhythm_poses
+from exubio.synth.simulate import rhythm_poses
 
 PLANES = ("frontal", "scapular", "sagittal")
 HT_DEG = np.arange(0.0, 120.0 + 1e-9, 5.0)

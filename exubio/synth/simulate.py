@@ -82,7 +82,7 @@ from scipy.interpolate import CubicSpline
 
 from exubio.errors import InputError, ModelError
 from exubio.model.kinematics import Kinematics, axis_rotation
-from exubio.perturb import ModelPerturbation
+from exubio.synth.perturb import ModelPerturbation
 from exubio.reference import ludewig2009_at
 from exubio.types import Model, Trajectories
 
@@ -571,7 +571,7 @@ def simulate_trial(
     perturbation: ModelPerturbation | None = None,
 ) -> SimulatedTrial:
     """Simulate a trial of ``motion`` on ``model`` (see the module docstring); with
-    ``perturbation``, on ``perturbation.apply(model)`` (exubio.perturb: a model mismatch for a
+    ``perturbation``, on ``perturbation.apply(model)`` (exubio.synth.perturb: a model mismatch for a
     reconstruction with ``model``; the truth is the perturbed model's coordinates)."""
     motion = Motion.parse(motion)
     if perturbation is not None:
