@@ -1,6 +1,6 @@
 """Frame definitions as data (exubio.model.frame_definitions), angles in a study's definition
-(exubio.model.angles.joint_angles), the shipped Spartacus corpus (exubio.reference) and corridors
-(exubio.corridor): frames built from landmarks against hand computations, known rotations giving
+(exubio.model.angles.joint_angles), the shipped Spartacus corpus (exubio.literature.reference) and corridors
+(exubio.literature.corridor): frames built from landmarks against hand computations, known rotations giving
 known angles, conversions between definitions against a direct computation."""
 from __future__ import annotations
 
@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from exubio.model.angles import anatomical_frames, definition_frame, isb_angles, joint_angles, ISB_SEQUENCES
-from exubio.corridor import build_corridor, convert_angles, share_inside, target_definition, HT_GRID_DEG
+from exubio.literature.corridor import build_corridor, convert_angles, share_inside, target_definition, HT_GRID_DEG
 from exubio.model.frame_definitions import (ISB_WU2005, FrameDefinition, JointDefinition, NotBuildable, build_frame,
                                       sequence_letters)
-from exubio.reference import load_corpus, load_ludewig2009
+from exubio.literature.reference import load_corpus, load_ludewig2009
 
 LUDEWIG_SCAPULA = FrameDefinition("scapula", x="vec(AI>TS)^vec(AI>AC)", y="z^x", z="vec(TS>AC)", origin="AC")
 

@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from exubio.invivo import ANGLE_KEYS as LUDEWIG_COLUMNS
-from exubio.reference import load_ludewig2009
+from exubio.literature.invivo import ANGLE_KEYS as LUDEWIG_COLUMNS
+from exubio.literature.reference import load_ludewig2009
 from exubio.report import FIGURES, REPORT_PAGES
 from exubio.validation import SchemaError, ValidationResults, run_validation
 from exubio.validation.determinacy import undetermined_coordinates, unobserved_segments

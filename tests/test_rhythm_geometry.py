@@ -9,7 +9,7 @@ import pytest
 from exubio.model.angles import humerothoracic_elevation, isb_angles
 from exubio.model.kinematics import Kinematics
 from exubio.model.load import load_model
-from exubio.reference import load_ludewig2009
+from exubio.literature.reference import load_ludewig2009
 from exubio.io.resources import shipped_file
 from exubio.synth.simulate import PLANE_OF, Motion, simulate_trial
 

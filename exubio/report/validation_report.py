@@ -341,7 +341,7 @@ def fig_invivo(r: ValidationResults) -> Figure:
         sim_note = ("Simulated trials: the 'simulated truth' is the model's rhythm; PF/LS should match the truth, the "
                     "truth need not match Ludewig. ")
     _footer(fig, f"{_definition_note()} Corridor: spread of the study means (≥ 2 studies) converted to these "
-            f"definitions on the model's bones (exubio.corridor); dotted: the other studies; {CORPUS_NOTE}. Only raising "
+            f"definitions on the model's bones (exubio.literature.corridor); dotted: the other studies; {CORPUS_NOTE}. Only raising "
             f"phases are drawn. {sim_note}" + _data_footer(r))
     fig.tight_layout(rect=(0, 0.08, 1, 0.93), h_pad=1.2)
     for m, name in enumerate(("abduction", "flexion")):
@@ -685,7 +685,7 @@ def summary_pages(r: ValidationResults) -> list[Figure]:
         "exubio.model.angles.joint_angles; scapula built on AC, SC and ST Y-X'-Z'', GH X-Z'-Y''), raw Euler angles as "
         "Spartacus stores Ludewig's: retraction, clavicle elevation, scapular upward rotation and GH elevation "
         "negative; posterior clavicle rotation and posterior scapular tilt positive. The corridor behind them "
-        "holds the comparable studies of the Spartacus corpus converted to the same definitions (exubio.corridor). "
+        "holds the comparable studies of the Spartacus corpus converted to the same definitions (exubio.literature.corridor). "
         "Wall times: one process on this machine "
         f"({r.processor}); the paper's: SIMPACK PF and MATLAB fmincon LS on a 3.3 GHz desktop.")
     sim_sc = []
@@ -1037,7 +1037,7 @@ def _corridor_studies_page(r: ValidationResults) -> Figure:
     fig.text(0.02, y, "Studies shown: " + "; ".join(cited[k] for k in sorted(cited)) + f". Corpus: {CORPUS_NOTE}.",
              fontsize=6.4, va="top", wrap=True)
     _footer(fig, "Converted: the study's three angles re-expressed in Ludewig's definitions with the constant frame "
-            "offsets between the two definitions on the model's bones (exubio.corridor.convert_angles); a study in "
+            "offsets between the two definitions on the model's bones (exubio.literature.corridor.convert_angles); a study in "
             "Ludewig's own definitions is taken as published. " + _data_footer(r))
     return fig
 

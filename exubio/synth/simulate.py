@@ -83,7 +83,7 @@ from scipy.interpolate import CubicSpline
 from exubio.errors import InputError, ModelError
 from exubio.model.kinematics import Kinematics, axis_rotation
 from exubio.synth.perturb import ModelPerturbation
-from exubio.reference import ludewig2009_at
+from exubio.literature.reference import ludewig2009_at
 from exubio.types import Model, Trajectories
 
 __all__ = [

@@ -4,7 +4,7 @@ the corridor in every plane of elevation their raising phases match, or why not.
 from __future__ import annotations
 
 from exubio.errors import ExubioError
-from exubio.invivo import PLANE_TOLERANCE_DEG, RAISING_MIN_SPAN_DEG, compare_elevation, inferred_joints
+from exubio.literature.invivo import PLANE_TOLERANCE_DEG, RAISING_MIN_SPAN_DEG, compare_elevation, inferred_joints
 from exubio.io.trial import read_trial
 from exubio.session import calibrate_file
 from exubio.prep.targets import prepare_targets
@@ -26,7 +26,7 @@ C3D_TASKS = (("bioptim_exo_martin_dynamique.c3d", "bioptim_exo_martin_statique.c
 
 def c3d_task_comparison(s: ValidationSettings, progress: Progress) -> C3dTasks | Skipped:
     """Each C3D task trial compared in every reference plane where its raising frames (plane of
-    elevation within exubio.invivo.PLANE_TOLERANCE_DEG) cover at least RAISING_MIN_SPAN_DEG of HT
+    elevation within exubio.literature.invivo.PLANE_TOLERANCE_DEG) cover at least RAISING_MIN_SPAN_DEG of HT
     elevation above 30 deg; otherwise the reason."""
     if not s.c3d_tasks:
         return Skipped(skipped="not run in this run (ValidationSettings.c3d_tasks is False)")

@@ -1,12 +1,12 @@
 """Fig. 5: the abduction and flexion trials' SC, ST, GH angles in Ludewig et al. 2009's own
 definitions against humerothoracic elevation, with Ludewig's means and the corridor of comparable
-studies (``exubio.invivo.compare_elevation``), for PF, LS and (simulated trials) the truth."""
+studies (``exubio.literature.invivo.compare_elevation``), for PF, LS and (simulated trials) the truth."""
 from __future__ import annotations
 
 import numpy as np
 
-from exubio.invivo import compare_elevation, inferred_joints
-from exubio.reference import load_ludewig2009
+from exubio.literature.invivo import compare_elevation, inferred_joints
+from exubio.literature.reference import load_ludewig2009
 from exubio.validation.codec import decode
 from exubio.validation.determinacy import trial_undetermined, undetermined_isb
 from exubio.validation.results import METHODS, InvivoComparison
@@ -16,7 +16,7 @@ __all__ = ["invivo_comparison", "ludewig_means"]
 
 
 def ludewig_means() -> dict[str, dict[str, np.ndarray]]:
-    """Ludewig et al. 2009's means by plane and column (exubio.reference.load_ludewig2009)."""
+    """Ludewig et al. 2009's means by plane and column (exubio.literature.reference.load_ludewig2009)."""
     return {plane: dict(cols) for plane, cols in load_ludewig2009().items()}
 
 

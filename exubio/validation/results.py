@@ -324,7 +324,7 @@ class SierRealisations(Record):
 
 
 # --------------------------------------------------------------------------------------------
-# Fig. 5: in vivo (exubio.invivo.compare_elevation)
+# Fig. 5: in vivo (exubio.literature.invivo.compare_elevation)
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False, kw_only=True)
 class AngleComparison(Record):
@@ -389,7 +389,7 @@ class CorridorEntry(Record):
 
 @dataclass(frozen=True, eq=False, kw_only=True)
 class InvivoComparison(Record):
-    """A trial's arm raising compared in a plane of elevation (exubio.invivo.compare_elevation),
+    """A trial's arm raising compared in a plane of elevation (exubio.literature.invivo.compare_elevation),
     per source, with the corridor of comparable studies per joint (``corridor``) on the HT grid
     ``corridor_ht_deg``; ``undetermined_isb_angles``: the ISB angles the markers do not determine."""
 

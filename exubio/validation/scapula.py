@@ -35,7 +35,7 @@ from exubio.calibration.ellipsoid import surface_distance
 from exubio.calibration.functional import cluster_poses
 from exubio.calibration.scapula_motion import scapula_markers
 from exubio.errors import ExubioError
-from exubio.invivo import compare_elevation
+from exubio.literature.invivo import compare_elevation
 from exubio.io.trial import read_trial
 from exubio.model.kinematics import Kinematics
 from exubio.pipeline import load_model_and_protocol, reconstruct

@@ -14,7 +14,7 @@ Writes, byte for byte where a file is copied:
 * ``curves.csv``: every rotation file that joint_data.csv names, as rows folder,file,ht_deg,value_deg
   (the two columns of the file, unchanged; translations are left out);
 * ``corrections.csv``: folder,file,factor from each study's corrections.csv (the sign that turns the
-  published number into the raw Euler angle of the study's own sequence; applied by exubio.reference).
+  published number into the raw Euler angle of the study's own sequence; applied by exubio.literature.reference).
 
 Run from the project root:  python models/sources/spartacus_corpus.py [../shared/reference/spartacus]
 """

@@ -1,10 +1,10 @@
 """Like-for-like comparison of a reconstructed arm elevation with published in vivo kinematics.
 
 exubio's joint angles are computed in the reference study's own definitions (Ludewig et al. 2009:
-frames from its landmarks, its scapula built on AC, its sequences; ``exubio.corridor.target_definition``),
+frames from its landmarks, its scapula built on AC, its sequences; ``exubio.literature.corridor.target_definition``),
 compared with its means at humerothoracic (HT) elevations 30/60/90/120 deg, and placed in the
 corridor of every comparable study of the Spartacus corpus converted to the same definition
-(``exubio.corridor``). The ISB-frame deviation (scapula on AA) is kept beside it, to show what the
+(``exubio.literature.corridor``). The ISB-frame deviation (scapula on AA) is kept beside it, to show what the
 frame definition alone changes.
 
 Only frames where the arm is being raised count (``raising``). Angles the markers cannot give are
@@ -19,10 +19,10 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 
 from exubio.model.angles import humerothoracic_elevation, isb_angles, joint_angles
-from exubio.corridor import HT_GRID_DEG, Corridor, build_corridor, share_inside, target_definition
+from exubio.literature.corridor import HT_GRID_DEG, Corridor, build_corridor, share_inside, target_definition
 from exubio.model.frame_definitions import JOINT_SEGMENTS
 from exubio.model.kinematics import Kinematics
-from exubio.reference import LUDEWIG_ID, load_corpus
+from exubio.literature.reference import LUDEWIG_ID, load_corpus
 from exubio.types import Model, Protocol
 
 __all__ = ["COMPARED_JOINTS", "ANGLE_KEYS", "HT_CHECK_DEG", "compare_elevation", "inferred_joints", "raising",

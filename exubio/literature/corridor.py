@@ -24,7 +24,7 @@ import numpy as np
 
 from exubio.model.angles import definition_frame, euler_angles, rotation_from_euler
 from exubio.model.frame_definitions import JointDefinition, NotBuildable
-from exubio.reference import LUDEWIG_ID, ReferenceCurve, Study, load_corpus, study_definition
+from exubio.literature.reference import LUDEWIG_ID, ReferenceCurve, Study, load_corpus, study_definition
 from exubio.types import Model
 
 __all__ = ["Corridor", "StudyCurve", "build_corridor", "convert_angles", "share_inside", "target_definition", "why_excluded",
