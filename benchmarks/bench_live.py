@@ -5,7 +5,7 @@ this process (a sender thread pushing each frame at its time and noting the LSL 
 ``exubio live`` runs as a separate process pinned to one core (``taskset -c CORE``); a receiver
 thread here pulls its output stream and notes the LSL clock at each sample's arrival. Latency =
 arrival - push, per frame (the same clock: one machine). Everything stays on 127.0.0.1 (the
-loopback lsl_api.cfg of exubio.live.transport, used by both processes).
+loopback lsl_api.cfg of exubio.run.live.transport, used by both processes).
 
 Figures: p50 / p99 / max latency over the run, frames that never arrived, and the live process's
 own summary (frames skipped when it fell behind, its CPU time per frame). A rate "keeps up" when no
@@ -50,7 +50,7 @@ def simulated_trial(rate_hz: float, duration_s: float):
 
 
 def run_once(trial, *, core: int | None, out: Path, tag: str) -> dict:
-    from exubio.live.transport import ReplayOutlet, load_pylsl
+    from exubio.run.live.transport import ReplayOutlet, load_pylsl
 
     lsl = load_pylsl("loopback")
     name = f"bench_markers_{tag}"
@@ -143,7 +143,7 @@ def main(argv=None) -> int:
     ap.add_argument("--core", type=int, default=1, help="the core exubio live is pinned to (-1: not pinned)")
     ap.add_argument("--json", help="write the figures here")
     args = ap.parse_args(argv)
-    from exubio.live.transport import use_config
+    from exubio.run.live.transport import use_config
 
     use_config("loopback")
     rows = []

@@ -8,7 +8,7 @@
 2. Runs ``exubio reconstruct TRIAL --method pf|ls --no-report`` under ``/usr/bin/time -v`` and prints
    its peak resident memory (maximum RSS) and wall time. The method streams its result in chunks
    (exubio.methods.common.CHUNK_FRAMES frames) to its result files (exubio.io.streamed).
-3. Reconstructs the same trial in one pass in this process (``exubio.pipeline.reconstruct``: one
+3. Reconstructs the same trial in one pass in this process (``exubio.run.pipeline.reconstruct``: one
    chunk of every frame, memory not measured) and prints the largest difference of q, q̇, q̈ to
    the files of step 2.
 """
@@ -61,7 +61,7 @@ def main() -> int:
         if args.no_compare:
             continue
         from exubio.io.results import read_npz
-        from exubio.pipeline import load_inputs, reconstruct
+        from exubio.run.pipeline import load_inputs, reconstruct
 
         streamed = read_npz(out / f"{trial.stem}.{method}.npz")
         inp = load_inputs(trial)

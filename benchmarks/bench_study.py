@@ -80,23 +80,23 @@ def overheads(out: Path) -> tuple[list[float], list[float]]:
     return walls, over
 
 
-_STAGES = (("exubio.jobs", "read_trial", "read the trial"),
-           ("exubio.pipeline", "read_trial", "read the trial"),
-           ("exubio.pipeline", "prepare_targets", "prepare targets (thorax frame, cut-off, filter, splines)"),
+_STAGES = (("exubio.run.job", "read_trial", "read the trial"),
+           ("exubio.run.pipeline", "read_trial", "read the trial"),
+           ("exubio.run.pipeline", "prepare_targets", "prepare targets (thorax frame, cut-off, filter, splines)"),
            ("exubio.prep.targets", "residual_cutoffs", "  of which the automatic cut-off"),
-           ("exubio.pipeline", "stream_reconstruct", "reconstruction (PF)"),
+           ("exubio.run.pipeline", "stream_reconstruct", "reconstruction (PF)"),
            ("exubio.trust.assess", "trial_label_findings", "label checks"),
            ("exubio.trust.assess", "assess_trial", "assessment (determinacy, limits, verdict)"),
-           ("exubio.pipeline", "write_outputs", "write the result files"),
+           ("exubio.run.pipeline", "write_outputs", "write the result files"),
            ("exubio.report.trial_report", "build_trial_report", "report (PDF + PNG)"))
 
 
 def breakdown(trials: list[Path], out: Path, methods: tuple[str, ...]) -> None:
-    """CPU time per stage of ``exubio.study.run_trial_task`` on each trial (the functions the
+    """CPU time per stage of ``exubio.run.study.run_trial_task`` on each trial (the functions the
     pipeline calls, wrapped with timers), median over the trials after the first two."""
     import importlib
 
-    from exubio.study import TrialTask, run_trial_task
+    from exubio.run.study import TrialTask, run_trial_task
 
     spent: dict[str, float] = {}
 

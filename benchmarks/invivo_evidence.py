@@ -15,7 +15,7 @@ import numpy as np
 
 from exubio.model.angles import humerothoracic_elevation, isb_angles
 from exubio.literature.invivo import compare_elevation, raising
-from exubio.pipeline import reconstruct
+from exubio.run.pipeline import reconstruct
 from exubio.validation.trials import LUDEWIG_PLANE, why_no_real_trial
 from exubio.validation.trials import real_trial as _real_trial
 

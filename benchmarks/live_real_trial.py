@@ -3,7 +3,7 @@
 1. A real trial of ../shared/data (default: martin_dynamique, 21 markers, 100 Hz, with the model
    calibrated on its session's static trial martin_statique) is replayed with ``exubio stream`` and
    reconstructed by ``exubio live`` (two processes, LSL on 127.0.0.1 only); its angles are compared
-   with the offline causal PF run of the same trial (``exubio.live.reconstruct_causal``, the same
+   with the offline causal PF run of the same trial (``exubio.run.live.reconstruct_causal``, the same
    settings: they must agree to 1e-9 rad) and with the offline zero-lag reconstruction
    (``exubio reconstruct``: zero-lag Butterworth + splines, 10 ms steps): RMSE and max per
    coordinate, and the lag (the time shift that best aligns the causal angles on the zero-lag ones).
@@ -68,11 +68,11 @@ def main(argv=None) -> int:
     from exubio.trust.assess import not_solved_mask
     from exubio.io.results import read_npz
     from exubio.io.trial import read_trial
-    from exubio.live.causal import CausalOptions
-    from exubio.live.loop import LiveOptions, reconstruct_causal
-    from exubio.live.transport import use_config
-    from exubio.pipeline import load_inputs, load_model_and_protocol, reconstruct
-    from exubio.session import calibrate_file
+    from exubio.run.live.causal import CausalOptions
+    from exubio.run.live.loop import LiveOptions, reconstruct_causal
+    from exubio.run.live.transport import use_config
+    from exubio.run.pipeline import load_inputs, load_model_and_protocol, reconstruct
+    from exubio.run.session import calibrate_file
 
     report: dict = {}
     with tempfile.TemporaryDirectory(prefix="exubio-live-real-") as tmp:
@@ -99,7 +99,7 @@ def main(argv=None) -> int:
             print(out, err)
             return 1
         got = read_npz(tmp / "real" / "real.pf.npz")
-        from exubio.live.record import read_recorded_markers
+        from exubio.run.live.record import read_recorded_markers
 
         recorded = read_recorded_markers(tmp / "real" / "real.markers.npz")
         causal_rec = reconstruct_causal(recorded, model, protocol)  # what live received, offline

@@ -29,7 +29,7 @@ def main() -> int:
         return 2
     from exubio.io.c3d import write_c3d
     from exubio.io.trial import read_trial
-    from exubio.live.transport import use_config
+    from exubio.run.live.transport import use_config
     from exubio.types import Trajectories
 
     cfg = use_config("loopback")

@@ -40,7 +40,7 @@ from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.trust.mismatch import segment_evidence
 from exubio.synth.perturb import ModelPerturbation
-from exubio.pipeline import load_model_and_protocol, reconstruct
+from exubio.run.pipeline import load_model_and_protocol, reconstruct
 from exubio.prep.targets import prepare_targets
 from exubio.synth.simulate import simulate_trial
 from exubio.validation.mismatch import measured_angle_errors
@@ -124,8 +124,8 @@ def real_refit() -> None:
     from exubio.io.trial import read_trial
     from exubio.trust.mismatch import rigid_fit
     from exubio.model.load import load_model
-    from exubio.pipeline import protocol_for_model
-    from exubio.session import calibrate_session
+    from exubio.run.pipeline import protocol_for_model
+    from exubio.run.session import calibrate_session
     from exubio.validation.trials import real_trial
 
     root = Path(__file__).resolve().parents[1]

@@ -16,7 +16,7 @@ import sys
 import numpy as np
 
 from exubio.errors import ReconstructionError
-from exubio.pipeline import load_model_and_protocol, reconstruct
+from exubio.run.pipeline import load_model_and_protocol, reconstruct
 from exubio.prep.targets import prepare_targets
 from exubio.synth.simulate import simulate_trial
 from exubio.validation.sensitivity import with_springs

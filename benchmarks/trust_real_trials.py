@@ -30,7 +30,7 @@ import numpy as np
 
 from exubio.io.results import read_npz
 from exubio.model.load import load_model
-from exubio.jobs import TrialJob, run_job
+from exubio.run.job import TrialJob, run_job
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "data"
@@ -63,7 +63,7 @@ def runs() -> list[dict]:
 
 
 def run_one(spec: dict, work: Path) -> dict:
-    from exubio.session import calibrate_session
+    from exubio.run.session import calibrate_session
 
     out_dir = work / f"{spec['trial'].stem}_{'session' if spec['protocol'] == SESSION else 'shipped'}{'_cross' if spec.get('cross') else ''}"
     extra, model_path = {}, None

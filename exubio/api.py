@@ -45,7 +45,7 @@ def load_model(path: str | Path | None = None, /, *, body_mass_kg: float | None 
 def load_protocol(path: str | Path | None = None, /, *, model: Model | None = None) -> Protocol:
     """A protocol YAML (default: the shipped 21-marker protocol) checked against ``model`` (default:
     the generic model); on a calibrated model, bound to its registered marker points."""
-    from exubio.pipeline import protocol_for_model
+    from exubio.run.pipeline import protocol_for_model
 
     return protocol_for_model(model if model is not None else load_model(), path)
 
@@ -72,7 +72,7 @@ def reconstruct(trial: Trajectories | MarkerTargets | str | Path, model: Model |
                 protocol: Protocol | None = None, /, *, method: str = "pf", **options: Any) -> Reconstruction:
     """Joint kinematics of one trial by one method ("pf" or "ls"); ``options`` go to the method's
     options (e.g. ``step_s`` for PF). ``trial``: a file, a read trial or prepared targets."""
-    from exubio.pipeline import reconstruct as _reconstruct
+    from exubio.run.pipeline import reconstruct as _reconstruct
     from exubio.prep.targets import prepare_targets
 
     model = model if model is not None else load_model()
@@ -146,7 +146,7 @@ def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str
     from exubio.model.angles import anatomical_table
     from exubio.trust.evaluate import summary
     from exubio.io import results
-    from exubio.pipeline import AngleOutputs, angle_header, write_outputs
+    from exubio.run.pipeline import AngleOutputs, angle_header, write_outputs
 
     model = model if model is not None else load_model()
     protocol = protocol if protocol is not None else load_protocol(model=model)

@@ -26,7 +26,7 @@ import exubio  # noqa: E402
 from exubio.errors import ExubioError, InputError, ModelError, ProtocolError, ReconstructionError  # noqa: E402
 
 if TYPE_CHECKING:  # the CLI imports the pipeline only when a command runs (fast --help)
-    from exubio.jobs import TrialJob, TrialResult
+    from exubio.run.job import TrialJob, TrialResult
 
 log = logging.getLogger("exubio")
 
@@ -48,7 +48,7 @@ EXAMPLES = {
     "calibrate": "exubio calibrate static.c3d --out subject.yaml   (then: exubio reconstruct trial.c3d --model subject.yaml ...)",
     "validate": "exubio validate            (about 4-6 minutes on 2 cores; --quick: a smoke run)",
     "export-model": "exubio export-model subject.yaml --format osim --out subject.osim   (exubio's .mot plays on it)",
-    "study": "exubio study study.yaml --out results/ --jobs 2   (the study file's format: exubio/study.py's docstring)",
+    "study": "exubio study study.yaml --out results/ --jobs 2   (the study file's format: exubio/run/study.py's docstring)",
     "view": "exubio view results/trial.pf.npz --out trial.html",
     "demo": "exubio demo   (writes ./exubio_demo/)",
 }
@@ -179,7 +179,7 @@ def _check_output_folder(folder: Path, out: str) -> None:
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from exubio.calibration import format_report, parse_frames
-    from exubio.session import calibrate_file
+    from exubio.run.session import calibrate_file
 
     if Path(args.out).suffix.lower() not in (".yaml", ".yml"):
         raise InputError(f"--out {args.out}: expected a model file ending in .yaml")
@@ -195,7 +195,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 def _run_trial(job: TrialJob) -> tuple[str, TrialResult | None, int, str]:
     """One trial in a worker process: (trial, result, exit code, error message)."""
-    from exubio.jobs import run_job
+    from exubio.run.job import run_job
 
     trial = str(job.trial)
     try:
@@ -238,7 +238,7 @@ def _reconstruct_arms(args: argparse.Namespace, protocols: list[str]) -> int:
 def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
     from exubio.io.trial import read_trial
     from exubio.protocol.load import parse_relabel, relabel_trajectories
-    from exubio.session import calibrate_session
+    from exubio.run.session import calibrate_session
 
     model_path, extra = args.model, {}
     if args.also_static and not args.static:
@@ -285,7 +285,7 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
         extra = {"calibration": calibration}
         for f in calibration["labels"]:
             print(f"static trial {args.static}: {f['severity']}: {f['kind']} ({', '.join(f['markers'])}): {f['evidence']}")
-    from exubio.jobs import TrialJob, run_job
+    from exubio.run.job import TrialJob, run_job
 
     methods = _methods(args.method)
     jobs = [TrialJob(t, args.out, methods=tuple(methods), model=model_path, protocol=args.protocol,
@@ -299,7 +299,7 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
         return _trial_code(result)
     codes = []
     if args.scheduler:
-        from exubio.study import map_on_scheduler
+        from exubio.run.study import map_on_scheduler
 
         try:
             done = map_on_scheduler(_run_trial, jobs, args.scheduler,
@@ -313,7 +313,7 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
                                        + [f"{job.trial.stem}.report"])
             raise
     elif args.jobs > 1:
-        from exubio.study import map_in_processes
+        from exubio.run.study import map_in_processes
 
         done = map_in_processes(_run_trial, jobs, args.jobs,
                                 on_error=lambda job, exc: (str(job.trial), None, EXIT_FAILED, f"{type(exc).__name__}: {exc}"))
@@ -344,7 +344,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     import numpy as np
 
     from exubio.io.results import read_angles_csv
-    from exubio.pipeline import reconstruct_file
+    from exubio.run.pipeline import reconstruct_file
     from exubio.io.resources import shipped_file
 
     out = Path(args.out)
@@ -406,7 +406,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 
 def cmd_protocols(args: argparse.Namespace) -> int:
-    from exubio.pipeline import protocol_for_model
+    from exubio.run.pipeline import protocol_for_model
     from exubio.model.load import load_model
     from exubio.protocol.load import read_protocol_mapping, resolve_protocol, shipped_protocols
 
@@ -468,7 +468,7 @@ def cmd_export_model(args: argparse.Namespace) -> int:
 
 
 def cmd_study(args: argparse.Namespace) -> int:
-    from exubio.study import load_study, run_study
+    from exubio.run.study import load_study, run_study
 
     spec = load_study(args.study)  # every key, path and glob checked before any work
     if args.jobs < 1:
@@ -512,12 +512,12 @@ def _slice(text: str | None) -> slice | None:
 def cmd_live(args: argparse.Namespace) -> int:
     from datetime import datetime, timezone
 
-    from exubio.live.app import run_live
-    from exubio.live.causal import CausalOptions
-    from exubio.live.display import Display
-    from exubio.live.loop import LiveOptions
-    from exubio.live.transport import LSLSource, load_pylsl
-    from exubio.pipeline import load_model_and_protocol
+    from exubio.run.live.app import run_live
+    from exubio.run.live.causal import CausalOptions
+    from exubio.run.live.display import Display
+    from exubio.run.live.loop import LiveOptions
+    from exubio.run.live.transport import LSLSource, load_pylsl
+    from exubio.run.pipeline import load_model_and_protocol
 
     load_pylsl(args.lsl_config)  # the LSL configuration is set before pylsl is loaded
     model, protocol = load_model_and_protocol(model_path=args.model, protocol_path=args.protocol)
@@ -559,8 +559,8 @@ def _json_file(path) -> dict:
 
 def cmd_stream(args: argparse.Namespace) -> int:
     from exubio.io.trial import read_trial
-    from exubio.live.app import stream_file
-    from exubio.live.transport import load_pylsl
+    from exubio.run.live.app import stream_file
+    from exubio.run.live.transport import load_pylsl
 
     load_pylsl(args.lsl_config)
     trial = read_trial(args.trial)
@@ -683,7 +683,7 @@ def build_parser() -> argparse.ArgumentParser:
     st = sub.add_parser("study", parents=[common], formatter_class=argparse.RawDescriptionHelpFormatter,
                         help="run a study file (subjects x sessions x trials); re-running resumes it",
                         epilog=_epilog("study", EXIT_CODES_HELP))
-    st.add_argument("study", help="STUDY.yaml (format: exubio/study.py)")
+    st.add_argument("study", help="STUDY.yaml (format: exubio/run/study.py)")
     st.add_argument("--out", required=True, help="output folder: <subject>/<session>/<trial>/, study.csv, study.json")
     st.add_argument("--jobs", type=int, default=1, help="trials in parallel local processes (default 1)")
     st.add_argument("--scheduler", help="run the trials on Dask: local:N (a local cluster of N workers) or "

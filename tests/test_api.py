@@ -81,7 +81,7 @@ def test_methods_come_from_one_registry_and_options_are_checked():
     """Every method of the registry runs through the same entry point; a misspelt option is one
     InputError naming it and the method's options (not a TypeError from deep inside)."""
     from exubio.methods import REGISTRY
-    from exubio.pipeline import Method
+    from exubio.run.pipeline import Method
     from exubio.io.resources import shipped_file
 
     assert set(REGISTRY) == {m.value for m in Method}
@@ -98,7 +98,7 @@ def test_typed_options_objects_are_accepted_and_checked():
     """The entry point takes the method's options object; another method's options are refused."""
     from exubio.methods.ls import LSOptions
     from exubio.methods.pf import PFOptions
-    from exubio.pipeline import load_inputs, reconstruct
+    from exubio.run.pipeline import load_inputs, reconstruct
     from exubio.io.resources import shipped_file
 
     inp = load_inputs(shipped_file("exubio.data", "example_abduction.c3d", "exubio/data"))

@@ -16,14 +16,14 @@ OWNERS = {
     "ezc3d": {"io/c3d.py"},
     "matplotlib": {"report/trial_report.py", "report/validation_report.py", "report/study_report.py"},
     "plotly": {"viewer.py"},
-    "distributed": {"study.py"},
-    "dask": {"study.py"},
+    "distributed": {"run/study.py"},
+    "dask": {"run/study.py"},
     "pandas": {"api.py"},
-    "pylsl": {"live/transport.py"},
+    "pylsl": {"run/live/transport.py"},
 }
 VALIDATION_STUDY = tuple(f"exubio.validation.{m}" for m in ("run", "trials", "determinacy", "sensitivity", "residuals",
                                                               "sier", "invivo", "c3d_tasks", "agreement", "mismatch"))
-SOLVERS = ("exubio.methods", "exubio.backend", "exudyn", "exubio.pipeline", "exubio.calibration", "exubio.validate",
+SOLVERS = ("exubio.methods", "exubio.backend", "exudyn", "exubio.run.pipeline", "exubio.calibration", "exubio.validate",
            *VALIDATION_STUDY)
 
 

@@ -15,7 +15,7 @@ from exubio.io.c3d import write_c3d
 from exubio.model.angles import anatomical_table
 from exubio.io.results import read_angles_csv
 from exubio.model.load import load_model
-from exubio.pipeline import reconstruct
+from exubio.run.pipeline import reconstruct
 from exubio.prep.targets import prepare_targets
 from exubio.protocol.load import read_protocol_mapping
 from exubio.io.resources import shipped_file
@@ -66,7 +66,7 @@ def test_mirrored_right_arm_read_as_left_gives_the_same_angles(tmp_path, method)
 
 
 def _load(tmp_path, side, prefix):
-    from exubio.pipeline import protocol_for_model
+    from exubio.run.pipeline import protocol_for_model
 
     return protocol_for_model(load_model(), _arm_protocol(tmp_path, side, prefix))
 
@@ -113,7 +113,7 @@ def test_two_protocols_for_one_arm_are_refused(tmp_path, capsys):
 
 def test_side_must_be_right_or_left(tmp_path):
     from exubio.errors import ProtocolError
-    from exubio.pipeline import protocol_for_model
+    from exubio.run.pipeline import protocol_for_model
 
     data = read_protocol_mapping(BASE)
     data["side"] = "both"

@@ -1,7 +1,7 @@
 """Bad inputs are refused before any work: exit code 2, one message naming the file and the key,
 line or option and what was expected, no traceback, nothing written to --out.
 
-Every test here runs with exubio.pipeline.reconstruct replaced by a failure, so a refusal that
+Every test here runs with exubio.run.pipeline.reconstruct replaced by a failure, so a refusal that
 comes only after (or instead of) a reconstruction fails the test.
 """
 from __future__ import annotations
@@ -14,13 +14,13 @@ import numpy as np
 import pytest
 import yaml
 
-import exubio.pipeline
+import exubio.run.pipeline
 from exubio.cli import main
 from exubio.errors import InputError
 from exubio.io.c3d import read_c3d, write_c3d
 from exubio.io.trc import write_trc
 from exubio.model.load import DEFAULT_MODEL, load_model
-from exubio.pipeline import DEFAULT_PROTOCOL
+from exubio.run.pipeline import DEFAULT_PROTOCOL
 from exubio.synth.simulate import Motion, simulate_trial
 from exubio.types import Trajectories
 
@@ -32,7 +32,7 @@ def no_reconstruction(monkeypatch):
     def refuse(*args, **kwargs):
         pytest.fail("a reconstruction started: the bad input was not refused before the work")
 
-    monkeypatch.setattr(exubio.pipeline, "reconstruct", refuse)
+    monkeypatch.setattr(exubio.run.pipeline, "reconstruct", refuse)
 
 
 @pytest.fixture(scope="module")
@@ -339,7 +339,7 @@ def test_static_frames_past_the_end_refused_naming_window_and_frame_count(tmp_pa
 
 @pytest.mark.parametrize("jobs", ["0", "-1"])
 def test_jobs_below_one_refused_before_any_calibration(tmp_path, c3d, capsys, monkeypatch, jobs):
-    monkeypatch.setattr(exubio.pipeline, "read_trial", lambda *a, **k: pytest.fail("a trial was read"))
+    monkeypatch.setattr(exubio.run.pipeline, "read_trial", lambda *a, **k: pytest.fail("a trial was read"))
     out = tmp_path / "out"
     refused(capsys, reconstruct(c3d, out, "--jobs", jobs), out, f"--jobs {jobs}", ">= 1")
     refused(capsys, reconstruct(c3d, out, "--jobs", jobs, "--static", str(c3d)), out, f"--jobs {jobs}")
@@ -357,7 +357,7 @@ def _unwritable_folder() -> Path:
 
 @pytest.mark.parametrize("where", ["unwritable", "file", "under-a-file", "not-creatable"])
 def test_output_folder_checked_before_reading_anything(tmp_path, c3d, capsys, monkeypatch, where):
-    monkeypatch.setattr(exubio.pipeline, "read_trial", lambda *a, **k: pytest.fail("a trial was read"))
+    monkeypatch.setattr(exubio.run.pipeline, "read_trial", lambda *a, **k: pytest.fail("a trial was read"))
     (tmp_path / "a_file").write_text("not a folder")
     out = {"unwritable": _unwritable_folder, "file": lambda: tmp_path / "a_file",
            "under-a-file": lambda: tmp_path / "a_file" / "results",

@@ -21,7 +21,7 @@ from exubio.trust.evaluate import residual_statistics
 from exubio.io.c3d import write_c3d
 from exubio.model.kinematics import Kinematics
 from exubio.model.load import load_model, save_model
-from exubio.pipeline import load_model_and_protocol, reconstruct, reconstruct_file
+from exubio.run.pipeline import load_model_and_protocol, reconstruct, reconstruct_file
 from exubio.prep.targets import prepare_targets
 from exubio.protocol.load import load_protocol
 from exubio.io.resources import shipped_file

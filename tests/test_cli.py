@@ -328,17 +328,17 @@ def test_method_both_writes_ls_when_pf_fails_and_exits_1(tmp_path, c3d, capsys, 
     """With --method both, PF's failure threw LS's result away (nothing was written). Now LS's set is
     written, its summary names PF's failure, the console says PF failed and why, and the exit code
     is 1 (documented in --help and the README)."""
-    import exubio.pipeline
+    import exubio.run.pipeline
     from exubio.errors import ReconstructionError
 
-    stream = exubio.pipeline.stream_reconstruct
+    stream = exubio.run.pipeline.stream_reconstruct
 
     def pf_diverges(*args, method, **kwargs):
-        if exubio.pipeline.Method.parse(method).value == "pf":
+        if exubio.run.pipeline.Method.parse(method).value == "pf":
             raise ReconstructionError("abd.c3d: PF diverged at t = 0.000 s (EPI_lat spring 654 mm)")
         return stream(*args, method=method, **kwargs)
 
-    monkeypatch.setattr(exubio.pipeline, "stream_reconstruct", pf_diverges)
+    monkeypatch.setattr(exubio.run.pipeline, "stream_reconstruct", pf_diverges)
     out = tmp_path / "out"
     code = main(["-q", "reconstruct", str(c3d), "--method", "both", "--out", str(out)])
     console = capsys.readouterr()
@@ -353,7 +353,7 @@ def test_method_both_writes_ls_when_pf_fails_and_exits_1(tmp_path, c3d, capsys, 
     assert any(r["code"] == "method_failed" and "PF failed" in r["message"] for r in summ["quality"]["reasons"])
     assert summ["quality"]["verdict"] in ("ok", "check")  # LS's own verdict: PF's failure is a note on it
     # both methods failing is a failed reconstruction (exit 1), nothing written
-    monkeypatch.setattr(exubio.pipeline, "stream_reconstruct",
+    monkeypatch.setattr(exubio.run.pipeline, "stream_reconstruct",
                         lambda *a, method, **k: (_ for _ in ()).throw(ReconstructionError(f"{method} failed here")))
     out2 = tmp_path / "out2"
     assert main(["-q", "reconstruct", str(c3d), "--method", "both", "--no-report", "--out", str(out2)]) == 1

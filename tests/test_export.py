@@ -14,8 +14,8 @@ from exubio.export import marker_table, write_biomod, write_osim
 from exubio.model.kinematics import Kinematics
 from exubio.model.load import load_model
 from exubio.io.results import read_npz
-from exubio.pipeline import protocol_for_model, reconstruct_file
-from exubio.session import calibrate_file
+from exubio.run.pipeline import protocol_for_model, reconstruct_file
+from exubio.run.session import calibrate_file
 from exubio.io.resources import shipped_file
 
 @pytest.fixture(autouse=True)

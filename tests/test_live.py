@@ -1,4 +1,4 @@
-"""Live reconstruction (exubio.live): the causal preprocessing, the live loop against the batch PF
+"""Live reconstruction (exubio.run.live): the causal preprocessing, the live loop against the batch PF
 run, the faults a stream brings (each with what the live verdict and the recording say), Ctrl-C,
 and the two commands over Lab Streaming Layer held to 127.0.0.1 (skipped when pylsl's liblsl
 cannot load). Every test ends by itself: the in-process sources end, every LSL wait has a timeout,
@@ -21,12 +21,12 @@ from scipy.signal import sosfilt
 from exubio.errors import InputError
 from exubio.io.c3d import write_c3d
 from exubio.io.trial import read_trial
-from exubio.live.causal import CausalOptions, CausalTargets
-from exubio.live.loop import LiveOptions, LiveSession, angles_measured, reconstruct_causal
-from exubio.live.record import read_recorded_markers, write_recording
-from exubio.live.sources import Faults, ReplaySource, StreamInfo
-from exubio.live.transport import marker_labels
-from exubio.pipeline import load_model_and_protocol
+from exubio.run.live.causal import CausalOptions, CausalTargets
+from exubio.run.live.loop import LiveOptions, LiveSession, angles_measured, reconstruct_causal
+from exubio.run.live.record import read_recorded_markers, write_recording
+from exubio.run.live.sources import Faults, ReplaySource, StreamInfo
+from exubio.run.live.transport import marker_labels
+from exubio.run.pipeline import load_model_and_protocol
 from exubio.io.resources import shipped_file
 from exubio.types import Trajectories
 
@@ -189,7 +189,7 @@ def test_stopping_early_gives_the_first_frames_of_the_full_run(short_trial, mode
 def test_calibration_from_the_streams_first_frames(short_trial, model_protocol, tmp_path):
     """--static-frames: the first frames calibrate the model, then every frame is reconstructed;
     the live verdict carries the calibration's findings as the recording's assessment does."""
-    from exubio.live.app import calibrator
+    from exubio.run.live.app import calibrator
 
     model, protocol = model_protocol
     rec = reconstruct_causal(short_trial, model, protocol, static_frames=slice(0, 50), calibrate=calibrator(model, protocol))
@@ -310,7 +310,7 @@ def test_units_and_labels_are_checked_up_front(short_trial, model_protocol):
 
 # ---------------------------------------------------------------------------------- over LSL
 def _lsl_or_skip():
-    from exubio.live.transport import LiveUnavailable, load_pylsl
+    from exubio.run.live.transport import LiveUnavailable, load_pylsl
 
     try:
         return load_pylsl("loopback")
@@ -335,7 +335,7 @@ def _host(addr: str) -> str:
 
 
 def _env(tmp_path):
-    from exubio.live.transport import use_config
+    from exubio.run.live.transport import use_config
 
     cfg = use_config("loopback")
     return dict(os.environ, LSLAPICFG=str(cfg), PYTHONUNBUFFERED="1")
@@ -434,8 +434,8 @@ def test_live_without_a_stream_is_bad_input(tmp_path):
 def test_the_display_shows_latency_backlog_residual_verdict_and_key_angles():
     import io
 
-    from exubio.live.display import Display
-    from exubio.live.loop import Event
+    from exubio.run.live.display import Display
+    from exubio.run.live.loop import Event
 
     out = io.StringIO()
     d = Display(out)

@@ -7,7 +7,7 @@ import pytest
 from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.methods.ls import LSOptions, reconstruct_ls
-from exubio.pipeline import load_model_and_protocol
+from exubio.run.pipeline import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.synth.simulate import Motion, simulate_trial
 from exubio.types import MarkerTargets
@@ -169,7 +169,7 @@ def test_per_frame_steps_in_blocks_equal_one_pass(model_protocol, monkeypatch, m
     memory on long trials; the block size changes nothing (bit for bit), PF and LS."""
     import exubio.methods.common as common
     import exubio.methods.constraints as constraints
-    from exubio.pipeline import reconstruct
+    from exubio.run.pipeline import reconstruct
 
     model, protocol = model_protocol
     trial = simulate_trial(model, "flexion", duration_s=2.0, rate_hz=100.0, noise_mm=1.0, seed=8)

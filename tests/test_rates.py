@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from exubio.pipeline import load_model_and_protocol
+from exubio.run.pipeline import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.synth.simulate import simulate_trial
 from exubio.validation.codec import decode
@@ -84,7 +84,7 @@ def test_a_failed_pf_run_says_where():
     the worst spring and the coordinates beyond their range of motion at the last frame (a PF that
     converges here one day makes this test obsolete: replace it by the grid converging)."""
     from exubio.errors import ReconstructionError
-    from exubio.pipeline import reconstruct
+    from exubio.run.pipeline import reconstruct
     from exubio.validation.sensitivity import with_springs
     from exubio.validation.trials import real_trial, why_no_real_trial
 
@@ -130,7 +130,7 @@ def test_pf_ls_marker_difference_is_inertia_and_damping():
     """On the real abduction PF's model points differ from LS's by ~1 mm (the paper: < 0.37 mm);
     with every segment almost massless and the dampers weakened PF comes within the paper's figure:
     the difference is PF's physics (inertia, damper lag), not an error of either method."""
-    from exubio.pipeline import reconstruct
+    from exubio.run.pipeline import reconstruct
     from exubio.validation.agreement import _marker_rmse_causes
     from exubio.validation.trials import Trial, real_trial, why_no_real_trial
 

@@ -28,7 +28,7 @@ from exubio.validation.results import DATA_NPZ, RUNS_JSON, TABLE1_JSON
 from exubio.validation.trials import real_trial, why_no_real_trial
 
 PACKAGE = Path(__file__).resolve().parents[1] / "exubio"
-SOLVER_MODULES = ("exubio.methods", "exubio.backend", "exubio.pipeline", "exudyn", "exubio.calibration",
+SOLVER_MODULES = ("exubio.methods", "exubio.backend", "exubio.run.pipeline", "exudyn", "exubio.calibration",
                   "exubio.validate", "exubio.validation.run", "exubio.validation.trials")
 
 
@@ -255,7 +255,7 @@ def test_ludewig_values_match_the_published_tables():
 # Observability and the real trials
 # --------------------------------------------------------------------------------------------
 def test_undetermined_coordinates():
-    from exubio.pipeline import load_model_and_protocol
+    from exubio.run.pipeline import load_model_and_protocol
 
     model, protocol = load_model_and_protocol()
     q = np.zeros((1, model.n_coordinates))

@@ -14,7 +14,7 @@ from exubio.calibration.ellipsoid import surface_distance
 from exubio.calibration.scapula_motion import MIN_POSTURES, fit_scapula_motion
 from exubio.errors import InputError
 from exubio.model.kinematics import Kinematics
-from exubio.pipeline import load_model_and_protocol, reconstruct
+from exubio.run.pipeline import load_model_and_protocol, reconstruct
 from exubio.prep.targets import prepare_targets
 from exubio.io.resources import shipped_file
 from exubio.synth.simulate import simulate_trial
@@ -196,7 +196,7 @@ def test_cli_scapula_trial(tmp_path, capsys):
 def test_study_file_scapula_trial(tmp_path):
     """A session's ``scapula_trial:`` (a path or a list) is read with the session; without a static
     trial it is refused, naming the key."""
-    from exubio.study import load_study
+    from exubio.run.study import load_study
 
     for name in ("static.c3d", "raise1.c3d", "raise2.c3d", "task.c3d"):
         (tmp_path / name).write_bytes(b"")

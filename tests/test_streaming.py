@@ -15,7 +15,7 @@ from exubio.io.streamed import ArrayFile
 from exubio.methods.common import Collector, chunk_bounds
 from exubio.methods.ls import reconstruct_ls, stream_ls
 from exubio.methods.pf import PFOptions, reconstruct_pf, stream_pf
-from exubio.pipeline import load_inputs, reconstruct_file
+from exubio.run.pipeline import load_inputs, reconstruct_file
 from exubio.io.resources import shipped_file
 
 EXAMPLE = shipped_file("exubio.data", "example_abduction.c3d", "exubio/data")

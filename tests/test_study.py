@@ -1,4 +1,4 @@
-"""Studies (exubio.study, `exubio study`): trials of the same name in two sessions never collide,
+"""Studies (exubio.run.study, `exubio study`): trials of the same name in two sessions never collide,
 a re-run resumes (complete trials skipped, incomplete ones redone, leftovers removed), a broken
 trial or session never stops the others, Dask gives the same files as a serial run, and SIGINT /
 SIGKILL leave every trial's result set complete or absent."""
@@ -18,7 +18,7 @@ import yaml
 from exubio.cli import main
 from exubio.model.load import load_model
 from exubio.synth.simulate import simulate_trial, write_simulated_trial
-from exubio.study import DONE_FILE, load_study
+from exubio.run.study import DONE_FILE, load_study
 
 MODEL = Path(__file__).resolve().parents[1] / "models" / "upper_extremity.yaml"
 
@@ -205,7 +205,7 @@ def test_local_dask_workers_keep_glibc_malloc_defaults_and_no_profiler():
     """The workers of a local cluster do not get Dask's MALLOC_TRIM_THRESHOLD_ (it fixes glibc's
     mmap threshold: every trial array above 128 kB mapped afresh) nor its statistical profiler."""
     pytest.importorskip("distributed")
-    from exubio.study import map_on_scheduler
+    from exubio.run.study import map_on_scheduler
 
     def probe(_):
         import dask
@@ -252,7 +252,7 @@ def test_a_relabel_fixes_one_trial_of_a_session_without_touching_the_others(data
 
 def test_leftovers_of_killed_runs_go_a_running_studys_stay(tmp_path):
     """A second study into the same folder removed every .tmp-* folder, those of a study still at work too."""
-    from exubio.study import clean_leftovers
+    from exubio.run.study import clean_leftovers
 
     dead = int(subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
                               text=True).stdout)

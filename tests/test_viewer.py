@@ -23,7 +23,7 @@ import pytest
 from exubio.errors import InputError
 from exubio.io.results import read_npz, read_npz_metadata, write_npz
 from exubio.model.load import DEFAULT_MODEL
-from exubio.pipeline import reconstruct_file
+from exubio.run.pipeline import reconstruct_file
 from exubio.io.resources import shipped_file
 from exubio.viewer import MAX_ANIMATION_FRAMES, find_results, write_view
 

@@ -1,6 +1,6 @@
 """Subject calibration: a generic model fitted to a subject from a static pose (and optionally a
 functional movement trial). A pure step: arrays and a Model in, a Model and a CalibrationReport
-out; no file is read or written here (``exubio.pipeline`` does that).
+out; no file is read or written here (``exubio.run.pipeline`` does that).
 
 Modules, one job each: ``window`` (which frames hold the static pose), ``scaling`` (segment scale
 factors), ``posefit`` (the static pose and the scales of the scaled generic model), ``landmarks``

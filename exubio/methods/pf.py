@@ -218,7 +218,7 @@ def reconstruct_pf(model: Model, protocol: Protocol, targets: MarkerTargets, /, 
 @dataclass(frozen=True)
 class PFSetup:
     """What a PF run starts from: the kinematics, tracked points, held mask, the start state (q0, qd0)
-    and the Exudyn system built on it (shared by the offline run and the live one, exubio.live)."""
+    and the Exudyn system built on it (shared by the offline run and the live one, exubio.run.live)."""
 
     kin: Kinematics
     points: object

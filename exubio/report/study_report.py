@@ -1,4 +1,4 @@
-"""The report of a study: ``study.report.pdf`` from ``study.json`` (written by exubio.study), one
+"""The report of a study: ``study.report.pdf`` from ``study.json`` (written by exubio.run.study), one
 row per trial with its verdicts, residuals, PF-LS agreement and wall time, failures with their
 reason; counts on top. Reads the table only (no solver)."""
 from __future__ import annotations

@@ -74,7 +74,7 @@ def generic_model_and_protocol(model: Model, protocol: Protocol, /) -> tuple[Mod
     protocol bound to it: what the label checks expect, since a calibration registers every marker
     where the static trial had it, right or wrong."""
     from exubio.model.load import DEFAULT_MODEL, load_model
-    from exubio.pipeline import protocol_for_model
+    from exubio.run.pipeline import protocol_for_model
 
     cal = model.metadata.get("calibration")
     if not cal:

@@ -11,7 +11,7 @@ import numpy as np
 from exubio.model.angles import isb_angles
 from exubio.errors import ReconstructionError
 from exubio.model.kinematics import Kinematics
-from exubio.pipeline import reconstruct
+from exubio.run.pipeline import reconstruct
 from exubio.types import Model
 from exubio.validation.determinacy import trial_undetermined, undetermined_isb, unobserved_segments
 from exubio.validation.results import (

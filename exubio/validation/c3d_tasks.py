@@ -6,7 +6,7 @@ from __future__ import annotations
 from exubio.errors import ExubioError
 from exubio.literature.invivo import PLANE_TOLERANCE_DEG, RAISING_MIN_SPAN_DEG, compare_elevation, inferred_joints
 from exubio.io.trial import read_trial
-from exubio.session import calibrate_file
+from exubio.run.session import calibrate_file
 from exubio.prep.targets import prepare_targets
 from exubio.io.resources import shipped_file
 from exubio.validation.codec import decode

@@ -20,7 +20,7 @@ from exubio.model.angles import anatomical_table
 from exubio.trust.assess import assess_trial
 from exubio.trust.observability import AngleStatus
 from exubio.synth.perturb import ModelPerturbation
-from exubio.pipeline import load_model_and_protocol, reconstruct
+from exubio.run.pipeline import load_model_and_protocol, reconstruct
 from exubio.prep.targets import prepare_targets
 from exubio.synth.simulate import simulate_trial
 from exubio.types import Model

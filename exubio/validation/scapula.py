@@ -38,7 +38,7 @@ from exubio.errors import ExubioError
 from exubio.literature.invivo import compare_elevation
 from exubio.io.trial import read_trial
 from exubio.model.kinematics import Kinematics
-from exubio.pipeline import load_model_and_protocol, reconstruct
+from exubio.run.pipeline import load_model_and_protocol, reconstruct
 from exubio.prep.targets import prepare_targets
 from exubio.io.resources import shipped_file
 from exubio.synth.simulate import simulate_trial

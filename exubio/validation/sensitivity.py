@@ -10,7 +10,7 @@ import time
 import numpy as np
 
 from exubio.errors import ReconstructionError
-from exubio.pipeline import reconstruct
+from exubio.run.pipeline import reconstruct
 from exubio.types import Protocol
 from exubio.validation.results import FailedRun, Sensitivity
 from exubio.validation.settings import ValidationSettings

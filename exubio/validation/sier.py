@@ -10,7 +10,7 @@ import numpy as np
 from exubio.model.angles import isb_angles
 from exubio.errors import ReconstructionError
 from exubio.model.kinematics import Kinematics
-from exubio.pipeline import reconstruct
+from exubio.run.pipeline import reconstruct
 from exubio.synth.simulate import Motion
 from exubio.validation.results import (
     METHODS,

@@ -57,7 +57,7 @@ from exubio.io.yaml import read_yaml
 from exubio.errors import ExubioError, InputError
 
 if TYPE_CHECKING:
-    from exubio.jobs import TrialResult
+    from exubio.run.job import TrialResult
 
 log = logging.getLogger(__name__)
 
@@ -272,7 +272,7 @@ def load_study(path: str | Path, /) -> StudySpec:
 def run_trial_task(task: TrialTask) -> TrialOutcome:
     """Process one trial into a temporary folder beside its final one, write DONE.json last and
     rename the folder into place; any exception becomes a failed outcome (the study goes on)."""
-    from exubio.jobs import TrialJob, run_job
+    from exubio.run.job import TrialJob, run_job
 
     final = Path(task.final_dir)
     out = TrialOutcome(task.subject, task.session, task.trial, str(final), "failed")
@@ -368,7 +368,7 @@ def _remove_after_dask(out_dir: Path, /, *, wait_s: float = 1.0) -> None:
 
 def _calibrate_session(s: SessionSpec, folder: Path) -> tuple[str | None, dict | None, Any, str]:
     """(model file, calibration summary, static reference, error) of a session with a static trial."""
-    from exubio.session import calibrate_session
+    from exubio.run.session import calibrate_session
 
     if s.static is None:
         return (str(s.model) if s.model else None), None, None, ""
@@ -523,7 +523,7 @@ def _worker_setup() -> None:
     """Imported once per Dask worker: exubio and its solvers stay loaded for every trial."""
     import exubio.methods.ls  # noqa: F401
     import exubio.methods.pf  # noqa: F401
-    import exubio.pipeline  # noqa: F401
+    import exubio.run.pipeline  # noqa: F401
 
 
 _LOCAL_CLUSTER_CONFIG = {

@@ -2,8 +2,8 @@
 
 The steps are plain functions so that scripts, the CLI and the validation report compose them:
 ``load_inputs`` -> ``reconstruct`` (or ``stream_reconstruct``) -> ``write_outputs``; ``reconstruct_file`` does
-all of it for one trial file, streamed (bounded memory). One trial as a job: exubio.jobs; a
-session's calibration: exubio.session.
+all of it for one trial file, streamed (bounded memory). One trial as a job: exubio.run.job; a
+session's calibration: exubio.run.session.
 """
 from __future__ import annotations
 

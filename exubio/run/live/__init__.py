@@ -4,9 +4,9 @@ in-process replay; transport: Lab Streaming Layer, the only pylsl user), the rec
 ``exubio reconstruct`` writes a trial (record), the terminal display (display) and what the two
 commands do (app).
 
-``exubio.live.reconstruct_causal(trial, model, protocol)`` is the offline causal PF run (the live
+``exubio.run.live.reconstruct_causal(trial, model, protocol)`` is the offline causal PF run (the live
 loop fed by an in-process replay); the names below load their module on first use (importing
-``exubio.live`` loads no solver)."""
+``exubio.run.live`` loads no solver)."""
 from __future__ import annotations
 
 _LAZY = {"reconstruct_causal": "loop", "LiveOptions": "loop", "LiveSession": "loop", "LiveRecording": "loop",
@@ -20,8 +20,8 @@ def __getattr__(name: str):
     if name in _LAZY:
         import importlib
 
-        return getattr(importlib.import_module(f"exubio.live.{_LAZY[name]}"), name)
-    raise AttributeError(f"module 'exubio.live' has no attribute '{name}'")
+        return getattr(importlib.import_module(f"exubio.run.live.{_LAZY[name]}"), name)
+    raise AttributeError(f"module 'exubio.run.live' has no attribute '{name}'")
 
 
 def __dir__():

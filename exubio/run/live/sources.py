@@ -5,11 +5,11 @@ A source is opened once (``open``: the stream's labels, rate and units) and then
 (``pull(timeout_s)``: the samples that have arrived, each a (timestamp_s, positions (n_labels, 3) m)
 pair, NaN where a marker is missing; an empty list when none came within the timeout; None at the
 end of the stream). Timestamps are on the sender's clock: the live loop places each sample on the
-stream's uniform frame grid from them (exubio.live.loop), so dropped, late and out-of-order samples
+stream's uniform frame grid from them (exubio.run.live.loop), so dropped, late and out-of-order samples
 and a restarted stream are seen there, whatever the transport.
 
 Plugging in another system: a class with these four methods. The LSL source is
-exubio.live.transport.LSLSource; a Qualisys source would wrap ``qtm_rt`` (``connect``,
+exubio.run.live.transport.LSLSource; a Qualisys source would wrap ``qtm_rt`` (``connect``,
 ``stream_frames(components=["3d"], on_packet=...)``: labels from ``get_parameters(["3d"])``, mm,
 its frame number times 1/rate as the timestamp) and put packets on a queue that ``pull`` drains; a
 Vicon DataStream source would call ``GetFrame`` / ``GetMarkerGlobalTranslation`` per subject marker

@@ -30,7 +30,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from exubio.errors import InputError
-from exubio.live.sources import StreamInfo
+from exubio.run.live.sources import StreamInfo
 
 log = logging.getLogger(__name__)
 
@@ -174,7 +174,7 @@ def marker_stream_info(name: str, labels: Sequence[str], rate_hz: float, /, *, u
 
 class LSLSource:
     """A marker stream read from LSL (resolved by name or source id, the first one if neither is
-    given), as a MarkerSource (exubio.live.sources). Timestamps are the sender's, corrected to
+    given), as a MarkerSource (exubio.run.live.sources). Timestamps are the sender's, corrected to
     this machine's clock (LSL's clock sync); the inlet recovers a sender that restarts with the
     same source id."""
 
@@ -240,7 +240,7 @@ class LSLSource:
 
 class LSLPublisher:
     """The live output as two LSL outlets: ``<name>`` (one double64 sample per frame, channels
-    exubio.live.loop.OUTPUT_CHANNELS with their units, the input sample's timestamp) and
+    exubio.run.live.loop.OUTPUT_CHANNELS with their units, the input sample's timestamp) and
     ``<name>_events`` (irregular, one string channel: each Event as JSON)."""
 
     def __init__(self, name: str, channels: Sequence[tuple[str, str]], rate_hz: float, /, *,

@@ -10,7 +10,7 @@ from typing import Any
 from exubio.errors import InputError
 from exubio.io import results
 from exubio.io.trial import read_trial
-from exubio.pipeline import load_model_and_protocol
+from exubio.run.pipeline import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.types import Trajectories
 

@@ -44,8 +44,8 @@ from exubio.trust import quality as Q
 from exubio.model.angles import ISB_COLUMNS, isb_table, measured_isb_joints
 from exubio.trust.assess import DETERMINACY_PERIOD_S, not_solved_mask
 from exubio.errors import InputError, ReconstructionError
-from exubio.live.causal import CausalFrame, CausalOptions, CausalTargets, frame_index
-from exubio.live.sources import UNIT_SCALE, MarkerSource, ReplaySource, StreamInfo
+from exubio.run.live.causal import CausalFrame, CausalOptions, CausalTargets, frame_index
+from exubio.run.live.sources import UNIT_SCALE, MarkerSource, ReplaySource, StreamInfo
 from exubio.methods.pf import PFOptions, _Frames, pf_setup
 from exubio.trust.observability import determinacy
 from exubio.prep.targets import PLAUSIBLE_MEDIAN_DISTANCE_M
@@ -1043,7 +1043,7 @@ def reconstruct_causal(trial: Trajectories, model: Model, protocol: Protocol, /,
     """The offline causal PF reconstruction of a trial: the live loop itself, fed by an in-process
     replay of the trial as fast as it goes (no network, no clock), so ``exubio live`` on a replay of
     the same trial gives the same angles (to round-off: the same operations on the same numbers)."""
-    from exubio.live.sources import Faults
+    from exubio.run.live.sources import Faults
 
     source = ReplaySource(trial, speed=None, faults=faults or Faults())
     opts = dataclasses.replace(options, end_after_s=None, max_behind_s=math.inf, stall_s=math.inf)  # no clock

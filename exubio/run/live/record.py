@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from exubio.errors import InputError
-from exubio.live.loop import LiveRecording
+from exubio.run.live.loop import LiveRecording
 
 __all__ = ["write_recording", "read_recorded_markers"]
 
@@ -32,7 +32,7 @@ def write_recording(rec: LiveRecording, out_dir: str | os.PathLike, name: str, /
     from exubio.trust.assess import assess_trial, trial_label_findings
     from exubio.io.c3d import write_c3d
     from exubio.io.results import atomic_write, write_json, writable_folder
-    from exubio.pipeline import Method, TrialInfo, TrialInputs, write_assessed
+    from exubio.run.pipeline import Method, TrialInfo, TrialInputs, write_assessed
 
     out = writable_folder(out_dir, label="--out")
     final = out / name

@@ -5,7 +5,7 @@ process pool or on Dask workers, and ``exubio study`` makes one job per trial of
 names its files (trial, model, protocol) and carries the methods' options as their typed objects
 (PFOptions, LSOptions: exubio.methods.REGISTRY), checked when the job is made, before any work.
 ``run_job`` reads the trial once (also when it is calibrated on its own frames), reconstructs it
-with every method (exubio.pipeline.reconstruct_file: streamed, bounded memory), writes the results
+with every method (exubio.run.pipeline.reconstruct_file: streamed, bounded memory), writes the results
 and the trial report, and returns the TrialResult: per method the summary and the files, the
 PF-LS agreement, the verdicts, the calibration, and the methods that failed with their reasons
 (a method that fails does not take the others' results with it).
@@ -21,7 +21,7 @@ from exubio.errors import PartialReconstructionError
 from exubio.io import results
 from exubio.io.trial import read_trial
 from exubio.protocol.load import relabel_trajectories
-from exubio.pipeline import Method, reconstruct_file
+from exubio.run.pipeline import Method, reconstruct_file
 
 
 @dataclass(frozen=True)
@@ -31,7 +31,7 @@ class TrialJob:
     shipped generic one; protocol: a protocol file, else the shipped one; options: per method its
     options object (or a dict of its fields, turned into the object here); static_frames: calibrate
     on these frames of the trial itself ("0:50"); calibration: the session's calibration summary
-    (exubio.session.calibrate_session), which goes into every summary and verdict;
+    (exubio.run.session.calibrate_session), which goes into every summary and verdict;
     static_reference: the session static's pair distances the label checks compare with;
     relabel: this trial's labels read as other labels ({file label: read as}), for this trial only
     (exubio.protocol.load.relabel_trajectories), before the protocol's own relabel; repair_labels: exchange
@@ -115,7 +115,7 @@ def run_job(job: TrialJob, /, *, progress_factory: Callable[[str, int], Callable
 
 
 def _run_job(job: TrialJob, progress_factory: Callable[[str, int], Callable[[int], None]] | None) -> TrialResult:
-    from exubio.session import calibrate_session
+    from exubio.run.session import calibrate_session
 
     stem = job.trial.stem
     trajectories = None  # read here only when it is relabelled or calibrated on its own frames: then read once

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from exubio.errors import InputError
-from exubio.live.loop import OUTPUT_CHANNELS, Event, LiveOptions, LiveRecording, LiveSession
+from exubio.run.live.loop import OUTPUT_CHANNELS, Event, LiveOptions, LiveRecording, LiveSession
 from exubio.types import Model, Protocol, Trajectories
 
 log = logging.getLogger(__name__)
@@ -55,7 +55,7 @@ def run_live(model: Model, protocol: Protocol, source, /, *, out_dir: str | Path
     def ready(session: LiveSession) -> None:
         if not publish_name:
             return
-        from exubio.live.transport import LSLPublisher
+        from exubio.run.live.transport import LSLPublisher
 
         publisher_box["pub"] = LSLPublisher(
             publish_name, OUTPUT_CHANNELS(session.marker_names), session.rate,
@@ -107,7 +107,7 @@ def run_live(model: Model, protocol: Protocol, source, /, *, out_dir: str | Path
         source.close()
     folder = None
     if out_dir is not None:
-        from exubio.live.record import write_recording
+        from exubio.run.live.record import write_recording
 
         folder = write_recording(rec, out_dir, name, overwrite=overwrite, report=report)
     return LiveRun(rec, folder)
@@ -117,7 +117,7 @@ def stream_file(trial: Trajectories, /, *, name: str, speed: float = 1.0, units:
                 source_id: str = "", wait_s: float = 10.0, stop: Callable[[], bool] | None = None) -> int:
     """Send a trial as an LSL marker stream at ``speed`` times its own rate; waits up to ``wait_s``
     for a consumer first. Returns the frames sent."""
-    from exubio.live.transport import ReplayOutlet
+    from exubio.run.live.transport import ReplayOutlet
 
     if not speed > 0:
         raise InputError(f"--speed must be > 0, got {speed}")
