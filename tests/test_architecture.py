@@ -23,7 +23,7 @@ OWNERS = {
 }
 VALIDATION_STUDY = tuple(f"exubio.validation.{m}" for m in ("run", "trials", "determinacy", "sensitivity", "residuals",
                                                               "sier", "invivo", "c3d_tasks", "agreement", "mismatch"))
-SOLVERS = ("exubio.methods", "exubio.backend", "exudyn", "exubio.run.pipeline", "exubio.calibration", "exubio.validate",
+SOLVERS = ("exubio.methods", "exubio.backend", "exudyn", "exubio.run.pipeline", "exubio.calibration",
            *VALIDATION_STUDY)
 
 

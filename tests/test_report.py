@@ -29,7 +29,7 @@ from exubio.validation.trials import real_trial, why_no_real_trial
 
 PACKAGE = Path(__file__).resolve().parents[1] / "exubio"
 SOLVER_MODULES = ("exubio.methods", "exubio.backend", "exubio.run.pipeline", "exudyn", "exubio.calibration",
-                  "exubio.validate", "exubio.validation.run", "exubio.validation.trials")
+                  "exubio.validation.run", "exubio.validation.trials")
 
 
 def _pdf_pages(path: Path) -> int:
@@ -163,18 +163,6 @@ def test_files_that_do_not_fit_the_results_are_refused(quick, tmp_path):
     (tmp_path / TABLE1_JSON).write_text(json.dumps(table1), encoding="utf-8")
     with pytest.raises(SchemaError, match="disagrees"):
         ValidationResults.load(tmp_path)
-
-
-def test_the_old_module_still_answers():
-    """exubio.validate keeps its names (a shim over exubio.validation)."""
-    import exubio.validate as old
-    from exubio.validation import ValidationSettings
-
-    assert old.ValidationSettings is ValidationSettings
-    for name in ("ValidationSettings", "QUICK_SETTINGS", "LUDEWIG_PLANE", "_real_trial", "why_no_real_trial",
-                 "portable_paths", "shared_data_dir", "undetermined_coordinates", "unobserved_segments",
-                 "run_validation"):
-        assert hasattr(old, name), name
 
 
 def test_report_rebuilds_from_files_without_the_solver(quick, tmp_path):
