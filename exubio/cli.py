@@ -487,7 +487,7 @@ def cmd_study(args: argparse.Namespace) -> int:
 
 
 def cmd_view(args: argparse.Namespace) -> int:
-    from exubio.viewer import write_view
+    from exubio.report.viewer import write_view
 
     if args.max_frames < 2:
         raise InputError(f"--max-frames {args.max_frames}: expected at least 2 animation frames")

@@ -15,7 +15,7 @@ OWNERS = {
     "exudyn": {"backend/exudyn_system.py"},
     "ezc3d": {"io/c3d.py"},
     "matplotlib": {"report/trial_report.py", "report/validation_report.py", "report/study_report.py"},
-    "plotly": {"viewer.py"},
+    "plotly": {"report/viewer.py"},
     "distributed": {"run/study.py"},
     "dask": {"run/study.py"},
     "pandas": {"api.py"},
@@ -52,7 +52,7 @@ def test_each_library_has_one_owner(library):
 
 
 @pytest.mark.parametrize("module", ["report/trial_report.py", "report/validation_report.py", "report/study_report.py",
-                                    "viewer.py", "validation/results.py", "validation/codec.py",
+                                    "report/viewer.py", "validation/results.py", "validation/codec.py",
                                     "validation/settings.py", "validation/checks.py", "validation/paths.py"])
 def test_what_draws_results_never_imports_a_solver(module):
     bad = sorted(m for m in _imports(PACKAGE / module) if m.startswith(SOLVERS))

@@ -1,4 +1,4 @@
-"""exubio.viewer: the self-contained 3D HTML view of a reconstruction.
+"""exubio.report.viewer: the self-contained 3D HTML view of a reconstruction.
 
 Data tests read the page without a browser: the JSON block ``exubio-data`` and the plotly figure
 itself (its animation frames, traces and marker names) against the result files of a real
@@ -25,10 +25,10 @@ from exubio.io.results import read_npz, read_npz_metadata, write_npz
 from exubio.model.load import DEFAULT_MODEL
 from exubio.run.pipeline import reconstruct_file
 from exubio.io.resources import shipped_file
-from exubio.viewer import MAX_ANIMATION_FRAMES, find_results, write_view
+from exubio.report.viewer import MAX_ANIMATION_FRAMES, find_results, write_view
 
 EXAMPLE = shipped_file("exubio.data", "example_abduction.c3d", "exubio/data")
-BONE_RGB = (0x7A, 0x4B, 0x1E)  # exubio.viewer._BONE_COLOUR
+BONE_RGB = (0x7A, 0x4B, 0x1E)  # exubio.report.viewer._BONE_COLOUR
 
 
 # --------------------------------------------------------------------------------------------
