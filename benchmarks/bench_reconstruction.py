@@ -52,7 +52,8 @@ from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from exubio.run.pipeline import load_model_and_protocol, reconstruct  # noqa: E402
+from exubio.run.pipeline import reconstruct  # noqa: E402
+from exubio.run.inputs import load_model_and_protocol  # noqa: E402
 from exubio.prep.targets import prepare_targets  # noqa: E402
 from exubio.synth.simulate import Motion, simulate_trial  # noqa: E402
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from exubio.calibration import calibrate_model
 from exubio.io.trial import read_trial
-from exubio.run.pipeline import load_model_and_protocol
+from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 
 ROOT = Path(__file__).resolve().parents[1]

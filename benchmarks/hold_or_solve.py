@@ -15,7 +15,7 @@ import numpy as np
 
 from exubio.model.angles import anatomical_table
 from exubio.methods.ls import reconstruct_ls
-from exubio.run.pipeline import load_model_and_protocol
+from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.synth.simulate import simulate_trial
 

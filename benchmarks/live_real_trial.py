@@ -71,7 +71,8 @@ def main(argv=None) -> int:
     from exubio.run.live.causal import CausalOptions
     from exubio.run.live.loop import LiveOptions, reconstruct_causal
     from exubio.run.live.transport import use_config
-    from exubio.run.pipeline import load_inputs, load_model_and_protocol, reconstruct
+    from exubio.run.pipeline import load_inputs, reconstruct
+    from exubio.run.inputs import load_model_and_protocol, load_session
     from exubio.run.session import calibrate_file
 
     report: dict = {}
@@ -106,7 +107,7 @@ def main(argv=None) -> int:
         causal_file = reconstruct_causal(trial, model, protocol)  # the trial file itself, offline
         d_rec = float(np.nanmax(np.abs(got.q_rad - causal_rec.q_rad)))
         d_file = float(np.nanmax(np.abs(got.q_rad - causal_file.q_rad)))
-        inputs = load_inputs(args.trial, model_path=model_file)
+        inputs = load_inputs(args.trial, load_session(model_path=model_file))
         zl = reconstruct(inputs.model, inputs.protocol, inputs.targets, method="pf")
         per = lag_and_error(got.q_rad, zl.q_rad, trial.rate_hz, solved)
         report["replay"] = {"trial": Path(args.trial).name, "frames": int(got.n_frames), "markers": len(trial.labels),

@@ -40,7 +40,8 @@ from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.trust.mismatch import segment_evidence
 from exubio.synth.perturb import ModelPerturbation
-from exubio.run.pipeline import load_model_and_protocol, reconstruct
+from exubio.run.pipeline import reconstruct
+from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.synth.simulate import simulate_trial
 from exubio.validation.mismatch import measured_angle_errors
@@ -124,7 +125,7 @@ def real_refit() -> None:
     from exubio.io.trial import read_trial
     from exubio.trust.mismatch import rigid_fit
     from exubio.model.load import load_model
-    from exubio.run.pipeline import protocol_for_model
+    from exubio.run.inputs import load_session, protocol_for_model
     from exubio.run.session import calibrate_session
     from exubio.validation.trials import real_trial
 
@@ -138,7 +139,7 @@ def real_refit() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         runs = []
         for trial, static, prot in specs:
-            mf, _, _ = calibrate_session(static, Path(tmp) / trial.stem, "static", protocol_path=prot)
+            mf = calibrate_session(static, load_session(protocol_path=prot), Path(tmp) / trial.stem, "static").model_file
             model = load_model(mf)
             protocol = protocol_for_model(model, prot)
             runs.append((trial.name, model, protocol, prepare_targets(read_trial(trial), protocol)))

@@ -16,7 +16,8 @@ import sys
 import numpy as np
 
 from exubio.errors import ReconstructionError
-from exubio.run.pipeline import load_model_and_protocol, reconstruct
+from exubio.run.pipeline import reconstruct
+from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.synth.simulate import simulate_trial
 from exubio.validation.sensitivity import with_springs

@@ -24,7 +24,7 @@ from exubio.calibration import calibrate_model, calibrated_protocol
 from exubio.calibration.functional import cluster_poses
 from exubio.calibration.scapula_motion import scapula_markers
 from exubio.io.trial import read_trial
-from exubio.run.pipeline import load_model_and_protocol
+from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.io.resources import shipped_file
 from exubio.validation.paths import shared_data_dir

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from exubio.io.trial import read_trial
 from exubio.trust.labels import pair_distances
-from exubio.run.pipeline import load_model_and_protocol
+from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.trust.session_check import SHIFT_MM, SHIFT_Z, placed_anew, static_consistency
 from exubio.synth.simulate import simulate_trial

@@ -46,7 +46,8 @@ from scipy.linalg import null_space
 from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.methods.poses import held_mask
-from exubio.run.pipeline import load_model_and_protocol, reconstruct
+from exubio.run.pipeline import reconstruct
+from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.synth.simulate import STA_SCALE, Motion, simulate_trial
 from exubio.validation import ValidationSettings

@@ -13,7 +13,7 @@ import warnings
 from pathlib import Path
 
 from exubio.io.trial import read_trial
-from exubio.run.pipeline import load_model_and_protocol, protocol_for_model
+from exubio.run.inputs import load_model_and_protocol, protocol_for_model
 from exubio.io.resources import shipped_file
 from exubio.trust.thorax_check import SWAP_RATIO, thorax_label_fit
 

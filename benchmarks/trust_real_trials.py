@@ -63,10 +63,12 @@ def runs() -> list[dict]:
 
 
 def run_one(spec: dict, work: Path) -> dict:
-    from exubio.run.session import calibrate_session
+    from exubio.run.inputs import load_session
+    from exubio.run.session import StaticSpec, calibrate_session
 
     out_dir = work / f"{spec['trial'].stem}_{'session' if spec['protocol'] == SESSION else 'shipped'}{'_cross' if spec.get('cross') else ''}"
     extra, model_path = {}, None
+    session = load_session(protocol_path=spec["protocol"])
     if spec.get("static"):  # the session's static trial: calibration, its label checks, the reference
         static = spec["static"]
         if spec.get("static_relabel"):
@@ -74,10 +76,10 @@ def run_one(spec: dict, work: Path) -> dict:
             from exubio.protocol.load import relabel_trajectories
 
             static = relabel_trajectories(read_trial(static), spec["static_relabel"])
-        model_path, _, extra["calibration"] = calibrate_session(static, out_dir, "static",
-                                                                protocol_path=spec["protocol"],
-                                                                functional_path=spec.get("functional"))
-    result = run_job(TrialJob(spec["trial"], out_dir, methods=("pf", "ls"), model=model_path, protocol=spec["protocol"],
+        cal = calibrate_session(static, session, out_dir, "static",
+                                spec=StaticSpec(functional=Path(spec["functional"]) if spec.get("functional") else None))
+        model_path, extra["calibration"] = cal.model_file, cal
+    result = run_job(TrialJob(spec["trial"], out_dir, methods=("pf", "ls"), session=session,
                               static_frames=spec.get("static_frames"), calibration=extra.get("calibration"),
                               report=False, **({"relabel": spec["relabel"]} if spec.get("relabel") else {})))
     model = load_model(model_path) if model_path else None

@@ -1,21 +1,33 @@
 """exubio: upper-extremity joint kinematics from skin markers (potential-field and least-squares
 multibody kinematics optimisation, built on Exudyn).
 
-The Python API (exubio.api): ``read_trial``, ``load_model``, ``load_protocol``, ``calibrate``,
-``reconstruct``, ``isb_angles``, ``angle_status``, ``to_dataframe``, ``write_results`` and the result type
-``Reconstruction``; loaded on first use, so ``import exubio`` stays light."""
+The Python face (exubio.api), data first::
+
+    trial = exubio.read_trial("trial.c3d")
+    model, protocol, report = exubio.calibrate(exubio.read_trial("static.c3d"))
+    rec = exubio.reconstruct(trial, model, protocol, method="pf")
+    rec.verdict, rec.quality.reasons            # the CLI's verdict for the same trial, and why
+    exubio.to_dataframe(rec, model=model)       # the anatomical angles (deg) and their status
+    exubio.write_results(rec, "out", "trial", model=model)
+
+Functions: ``read_trial``, ``load_model``, ``load_protocol``, ``calibrate``, ``reconstruct``,
+``assess``, ``angles``, ``angle_status``, ``to_dataframe``, ``write_results``, ``simulate``. Types:
+``Trajectories``, ``Model``, ``Protocol``, ``Reconstruction``; the errors (``ExubioError`` and its
+kinds). Loaded on first use, so ``import exubio`` stays light; ``dir(exubio)`` and IDEs see them all
+(``__dir__`` and the stub ``__init__.pyi``)."""
 from __future__ import annotations
 
 __version__ = "0.1.0"
 
 from exubio.errors import ExubioError, InputError, ModelError, ProtocolError, ReconstructionError
 
-_API = ("read_trial", "load_model", "load_protocol", "calibrate", "reconstruct", "isb_angles", "angle_status", "to_dataframe",
-        "write_results")
+_API = ("read_trial", "load_model", "load_protocol", "calibrate", "reconstruct", "assess", "angles", "angle_status",
+        "to_dataframe", "write_results", "simulate")
+_TYPES = ("Trajectories", "Model", "Protocol", "Reconstruction")
 
 __all__ = [
     *_API,
-    "Reconstruction",
+    *_TYPES,
     "ExubioError",
     "InputError",
     "ModelError",
@@ -30,8 +42,12 @@ def __getattr__(name: str):
         from exubio import api
 
         return getattr(api, name)
-    if name == "Reconstruction":
-        from exubio.types import Reconstruction
+    if name in _TYPES:
+        from exubio import types
 
-        return Reconstruction
+        return getattr(types, name)
     raise AttributeError(f"module 'exubio' has no attribute '{name}'")
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

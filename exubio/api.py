@@ -1,4 +1,5 @@
-"""exubio from Python (a notebook, a script): the few functions a lab needs, on loaded objects.
+"""exubio from Python (a notebook, a script): the few functions a lab needs, on loaded objects,
+data first (the trial, then the model and the protocol it is read with).
 
     import exubio
     model = exubio.load_model()                          # generic model (or a calibrated YAML)
@@ -6,16 +7,22 @@
     trial = exubio.read_trial("trial.c3d")               # C3D or TRC: labels, positions (m), time (s)
     model, protocol, report = exubio.calibrate(exubio.read_trial("static.c3d"), model, protocol)
     rec = exubio.reconstruct(trial, model, protocol, method="ls")   # an exubio.Reconstruction
-    df = exubio.to_dataframe(rec, model=model)           # pandas: coordinates and ISB angles in degrees
-    exubio.write_results(rec, "out", "trial", model=model)   # CSV, .mot, ISB CSV, .npz (atomic)
+    rec.verdict                                          # "ok" / "check" / "fail": the CLI's verdict
+    rec.quality.reasons                                  # ... and why
+    both = exubio.assess(trial, [rec, exubio.reconstruct(trial, model, protocol)], model, protocol)
+    angles = exubio.angles(rec, model)                   # anatomical angles (rad) by name
+    df = exubio.to_dataframe(rec, model=model)           # pandas: the angles in degrees and their status
+    exubio.write_results(rec, "out", "trial", model=model)   # CSV, .mot, .npz, summary.json (atomic)
+    sim = exubio.simulate("abduction", model)            # a trial with a known truth (sim.q_true)
 
 Everything is SI inside (m, s, rad); degrees only in the DataFrame and the files, labelled. The
-command line (``exubio reconstruct``) does the same plus the quality verdict and the report.
+command line (``exubio reconstruct``) runs the same steps and adds the trial report.
 """
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
@@ -24,8 +31,11 @@ from exubio.types import MarkerTargets, Model, Protocol, Reconstruction, Traject
 if TYPE_CHECKING:  # pandas is imported when a DataFrame is asked for
     import pandas
 
-__all__ = ["read_trial", "load_model", "load_protocol", "calibrate", "reconstruct", "isb_angles", "angle_status", "to_dataframe",
-           "write_results"]
+    from exubio.synth.simulate import SimulatedTrial
+    from exubio.trust.assess import TrialAssessment
+
+__all__ = ["read_trial", "load_model", "load_protocol", "calibrate", "reconstruct", "assess", "angles", "angle_status",
+           "to_dataframe", "write_results", "simulate"]
 
 
 def read_trial(path: str | Path, /) -> Trajectories:
@@ -45,7 +55,7 @@ def load_model(path: str | Path | None = None, /, *, body_mass_kg: float | None 
 def load_protocol(path: str | Path | None = None, /, *, model: Model | None = None) -> Protocol:
     """A protocol YAML (default: the shipped 21-marker protocol) checked against ``model`` (default:
     the generic model); on a calibrated model, bound to its registered marker points."""
-    from exubio.run.pipeline import protocol_for_model
+    from exubio.run.inputs import protocol_for_model
 
     return protocol_for_model(model if model is not None else load_model(), path)
 
@@ -68,28 +78,74 @@ def calibrate(static: Trajectories, model: Model | None = None, protocol: Protoc
     return calibrated, calibrated_protocol(protocol, calibrated), report
 
 
-def reconstruct(trial: Trajectories | MarkerTargets | str | Path, model: Model | None = None,
-                protocol: Protocol | None = None, /, *, method: str = "pf", **options: Any) -> Reconstruction:
-    """Joint kinematics of one trial by one method ("pf" or "ls"); ``options`` go to the method's
-    options (e.g. ``step_s`` for PF). ``trial``: a file, a read trial or prepared targets."""
-    from exubio.run.pipeline import reconstruct as _reconstruct
-    from exubio.prep.targets import prepare_targets
+def _session(model: Model | None, protocol: Protocol | None, /):
+    """The run layer's Session for loaded objects (for a calibrated model, its generic model, which
+    the label checks expect, is read from the file the calibration recorded)."""
+    from exubio.run.inputs import Session, generic_of
 
     model = model if model is not None else load_model()
     protocol = protocol if protocol is not None else load_protocol(model=model)
-    if isinstance(trial, (str, Path)):
-        trial = read_trial(trial)
-    targets = trial if isinstance(trial, MarkerTargets) else prepare_targets(trial, protocol)
-    return _reconstruct(model, protocol, targets, method=method, **options)
+    return Session(model, protocol, *generic_of(model, protocol))
 
 
-def isb_angles(model: Model, reconstruction: Reconstruction | np.ndarray, /) -> dict[str, np.ndarray]:
-    """ISB angles (radians, (n, 3) per joint: SC, AC, ST, GH, HT; sequences and signs in
-    exubio.model.angles) of a reconstruction or of coordinates q (n, m)."""
-    from exubio.model.angles import isb_angles as _isb
+def _inputs(trial: Trajectories | MarkerTargets | str | Path, session, /):
+    """The trial through the run's checks and preparation (exubio.run.pipeline.load_inputs), or,
+    given as prepared targets, as they are."""
+    from exubio.run.pipeline import TrialInfo, TrialInputs, load_inputs
 
-    q = reconstruction.q_rad if isinstance(reconstruction, Reconstruction) else reconstruction
-    return _isb(model, q)
+    if isinstance(trial, MarkerTargets):
+        info = TrialInfo(source=trial.source, labels=trial.marker_names, ignored_labels=(), units_in_file="m",
+                         rate_hz=float(1.0 / np.median(np.diff(trial.time_s))) if trial.n_frames > 1 else 0.0)
+        return TrialInputs(info, session.model, session.protocol, trial, generic_model=session.generic_model,
+                           generic_protocol=session.generic_protocol)
+    return load_inputs(trial, session)
+
+
+def reconstruct(trial: Trajectories | MarkerTargets | str | Path, model: Model | None = None,
+                protocol: Protocol | None = None, /, *, method: str = "pf", **options: Any) -> Reconstruction:
+    """Joint kinematics of one trial by one method ("pf" or "ls"), assessed as ``exubio
+    reconstruct`` assesses it: the result's ``verdict`` ("ok", "check", "fail") and ``quality``
+    (with its reasons) are the CLI's for the same trial, model and protocol. ``options`` go to the
+    method's options (e.g. ``step_s`` for PF). ``trial``: a file, a read trial or prepared targets."""
+    from exubio.run.pipeline import assess_inputs
+    from exubio.run.pipeline import reconstruct as _reconstruct
+
+    session = _session(model, protocol)
+    inputs = _inputs(trial, session)
+    rec = _reconstruct(inputs.model, inputs.protocol, inputs.targets, method=method, **options)
+    return dataclasses.replace(rec, quality=assess_inputs(inputs, [rec]).quality[rec.method])
+
+
+def assess(trial: Trajectories | MarkerTargets | str | Path, reconstructions: Sequence[Reconstruction],
+           model: Model | None = None, protocol: Protocol | None = None, /) -> "TrialAssessment":
+    """The assessment of a trial's reconstructions together (a PF and an LS one: their agreement
+    enters each verdict, as with ``exubio reconstruct --method both``): per method its quality
+    (``.quality[method].verdict``), determinacy, range limits, angle status; the label findings."""
+    from exubio.run.pipeline import assess_inputs
+
+    session = _session(model, protocol)
+    return assess_inputs(_inputs(trial, session), list(reconstructions))
+
+
+def angles(reconstruction: Reconstruction | np.ndarray, model: Model | None = None, /) -> dict[str, np.ndarray]:
+    """The anatomical angles (exubio.model.angles.ANATOMICAL_ANGLES: ISB SC, AC, ST, GH, HT, GH in
+    Phadke's sequence, elbow, forearm, wrist) of a reconstruction or of coordinates q (n, m), in
+    radians, by name; definitions and signs in exubio.model.angles."""
+    from exubio.model.angles import anatomical_table
+
+    q = reconstruction.q_rad if isinstance(reconstruction, Reconstruction) else np.asarray(reconstruction, dtype=float)
+    names, table = anatomical_table(model if model is not None else load_model(), np.atleast_2d(q))
+    return {n: table[:, j] for j, n in enumerate(names)}
+
+
+def simulate(motion: str = "abduction", model: Model | None = None, /, *, duration_s: float = 10.0,
+             rate_hz: float = 100.0, noise_mm: float = 0.0, sta_mm: float = 0.0, seed: int = 0) -> "SimulatedTrial":
+    """A simulated trial with a known truth (exubio.synth.simulate.simulate_trial): ``motion``
+    "abduction", "flexion" or "scaption"; ``.trajectories`` the markers (m), ``.q_true`` (rad)."""
+    from exubio.synth.simulate import simulate_trial
+
+    return simulate_trial(model if model is not None else load_model(), motion, duration_s=duration_s, rate_hz=rate_hz,
+                          noise_mm=noise_mm, sta_mm=sta_mm, seed=seed)
 
 
 def angle_status(reconstruction: Reconstruction, model: Model | None = None, protocol: Protocol | None = None, /):

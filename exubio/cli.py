@@ -179,18 +179,27 @@ def _check_output_folder(folder: Path, out: str) -> None:
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from exubio.calibration import format_report, parse_frames
+    from exubio.run.inputs import load_session
     from exubio.run.session import calibrate_file
 
     if Path(args.out).suffix.lower() not in (".yaml", ".yml"):
         raise InputError(f"--out {args.out}: expected a model file ending in .yaml")
     _check_output_folder(Path(args.out).parent, args.out)
-    _, _, report = calibrate_file(args.static, protocol_path=args.protocol, model_path=args.model,
-                                  body_mass_kg=args.body_mass, frames=parse_frames(args.static_frames),
-                                  out_path=args.out, overwrite=args.overwrite, functional_path=args.functional,
-                                  more_static_paths=tuple(args.also_static or ()), scapula_paths=tuple(args.scapula_trial or ()))
+    parse_frames(args.static_frames)  # a malformed --static-frames is refused before anything is read
+    session = load_session(model_path=args.model, protocol_path=args.protocol, body_mass_kg=args.body_mass)
+    _, _, report = calibrate_file(args.static, session=session, spec=_static_spec(args), out_path=args.out,
+                                  overwrite=args.overwrite)
     print(format_report(report))
     print(f"wrote {args.out}")
     return EXIT_OK
+
+
+def _static_spec(args: argparse.Namespace):
+    from exubio.run.session import StaticSpec
+
+    return StaticSpec(frames=args.static_frames, functional=Path(args.functional) if args.functional else None,
+                      more_statics=tuple(Path(p) for p in args.also_static or ()),
+                      scapula_trials=tuple(Path(p) for p in args.scapula_trial or ()))
 
 
 def _run_trial(job: TrialJob) -> tuple[str, TrialResult | None, int, str]:
@@ -240,7 +249,6 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
     from exubio.protocol.load import parse_relabel, relabel_trajectories
     from exubio.run.session import calibrate_session
 
-    model_path, extra = args.model, {}
     if args.also_static and not args.static:
         raise InputError(f"--also-static {args.also_static[0]}: further static poses refine the calibration on a static "
                          f"trial; give --static STATIC as well")
@@ -266,32 +274,31 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
     static_relabel = parse_relabel(args.static_relabel, option="--static-relabel")
     if static_relabel and not args.static:
         raise InputError(f"--static-relabel {args.static_relabel}: relabels the static trial; give --static STATIC too")
+    from exubio.run.inputs import load_session
+
+    session = load_session(model_path=args.model, protocol_path=args.protocol, body_mass_kg=args.body_mass)
+    calibration = None
     if args.static:
-        static = args.static
+        from exubio.run.session import calibrate_session
+
+        static = read_trial(args.static)
         if static_relabel:
-            static = relabel_trajectories(read_trial(args.static), static_relabel, option="--static-relabel")
-        model_file, report, calibration = calibrate_session(static, args.out, Path(args.static).stem,
-                                                           protocol_path=args.protocol, model_path=args.model,
-                                                           body_mass_kg=args.body_mass, frames_text=args.static_frames,
-                                                           overwrite=args.overwrite, functional_path=args.functional,
-                                                           more_static_paths=tuple(args.also_static or ()),
-                                                           scapula_paths=tuple(args.scapula_trial or ()))
+            static = relabel_trajectories(static, static_relabel, option="--static-relabel")
+        calibration = calibrate_session(static, session, args.out, Path(args.static).stem, spec=_static_spec(args),
+                                        overwrite=args.overwrite)
         if not args.quiet:
             from exubio.calibration import format_report
 
-            print(format_report(report))
-        print(f"calibrated model: {model_file}")
-        model_path = model_file
-        extra = {"calibration": calibration}
-        for f in calibration["labels"]:
+            print(format_report(calibration.report))
+        print(f"calibrated model: {calibration.model_file}")
+        for f in calibration.summary()["labels"]:
             print(f"static trial {args.static}: {f['severity']}: {f['kind']} ({', '.join(f['markers'])}): {f['evidence']}")
     from exubio.run.job import TrialJob, run_job
 
     methods = _methods(args.method)
-    jobs = [TrialJob(t, args.out, methods=tuple(methods), model=model_path, protocol=args.protocol,
-                     body_mass_kg=args.body_mass, overwrite=args.overwrite,
+    jobs = [TrialJob(t, args.out, methods=tuple(methods), session=session, overwrite=args.overwrite,
                      options={"pf": {"gravity": args.gravity}} if "pf" in methods else {},
-                     calibration=extra.get("calibration"), static_frames=None if args.static else args.static_frames,
+                     calibration=calibration, static_frames=None if args.static else args.static_frames,
                      report=not args.no_report, relabel=relabel, repair_labels=args.repair_labels) for t in args.trials]
     if len(jobs) == 1 and not args.scheduler:  # errors propagate to main(): one message, one exit code
         result = run_job(jobs[0], progress_factory=_progress_factory(not args.quiet))
@@ -354,19 +361,22 @@ def cmd_demo(args: argparse.Namespace) -> int:
     print("  synthetic arm abduction, 10 s at 100 Hz, 22 markers, 1 mm noise, 10 mm soft-tissue artefact;")
     print(f"  made by: {EXAMPLE_COMMAND}")
     print(f"reconstructing it with the potential-field (pf) and least-squares (ls) methods -> {out}")
-    outputs = reconstruct_file(c3d, out, methods=["pf", "ls"], overwrite=True,
-                               progress_factory=_progress_factory(not args.quiet))
+    from exubio.run.inputs import load_session
+    from exubio.run.pipeline import RunSettings
+
+    session = load_session()
+    outputs = reconstruct_file(c3d, out, methods=["pf", "ls"], session=session,
+                               settings=RunSettings(overwrite=True, progress_factory=_progress_factory(not args.quiet)))
     t_true, names, q_true = read_angles_csv(truth_csv)
     from exubio.model.angles import anatomical_table
     from exubio.io.results import read_npz_arrays
-    from exubio.model.load import load_model
     from exubio.trust.observability import AngleStatus
 
-    angle_names, true_angles = anatomical_table(load_model(), q_true)
+    angle_names, true_angles = anatomical_table(session.model, q_true)
     for recon, paths, summ in outputs:
         _print_result(recon, paths, summ)
         status = read_npz_arrays(paths["npz"], ("angle_status",))["angle_status"]
-        _, rec_angles = anatomical_table(load_model(), recon.q_rad)
+        _, rec_angles = anatomical_table(session.model, recon.q_rad)
         err = np.degrees(np.abs(np.angle(np.exp(1j * (rec_angles - true_angles)))))
         measured = {n: float(np.sqrt(np.mean(err[status[:, j] == AngleStatus.MEASURED, j] ** 2)))
                     for j, n in enumerate(angle_names) if (status[:, j] == AngleStatus.MEASURED).all()}
@@ -406,7 +416,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 
 def cmd_protocols(args: argparse.Namespace) -> int:
-    from exubio.run.pipeline import protocol_for_model
+    from exubio.run.inputs import protocol_for_model
     from exubio.model.load import load_model
     from exubio.protocol.load import read_protocol_mapping, resolve_protocol, shipped_protocols
 
@@ -512,12 +522,12 @@ def _slice(text: str | None) -> slice | None:
 def cmd_live(args: argparse.Namespace) -> int:
     from datetime import datetime, timezone
 
-    from exubio.run.live.app import run_live
+    from exubio.run.live.app import LiveControl, LiveOutput, run_live
     from exubio.run.live.causal import CausalOptions
     from exubio.run.live.display import Display
     from exubio.run.live.loop import LiveOptions
     from exubio.run.live.transport import LSLSource, load_pylsl
-    from exubio.run.pipeline import load_model_and_protocol
+    from exubio.run.inputs import load_model_and_protocol
 
     load_pylsl(args.lsl_config)  # the LSL configuration is set before pylsl is loaded
     model, protocol = load_model_and_protocol(model_path=args.model, protocol_path=args.protocol)
@@ -527,10 +537,10 @@ def cmd_live(args: argparse.Namespace) -> int:
     display = Display(sys.stderr, quiet=args.quiet)
     name = args.name or f"live_{datetime.now(timezone.utc).strftime('%Y%m%dT%H%M%SZ')}"
     try:
-        run = run_live(model, protocol, source, out_dir=args.out, name=name, options=options,
-                       static_frames=_slice(args.static_frames), publish_name=args.publish or None,
-                       overwrite=args.overwrite, report=not args.no_report, on_event=display.event,
-                       on_status=display.status, duration_s=args.duration)
+        output = LiveOutput(args.out, name, publish_name=args.publish or None, overwrite=args.overwrite,
+                            report=not args.no_report)
+        run = run_live(model, protocol, source, output, options=options, static_frames=_slice(args.static_frames),
+                       control=LiveControl(on_event=display.event, on_status=display.status, duration_s=args.duration))
     finally:
         display.close()
     rec = run.recording

@@ -6,6 +6,7 @@ files and labels, never inside these objects.
 """
 from __future__ import annotations
 
+import copyreg
 import enum
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -14,6 +15,14 @@ from typing import Any, Literal, Mapping
 import numpy as np
 
 from exubio.errors import InputError, ModelError
+
+# The read-only mappings inside Model and Protocol pickle as what they show, so that loaded objects
+# travel to pool and Dask workers (a session's model and protocol are parsed once, not per trial).
+def _read_only(mapping: dict) -> MappingProxyType:
+    return MappingProxyType(mapping)
+
+
+copyreg.pickle(MappingProxyType, lambda view: (_read_only, (dict(view),)))
 
 
 # --------------------------------------------------------------------------------------------
@@ -251,6 +260,7 @@ class MarkerSpec:
     landmark: str | None = None  # the bony landmark (model point of ``segment``) the marker is placed over
     cluster: str | None = None  # the rigid marker cluster it belongs to (e.g. an acromion cluster)
     landmark_offset_mm: float | None = None  # a lab's placement, accepted once: the landmark distance allowed
+    point: str | None = None  # the model point its protocol file names (``point:``), None when given by position
 
 
 @dataclass(frozen=True)
@@ -379,6 +389,7 @@ class Reconstruction:
     status:         (n_frames,) FrameStatus values.
     timings_s:      named wall times (build, initial, solve, ... total).
     info:           method-specific figures (iterations, mean spring deflection, ...).
+    quality:        the verdict and its reasons, once the trial is assessed (``verdict``).
     """
 
     method: str
@@ -397,7 +408,13 @@ class Reconstruction:
     timings_s: Mapping[str, float] = field(default_factory=dict)
     info: Mapping[str, Any] = field(default_factory=dict)
     gaps: tuple[Gap, ...] = ()
+    quality: Any = None  # once assessed (exubio.reconstruct): its verdict and reasons, exubio.trust.quality.Quality
 
     @property
     def n_frames(self) -> int:
         return int(self.q_rad.shape[0])
+
+    @property
+    def verdict(self) -> str | None:
+        """"ok", "check" or "fail" once assessed (the CLI's verdict for the same trial), else None."""
+        return None if self.quality is None else self.quality.verdict

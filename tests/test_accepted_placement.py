@@ -7,7 +7,7 @@ from exubio.trust import quality as Q
 from exubio.calibration import SCALE_BOUNDS
 from exubio.errors import ProtocolError
 from exubio.model.load import load_model
-from exubio.run.pipeline import protocol_for_model
+from exubio.run.inputs import protocol_for_model
 from exubio.io.resources import shipped_file
 
 CAL = {"source": "static.c3d", "landmark_offsets_mm": {"CLAV_AC": 66.0, "EPI_med": 45.0}}

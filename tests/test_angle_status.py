@@ -12,7 +12,7 @@ from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.methods.poses import held_mask
 from exubio.trust.observability import MODELLED_SHARE, AngleStatus, angle_determinacy
-from exubio.run.pipeline import load_model_and_protocol, protocol_for_model
+from exubio.run.inputs import load_model_and_protocol, protocol_for_model
 from exubio.io.resources import shipped_file
 from exubio.synth.simulate import reference_postures
 

@@ -59,21 +59,61 @@ def test_what_draws_results_never_imports_a_solver(module):
     assert not bad, f"{module} imports {bad}"
 
 
-def test_no_import_cycles_at_module_level():
-    """Module-level imports between exubio modules form no cycle (imports inside functions are
-    deferred on purpose and do not count)."""
+# The layers, lowest first: a module imports only from its own layer or below (the longest prefix
+# decides: the validation study's typed records sit below the report that draws them, the study
+# itself above the run layer it drives).
+LAYERS = (
+    ("exubio.errors", "exubio.types"),
+    ("exubio.io",),
+    ("exubio.model",),
+    ("exubio.protocol",),
+    ("exubio.prep", "exubio.export"),
+    ("exubio.backend",),
+    ("exubio.methods",),
+    ("exubio.calibration",),
+    ("exubio.literature",),
+    ("exubio.synth",),
+    ("exubio.trust",),
+    tuple(f"exubio.validation.{m}" for m in ("results", "codec", "settings", "checks", "paths")),
+    ("exubio.report",),
+    ("exubio.run",),
+    ("exubio.validation",),
+    ("exubio.api", "exubio.cli"),
+    ("exubio",),  # the package's face: its lazy names come from the API
+)
+
+
+def _graph() -> dict[str, set[str]]:
+    """exubio module -> the exubio modules it imports, at module level or inside functions alike."""
     mods = _modules()
     name = {rel: "exubio." + rel[:-3].replace("/", ".").removesuffix(".__init__") for rel in mods}
+    name = {rel: ("exubio" if n == "exubio.__init__" else n) for rel, n in name.items()}
     known = set(name.values())
     graph: dict[str, set[str]] = {}
     for rel, path in mods.items():
         deps = set()
-        for m in _imports(path, top_level_only=True):
+        for m in _imports(path):
             while m and m not in known:
                 m = m.rpartition(".")[0]
             if m and m != name[rel] and m != "exubio":
                 deps.add(m)
         graph[name[rel]] = deps
+    return graph
+
+
+def _layer(module: str) -> int | None:
+    best = None
+    for i, prefixes in enumerate(LAYERS):
+        for pre in prefixes:
+            if (module == pre or module.startswith(pre + ".")) and (best is None or len(pre) > best[1]):
+                best = (i, len(pre))
+    return None if best is None else best[0]
+
+
+def test_no_import_cycles():
+    """No cycle among exubio's modules, counting the imports inside functions too (a deferred
+    import hides a cycle from the interpreter, not from the design)."""
+    graph = _graph()
     state: dict[str, int] = {}
     stack: list[str] = []
 
@@ -91,6 +131,41 @@ def test_no_import_cycles_at_module_level():
     for n in sorted(graph):
         if n not in state:
             visit(n)
+
+
+def test_every_module_is_on_a_layer():
+    graph = _graph()
+    assert not [m for m in graph if _layer(m) is None and m != "exubio.data"]
+
+
+def test_imports_point_down_the_layers():
+    """A module imports only from its own layer or the layers below it (LAYERS)."""
+    up = sorted(f"{a} (layer {_layer(a)}) imports {b} (layer {_layer(b)})" for a, deps in _graph().items()
+                for b in deps if _layer(a) is not None and _layer(b) is not None and _layer(b) > _layer(a))
+    assert not up, "\n".join(up)
+
+
+def test_the_checker_sees_an_import_inside_a_function(tmp_path):
+    """_imports reads the imports inside functions (what the cycle and layer tests rely on)."""
+    f = tmp_path / "m.py"
+    f.write_text("def f():\n    from exubio.run.pipeline import reconstruct\n", encoding="utf-8")
+    assert "exubio.run.pipeline" in _imports(f)
+    assert "exubio.run.pipeline" not in _imports(f, top_level_only=True)
+
+
+def _parameters(fn: ast.FunctionDef | ast.AsyncFunctionDef) -> int:
+    a = fn.args
+    n = len(a.posonlyargs) + len(a.args) + len(a.kwonlyargs) + bool(a.vararg) + bool(a.kwarg)
+    return n - bool(a.args and a.args[0].arg in ("self", "cls"))
+
+
+def test_no_function_of_the_run_layer_takes_more_than_8_parameters():
+    """The run layer passes objects (Session, RunSettings, SessionCalibration, TrialJob), not long
+    keyword lists."""
+    long = sorted(f"{rel}:{fn.lineno} {fn.name} ({_parameters(fn)})" for rel, path in _modules().items()
+                  if rel.startswith("run/") for fn in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+                  if isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)) and _parameters(fn) > 8)
+    assert not long, long
 
 
 def test_every_subpackage_is_installed():

@@ -66,7 +66,7 @@ def test_mirrored_right_arm_read_as_left_gives_the_same_angles(tmp_path, method)
 
 
 def _load(tmp_path, side, prefix):
-    from exubio.run.pipeline import protocol_for_model
+    from exubio.run.inputs import protocol_for_model
 
     return protocol_for_model(load_model(), _arm_protocol(tmp_path, side, prefix))
 
@@ -113,7 +113,7 @@ def test_two_protocols_for_one_arm_are_refused(tmp_path, capsys):
 
 def test_side_must_be_right_or_left(tmp_path):
     from exubio.errors import ProtocolError
-    from exubio.run.pipeline import protocol_for_model
+    from exubio.run.inputs import protocol_for_model
 
     data = read_protocol_mapping(BASE)
     data["side"] = "both"

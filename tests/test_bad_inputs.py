@@ -20,7 +20,7 @@ from exubio.errors import InputError
 from exubio.io.c3d import read_c3d, write_c3d
 from exubio.io.trc import write_trc
 from exubio.model.load import DEFAULT_MODEL, load_model
-from exubio.run.pipeline import DEFAULT_PROTOCOL
+from exubio.run.inputs import DEFAULT_PROTOCOL
 from exubio.synth.simulate import Motion, simulate_trial
 from exubio.types import Trajectories
 

@@ -21,7 +21,8 @@ from exubio.trust.evaluate import residual_statistics
 from exubio.io.c3d import write_c3d
 from exubio.model.kinematics import Kinematics
 from exubio.model.load import load_model, save_model
-from exubio.run.pipeline import load_model_and_protocol, reconstruct, reconstruct_file
+from exubio.run.pipeline import reconstruct, reconstruct_file
+from exubio.run.inputs import load_model_and_protocol, load_session
 from exubio.prep.targets import prepare_targets
 from exubio.protocol.load import load_protocol
 from exubio.io.resources import shipped_file
@@ -323,7 +324,7 @@ def test_a_protocol_marker_that_never_appears(tmp_path, generic):
     custom.write_text(text, encoding="utf-8")
     trial = tmp_path / "no_seml_elb.c3d"
     _messy_trial(model, trial, drop=("SEML", "ELB"))
-    (recon, _, summ), = reconstruct_file(trial, tmp_path / "out2", methods=["ls"], protocol_path=custom)
+    (recon, _, summ), = reconstruct_file(trial, tmp_path / "out2", methods=["ls"], session=load_session(protocol_path=custom))
     assert np.isnan(recon.residuals_m[:, recon.marker_names.index("SEML")]).all()
     assert summ["residual_mm"]["per_marker_rmse"]["SEML"] is None
     assert np.abs(recon.constraint).max() < 1e-8

@@ -14,8 +14,9 @@ from exubio.export import marker_table, write_biomod, write_osim
 from exubio.model.kinematics import Kinematics
 from exubio.model.load import load_model
 from exubio.io.results import read_npz
-from exubio.run.pipeline import protocol_for_model, reconstruct_file
-from exubio.run.session import calibrate_file
+from exubio.run.pipeline import reconstruct_file
+from exubio.run.inputs import load_session, protocol_for_model
+from exubio.run.session import StaticSpec, calibrate_file
 from exubio.io.resources import shipped_file
 
 @pytest.fixture(autouse=True)
@@ -38,7 +39,7 @@ def model_files(tmp_path_factory):
     """The generic model file and one calibrated as `exubio calibrate` does (first 0.2 s of the
     shipped example, written by save_model)."""
     subject = tmp_path_factory.mktemp("calibrated") / "subject.yaml"
-    calibrate_file(EXAMPLE, frames=slice(0, 20), out_path=subject)
+    calibrate_file(EXAMPLE, spec=StaticSpec(frames="0:20"), out_path=subject)
     return {"generic": None, "calibrated": subject}
 
 
@@ -191,9 +192,10 @@ def reconstruction(tmp_path_factory, model_files):
     """`exubio reconstruct` (LS) of the shipped example with each model: its .mot and q."""
     out = {}
     for key, path in model_files.items():
-        model = load_model() if path is None else load_model(path)
+        session = load_session(model_path=path)
+        model = session.model
         folder = tmp_path_factory.mktemp(f"recon_{key}")
-        [(_, paths, _)] = reconstruct_file(EXAMPLE, folder, methods=["ls"], model=model)
+        [(_, paths, _)] = reconstruct_file(EXAMPLE, folder, methods=["ls"], session=session)
         out[model.name] = read_npz(paths["npz"]), paths["mot"]  # with the model points (streamed to the file)
     return out
 

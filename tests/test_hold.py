@@ -8,7 +8,8 @@ from exubio.backend.exudyn_system import PFSystem, SpringSet
 from exubio.errors import ModelError, ProtocolError
 from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
-from exubio.run.pipeline import DEFAULT_PROTOCOL, load_model_and_protocol, reconstruct
+from exubio.run.pipeline import reconstruct
+from exubio.run.inputs import DEFAULT_PROTOCOL, load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.protocol.load import load_protocol
 from exubio.synth.simulate import Motion, simulate_trial

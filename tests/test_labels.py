@@ -17,7 +17,7 @@ from exubio.trust import labels as L
 from exubio.calibration import scale_model
 from exubio.errors import InputError
 from exubio.model.kinematics import Kinematics
-from exubio.run.pipeline import protocol_for_model
+from exubio.run.inputs import protocol_for_model
 from exubio.synth.simulate import simulate_trial
 
 REPO = Path(__file__).resolve().parents[1]

@@ -26,7 +26,7 @@ from exubio.run.live.loop import LiveOptions, LiveSession, angles_measured, reco
 from exubio.run.live.record import read_recorded_markers, write_recording
 from exubio.run.live.sources import Faults, ReplaySource, StreamInfo
 from exubio.run.live.transport import marker_labels
-from exubio.run.pipeline import load_model_and_protocol
+from exubio.run.inputs import load_model_and_protocol
 from exubio.io.resources import shipped_file
 from exubio.types import Trajectories
 

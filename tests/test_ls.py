@@ -7,7 +7,7 @@ import pytest
 from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.methods.ls import LSOptions, reconstruct_ls
-from exubio.run.pipeline import load_model_and_protocol
+from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.synth.simulate import Motion, simulate_trial
 from exubio.types import MarkerTargets

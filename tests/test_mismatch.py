@@ -15,7 +15,8 @@ from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.trust.mismatch import BIAS_MM, CONTACT_OFFSET_MM, assess_mismatch, segment_evidence
 from exubio.synth.perturb import ModelPerturbation
-from exubio.run.pipeline import load_model_and_protocol, reconstruct
+from exubio.run.pipeline import reconstruct
+from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.synth.simulate import reference_postures, simulate_trial
 from exubio.validation.mismatch import measured_angle_errors
@@ -143,12 +144,14 @@ def test_thresholds_sit_between_what_noise_gives_and_what_a_costly_mismatch_give
 def test_real_trials_with_their_labels_right_raise_no_mismatch(tmp_path, trial, static):
     from exubio.io.trial import read_trial
     from exubio.model.load import load_model
-    from exubio.run.pipeline import protocol_for_model
+    from exubio.run.inputs import protocol_for_model
     from exubio.run.session import calibrate_session
 
     session = ROOT / "protocols" / "examples" / "kinova_martin_session.yaml" if "kinova" in trial else None
-    model_file, _, _ = calibrate_session(SHARED / "c3d" / static, tmp_path, "static", protocol_path=session)
-    model = load_model(model_file)
+    from exubio.run.inputs import load_session
+
+    cal = calibrate_session(SHARED / "c3d" / static, load_session(protocol_path=session), tmp_path, "static")
+    model = load_model(cal.model_file)
     protocol = protocol_for_model(model, session)
     targets = prepare_targets(read_trial(SHARED / "c3d" / trial), protocol)
     rec = reconstruct(model, protocol, targets, method="ls")

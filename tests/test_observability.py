@@ -6,7 +6,7 @@ import numpy as np
 from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.trust.observability import UNDETERMINED_DEG_PER_MM, determinacy
-from exubio.run.pipeline import load_model_and_protocol
+from exubio.run.inputs import load_model_and_protocol
 
 
 def _pose(names, **deg):

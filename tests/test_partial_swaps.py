@@ -11,7 +11,7 @@ from exubio.cli import main
 from exubio.io.c3d import write_c3d
 from exubio.io.trial import read_trial
 from exubio.trust.label_ranges import find_partial_swaps, repair_partial_swaps
-from exubio.run.pipeline import load_model_and_protocol
+from exubio.run.inputs import load_model_and_protocol
 
 C3D = Path(__file__).resolve().parents[2] / "shared" / "data" / "c3d"
 pytestmark = pytest.mark.skipif(not C3D.is_dir(), reason=f"real data folder {C3D} is absent")

@@ -10,7 +10,7 @@ import pytest
 from exubio.trust import quality as Q
 from exubio.io.trial import read_trial
 from exubio.trust.labels import check_trial, pair_distances
-from exubio.run.pipeline import load_model_and_protocol
+from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.protocol.load import relabel_trajectories
 

@@ -13,7 +13,8 @@ from exubio.model.kinematics import Kinematics  # noqa: E402
 from exubio.methods.common import tracked_points  # noqa: E402
 from exubio.methods.constraints import project_on_constraints  # noqa: E402
 from exubio.methods.pf import PFOptions, integration_step, reconstruct_pf  # noqa: E402
-from exubio.run.pipeline import load_model_and_protocol, reconstruct  # noqa: E402
+from exubio.run.pipeline import reconstruct  # noqa: E402
+from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets  # noqa: E402
 from exubio.synth.simulate import Motion, simulate_trial  # noqa: E402
 from exubio.types import MarkerTargets  # noqa: E402
@@ -206,7 +207,8 @@ def test_unobserved_segments_are_held_at_their_start_posture():
     and wrist at the start posture, as LS holds them, and both still track the rest."""
     import dataclasses
 
-    from exubio.run.pipeline import load_model_and_protocol, reconstruct
+    from exubio.run.pipeline import reconstruct
+    from exubio.run.inputs import load_model_and_protocol
     from exubio.prep.targets import prepare_targets
     from exubio.synth.simulate import Motion, simulate_trial
 

@@ -9,7 +9,7 @@ from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.methods.ls import LSOptions, reconstruct_ls
 from exubio.model.load import load_model, model_to_dict, save_model
-from exubio.run.pipeline import load_model_and_protocol
+from exubio.run.inputs import load_model_and_protocol
 from exubio.model.ranges import limit_report, violation, wrap_into_range
 from exubio.types import MarkerTargets
 

@@ -12,7 +12,8 @@ from exubio.calibration import calibrate_model, calibrated_protocol
 from exubio.trust.evaluate import residual_statistics
 from exubio.io.trial import read_trial
 from exubio.model.load import load_model, save_model
-from exubio.run.pipeline import load_model_and_protocol, reconstruct
+from exubio.run.pipeline import reconstruct
+from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.io.resources import shipped_file
 

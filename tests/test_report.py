@@ -243,7 +243,7 @@ def test_ludewig_values_match_the_published_tables():
 # Observability and the real trials
 # --------------------------------------------------------------------------------------------
 def test_undetermined_coordinates():
-    from exubio.run.pipeline import load_model_and_protocol
+    from exubio.run.inputs import load_model_and_protocol
 
     model, protocol = load_model_and_protocol()
     q = np.zeros((1, model.n_coordinates))

@@ -14,7 +14,8 @@ from exubio.calibration.ellipsoid import surface_distance
 from exubio.calibration.scapula_motion import MIN_POSTURES, fit_scapula_motion
 from exubio.errors import InputError
 from exubio.model.kinematics import Kinematics
-from exubio.run.pipeline import load_model_and_protocol, reconstruct
+from exubio.run.pipeline import reconstruct
+from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.io.resources import shipped_file
 from exubio.synth.simulate import simulate_trial

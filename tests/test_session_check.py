@@ -9,7 +9,7 @@ import pytest
 from exubio.cli import main
 from exubio.io.trial import read_trial
 from exubio.trust.labels import pair_distances
-from exubio.run.pipeline import load_model_and_protocol
+from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.trust.session_check import placed_anew, static_consistency
 

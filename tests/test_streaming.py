@@ -15,7 +15,7 @@ from exubio.io.streamed import ArrayFile
 from exubio.methods.common import Collector, chunk_bounds
 from exubio.methods.ls import reconstruct_ls, stream_ls
 from exubio.methods.pf import PFOptions, reconstruct_pf, stream_pf
-from exubio.run.pipeline import load_inputs, reconstruct_file
+from exubio.run.pipeline import RunSettings, load_inputs, reconstruct_file
 from exubio.io.resources import shipped_file
 
 EXAMPLE = shipped_file("exubio.data", "example_abduction.c3d", "exubio/data")
@@ -99,8 +99,8 @@ def test_streamed_npz_equals_the_in_memory_one(inputs, tmp_path):
 
 
 def test_pipeline_files_do_not_depend_on_the_chunk_size(tmp_path):
-    whole = reconstruct_file(EXAMPLE, tmp_path / "whole", methods=["pf", "ls"], chunk_frames=100000)
-    small = reconstruct_file(EXAMPLE, tmp_path / "small", methods=["pf", "ls"], chunk_frames=60)
+    whole = reconstruct_file(EXAMPLE, tmp_path / "whole", methods=["pf", "ls"], settings=RunSettings(chunk_frames=100000))
+    small = reconstruct_file(EXAMPLE, tmp_path / "small", methods=["pf", "ls"], settings=RunSettings(chunk_frames=60))
     assert all(r.model_points_m is None for r, _, _ in whole + small)  # left on disk, not in memory
     for (_, pa, sa), (_, pb, sb) in zip(whole, small):
         for kind in ("csv", "mot"):
@@ -116,8 +116,8 @@ def test_pipeline_files_do_not_depend_on_the_chunk_size(tmp_path):
 
 def test_a_failing_run_leaves_no_part_file(tmp_path):
     with pytest.raises(ReconstructionError):
-        reconstruct_file(EXAMPLE, tmp_path, methods=["pf"], chunk_frames=50,
-                         method_options={"pf": {"divergence_deflection_m": 1e-4}})
+        reconstruct_file(EXAMPLE, tmp_path, methods=["pf"], settings=RunSettings(
+            chunk_frames=50, method_options={"pf": {"divergence_deflection_m": 1e-4}}))
     assert list(tmp_path.iterdir()) == []
 
 

@@ -13,7 +13,8 @@ from exubio.errors import InputError
 from exubio.io.c3d import write_c3d
 from exubio.io.trial import read_trial
 from exubio.model.load import load_model
-from exubio.run.pipeline import load_inputs, load_model_and_protocol, protocol_for_model
+from exubio.run.pipeline import load_inputs
+from exubio.run.inputs import load_model_and_protocol, protocol_for_model
 from exubio.io.resources import shipped_file
 from exubio.synth.simulate import simulate_trial
 from exubio.trust.thorax_check import check_thorax_labels, thorax_label_fit

@@ -23,6 +23,7 @@ import pytest
 from exubio.errors import InputError
 from exubio.io.results import read_npz, read_npz_metadata, write_npz
 from exubio.model.load import DEFAULT_MODEL
+from exubio.run.inputs import load_session
 from exubio.run.pipeline import reconstruct_file
 from exubio.io.resources import shipped_file
 from exubio.report.viewer import MAX_ANIMATION_FRAMES, find_results, write_view
@@ -238,7 +239,7 @@ def test_subject_model_beside_moved_results_and_a_wrong_model_is_flagged(tmp_pat
     bigger = ", ".join(f"{float(v) * 1.03:.6f}" for v in radii.group(1).split(","))
     subject = run / "subject.model.yaml"
     subject.write_text(text.replace(radii.group(0), f"radii_mm: [{bigger}]"), encoding="utf-8")
-    reconstruct_file(EXAMPLE, run, methods=["ls"], model_path=subject)
+    reconstruct_file(EXAMPLE, run, methods=["ls"], session=load_session(model_path=subject))
     moved = tmp_path / "moved"
     shutil.move(str(run), str(moved))
     out = write_view([moved / "example_abduction.ls.npz"], tmp_path / "v.html")

@@ -3,29 +3,17 @@ itself, and a protocol bound to a calibrated model."""
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
 
-from exubio.errors import ProtocolError
 from exubio.model.kinematics import Kinematics
 from exubio.types import Model, Protocol
 
 
 def _declared_points(protocol: Protocol) -> dict[str, str]:
     """marker -> the ``point:`` its protocol file names (markers given by position: absent)."""
-    src = Path(protocol.source) if protocol.source else None
-    if src is None or not src.is_file():
-        return {}
-    from exubio.protocol.load import read_protocol_mapping
-
-    try:  # a session file's markers may come from the protocol it extends
-        raw = read_protocol_mapping(src).get("markers", {}) or {}
-    except ProtocolError:
-        return {}
-    return {name: spec["point"] for name, spec in raw.items()
-            if isinstance(spec, Mapping) and isinstance(spec.get("point"), str)}
+    return {m.name: m.point for m in protocol.markers if m.point}
 
 
 def joint_centre_points(model: Model, segment: str, /) -> set[str]:

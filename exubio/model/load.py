@@ -81,8 +81,12 @@ def load_model(path: str | Path = DEFAULT_MODEL, /, *, body_mass_kg: float | Non
     """Read a model YAML: a path, or the name of a shipped model ("upper_extremity").
     ``body_mass_kg`` overrides the file's body mass (inertia scales)."""
     path = resolve(path, "exubio.models", "models", "upper_extremity.yaml")
-    data = read_yaml(path, error=ModelError)
-    src = str(path)
+    return model_from_mapping(read_yaml(path, error=ModelError), str(path), name=path.stem, body_mass_kg=body_mass_kg)
+
+
+def model_from_mapping(data: Any, src: str, /, *, name: str, body_mass_kg: float | None = None) -> Model:
+    """The Model a model YAML's mapping describes (``src``: where it came from, named in errors and
+    kept as ``Model.source``; ``name``: the model's name when the mapping has none)."""
     check_keys(data, _TOP_KEYS, src, error=ModelError, required={"schema_version", "segments", "ellipsoid"})
     if isinstance(data["schema_version"], bool) or data["schema_version"] != SCHEMA_VERSION:
         raise ModelError(f"{src}: schema_version {data['schema_version']!r} is not supported (expected {SCHEMA_VERSION})")
@@ -162,7 +166,7 @@ def load_model(path: str | Path = DEFAULT_MODEL, /, *, body_mass_kg: float | Non
         raise ModelError(f"{src}: calibration: expected a mapping (what a calibration recorded), "
                          f"got {type(data['calibration']).__name__}")
     metadata = {"side": data.get("side", "right"), "calibration": data.get("calibration")}
-    return Model(name=str(data.get("name", path.stem)), segments=tuple(segments), ellipsoid=ellipsoid,
+    return Model(name=str(data.get("name", name)), segments=tuple(segments), ellipsoid=ellipsoid,
                  body_mass_kg=mass, source=src, metadata=metadata)
 
 
@@ -372,6 +376,14 @@ def model_to_dict(model: Model, /, *, calibration: Mapping[str, Any] | None = No
     if calibration is not None:
         out["calibration"] = _plain(calibration)
     return out
+
+
+def as_written(model: Model, /, *, calibration: Mapping[str, Any] | None, source: str | Path) -> Model:
+    """``model`` exactly as ``load_model`` reads it back from the file ``save_model`` writes (points
+    through mm, the calibration as plain data; YAML keeps every float exactly), with ``source``
+    the file: what a run reconstructs with after it wrote the file, without reading it again."""
+    return model_from_mapping(_plain(model_to_dict(model, calibration=calibration)), str(source),
+                              name=Path(source).stem)
 
 
 def save_model(model: Model, path: str | Path, *, calibration: Mapping[str, Any] | None) -> Path:

@@ -511,6 +511,15 @@ def spline_derivatives(
 # --------------------------------------------------------------------------------------------
 # The whole chain
 # --------------------------------------------------------------------------------------------
+def preparation_key(protocol: Protocol, /) -> tuple:
+    """What :func:`prepare_targets` reads of a protocol: two protocols of equal keys prepare a trial
+    into the same targets (a protocol bound to a calibrated model differs only in its markers'
+    local positions, which preparation does not read)."""
+    return (protocol.name, protocol.source, tuple((m.name, m.aliases, m.optional) for m in protocol.markers),
+            protocol.thorax_frame, protocol.cutoff_hz, protocol.filter_order, tuple(sorted(protocol.relabel.items())),
+            protocol.side)
+
+
 def prepare_targets(
     trajectories: Trajectories,
     protocol: Protocol,

@@ -461,6 +461,7 @@ def _parse_marker(
         landmark=landmark,
         cluster=cluster,
         landmark_offset_mm=offset,
+        point=spec["point"] if has_point else None,
     )
 
 

@@ -20,35 +20,35 @@ from typing import Any, Callable, Mapping
 from exubio.errors import PartialReconstructionError
 from exubio.io import results
 from exubio.io.trial import read_trial
+from exubio.prep.targets import preparation_key, prepare_targets
 from exubio.protocol.load import relabel_trajectories
-from exubio.run.pipeline import Method, reconstruct_file
+from exubio.run.inputs import Session, load_session
+from exubio.run.pipeline import Method, Prepared, RunSettings, reconstruct_file
+from exubio.run.session import SessionCalibration
 
 
 @dataclass(frozen=True)
 class TrialJob:
     """trial: the C3D/TRC file; out_dir: where its results go (named after the trial file);
-    methods: "pf" and/or "ls"; model: a model file (e.g. a session's calibrated model), else the
-    shipped generic one; protocol: a protocol file, else the shipped one; options: per method its
-    options object (or a dict of its fields, turned into the object here); static_frames: calibrate
-    on these frames of the trial itself ("0:50"); calibration: the session's calibration summary
-    (exubio.run.session.calibrate_session), which goes into every summary and verdict;
-    static_reference: the session static's pair distances the label checks compare with;
-    relabel: this trial's labels read as other labels ({file label: read as}), for this trial only
-    (exubio.protocol.load.relabel_trajectories), before the protocol's own relabel; repair_labels: exchange
-    back labels exchanged in part of the trial (exubio.trust.label_ranges), reported frame range by range."""
+    methods: "pf" and/or "ls"; session: the model and protocol, loaded once for the session
+    (exubio.run.inputs.Session; None: the shipped ones); options: per method its options object
+    (or a dict of its fields, turned into the object here); static_frames: calibrate on these
+    frames of the trial itself ("0:50"); calibration: the session's calibration
+    (exubio.run.session.SessionCalibration: its model, report and static reference go into every
+    summary and verdict); relabel: this trial's labels read as other labels ({file label: read
+    as}), for this trial only (exubio.protocol.load.relabel_trajectories), before the protocol's
+    own relabel; repair_labels: exchange back labels exchanged in part of the trial
+    (exubio.trust.label_ranges), reported frame range by range."""
 
     trial: Path
     out_dir: Path
     methods: tuple[str, ...] = ("pf",)
-    model: Path | None = None
-    protocol: Path | None = None
-    body_mass_kg: float | None = None
+    session: Session | None = None
     options: Mapping[str, Any] = field(default_factory=dict)
     static_frames: str | None = None
     report: bool = True
     overwrite: bool = False
-    calibration: Mapping[str, Any] | None = None
-    static_reference: Any = None
+    calibration: SessionCalibration | None = None
     relabel: Mapping[str, str] = field(default_factory=dict)
     repair_labels: bool = False
 
@@ -59,9 +59,6 @@ class TrialJob:
         set_(self, "trial", Path(self.trial))
         set_(self, "out_dir", Path(self.out_dir))
         set_(self, "methods", tuple(Method.parse(m).value for m in self.methods))
-        for name in ("model", "protocol"):
-            if getattr(self, name) is not None:
-                set_(self, name, Path(getattr(self, name)))
         set_(self, "options", {m: method_spec(m).make_options(self.options.get(m)) for m in self.methods})
 
 
@@ -115,29 +112,29 @@ def run_job(job: TrialJob, /, *, progress_factory: Callable[[str, int], Callable
 
 
 def _run_job(job: TrialJob, progress_factory: Callable[[str, int], Callable[[int], None]] | None) -> TrialResult:
-    from exubio.run.session import calibrate_session
-
     stem = job.trial.stem
+    session = job.session if job.session is not None else load_session()
+    calibration, calibrated, prepared = job.calibration, None, None
     trajectories = None  # read here only when it is relabelled or calibrated on its own frames: then read once
-    model, calibration, summary_cal = job.model, None, job.calibration
     if job.relabel:
         trajectories = relabel_trajectories(read_trial(job.trial), job.relabel)
     if job.static_frames:
+        from exubio.run.session import StaticSpec, calibrate_session
+
         trajectories = trajectories if trajectories is not None else read_trial(job.trial)
-        model, report, summary_cal = calibrate_session(trajectories, job.out_dir, stem, protocol_path=job.protocol,
-                                                       model_path=job.model, body_mass_kg=job.body_mass_kg,
-                                                       frames_text=job.static_frames, overwrite=job.overwrite,
-                                                       reference=False)
-        calibration = Calibrated(str(model), report)
-    extra = {"calibration": summary_cal} if summary_cal else {}
-    reference = job.static_reference if job.static_reference is not None else (summary_cal or {}).get("_reference")
+        static = prepare_targets(trajectories, session.generic_protocol)  # the calibration's and the trial's
+        calibration = calibrate_session(trajectories, session, job.out_dir, stem, spec=StaticSpec(frames=job.static_frames),
+                                        overwrite=job.overwrite, reference=False, targets=static)
+        calibrated = Calibrated(str(calibration.model_file), calibration.report)
+        prepared = Prepared(preparation_key(session.generic_protocol), static)
+    if calibration is not None:
+        session = calibration.session
+    settings = RunSettings(method_options=dict(job.options), overwrite=job.overwrite, repair_labels=job.repair_labels,
+                           progress_factory=progress_factory)
     failed: dict[str, str] = {}
     try:
-        outputs = reconstruct_file(job.trial, job.out_dir, methods=list(job.methods), trajectories=trajectories,
-                                   model_path=model, protocol_path=job.protocol, body_mass_kg=job.body_mass_kg,
-                                   overwrite=job.overwrite, method_options=dict(job.options), summary_extra=extra,
-                                   progress_factory=progress_factory, calibration=summary_cal,
-                                   static_reference=reference, repair_labels=job.repair_labels)
+        outputs = reconstruct_file(job.trial, job.out_dir, methods=list(job.methods), session=session, settings=settings,
+                                   trajectories=trajectories, calibration=calibration, prepared=prepared)
     except PartialReconstructionError as exc:  # one method failed, the others' results are written
         outputs, failed = exc.outputs, dict(exc.failures)
     methods = tuple(MethodResult(r.method, {k: str(v) for k, v in paths.items()}, summ) for r, paths, summ in outputs)
@@ -145,7 +142,7 @@ def _run_job(job: TrialJob, progress_factory: Callable[[str, int], Callable[[int
     if len(outputs) == 2:
         agree = outputs[0][2].get("pf_ls_agreement_deg") or {}
         agreement = {k: v for k, v in agree.items() if isinstance(v, float)}
-    result = TrialResult(str(job.trial), methods, agreement, calibration, failed=failed)
+    result = TrialResult(str(job.trial), methods, agreement, calibrated, failed=failed)
     if job.report:
         from exubio.report.trial_report import build_trial_report
 

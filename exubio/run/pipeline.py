@@ -10,27 +10,22 @@ from __future__ import annotations
 import enum
 import logging
 import platform
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
 import exubio
-from exubio.errors import InputError, PartialReconstructionError, ProtocolError, ReconstructionError
+from exubio.errors import InputError, PartialReconstructionError, ReconstructionError
 from exubio.trust.evaluate import summary
 from exubio.io import results
 from exubio.io.trial import read_trial
-from exubio.model.load import DEFAULT_MODEL, load_model
-from exubio.prep.targets import prepare_targets
-from exubio.protocol.load import check_landmarks, load_protocol
-from exubio.io.resources import shipped_file
+from exubio.prep.targets import preparation_key, prepare_targets
+from exubio.run.inputs import Session, load_session
 from exubio.types import MarkerTargets, Model, Protocol, Reconstruction, Trajectories
 
 log = logging.getLogger(__name__)
-
-DEFAULT_PROTOCOL = shipped_file("exubio.protocols", "upper_limb_21.yaml", "protocols")
-
 
 class Method(str, enum.Enum):
     PF = "pf"  # potential field (Exudyn forward dynamics)
@@ -75,79 +70,60 @@ in part of the trial, ``repaired``: exchanged back before preparing (``--repair-
     dropped: tuple[str, ...] = ()
     partial_swaps: tuple = ()  # labels exchanged in part of the trial (exubio.trust.label_ranges)
     repaired: bool = False  # ... and exchanged back (--repair-labels)
+    generic_model: Model | None = None  # what the label checks expect (exubio.run.inputs.Session)
+    generic_protocol: Protocol | None = None
 
 
-def protocol_for_model(model: Model, protocol_path: str | Path | None = None, /) -> Protocol:
-    """Load a protocol against a model; a calibrated model rebinds the markers to the points the
-    calibration registered for them."""
-    points = {s.name: dict(s.points) for s in model.segments}
-    protocol = load_protocol(protocol_path or DEFAULT_PROTOCOL, segments=model.segment_names, model_points=points,
-                             coordinates=model.coordinate_names)
-    check_landmarks(protocol, points)
-    check_held(model, protocol)
-    if model.metadata.get("calibration"):
-        from exubio.calibration import calibrated_protocol
+@dataclass(frozen=True)
+class Prepared:
+    """Targets a trial was already prepared into, with the preparation_key of the protocol used
+    (the calibration's, when a trial is calibrated on its own frames): reused when the trial's
+    protocol prepares it the same way."""
 
-        protocol = calibrated_protocol(protocol, model)
-    return protocol
+    key: tuple
+    targets: MarkerTargets
 
 
-def check_held(model: Model, protocol: Protocol, /) -> None:
-    """Refuse (ProtocolError naming the protocol's ``hold`` key) a hold that leaves the methods
-    nothing to solve: every coordinate held, or fewer coordinates free in the chain that moves the
-    ellipsoid's contact points than there are contact constraints (they could not be met: a singular
-    system in both methods)."""
-    held = set(protocol.held_coordinates)
-    names = model.coordinate_names
-    where = f"{protocol.source or protocol.name}: hold"
-    if names and held >= set(names):
-        raise ProtocolError(f"{where}: holds every coordinate of the model ({len(names)}); nothing is left for the "
-                            f"markers to determine: hold fewer (thoracoscapular_9 holds sc_posterior_rotation only)")
-    by_name = {s.name: s for s in model.segments}
-    for segment in sorted({seg for seg, _ in model.ellipsoid.contact_points}):
-        chain, name = [], segment
-        while name in by_name:
-            s = by_name[name]
-            chain = list(s.joint.coordinates if s.joint else ()) + chain
-            name = s.parent
-        free = [c for c in chain if c not in held]
-        n_constraints = sum(seg == segment for seg, _ in model.ellipsoid.contact_points)
-        if chain and len(free) < n_constraints:
-            raise ProtocolError(
-                f"{where}: leaves {len(free)} of the coordinates that move the {segment} free ({free or 'none'} of "
-                f"{chain}); its {n_constraints} points on the thorax ellipsoid need at least {n_constraints}: hold fewer")
+@dataclass(frozen=True)
+class RunSettings:
+    """How the trials of a run are run: per method its options object (or a dict of its fields),
+    ``overwrite`` earlier results, the chunk size of the streamed result (frames), ``repair_labels``
+    (exchange back labels exchanged in part of a trial), ``progress_factory`` (method, frames) ->
+    a callback told the frames done."""
+
+    method_options: Mapping[str, Any] = field(default_factory=dict)
+    overwrite: bool = False
+    chunk_frames: int | None = None
+    repair_labels: bool = False
+    progress_factory: Callable[[str, int], Callable[[int], None]] | None = None  # per method: a progress callback
 
 
-def load_model_and_protocol(*, model_path: str | Path | None = None, protocol_path: str | Path | None = None,
-                            body_mass_kg: float | None = None) -> tuple[Model, Protocol]:
-    model = load_model(model_path or DEFAULT_MODEL, body_mass_kg=body_mass_kg)
-    return model, protocol_for_model(model, protocol_path)
-
-
-def load_inputs(trial_path: str | Path | Trajectories, /, *, model_path: str | Path | None = None,
-                protocol_path: str | Path | None = None, body_mass_kg: float | None = None,
-                model: Model | None = None, repair_labels: bool = False) -> TrialInputs:
-    """Read the trial (or take it, read already), the model and the protocol, check the labels that
-    must be right before anything is computed (thorax landmarks, missing markers, labels exchanged
-    in part of the trial: repaired with ``repair_labels``), and prepare the marker targets."""
-    traj = trial_path if isinstance(trial_path, Trajectories) else read_trial(trial_path)
-    if model is None:
-        model, protocol = load_model_and_protocol(model_path=model_path, protocol_path=protocol_path,
-                                                  body_mass_kg=body_mass_kg)
-    else:
-        protocol = protocol_for_model(model, protocol_path)
+def load_inputs(trial: str | Path | Trajectories, session: Session | None = None, /, *, repair_labels: bool = False,
+                prepared: Prepared | None = None) -> TrialInputs:
+    """Read the trial (or take it, read already), check the labels that must be right before
+    anything is computed (thorax landmarks, missing markers, labels exchanged in part of the trial:
+    repaired with ``repair_labels``), and prepare the marker targets (or take ``prepared``, when
+    the protocol prepares the trial the same way). ``session``: default the shipped model and
+    protocol (exubio.run.inputs.load_session)."""
+    from exubio.trust.label_ranges import find_partial_swaps, repair_partial_swaps
     from exubio.trust.missing_markers import drop_missing_markers
     from exubio.trust.thorax_check import check_thorax_labels
 
-    from exubio.trust.label_ranges import find_partial_swaps, repair_partial_swaps
-
-    protocol, dropped = drop_missing_markers(traj, protocol, model)
+    traj = trial if isinstance(trial, Trajectories) else read_trial(trial)
+    session = session if session is not None else load_session()
+    model = session.model
+    protocol, dropped = drop_missing_markers(traj, session.protocol, model)
     check_thorax_labels(traj, protocol, model)  # before the thorax frame is built from them
     partial = find_partial_swaps(traj, protocol, model)
-    if partial and repair_labels:
+    repaired = bool(partial and repair_labels)
+    if repaired:
         traj = repair_partial_swaps(traj, protocol, partial)
-    targets = prepare_targets(traj, protocol)
-    return TrialInputs(TrialInfo.of(traj), model, protocol, targets, dropped, partial, bool(partial and repair_labels))
+    if prepared is not None and not repaired and prepared.key == preparation_key(protocol):
+        targets = prepared.targets
+    else:
+        targets = prepare_targets(traj, protocol)
+    return TrialInputs(TrialInfo.of(traj), model, protocol, targets, dropped, partial, repaired,
+                       session.generic_model, session.generic_protocol)
 
 
 def reconstruct(model: Model, protocol: Protocol, targets: MarkerTargets, /, *, method: Method | str = Method.PF,
@@ -169,15 +145,16 @@ def _options(spec: Any, options: Any, values: dict[str, Any]) -> Any:
 
 def stream_reconstruct(model: Model, protocol: Protocol, targets: MarkerTargets, sink: Callable[[Reconstruction], None],
                        /, *, method: Method | str = Method.PF, options: Any = None,
-                       progress: Callable[[int], None] | None = None, chunk_frames: int | None = None,
-                       **values: Any) -> tuple[dict[str, float], dict[str, Any]]:
+                       progress: Callable[[int], None] | None = None,
+                       chunk_frames: int | None = None) -> tuple[dict[str, float], dict[str, Any]]:
     """Run one method handing its result to ``sink`` in chunks (bounded memory on trials of any
-    length: exubio.methods.common); returns the method's (timings_s, info)."""
+    length: exubio.methods.common); ``options``: the method's options object or a dict of its
+    fields (exubio.methods.REGISTRY); returns the method's (timings_s, info)."""
     from exubio.methods import method_spec
     from exubio.methods.common import CHUNK_FRAMES
 
     spec = method_spec(Method.parse(method).value)
-    return spec.load_stream()(model, protocol, targets, sink, options=_options(spec, options, values),
+    return spec.load_stream()(model, protocol, targets, sink, options=spec.make_options(options),
                               progress=progress, chunk_frames=chunk_frames or CHUNK_FRAMES)
 
 
@@ -195,14 +172,15 @@ class AngleOutputs:
     values_rad: np.ndarray
     status: np.ndarray
     comments: tuple[str, ...] = ()
+    undetermined: np.ndarray | None = None  # (n, m) per model coordinate: not determined by the markers
 
 
 def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
                   metadata: dict[str, Any], summary_data: dict[str, Any], angles: AngleOutputs,
-                  undetermined: np.ndarray | None = None, streamed: dict[str, Any] | None = None,
+                  streamed: dict[str, Any] | None = None,
                   overwrite: bool = True) -> dict[str, Path]:
     """Write <stem>.csv and .mot (the anatomical angles ``angles`` in degrees, each one's status in
-    the header), .npz (everything: the model coordinates, ``undetermined`` (n, m) per coordinate and
+    the header), .npz (everything: the model coordinates, ``angles.undetermined`` (n, m) per coordinate and
     the angles' status per frame) and .summary.json into out_dir as one result set, complete or
     absent (exubio.io.results.ResultSet: written in a hidden staging folder, renamed into place,
     summary.json last; without ``overwrite`` no existing file is ever replaced); ``streamed``:
@@ -214,8 +192,8 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
     if summary_data.get("quality"):
         notes.append(f"exubio_quality={summary_data['quality']['verdict']}")
     extra = {"angle_status": np.asarray(angles.status, dtype=np.int8), "angle_names": np.array(angles.names)}
-    if undetermined is not None:
-        extra["undetermined"] = undetermined
+    if angles.undetermined is not None:
+        extra["undetermined"] = angles.undetermined
     with results.ResultSet(out, stem, overwrite=overwrite) as result_set:
         staged = {kind: result_set.path(name) for kind, name in names.items()}
         results.write_angles_csv(staged["csv"], recon.time_s, [f"{n}_deg" for n in angles.names], angles.values_rad,
@@ -248,24 +226,20 @@ def run_metadata(inputs: TrialInputs, trial_path: str | Path, method: Method) ->
 
 
 def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods: list[Method | str],
-                     trajectories: Trajectories | None = None,
-                     model_path: str | Path | None = None, protocol_path: str | Path | None = None,
-                     body_mass_kg: float | None = None, overwrite: bool = False, model: Model | None = None,
-                     method_options: dict[str, Any] | None = None,
-                     summary_extra: dict[str, Any] | None = None,
-                     progress_factory: Callable[[str, int], Callable[[int], None]] | None = None,
-                     calibration: dict[str, Any] | None = None, static_reference: Any = None,
-                     chunk_frames: int | None = None, repair_labels: bool = False
+                     session: Session | None = None, settings: RunSettings = RunSettings(),
+                     trajectories: Trajectories | None = None, calibration: Any = None, prepared: Prepared | None = None
                      ) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
     """Everything ``exubio reconstruct`` does for one trial; returns (reconstruction, paths, summary)
     per method. Every method runs first (one that fails, ReconstructionError, does not stop the
     others: their results are written, then PartialReconstructionError carries them and each failed
-    method's reason; its summary says so, ``failed_methods``); then the trial is assessed (label checks, determinacy,
-    range limits, PF-LS agreement, ``calibration``: the calibration report dict) and every summary
-    carries its quality verdict. Refuses (InputError) to replace earlier results unless
-    ``overwrite``. ``trajectories``: the trial ``trial_path`` already read. Bounded memory: each method streams its result in chunks of ``chunk_frames``
-    (exubio.io.streamed), the model points going to disk as they come; the reconstructions
-    returned hold no model points (``model_points_m`` None: they are in the .npz)."""
+    method's reason; its summary says so, ``failed_methods``); then the trial is assessed (label
+    checks, determinacy, range limits, PF-LS agreement, ``calibration``: the session's
+    exubio.run.session.SessionCalibration) and every summary carries its quality verdict. Refuses
+    (InputError) to replace earlier results unless ``settings.overwrite``. ``session``: the model
+    and protocol (default: the shipped ones); ``trajectories``: the trial ``trial_path`` already
+    read; ``prepared``: its targets already prepared (load_inputs). Bounded memory: each method
+    streams its result in chunks (exubio.io.streamed), the model points going to disk as they come;
+    the reconstructions returned hold no model points (``model_points_m`` None: they are in the .npz)."""
     from contextlib import ExitStack
 
     from exubio.io.streamed import StreamedReconstruction
@@ -275,84 +249,99 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
     results.writable_folder(out_dir)
     with ExitStack() as parts:  # the locks, and the streamed model points' part files, go whatever happens
         parts.enter_context(results.claim(out_dir, stems))  # no other run writes these results meanwhile
-        results.prepare_output_dir(out_dir, stems, overwrite=overwrite)
-        inputs = load_inputs(trajectories if trajectories is not None else trial_path, model_path=model_path,
-                             protocol_path=protocol_path, body_mass_kg=body_mass_kg, model=model,
-                             repair_labels=repair_labels)
-        return _reconstruct_streamed(inputs, trial_path, out_dir, methods, stems, parts, StreamedReconstruction,
-                                     method_options=method_options, summary_extra=summary_extra,
-                                     progress_factory=progress_factory, calibration=calibration,
-                                     static_reference=static_reference, chunk_frames=chunk_frames,
-                                     overwrite=overwrite)
+        results.prepare_output_dir(out_dir, stems, overwrite=settings.overwrite)
+        inputs = load_inputs(trajectories if trajectories is not None else trial_path, session,
+                             repair_labels=settings.repair_labels, prepared=prepared)
+        run = _Run(inputs, Path(trial_path), Path(out_dir), settings, calibration)
+        return run.reconstruct(methods, stems, parts, StreamedReconstruction)
 
 
-def _reconstruct_streamed(inputs: TrialInputs, trial_path, out_dir, methods, stems, parts, sink_type, /, *,
-                          method_options, summary_extra, progress_factory, calibration, static_reference,
-                          chunk_frames, overwrite) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
+@dataclass(frozen=True)
+class _Run:
+    """One trial's run after its inputs are prepared: the methods, the assessment, the files."""
+
+    inputs: TrialInputs
+    trial_path: Path
+    out_dir: Path
+    settings: RunSettings
+    calibration: Any
+
+    def reconstruct(self, methods, stems, parts, sink_type) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
+        inputs, out_dir = self.inputs, self.out_dir
+        recons, sinks, done, failures = [], [], [], {}
+        for method, stem in zip(methods, stems):
+            factory = self.settings.progress_factory
+            progress = factory(method.value, inputs.targets.n_frames) if factory else None
+            sink = parts.enter_context(sink_type(out_dir, stem, inputs.targets, inputs.model.coordinate_names))
+            try:
+                timings, info = stream_reconstruct(inputs.model, inputs.protocol, inputs.targets, sink, method=method,
+                                                   options=self.settings.method_options.get(method.value),
+                                                   progress=progress, chunk_frames=self.settings.chunk_frames)
+            except ReconstructionError as exc:  # the other methods still give their results
+                if len(methods) == 1:
+                    raise
+                failures[method.value] = str(exc)
+                log.warning("%s failed: %s", method.value.upper(), exc)
+                sink.discard()
+                continue
+            recons.append(sink.reconstruction(timings_s=timings, info=info))
+            sinks.append(sink)
+            done.append((method, stem))
+        if not recons:
+            raise ReconstructionError("; ".join(f"{m.upper()}: {reason}" for m, reason in failures.items()))
+        assessment = self.assess(recons)
+        extra = {} if self.calibration is None else {"calibration": self.calibration.summary()}
+        out = write_assessed(inputs, self.trial_path, out_dir,
+                             [(m, s, r, sink.model_points) for (m, s), r, sink in zip(done, recons, sinks)], assessment,
+                             summary_extra=extra, failures=failures, overwrite=self.settings.overwrite)
+        if failures:
+            raise PartialReconstructionError(
+                "; ".join(f"{m.upper()} failed: {reason}" for m, reason in failures.items())
+                + f" ({', '.join(r.method.upper() for r, _, _ in out)} written)", outputs=out, failures=failures)
+        return out
+
+    def assess(self, recons: list[Reconstruction]):
+        return assess_inputs(self.inputs, recons, self.calibration)
+
+
+def assess_inputs(inputs: TrialInputs, recons: list[Reconstruction], calibration: Any = None, /):
+    """The trial's assessment (exubio.trust.assess.TrialAssessment) as ``exubio reconstruct`` makes
+    it: the label checks against the generic model (and, with the session's ``calibration``,
+    against its static trial), then determinacy, limits, agreement and the verdicts."""
     from exubio.trust.assess import assess_trial, trial_label_findings
 
-    recons, sinks, done, failures = [], [], [], {}
-    for method, stem in zip(methods, stems):
-        progress = progress_factory(method.value, inputs.targets.n_frames) if progress_factory else None
-        opts = (method_options or {}).get(method.value)  # the options object, or a dict of its fields
-        values = opts if isinstance(opts, dict) else {}
-        sink = parts.enter_context(sink_type(out_dir, stem, inputs.targets, inputs.model.coordinate_names))
-        try:
-            timings, info = stream_reconstruct(inputs.model, inputs.protocol, inputs.targets, sink, method=method,
-                                               options=None if isinstance(opts, dict) else opts, progress=progress,
-                                               chunk_frames=chunk_frames, **values)
-        except ReconstructionError as exc:  # the other methods still give their results
-            if len(methods) == 1:
-                raise
-            failures[method.value] = str(exc)
-            log.warning("%s failed: %s", method.value.upper(), exc)
-            sink.discard()
-            continue
-        recons.append(sink.reconstruction(timings_s=timings, info=info))
-        sinks.append(sink)
-        done.append((method, stem))
-    if not recons:
-        raise ReconstructionError("; ".join(f"{m.upper()}: {reason}" for m, reason in failures.items()))
-    methods, stems = [m for m, _ in done], [s for _, s in done]
-    findings = trial_label_findings(inputs.model, inputs.protocol, inputs.targets, reference=static_reference)
+    reference = calibration.reference if calibration is not None else None
+    expect = (inputs.generic_model or inputs.model, inputs.generic_protocol or inputs.protocol)
+    findings = trial_label_findings(inputs.model, inputs.protocol, inputs.targets, reference=reference, expect=expect)
     session = ()
-    if static_reference is not None:  # does the static belong to this trial's session?
+    if reference is not None:  # does the static belong to this trial's session?
         from exubio.trust.labels import pair_distances
         from exubio.trust.session_check import placed_anew, static_consistency
 
         trial_pd = pair_distances(inputs.targets.positions_m, inputs.targets.marker_names)
-        session = tuple(placed_anew(static_consistency(static_reference, trial_pd, inputs.protocol)))
-    assessment = assess_trial(inputs.model, inputs.protocol, inputs.targets, recons, label_findings=findings,
-                              calibration=calibration, session=session, dropped=inputs.dropped,
-                              partial_swaps=inputs.partial_swaps, repaired=inputs.repaired,
-                              static_name=getattr(static_reference, "source", "") or "")
-    out = write_assessed(inputs, trial_path, out_dir, methods, stems, recons, assessment, summary_extra=summary_extra,
-                         model_points=[sink.model_points for sink in sinks], failures=failures, overwrite=overwrite)
-    if failures:
-        raise PartialReconstructionError(
-            "; ".join(f"{m.upper()} failed: {reason}" for m, reason in failures.items())
-            + f" ({', '.join(r.method.upper() for r, _, _ in out)} written)", outputs=out, failures=failures)
-    return out
+        session = tuple(placed_anew(static_consistency(reference, trial_pd, inputs.protocol)))
+    return assess_trial(inputs.model, inputs.protocol, inputs.targets, recons, label_findings=findings,
+                        calibration=None if calibration is None else calibration.summary(), session=session,
+                        dropped=inputs.dropped, partial_swaps=inputs.partial_swaps, repaired=inputs.repaired,
+                        static_name=getattr(reference, "source", "") or "")
 
 
-def write_assessed(inputs: TrialInputs, trial_path: str | Path, out_dir: str | Path, methods: list[Method],
-                   stems: list[str], recons: list[Reconstruction], assessment: Any, /, *,
-                   summary_extra: dict[str, Any] | None = None, model_points: list[Any] | None = None,
-                   failures: dict[str, str] | None = None,
+def write_assessed(inputs: TrialInputs, trial_path: str | Path, out_dir: str | Path, done: list[tuple], assessment: Any,
+                   /, *, summary_extra: Mapping[str, Any] | None = None, failures: Mapping[str, str] | None = None,
                    overwrite: bool = True) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
     """Write every method's result set (write_outputs: the anatomical angles with their status, the
-    assessment's verdict in summary.json); ``model_points``: per method, the streamed model points
-    (exubio.io.streamed) when the reconstructions do not hold them; ``failures``: the methods of the
-    run that failed, named in each summary. Returns (reconstruction, paths, summary) per method."""
+    assessment's verdict in summary.json); ``done``: per method (Method, stem, reconstruction, its
+    streamed model points (exubio.io.streamed) or None when the reconstruction holds them);
+    ``summary_extra``: further summary entries (the session's calibration, a live recording);
+    ``failures``: the methods of the run that failed, named in each summary. Returns
+    (reconstruction, paths, summary) per method."""
     from exubio.model.angles import ANATOMICAL_ANGLES, anatomical_table
 
     failures = failures or {}
     out = []
-    for i, (method, stem, recon) in enumerate(zip(methods, stems, recons)):
+    for method, stem, recon, model_points in done:
         meta = run_metadata(inputs, trial_path, method)
         extra = {"unused_trial_labels": _unused(inputs), **(summary_extra or {})}
-        if isinstance(extra.get("calibration"), dict):  # private entries (the static's distances) stay out
-            extra["calibration"] = {k: v for k, v in extra["calibration"].items() if not k.startswith("_")}
         if "mean_spring_deflection_mm" in recon.info:
             extra["mean_spring_deflection_mm"] = recon.info["mean_spring_deflection_mm"]
         if inputs.targets.cutoff_hz:
@@ -373,10 +362,10 @@ def write_assessed(inputs: TrialInputs, trial_path: str | Path, out_dir: str | P
                            "definitions": {n: {"definition": d, "meaning": m} for n, d, m in ANATOMICAL_ANGLES}}
         summ = summary(recon, source=str(trial_path), extra=extra)
         angles = AngleOutputs(names, values, det.status,
-                              angle_header(det, Path(trial_path).name, method.value, inputs.protocol.side))
+                              angle_header(det, Path(trial_path).name, method.value, inputs.protocol.side),
+                              assessment.determinacy[recon.method].undetermined)
         paths = write_outputs(recon, out_dir, stem, metadata=meta, summary_data=summ, angles=angles,
-                              undetermined=assessment.determinacy[recon.method].undetermined,
-                              streamed=None if model_points is None else {"model_points_m": model_points[i]},
+                              streamed=None if model_points is None else {"model_points_m": model_points},
                               overwrite=overwrite)
         out.append((recon, paths, summ))
     return out

@@ -1,129 +1,130 @@
-"""A session's calibration: the subject model from a static trial (or frames of a trial), written as
-a model file, and the static trial's label checks and pair distances that the session's task
-trials are checked against. Each function takes a trial file or a trial already read
-(Trajectories), so that a trial calibrated on its own frames is read once."""
+"""A session's calibration: the subject model from a static trial (or frames of a trial), and the
+static trial's label checks and pair distances that the session's task trials are checked against.
+The calibration returns the calibrated model as an object (``SessionCalibration.session``); its
+model file is written as a by-product, and the run goes on with the object, exactly as the file
+holds it (exubio.model.load.as_written), without reading it back. The static trial is read once
+and prepared once, for the calibration and its label checks alike."""
 from __future__ import annotations
 
+import dataclasses
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from exubio.errors import InputError
 from exubio.io import results
 from exubio.io.trial import read_trial
-from exubio.run.pipeline import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
-from exubio.types import Trajectories
+from exubio.run.inputs import Session, load_session
+from exubio.types import MarkerTargets, Trajectories
+
+
+@dataclass(frozen=True)
+class StaticSpec:
+    """How a session's static calibrates the model (the command line's --static options):
+    ``frames`` of the static ("0:50"; None: its longest still stretch), a ``functional`` movement
+    trial for a functional (SCoRE) glenohumeral centre, ``more_statics`` (further static poses the
+    thorax ellipsoid is fitted through), ``scapula_trials`` (movement trials whose scapula postures
+    it is fitted through: exubio.calibration.scapula_motion)."""
+
+    frames: str | None = None
+    functional: Path | None = None
+    more_statics: tuple[Path, ...] = ()
+    scapula_trials: tuple[Path, ...] = ()
+
+
+@dataclass(frozen=True)
+class SessionCalibration:
+    """A session's calibration as the run carries it: ``session`` (the calibrated model, the
+    protocol bound to it, and the generic ones), the CalibrationReport, the static trial's name,
+    the model file written, the label findings on the static, its pair distances (``reference``:
+    what the task trials are checked against; None when a trial is calibrated on its own frames)
+    and what its reader read around (``input_findings``)."""
+
+    session: Session
+    report: Any
+    static: str
+    model_file: Path
+    frames: str | None = None
+    labels: tuple = ()
+    reference: Any = None
+    input_findings: tuple[str, ...] = ()
+
+    def summary(self) -> dict[str, Any]:
+        """The calibration as summary.json records it (the full report dict under ``report``, the
+        label findings on the static trial under ``labels``)."""
+        from exubio.trust.assess import _finding_dict
+
+        out = {"static": self.static, "frames": self.frames, "model_file": str(self.model_file),
+               "mean_residual_mm": self.report.mean_residual_mm, "residual_mm": self.report.to_dict().get("residual_mm"),
+               "report": self.report.to_dict(), "labels": [_finding_dict(f) for f in self.labels]}
+        if self.input_findings:  # what the reader read around in the static trial's file (io/trc.py, io/c3d.py)
+            out["input_findings"] = list(self.input_findings)
+        return out
+
+    def moved_to(self, model_file: Path, /) -> "SessionCalibration":
+        """The same calibration, its model file moved (a study renames its calibration folder)."""
+        return dataclasses.replace(self, model_file=Path(model_file))
 
 
 def _read(source: str | Path | Trajectories) -> Trajectories:
     return source if isinstance(source, Trajectories) else read_trial(source)
 
 
-def _name(source: str | Path | Trajectories) -> str:
-    return source.source if isinstance(source, Trajectories) else str(source)
+def calibrate(static: Trajectories, session: Session, spec: StaticSpec = StaticSpec(), /, *,
+              targets: MarkerTargets | None = None):
+    """Calibrate the session's generic model to ``static`` (exubio.calibration.calibrate_model, a pure
+    step; ``targets``: the static prepared with the generic protocol): (calibrated model, report)."""
+    from exubio.calibration import calibrate_model, parse_frames
+
+    protocol = session.generic_protocol
+    functional = prepare_targets(read_trial(spec.functional), protocol) if spec.functional is not None else None
+    more = tuple(prepare_targets(read_trial(p), protocol) for p in spec.more_statics)
+    scapula = tuple(prepare_targets(read_trial(p), protocol) for p in spec.scapula_trials) or None
+    return calibrate_model(session.generic_model, protocol, static, frames=parse_frames(spec.frames), targets=targets,
+                           functional=functional, more_statics=more, scapula_motion=scapula)
 
 
-def calibration_summary(report, /, *, static: str, model_file: str | Path, frames: str | None = None,
-                        labels: Any = ()) -> dict[str, Any]:
-    """The calibration as summary.json records it (the full report dict under ``report``, the
-    label findings on the static trial under ``labels``)."""
-    from exubio.trust.assess import _finding_dict
-
-    return {"static": static, "frames": frames, "model_file": str(model_file),
-            "mean_residual_mm": report.mean_residual_mm, "residual_mm": report.to_dict().get("residual_mm"),
-            "report": report.to_dict(), "labels": [_finding_dict(f) for f in labels]}
-
-
-def static_checks(static_path: str | Path | Trajectories, /, *, protocol_path: str | Path | None = None,
-                  model_path: str | Path | None = None, frames: slice | None = None):
-    """The label findings on a static trial (against the generic model) and its pair distances,
-    the reference the session's task trials are checked against (exubio.trust.labels)."""
-    from exubio.trust.labels import check_trial, pair_distances
-
-    model, protocol = load_model_and_protocol(model_path=model_path, protocol_path=protocol_path)
-    targets = prepare_targets(_read(static_path), protocol)
-    pos = targets.positions_m if frames is None else targets.positions_m[frames]
-    findings = check_trial(targets, model=model, protocol=protocol, ranges_rad=model.coordinate_ranges_rad)
-    return findings, pair_distances(pos, targets.marker_names, source=_name(static_path))
-
-
-def calibrate_file(static_path: str | Path | Trajectories, /, *, protocol_path: str | Path | None = None,
-                   model_path: str | Path | None = None, body_mass_kg: float | None = None,
-                   frames: slice | None = None, out_path: str | Path | None = None,
-                   overwrite: bool = False, functional_path: str | Path | None = None,
-                   more_static_paths: tuple[str | Path, ...] = (), scapula_paths: tuple[str | Path, ...] = ()):
-    """Everything ``exubio calibrate`` does: read the trial, the generic model and the protocol,
-    calibrate (``exubio.calibration.calibrate_model``, a pure step), and (with ``out_path``) write
-    the calibrated model YAML. Returns (calibrated model, the protocol bound to it, the
-    CalibrationReport). An existing ``out_path`` is replaced only with ``overwrite``.
-    ``functional_path``: a movement trial of the same session for a functional (SCoRE)
-    glenohumeral centre; ``more_static_paths``: further static poses (e.g. arm raised) the
-    thorax ellipsoid is fitted through as well; ``scapula_paths``: movement trials of the session
-    (arm raised in one or more planes) whose scapula postures the thorax ellipsoid is fitted
-    through with the static pose(s) (exubio.calibration.scapula_motion)."""
-    from exubio.calibration import calibrate_model, calibrated_protocol
-    from exubio.model.load import save_model
+def calibrate_file(static: str | Path | Trajectories, /, *, session: Session | None = None,
+                   spec: StaticSpec = StaticSpec(), out_path: str | Path | None = None, overwrite: bool = False):
+    """Everything ``exubio calibrate`` does: read the static trial, calibrate the session's generic
+    model (default: the shipped model and protocol) and, with ``out_path``, write the calibrated
+    model YAML (replaced only with ``overwrite``). Returns (calibrated model, the protocol bound
+    to it, the CalibrationReport)."""
+    from exubio.model.load import as_written, save_model
 
     if out_path is not None and Path(out_path).exists() and not overwrite:
         raise InputError(f"{out_path}: the model file already exists; pass --overwrite to replace it")
-    model, protocol = load_model_and_protocol(model_path=model_path, protocol_path=protocol_path,
-                                              body_mass_kg=body_mass_kg)
-    functional = None
-    if functional_path is not None:
-        functional = prepare_targets(read_trial(functional_path), protocol)
-    more = tuple(prepare_targets(read_trial(p), protocol) for p in more_static_paths)
-    scapula = tuple(prepare_targets(read_trial(p), protocol) for p in scapula_paths) or None
-    calibrated, report = calibrate_model(model, protocol, _read(static_path), frames=frames, functional=functional,
-                                         more_statics=more, scapula_motion=scapula)
+    session = session if session is not None else load_session()
+    model, report = calibrate(_read(static), session, spec)
     if out_path is not None:
-        save_model(calibrated, out_path, calibration=report.to_dict())
-    return calibrated, calibrated_protocol(protocol, calibrated), report
+        save_model(model, out_path, calibration=report.to_dict())
+        model = as_written(model, calibration=report.to_dict(), source=out_path)
+    calibrated = session.with_model(model)
+    return calibrated.model, calibrated.protocol, report
 
 
-def calibrate_into(source: str | Path | Trajectories, out_dir: str | Path, stem: str, /, *, protocol_path: str | Path | None = None,
-                   model_path: str | Path | None = None, body_mass_kg: float | None = None,
-                   frames_text: str | None = None, overwrite: bool = False,
-                   functional_path: str | Path | None = None, more_static_paths: tuple[str | Path, ...] = (),
-                   scapula_paths: tuple[str | Path, ...] = ()):
-    """Calibrate the model to ``source`` (a static trial, or frames of the trial itself) and write
-    ``out_dir/<stem>.model.yaml``; returns (model file, CalibrationReport)."""
+def calibrate_session(static: str | Path | Trajectories, session: Session, out_dir: str | Path, stem: str, /, *,
+                      spec: StaticSpec = StaticSpec(), overwrite: bool = False, reference: bool = True,
+                      targets: MarkerTargets | None = None) -> SessionCalibration:
+    """Calibrate the session's generic model to ``static`` (a static trial, or frames of the trial
+    itself), write ``out_dir/<stem>.model.yaml``, check the static's labels and (with ``reference``:
+    a static trial apart from the task trials) keep its pair distances, which the session's trials
+    are checked against. ``targets``: the static already prepared with the generic protocol."""
     from exubio.calibration import parse_frames
-    from exubio.model.load import save_model
+    from exubio.model.load import as_written, save_model
+    from exubio.trust.labels import check_trial, pair_distances
 
+    source = _read(static)  # read once for the calibration and the checks
     model_file = Path(out_dir) / f"{stem}.model.yaml"
     results.prepare_output_dir(out_dir, [model_file.name], overwrite=overwrite)
-    model, _, report = calibrate_file(source, protocol_path=protocol_path, model_path=model_path,
-                                      body_mass_kg=body_mass_kg, frames=parse_frames(frames_text),
-                                      functional_path=functional_path, more_static_paths=more_static_paths,
-                                      scapula_paths=scapula_paths)
+    gmodel, gprot = session.generic_model, session.generic_protocol
+    targets = targets if targets is not None else prepare_targets(source, gprot)  # prepared once
+    model, report = calibrate(source, session, spec, targets=targets)
     save_model(model, model_file, calibration=report.to_dict())
-    return model_file, report
-
-
-def calibrate_session(source: str | Path | Trajectories, out_dir: str | Path, stem: str, /, *, protocol_path: str | Path | None = None,
-                      model_path: str | Path | None = None, body_mass_kg: float | None = None,
-                      frames_text: str | None = None, overwrite: bool = False,
-                      reference: bool = True, functional_path: str | Path | None = None,
-                      more_static_paths: tuple[str | Path, ...] = (),
-                      scapula_paths: tuple[str | Path, ...] = ()) -> tuple[Path, Any, dict[str, Any]]:
-    """calibrate_into plus the static trial's label checks: (model file, report, the calibration
-    summary for summary.json). With ``reference`` (a static trial apart from the task trials) the
-    summary's private ``_reference`` holds the static's pair distances, which the session's trials
-    are checked against; it is not written to summary.json."""
-    from exubio.calibration import parse_frames
-
-    source = _read(source)  # read once for the calibration and the checks
-    model_file, report = calibrate_into(source, out_dir, stem, protocol_path=protocol_path, model_path=model_path,
-                                        body_mass_kg=body_mass_kg, frames_text=frames_text, overwrite=overwrite,
-                                        functional_path=functional_path, more_static_paths=more_static_paths,
-                                        scapula_paths=scapula_paths)
-    frames = parse_frames(frames_text)
-    findings, ref_distances = static_checks(source, protocol_path=protocol_path, model_path=model_path,
-                                        frames=slice(*report.frames) if frames is not None else None)
-    summary = calibration_summary(report, static=_name(source), model_file=model_file, frames=frames_text,
-                                  labels=findings)
-    if source.input_findings:  # what the reader read around in the static trial's file (io/trc.py, io/c3d.py)
-        summary["input_findings"] = list(source.input_findings)
-    if reference:
-        summary["_reference"] = ref_distances
-    return model_file, report, summary
+    model = as_written(model, calibration=report.to_dict(), source=model_file)
+    pos = targets.positions_m[slice(*report.frames)] if parse_frames(spec.frames) is not None else targets.positions_m
+    findings = check_trial(targets, model=gmodel, protocol=gprot, ranges_rad=gmodel.coordinate_ranges_rad)
+    return SessionCalibration(session.with_model(model), report, source.source, model_file, spec.frames, tuple(findings),
+                              pair_distances(pos, targets.marker_names, source=source.source) if reference else None,
+                              tuple(source.input_findings))

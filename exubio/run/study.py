@@ -38,6 +38,7 @@ processes that import exubio once. A trial's exception never stops the study.
 """
 from __future__ import annotations
 
+import dataclasses
 import csv
 import glob
 import io
@@ -103,20 +104,15 @@ class StudySpec:
 
 @dataclass(frozen=True)
 class TrialTask:
-    """One trial to run: everything a worker needs, as plain picklable values."""
+    """One trial of a study to run: its place in the study and the job (exubio.run.job.TrialJob,
+    run into a temporary folder beside ``final_dir``); picklable, the session's model and protocol
+    travel inside the job as loaded objects."""
 
     subject: str
     session: str
     trial: str
     final_dir: str
-    methods: tuple[str, ...]
-    protocol: str | None
-    model: str | None
-    static_frames: str | None
-    report: bool
-    calibration: dict | None = None
-    static_reference: Any = None
-    relabel: dict | None = None
+    job: Any  # exubio.run.job.TrialJob
 
 
 @dataclass
@@ -272,7 +268,7 @@ def load_study(path: str | Path, /) -> StudySpec:
 def run_trial_task(task: TrialTask) -> TrialOutcome:
     """Process one trial into a temporary folder beside its final one, write DONE.json last and
     rename the folder into place; any exception becomes a failed outcome (the study goes on)."""
-    from exubio.run.job import TrialJob, run_job
+    from exubio.run.job import run_job
 
     final = Path(task.final_dir)
     out = TrialOutcome(task.subject, task.session, task.trial, str(final), "failed")
@@ -283,10 +279,7 @@ def run_trial_task(task: TrialTask) -> TrialOutcome:
     try:
         tmp.mkdir(parents=True)
         in_progress(tmp)
-        result = run_job(TrialJob(task.trial, tmp, methods=tuple(task.methods), model=task.model,
-                                  protocol=task.protocol, static_frames=task.static_frames, report=task.report,
-                                  calibration=task.calibration or None, static_reference=task.static_reference,
-                                  relabel=dict(task.relabel or {})))
+        result = run_job(dataclasses.replace(task.job, out_dir=tmp))
         _fill(out, result)
         out.status = "done"
         out.wall_s = time.perf_counter() - t0
@@ -366,40 +359,43 @@ def _remove_after_dask(out_dir: Path, /, *, wait_s: float = 1.0) -> None:
     clean_leftovers(out_dir)
 
 
-def _calibrate_session(s: SessionSpec, folder: Path) -> tuple[str | None, dict | None, Any, str]:
-    """(model file, calibration summary, static reference, error) of a session with a static trial."""
-    from exubio.run.session import calibrate_session
+def _calibrate_session(s: SessionSpec, folder: Path) -> tuple[Any, Any, str]:
+    """(session, calibration, error) of a session: its model and protocol loaded once and, with a
+    static trial, calibrated (exubio.run.session.SessionCalibration, its model file in
+    ``folder/calibration``)."""
+    from exubio.run.inputs import load_session
+    from exubio.run.session import StaticSpec, calibrate_session
 
-    if s.static is None:
-        return (str(s.model) if s.model else None), None, None, ""
-    cal_dir = folder / "calibration"
+    tmp = folder / f"{_TMP_PREFIX}calibration-{os.getpid()}"
     try:
-        tmp = folder / f"{_TMP_PREFIX}calibration-{os.getpid()}"
+        session = load_session(model_path=s.model, protocol_path=s.protocol)
+        if s.static is None:
+            return session, None, ""
+        cal_dir = folder / "calibration"
         shutil.rmtree(tmp, ignore_errors=True)
         tmp.mkdir(parents=True)
-        static = s.static
+        from exubio.io.trial import read_trial
+
+        static = read_trial(s.static)
         static_relabel = s.relabel if s.static_relabel is None else s.static_relabel
         if static_relabel:
-            from exubio.io.trial import read_trial
             from exubio.protocol.load import relabel_trajectories
 
-            static = relabel_trajectories(read_trial(s.static), static_relabel, option=f"{s.subject}/{s.session} relabel")
-        model_tmp, _, summary = calibrate_session(static, tmp, s.static.stem, protocol_path=s.protocol,
-                                                   model_path=s.model, functional_path=s.functional, overwrite=True,
-                                                   scapula_paths=s.scapula_trials)
-        ref = summary.pop("_reference", None)
+            static = relabel_trajectories(static, static_relabel, option=f"{s.subject}/{s.session} relabel")
+        cal = calibrate_session(static, session, tmp, s.static.stem, overwrite=True,
+                                spec=StaticSpec(functional=s.functional, scapula_trials=tuple(s.scapula_trials)))
         from exubio.io.results import write_json
 
-        write_json(tmp / DONE_FILE, {"static": str(s.static), "model": Path(model_tmp).name})
+        write_json(tmp / DONE_FILE, {"static": str(s.static), "model": cal.model_file.name})
         if cal_dir.exists():
             shutil.rmtree(cal_dir)
         tmp.rename(cal_dir)
-        model_file = cal_dir / Path(model_tmp).name
-        summary["model_file"] = str(model_file)
-        return str(model_file), summary, ref, ""
+        return session, cal.moved_to(cal_dir / cal.model_file.name), ""
     except Exception as exc:  # noqa: BLE001 - the session's trials are reported failed with the reason
-        shutil.rmtree(folder / f"{_TMP_PREFIX}calibration-{os.getpid()}", ignore_errors=True)
-        return None, None, None, f"calibration on {s.static.name} failed: {exc}"
+        shutil.rmtree(tmp, ignore_errors=True)
+        if s.static is None:
+            return None, None, str(exc)
+        return None, None, f"calibration on {s.static.name} failed: {exc}"
 
 
 def plan(spec: StudySpec, out_dir: Path) -> tuple[list[TrialTask], list[TrialOutcome]]:
@@ -422,15 +418,17 @@ def plan(spec: StudySpec, out_dir: Path) -> tuple[list[TrialTask], list[TrialOut
         if not pending:
             continue
         folder.mkdir(parents=True, exist_ok=True)
-        model, cal, ref, err = _calibrate_session(s, folder)
+        session, cal, err = _calibrate_session(s, folder)
         for t in pending:
             if err:
                 skipped.append(TrialOutcome(s.subject, s.session, str(t), str(trial_dirs[t]), "failed", error=err))
                 continue
+            from exubio.run.job import TrialJob
+
+            job = TrialJob(t, trial_dirs[t], methods=s.methods, session=session, static_frames=s.static_frames,
+                           report=spec.report, calibration=cal, relabel=s.relabel_of(t) or {})
             tasks.append(TrialTask(subject=s.subject, session=s.session, trial=str(t), final_dir=str(trial_dirs[t]),
-                                   methods=s.methods, protocol=str(s.protocol) if s.protocol else None, model=model,
-                                   static_frames=s.static_frames, report=spec.report, calibration=cal,
-                                   static_reference=ref, relabel=s.relabel_of(t) or None))
+                                   job=job))
     return tasks, skipped
 
 

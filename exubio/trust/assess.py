@@ -5,7 +5,6 @@ turned into one quality verdict per method (exubio.trust.quality). No solver is 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -69,27 +68,16 @@ def _finding_dict(f) -> dict[str, Any]:
     return out
 
 
-def generic_model_and_protocol(model: Model, protocol: Protocol, /) -> tuple[Model, Protocol]:
-    """The generic model a calibrated model was made from (its file, else the shipped one) and the
-    protocol bound to it: what the label checks expect, since a calibration registers every marker
-    where the static trial had it, right or wrong."""
-    from exubio.model.load import DEFAULT_MODEL, load_model
-    from exubio.run.pipeline import protocol_for_model
-
-    cal = model.metadata.get("calibration")
-    if not cal:
-        return model, protocol
-    generic_path = Path(str(cal.get("generic_model") or ""))
-    generic = load_model(generic_path if generic_path.is_file() else DEFAULT_MODEL, body_mass_kg=model.body_mass_kg)
-    return generic, protocol_for_model(generic, protocol.source or None)
-
-
-def trial_label_findings(model: Model, protocol: Protocol, targets: MarkerTargets, /, *, reference: Any = None) -> tuple:
-    """The label checks of exubio.trust.labels on a prepared trial, against the generic model's
-    expectations; ``reference``: the session's static trial's pair distances (exubio.trust.labels.pair_distances)."""
+def trial_label_findings(model: Model, protocol: Protocol, targets: MarkerTargets, /, *, reference: Any = None,
+                         expect: tuple[Model, Protocol] | None = None) -> tuple:
+    """The label checks of exubio.trust.labels on a prepared trial, against what ``expect`` (the
+    generic model and the protocol bound to it: exubio.run.inputs.Session) expects, since a
+    calibration registers every marker where the static trial had it, right or wrong; without it,
+    against ``model`` and ``protocol`` (a model that is not calibrated). ``reference``: the
+    session's static trial's pair distances (exubio.trust.labels.pair_distances)."""
     from exubio.trust.labels import check_trial
 
-    generic, gprot = generic_model_and_protocol(model, protocol)
+    generic, gprot = expect if expect is not None else (model, protocol)
     return check_trial(targets, model=generic, protocol=gprot, ranges_rad=generic.coordinate_ranges_rad,
                        reference=reference)
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 from exubio.errors import ExubioError
 from exubio.literature.invivo import PLANE_TOLERANCE_DEG, RAISING_MIN_SPAN_DEG, compare_elevation, inferred_joints
 from exubio.io.trial import read_trial
+from exubio.run.inputs import load_session
 from exubio.run.session import calibrate_file
 from exubio.prep.targets import prepare_targets
 from exubio.io.resources import shipped_file
@@ -39,7 +40,7 @@ def c3d_task_comparison(s: ValidationSettings, progress: Progress) -> C3dTasks |
         progress(f"C3D task {trial}: calibrating on {static}, PF and LS")
         try:
             proto_path = shipped_file("exubio.protocols", protocol, "protocols") if protocol else None
-            model, proto, _ = calibrate_file(c3d / static, protocol_path=proto_path)
+            model, proto, _ = calibrate_file(c3d / static, session=load_session(protocol_path=proto_path))
             targets = prepare_targets(read_trial(c3d / trial), proto)
         except ExubioError as exc:
             trials[trial] = Skipped(skipped=f"could not be prepared: {exc}")

@@ -20,7 +20,8 @@ from exubio.model.angles import anatomical_table
 from exubio.trust.assess import assess_trial
 from exubio.trust.observability import AngleStatus
 from exubio.synth.perturb import ModelPerturbation
-from exubio.run.pipeline import load_model_and_protocol, reconstruct
+from exubio.run.pipeline import reconstruct
+from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.synth.simulate import simulate_trial
 from exubio.types import Model

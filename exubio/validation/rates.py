@@ -29,7 +29,8 @@ import numpy as np
 
 from exubio.errors import ReconstructionError
 from exubio.model.kinematics import Kinematics
-from exubio.run.pipeline import load_model_and_protocol, reconstruct
+from exubio.run.pipeline import reconstruct
+from exubio.run.inputs import load_model_and_protocol
 from exubio.synth.simulate import Motion
 from exubio.validation.determinacy import UNDETERMINED_SHARE, undetermined_coordinates
 from exubio.validation.results import Check, Rates, RatesCondition

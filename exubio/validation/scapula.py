@@ -38,7 +38,8 @@ from exubio.errors import ExubioError
 from exubio.literature.invivo import compare_elevation
 from exubio.io.trial import read_trial
 from exubio.model.kinematics import Kinematics
-from exubio.run.pipeline import load_model_and_protocol, reconstruct
+from exubio.run.pipeline import reconstruct
+from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.io.resources import shipped_file
 from exubio.synth.simulate import simulate_trial

@@ -19,7 +19,8 @@ import numpy as np
 
 from exubio.errors import ExubioError, ReconstructionError
 from exubio.io.trial import read_trial
-from exubio.run.pipeline import load_model_and_protocol, reconstruct
+from exubio.run.pipeline import reconstruct
+from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.io.resources import shipped_file
 from exubio.synth.simulate import Motion, SimulatedTrial, simulate_trial

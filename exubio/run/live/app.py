@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from exubio.errors import InputError
-from exubio.run.live.loop import OUTPUT_CHANNELS, Event, LiveOptions, LiveRecording, LiveSession
+from exubio.run.live.loop import OUTPUT_CHANNELS, Event, LiveOptions, LiveRecording, LiveSession, SessionHooks
 from exubio.types import Model, Protocol, Trajectories
 
 log = logging.getLogger(__name__)
@@ -41,14 +41,37 @@ def calibrator(model: Model, protocol: Protocol, /) -> Callable[[Trajectories, s
     return calibrate
 
 
-def run_live(model: Model, protocol: Protocol, source, /, *, out_dir: str | Path | None, name: str,
-             options: LiveOptions = LiveOptions(), static_frames: slice | None = None,
-             publish_name: str | None = "exubio_angles", overwrite: bool = False, report: bool = True,
-             on_event: Callable[[Event], None] | None = None, on_status: Callable[[dict], None] | None = None,
-             duration_s: float | None = None, handle_sigint: bool = True) -> LiveRun:
-    """Reconstruct ``source`` live, publish on LSL (``publish_name``; None: no output stream), and
-    write the recording into ``out_dir/name`` when the stream ends or on Ctrl-C (the first Ctrl-C
-    ends the session cleanly, a second one aborts)."""
+@dataclass(frozen=True)
+class LiveOutput:
+    """Where a live session goes: the recording into ``out_dir/name`` (None: kept in memory only),
+    replaced only with ``overwrite``, with its trial ``report``; the angles published on LSL as
+    ``publish_name`` (None: no output stream)."""
+
+    out_dir: str | Path | None
+    name: str
+    publish_name: str | None = "exubio_angles"
+    overwrite: bool = False
+    report: bool = True
+
+
+@dataclass(frozen=True)
+class LiveControl:
+    """How a live session is watched and ended: ``on_event`` / ``on_status`` callbacks (the console
+    display), ``duration_s`` (stop after; None: when the stream ends), ``handle_sigint`` (the first
+    Ctrl-C ends the session cleanly, a second one aborts)."""
+
+    on_event: Callable[[Event], None] | None = None
+    on_status: Callable[[dict], None] | None = None
+    duration_s: float | None = None
+    handle_sigint: bool = True
+
+
+def run_live(model: Model, protocol: Protocol, source, output: LiveOutput, /, *, options: LiveOptions = LiveOptions(),
+             static_frames: slice | None = None, control: LiveControl = LiveControl()) -> LiveRun:
+    """Reconstruct ``source`` live, publish on LSL, and write the recording when the stream ends or
+    on Ctrl-C (LiveOutput, LiveControl)."""
+    out_dir, name, publish_name = output.out_dir, output.name, output.publish_name
+    on_event, on_status = control.on_event, control.on_status
     publisher = None
     publisher_box: dict[str, Any] = {}
 
@@ -80,17 +103,16 @@ def run_live(model: Model, protocol: Protocol, source, /, *, out_dir: str | Path
 
     clock = getattr(source, "clock", None)
     kwargs = {"clock": clock} if callable(clock) else {}
-    session = LiveSession(model, protocol, source, options=options, publish=publisher, on_event=event,
-                          on_status=on_status, static_frames=static_frames,
-                          calibrate=calibrator(model, protocol) if static_frames is not None else None,
-                          on_ready=ready, **kwargs)
+    hooks = SessionHooks(publish=publisher, on_event=event, on_status=on_status, on_ready=ready,
+                         calibrate=calibrator(model, protocol) if static_frames is not None else None, **kwargs)
+    session = LiveSession(model, protocol, source, options=options, hooks=hooks, static_frames=static_frames)
     timer = None
-    if duration_s is not None:
-        timer = threading.Timer(duration_s, session.stop)
+    if control.duration_s is not None:
+        timer = threading.Timer(control.duration_s, session.stop)
         timer.daemon = True
         timer.start()
     previous = None
-    if handle_sigint and threading.current_thread() is threading.main_thread():
+    if control.handle_sigint and threading.current_thread() is threading.main_thread():
         def on_sigint(signum, frame):  # noqa: ARG001
             if session._stop.is_set():
                 raise KeyboardInterrupt
@@ -109,7 +131,7 @@ def run_live(model: Model, protocol: Protocol, source, /, *, out_dir: str | Path
     if out_dir is not None:
         from exubio.run.live.record import write_recording
 
-        folder = write_recording(rec, out_dir, name, overwrite=overwrite, report=report)
+        folder = write_recording(rec, out_dir, name, overwrite=output.overwrite, report=output.report)
     return LiveRun(rec, folder)
 
 

@@ -297,6 +297,20 @@ class _EndRun(Exception):
     pass
 
 
+@dataclass(frozen=True)
+class SessionHooks:
+    """What a LiveSession calls out to: ``publish`` (row, timestamp) each result, ``on_event`` /
+    ``on_status`` (the display), ``on_ready`` once the session is set up, ``calibrate`` (trial,
+    frames) -> (model, protocol, report) for a calibration on the first frames, and the ``clock``."""
+
+    publish: Callable[[np.ndarray, float], None] | None = None
+    on_event: Callable[[Event], None] | None = None
+    on_status: Callable[[dict], None] | None = None
+    on_ready: Callable[["LiveSession"], None] | None = None
+    calibrate: Callable[[Trajectories, slice], tuple[Model, Protocol, Any]] | None = None
+    clock: Callable[[], float] = time.perf_counter
+
+
 class LiveSession:
     """One live reconstruction: ``run()`` pulls ``source`` until it ends or ``stop()`` is called,
     hands every frame's output row (OUTPUT_CHANNELS) to ``publish(row, input_timestamp)`` and
@@ -309,17 +323,12 @@ class LiveSession:
     ``calibrated`` function receives (model, protocol, report))."""
 
     def __init__(self, model: Model, protocol: Protocol, source: MarkerSource, /, *, options: LiveOptions = LiveOptions(),
-                 publish: Callable[[np.ndarray, float], None] | None = None,
-                 on_event: Callable[[Event], None] | None = None,
-                 on_status: Callable[[dict], None] | None = None, status_every_s: float = 0.2,
-                 static_frames: slice | None = None,
-                 calibrate: Callable[[Trajectories, slice], tuple[Model, Protocol, Any]] | None = None,
-                 clock: Callable[[], float] = time.perf_counter,
-                 on_ready: Callable[["LiveSession"], None] | None = None):
+                 hooks: "SessionHooks | None" = None, static_frames: slice | None = None, status_every_s: float = 0.2):
+        hooks = hooks if hooks is not None else SessionHooks()
         self.model, self.protocol, self.source, self.options = model, protocol, source, options
-        self.publish, self.on_event, self.on_status = publish, on_event, on_status
-        self.status_every_s, self.static_frames, self.calibrate = status_every_s, static_frames, calibrate
-        self.clock, self.on_ready = clock, on_ready
+        self.publish, self.on_event, self.on_status = hooks.publish, hooks.on_event, hooks.on_status
+        self.status_every_s, self.static_frames, self.calibrate = status_every_s, static_frames, hooks.calibrate
+        self.clock, self.on_ready = hooks.clock, hooks.on_ready
         self._stop = threading.Event()
 
     # ------------------------------------------------------------------ control
@@ -1047,4 +1056,5 @@ def reconstruct_causal(trial: Trajectories, model: Model, protocol: Protocol, /,
 
     source = ReplaySource(trial, speed=None, faults=faults or Faults())
     opts = dataclasses.replace(options, end_after_s=None, max_behind_s=math.inf, stall_s=math.inf)  # no clock
-    return LiveSession(model, protocol, source, options=opts, static_frames=static_frames, calibrate=calibrate).run()
+    return LiveSession(model, protocol, source, options=opts, static_frames=static_frames,
+                       hooks=SessionHooks(calibrate=calibrate)).run()
