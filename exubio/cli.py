@@ -350,9 +350,10 @@ EXAMPLE_COMMAND = ("exubio simulate --motion abduction --duration 10 --rate 100 
 def cmd_demo(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from exubio.io.resources import shipped_file
     from exubio.io.results import read_angles_csv
     from exubio.run.pipeline import reconstruct_file
-    from exubio.io.resources import shipped_file
+    from exubio.trust.evaluate import measured_angle_rmse_deg
 
     out = Path(args.out)
     c3d = shipped_file("exubio.data", "example_abduction.c3d", "exubio/data")
@@ -370,16 +371,12 @@ def cmd_demo(args: argparse.Namespace) -> int:
     t_true, names, q_true = read_angles_csv(truth_csv)
     from exubio.model.angles import anatomical_table
     from exubio.io.results import read_npz_arrays
-    from exubio.trust.observability import AngleStatus
 
     angle_names, true_angles = anatomical_table(session.model, q_true)
     for recon, paths, summ in outputs:
         _print_result(recon, paths, summ)
         status = read_npz_arrays(paths["npz"], ("angle_status",))["angle_status"]
-        _, rec_angles = anatomical_table(session.model, recon.q_rad)
-        err = np.degrees(np.abs(np.angle(np.exp(1j * (rec_angles - true_angles)))))
-        measured = {n: float(np.sqrt(np.mean(err[status[:, j] == AngleStatus.MEASURED, j] ** 2)))
-                    for j, n in enumerate(angle_names) if (status[:, j] == AngleStatus.MEASURED).all()}
+        measured = measured_angle_rmse_deg(session.model, recon.q_rad, q_true, status)
         print(f"[{recon.method}] anatomical angles against the truth, the {len(measured)} measured ones: RMSE mean "
               f"{np.mean(list(measured.values())):.2f} deg, max {max(measured.values()):.2f} deg "
               f"({max(measured, key=measured.get)}); SC elevation {measured.get('SC_X_elevation', float('nan')):.2f}, "

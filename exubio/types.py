@@ -367,6 +367,78 @@ class MarkerTargets:
         return ~np.isnan(self.positions_m).any(axis=2)
 
 
+class Method(str, enum.Enum):
+    PF = "pf"  # potential field (Exudyn forward dynamics)
+    LS = "ls"  # constrained least squares per frame
+
+    @classmethod
+    def parse(cls, value: "str | Method") -> "Method":
+        try:
+            return cls(value)
+        except ValueError:
+            raise InputError(f"unknown method '{value}'; valid methods are {[m.value for m in cls]}") from None
+
+
+class Verdict(str, enum.Enum):
+    """A result's verdict: ok (believe it), check (look at the reasons first), fail (do not use it)."""
+
+    OK = "ok"
+    CHECK = "check"
+    FAIL = "fail"
+
+    def __str__(self) -> str:
+        return self.value
+
+    def __format__(self, spec: str) -> str:
+        return format(self.value, spec)
+
+
+class Severity(str, enum.Enum):
+    """How much a reason weighs: a note leaves the verdict as it is, a check makes it 'check' at
+    least, a fail makes it 'fail' (ordered: NOTE < CHECK < FAIL)."""
+
+    NOTE = "note"
+    CHECK = "check"
+    FAIL = "fail"
+
+    def __str__(self) -> str:
+        return self.value
+
+    def __format__(self, spec: str) -> str:
+        return format(self.value, spec)
+
+    @property
+    def rank(self) -> int:
+        return _SEVERITY_RANK[self]
+
+
+_SEVERITY_RANK = {Severity.NOTE: 0, Severity.CHECK: 1, Severity.FAIL: 2}
+
+
+class StopReason(enum.IntEnum):
+    """Why one problem's iteration stopped (stored as int8 codes in result arrays)."""
+
+    CONVERGED = 0  # a kept step whose largest component is at most the step tolerance
+    STALLED = 1  # a kept step that no longer lowers the merit (relative decrease <= stall_rtol): a flat
+    # valley, the objective does not care where along it the solution lies; accepted as converged
+    MAX_ITERATIONS = 2  # still iterating after max_iterations
+    DAMPING_EXHAUSTED = 3  # the damping grew beyond its cap: no step along the gradient lowers the merit
+    # (a wrong gradient; or, with an acceptance test without slack, a minimum whose rounding-level
+    # steps raise the cost by an ulp)
+    NOT_FINITE = 4  # the cost or the step at the current point is NaN (stops at once), or the
+    # problem ran out of iterations or damping at a point whose cost or constraints are not finite
+
+    @property
+    def label(self) -> str:
+        """Lower-case name, as in reports: 'converged', 'max_iterations', ..."""
+        return self.name.lower()
+
+    @property
+    def converged(self) -> bool:
+        """True for CONVERGED and STALLED: the iterate is a solution."""
+        return self <= StopReason.STALLED
+
+
 class FrameStatus(enum.IntEnum):
     CONVERGED = 0
     NOT_CONVERGED = 1

@@ -49,7 +49,7 @@ def test_readme_api_example_runs(tmp_path, monkeypatch, capsys):
 
 
 def test_api_names_are_exported():
-    for name in ("read_trial", "load_model", "load_protocol", "calibrate", "reconstruct", "isb_angles",
+    for name in ("read_trial", "load_model", "load_protocol", "calibrate", "reconstruct", "assess", "angles", "simulate",
                  "angle_status", "to_dataframe", "write_results", "Reconstruction"):
         assert name in exubio.__all__ and getattr(exubio, name) is not None
     with pytest.raises(AttributeError):
@@ -81,7 +81,7 @@ def test_methods_come_from_one_registry_and_options_are_checked():
     """Every method of the registry runs through the same entry point; a misspelt option is one
     InputError naming it and the method's options (not a TypeError from deep inside)."""
     from exubio.methods import REGISTRY
-    from exubio.run.pipeline import Method
+    from exubio.types import Method
     from exubio.io.resources import shipped_file
 
     assert set(REGISTRY) == {m.value for m in Method}

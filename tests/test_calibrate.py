@@ -341,7 +341,7 @@ def test_report_is_a_dataclass_with_plain_data(calibrated):
 
 
 def test_the_report_says_how_the_fits_stopped(calibrated):
-    """Every fit of the calibration says why it stopped (exubio.methods.lsq.StopReason labels); on the
+    """Every fit of the calibration says why it stopped (exubio.types.StopReason labels); on the
     simulated subject they all converge and the quality verdict has nothing to say about them."""
     from exubio.trust import quality as Q
     from exubio.calibration import SCALE_BOUNDS

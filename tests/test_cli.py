@@ -334,7 +334,7 @@ def test_method_both_writes_ls_when_pf_fails_and_exits_1(tmp_path, c3d, capsys, 
     stream = exubio.run.pipeline.stream_reconstruct
 
     def pf_diverges(*args, method, **kwargs):
-        if exubio.run.pipeline.Method.parse(method).value == "pf":
+        if exubio.types.Method.parse(method).value == "pf":
             raise ReconstructionError("abd.c3d: PF diverged at t = 0.000 s (EPI_lat spring 654 mm)")
         return stream(*args, method=method, **kwargs)
 

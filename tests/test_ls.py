@@ -185,7 +185,7 @@ def test_per_frame_steps_in_blocks_equal_one_pass(model_protocol, monkeypatch, m
 
 
 def test_ls_reports_why_each_frame_stopped(model_protocol, caplog):
-    """The info counts the frames per stop reason (exubio.methods.lsq.StopReason): every frame once, the
+    """The info counts the frames per stop reason (exubio.types.StopReason): every frame once, the
     converged ones (step below tol, or a merit that no longer decreases) matching the frame
     status; too few iterations leave frames at MAX_ITERATIONS, counted, logged, NOT_CONVERGED."""
     from exubio.types import FrameStatus

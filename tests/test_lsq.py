@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from exubio.methods.lsq import (Evaluation, Settings, StopReason, damped_step, levenberg_marquardt, newton,
-                        stop_counts)
+from exubio.methods.lsq import Evaluation, Settings, damped_step, levenberg_marquardt, newton, stop_counts
+from exubio.types import StopReason
 
 PLAIN = Settings(max_iterations=100, step_tol=1e-12, damping=1e-12, damping_floor=1e-15, accept_rtol=1e-12)
 """Nearly Gauss-Newton; a step that raises the cost by no more than rounding is kept (as in LS):

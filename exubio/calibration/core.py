@@ -75,7 +75,7 @@ from exubio.calibration.scaling import DEFAULT_SCALE_GROUPS, _groups, _thorax_sc
 from exubio.calibration.window import _nanmean, _window
 from exubio.errors import InputError, ReconstructionError
 from exubio.model.kinematics import Kinematics
-from exubio.methods.lsq import StopReason
+from exubio.types import StopReason
 from exubio.methods.common import tracked_points
 from exubio.methods.poses import Limits, LSOptions, solve_positions
 from exubio.prep.targets import prepare_targets
@@ -129,7 +129,7 @@ def pose_weights(protocol: Protocol, /) -> np.ndarray:
 @dataclasses.dataclass(frozen=True)
 class _FitOutcome:
     """How the anatomical fit ended: the reweighting iterations, why the last joint fit of pose
-    and scales stopped (exubio.methods.lsq.StopReason), and whether the robust weights settled
+    and scales stopped (exubio.types.StopReason), and whether the robust weights settled
     (CONVERGED) or still changed after MAX_REWEIGHTING iterations (MAX_ITERATIONS)."""
 
     iterations: int

@@ -1,6 +1,6 @@
 """The anatomical fit: the static pose and the segment scale factors of the scaled generic model
 (without the ellipsoid constraint, robust weights, inside the joint ranges), both by the
-Levenberg-Marquardt core of exubio.methods.lsq (each fit says why it stopped: exubio.methods.lsq.StopReason)."""
+Levenberg-Marquardt core of exubio.methods.lsq (each fit says why it stopped: exubio.types.StopReason)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -10,7 +10,8 @@ import numpy as np
 
 from exubio.calibration.scaling import SCALE_BOUNDS, SCALE_PRIOR_M2, _scale_design, scale_model
 from exubio.model.kinematics import Kinematics, PointSet
-from exubio.methods.lsq import Evaluation, Result, Settings, StopReason, levenberg_marquardt
+from exubio.methods.lsq import Evaluation, Result, Settings, levenberg_marquardt
+from exubio.types import StopReason
 from exubio.methods.poses import Limits
 from exubio.model.ranges import AT_LIMIT_TOLERANCE_RAD, violation
 from exubio.types import Model

@@ -70,7 +70,7 @@ class CalibrationReport:
     landmark_offsets_mm: Mapping[str, float] = dataclasses.field(default_factory=dict)  # landmark marker ->
     # its distance from the landmark it is placed over, on the calibrated model
     fit_stop: Mapping[str, str] = dataclasses.field(default_factory=dict)  # how the fits stopped
-    # (exubio.methods.lsq.StopReason labels): "start_pose" (the best start posture's pose-only fit),
+    # (exubio.types.StopReason labels): "start_pose" (the best start posture's pose-only fit),
     # "pose_and_scales" (the final joint fit), "reweighting" ("converged": the robust weights
     # settled; "max_iterations": not within MAX_REWEIGHTING), "pose of <trial>" per further static
 

@@ -2,7 +2,7 @@
 every frame solved from its markers (exubio.methods.poses: Gauss-Newton SQP with the ellipsoid
 constraints, warm-started block by block) and its consistent rates, streamed in chunks
 (exubio.methods.common). A frame's status says whether it converged, and the info of ``stream_ls``
-counts the stop reasons (exubio.methods.lsq.StopReason)."""
+counts the stop reasons (exubio.types.StopReason)."""
 from __future__ import annotations
 
 import logging
@@ -12,7 +12,8 @@ from typing import Callable
 import numpy as np
 
 from exubio.model.kinematics import Kinematics
-from exubio.methods.lsq import StopReason, stop_counts
+from exubio.methods.lsq import stop_counts
+from exubio.types import StopReason
 from exubio.methods.common import CHUNK_FRAMES, ChunkSink, Collector, assemble, chunk_bounds, target_chunk, tracked_points
 from exubio.methods.poses import (MIN_MARKERS, RATES_REGULARISATION, Limits, LSOptions, held_mask, solve_positions,
                                   solve_rates)

@@ -22,38 +22,15 @@ Pure numpy; no exubio imports.
 """
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import numpy as np
 
+from exubio.types import StopReason
+
 RHO_FLOOR = 1e-6
 """Added to 2 max|lambda| for the l1 merit's penalty weight rho (units of the cost per unit of g)."""
-
-
-class StopReason(enum.IntEnum):
-    """Why one problem's iteration stopped (stored as int8 codes in result arrays)."""
-
-    CONVERGED = 0  # a kept step whose largest component is at most the step tolerance
-    STALLED = 1  # a kept step that no longer lowers the merit (relative decrease <= stall_rtol): a flat
-    # valley, the objective does not care where along it the solution lies; accepted as converged
-    MAX_ITERATIONS = 2  # still iterating after max_iterations
-    DAMPING_EXHAUSTED = 3  # the damping grew beyond its cap: no step along the gradient lowers the merit
-    # (a wrong gradient; or, with an acceptance test without slack, a minimum whose rounding-level
-    # steps raise the cost by an ulp)
-    NOT_FINITE = 4  # the cost or the step at the current point is NaN (stops at once), or the
-    # problem ran out of iterations or damping at a point whose cost or constraints are not finite
-
-    @property
-    def label(self) -> str:
-        """Lower-case name, as in reports: 'converged', 'max_iterations', ..."""
-        return self.name.lower()
-
-    @property
-    def converged(self) -> bool:
-        """True for CONVERGED and STALLED: the iterate is a solution."""
-        return self <= StopReason.STALLED
 
 
 def stop_counts(reasons: np.ndarray) -> dict[str, int]:

@@ -52,7 +52,7 @@ from exubio.errors import ReconstructionError
 from exubio.model.kinematics import Kinematics
 from exubio.methods.common import CHUNK_FRAMES, ChunkSink, Collector, assemble, target_chunk, tracked_points
 from exubio.methods.constraints import project_on_constraints
-from exubio.methods.lsq import StopReason
+from exubio.types import StopReason
 from exubio.methods.poses import RATES_REGULARISATION, Limits, LSOptions, held_mask, solve_positions, solve_rates
 from exubio.model.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD
 from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Reconstruction

@@ -13,7 +13,7 @@ grows, which keeps large-residual frames (a generic model on a real subject) con
 Frames are solved in short blocks that run through numpy together: every frame of a block starts
 from the previous block's last solution (the warm start; blocks are ``block_s`` = 0.2 s long) and
 iterates until its step is below ``tol_rad`` or its merit no longer decreases; its stop reason
-says why it stopped (exubio.methods.lsq.StopReason).
+says why it stopped (exubio.types.StopReason).
 
 Velocities and accelerations are the consistent linearisations: J q̇ = ṙ_M with G q̇ = 0, and
 J q̈ = r̈_M - J̇ q̇ with G q̈ = -eta (weighted least squares with the same weights).
@@ -27,7 +27,8 @@ from typing import Callable
 import numpy as np
 
 from exubio.model.kinematics import Kinematics, PointSet
-from exubio.methods.lsq import Evaluation, Settings, StopReason, fix_variables, levenberg_marquardt
+from exubio.methods.lsq import Evaluation, Settings, fix_variables, levenberg_marquardt
+from exubio.types import StopReason
 from exubio.methods.constraints import project_on_constraints
 from exubio.model.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD, penalty_weight, violation
 from exubio.types import Model, Protocol
@@ -132,7 +133,7 @@ def solve_positions(kin: Kinematics, points: PointSet, targets_m: np.ndarray, we
                     progress: Callable[[int], None] | None = None, held: np.ndarray | None = None,
                     limits: Limits | None = None, q_previous: np.ndarray | None = None):
     """q (n, m) per frame, iterations (n,), converged (n,) bool, stop reasons (n,) int8
-    (exubio.methods.lsq.StopReason codes; converged = CONVERGED or STALLED). The first frame is solved from
+    (exubio.types.StopReason codes; converged = CONVERGED or STALLED). The first frame is solved from
     several start postures around ``q_start`` (its stop reason is the best start's); with
     ``q_previous`` (the solution of the frame before these, when a trial is solved in chunks) every
     frame is warm-started like the frames after the first, so that chunks starting at 1 + a

@@ -29,7 +29,7 @@ from matplotlib.transforms import Bbox
 from exubio.trust.evaluate import per_frame_residuals_mm, residual_statistics
 from exubio.errors import InputError
 from exubio.io.results import atomic_write, read_angles_csv, read_npz, read_npz_arrays, read_npz_metadata
-from exubio.types import Reconstruction
+from exubio.types import FrameStatus, Reconstruction
 
 _COLOURS = {"pf": "black", "ls": "tab:red"}
 _JOINTS = (("SC (ISB Y-X'-Z'')", "SC_"), ("AC (ISB Y-X'-Z'')", "AC_"), ("ST (ISB Y-X'-Z'')", "ST_"),
@@ -482,8 +482,8 @@ def residuals_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict
                   f"{rs.get('max_frame_mean_sd', float('nan')):.2f} mm",
                   f"  constraints: max |g| {np.nanmax(np.abs(r.constraint)):.1e}, "
                   f"max |G q̇| {np.nanmax(np.abs(r.constraint_velocity)):.1e} 1/s",
-                  f"  frames not converged / too few markers: {int((np.asarray(r.status) == 1).sum())} / "
-                  f"{int((np.asarray(r.status) == 2).sum())}", ""]
+                  f"  frames not converged / too few markers: {int((np.asarray(r.status) == FrameStatus.NOT_CONVERGED).sum())} / "
+                  f"{int((np.asarray(r.status) == FrameStatus.TOO_FEW_MARKERS).sum())}", ""]
     gaps = recons[0].gaps
     lines.append(f"gaps: {len(gaps)}" + ("" if not gaps else " — " + ", ".join(
         f"{g.marker} ({g.n_frames} frames)" for g in gaps[:6]) + (" ..." if len(gaps) > 6 else "")))

@@ -7,7 +7,6 @@ session's calibration: exubio.run.session.
 """
 from __future__ import annotations
 
-import enum
 import logging
 import platform
 from dataclasses import dataclass, field
@@ -23,21 +22,9 @@ from exubio.io import results
 from exubio.io.trial import read_trial
 from exubio.prep.targets import preparation_key, prepare_targets
 from exubio.run.inputs import Session, load_session
-from exubio.types import MarkerTargets, Model, Protocol, Reconstruction, Trajectories
+from exubio.types import MarkerTargets, Method, Model, Protocol, Reconstruction, Trajectories
 
 log = logging.getLogger(__name__)
-
-class Method(str, enum.Enum):
-    PF = "pf"  # potential field (Exudyn forward dynamics)
-    LS = "ls"  # constrained least squares per frame
-
-    @classmethod
-    def parse(cls, value: "str | Method") -> "Method":
-        try:
-            return cls(value)
-        except ValueError:
-            raise InputError(f"unknown method '{value}'; valid methods are {[m.value for m in cls]}") from None
-
 
 @dataclass(frozen=True)
 class TrialInfo:
@@ -436,9 +423,3 @@ def _unused(inputs: TrialInputs) -> list[str]:
 
     match = resolve_labels(inputs.protocol, inputs.trial.labels, source=inputs.trial.source)
     return list(match.unused) + list(inputs.trial.ignored_labels)
-
-
-def agreement_deg(a: Reconstruction, b: Reconstruction, /) -> dict[str, float]:
-    """RMSE (deg) per coordinate between two reconstructions of the same trial."""
-    d = np.rad2deg(a.q_rad - b.q_rad)
-    return {n: float(v) for n, v in zip(a.coordinate_names, np.sqrt(np.mean(d**2, axis=0)))}

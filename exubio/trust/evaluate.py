@@ -7,7 +7,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from exubio.types import FrameStatus, Reconstruction
+from exubio.types import FrameStatus, Model, Reconstruction
 
 
 def residual_statistics(recon: Reconstruction, /) -> dict[str, Any]:
@@ -89,6 +89,21 @@ def rmse_deg(q_a: np.ndarray, q_b: np.ndarray, names: Sequence[str], /) -> dict[
     """RMSE in degrees per coordinate between two (n, m) joint-angle series in radians."""
     d = np.rad2deg(np.asarray(q_a) - np.asarray(q_b))
     return {n: float(v) for n, v in zip(names, np.sqrt(np.nanmean(d**2, axis=0)))}
+
+
+def measured_angle_rmse_deg(model: Model, q_rad: np.ndarray, q_true_rad: np.ndarray, status: np.ndarray, /
+                            ) -> dict[str, float]:
+    """RMSE (deg) against a truth of each anatomical angle (exubio.model.angles.anatomical_table)
+    that is measured in every frame (``status``: (n, a) AngleStatus codes); differences wrapped
+    to +-180 deg. The angles modelled or not measured are left out: they are no measurement."""
+    from exubio.model.angles import anatomical_table
+    from exubio.trust.observability import AngleStatus
+
+    names, rec = anatomical_table(model, q_rad)
+    _, true = anatomical_table(model, q_true_rad)
+    err = np.degrees(np.abs(np.angle(np.exp(1j * (rec - true)))))
+    measured = np.asarray(status) == AngleStatus.MEASURED
+    return {n: float(np.sqrt(np.mean(err[measured[:, j], j] ** 2))) for j, n in enumerate(names) if measured[:, j].all()}
 
 
 def marker_rmse_mm(a: np.ndarray, b: np.ndarray, names: Sequence[str], /) -> dict[str, float]:

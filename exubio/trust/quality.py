@@ -14,6 +14,8 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
+from exubio.types import Severity, StopReason, Verdict
+
 # ---------------------------------------------------------------------------------- thresholds
 RESIDUAL_MEAN_MM = (20.0, 40.0)
 """Trial mean marker residual (check, fail). Skin-marker models of the shoulder fit real trials
@@ -71,39 +73,45 @@ GAP_NOTE_FRACTION = 0.05
 gap is handled, its spring or LS term is off there, and the determinacy check says whether the
 remaining markers still determine every coordinate)."""
 
-FIT_SETTLED = ("converged", "stalled")
-"""Stop reasons (exubio.methods.lsq.StopReason labels, the calibration report's ``fit_stop``) of a fit
+FIT_SETTLED = tuple(r.label for r in StopReason if r.converged)  # ("converged", "stalled")
+"""Stop reasons (exubio.types.StopReason labels, the calibration report's ``fit_stop``) of a fit
 that reached its optimum. Any other on the final fit of the static pose and scales, on the robust
 reweighting or on a further static's pose (max_iterations, damping_exhausted, not_finite) is a
 'check': the calibrated geometry rests on a pose that is not the optimum. The fits of the start
 postures only seed the final fit and are not judged."""
 
-LEVELS = ("note", "check", "fail")
+LEVELS = tuple(s.value for s in Severity)  # "note", "check", "fail": the order of weight
 
 
 @dataclass(frozen=True)
 class Reason:
     code: str  # e.g. "residual", "marker_residual", "label", "limit", "undetermined", ...
-    level: str  # note | check | fail
+    level: Severity  # given as the enum or its value ("note", "check", "fail")
     message: str
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "level", Severity(self.level))
+
     def to_dict(self) -> dict[str, str]:
-        return {"code": self.code, "level": self.level, "message": self.message}
+        return {"code": self.code, "level": self.level.value, "message": self.message}
 
 
 @dataclass(frozen=True)
 class Quality:
-    verdict: str  # ok | check | fail
+    verdict: Verdict
     reasons: tuple[Reason, ...] = field(default_factory=tuple)
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "verdict", Verdict(self.verdict))
+
     def to_dict(self) -> dict[str, Any]:
-        return {"verdict": self.verdict, "reasons": [r.to_dict() for r in self.reasons]}
+        return {"verdict": self.verdict.value, "reasons": [r.to_dict() for r in self.reasons]}
 
     @staticmethod
     def of(reasons: Iterable[Reason]) -> "Quality":
-        reasons = tuple(sorted(reasons, key=lambda r: -LEVELS.index(r.level)))
-        worst = max((LEVELS.index(r.level) for r in reasons), default=0)
-        return Quality({0: "ok", 1: "check", 2: "fail"}[worst], reasons)
+        reasons = tuple(sorted(reasons, key=lambda r: -r.level.rank))
+        worst = max((r.level.rank for r in reasons), default=0)
+        return Quality((Verdict.OK, Verdict.CHECK, Verdict.FAIL)[worst], reasons)
 
 
 def _level(value: float, bounds: tuple[float, float]) -> str | None:

@@ -31,6 +31,7 @@ from exubio.errors import ReconstructionError
 from exubio.model.kinematics import Kinematics
 from exubio.run.pipeline import reconstruct
 from exubio.run.inputs import load_model_and_protocol
+from exubio.trust.evaluate import rmse_deg
 from exubio.synth.simulate import Motion
 from exubio.validation.determinacy import UNDETERMINED_SHARE, undetermined_coordinates
 from exubio.validation.results import Check, Rates, RatesCondition
@@ -54,8 +55,8 @@ def finite_differences(q: np.ndarray, dt: float, /) -> tuple[np.ndarray, np.ndar
 
 
 def _rmse_deg(est: np.ndarray, true: np.ndarray, names) -> dict[str, float]:
-    e = np.degrees(est[1:-1] - true[1:-1])
-    return dict(zip(names, np.sqrt(np.mean(e**2, axis=0)).tolist()))
+    """Per coordinate RMSE (deg), the first and last frames left out (no central difference there)."""
+    return rmse_deg(est[1:-1], true[1:-1], names)
 
 
 def constraint_levels(kin: Kinematics, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, /) -> tuple[float, float, float]:

@@ -32,7 +32,8 @@ def write_recording(rec: LiveRecording, out_dir: str | os.PathLike, name: str, /
     from exubio.trust.assess import assess_trial, trial_label_findings
     from exubio.io.c3d import write_c3d
     from exubio.io.results import atomic_write, write_json, writable_folder
-    from exubio.run.pipeline import Method, TrialInfo, TrialInputs, write_assessed
+    from exubio.run.pipeline import TrialInfo, TrialInputs, write_assessed
+    from exubio.types import Method
     from exubio.run.inputs import generic_of
 
     out = writable_folder(out_dir, label="--out")
