@@ -305,27 +305,19 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
         _print_trial(result, args.quiet)
         return _trial_code(result)
     codes = []
-    if args.scheduler:
-        from exubio.run.study import map_on_scheduler
+    from exubio.run.executors import run_all
 
-        try:
-            done = map_on_scheduler(_run_trial, jobs, args.scheduler,
-                                    on_error=lambda job, exc: (str(job.trial), None, EXIT_FAILED,
-                                                               f"{type(exc).__name__}: {exc}"))
-        except KeyboardInterrupt:  # Dask's workers were stopped: their unfinished files go now
+    try:
+        done = run_all(_run_trial, jobs, jobs=args.jobs, scheduler=args.scheduler,
+                       on_error=lambda job, exc: (str(job.trial), None, EXIT_FAILED, f"{type(exc).__name__}: {exc}"))
+    except KeyboardInterrupt:
+        if args.scheduler:  # Dask's workers were stopped: their unfinished files go now
             from exubio.io.results import remove_after_interrupt
 
             for job in jobs:
                 remove_after_interrupt(job.out_dir, [f"{job.trial.stem}.{m}" for m in job.methods]
                                        + [f"{job.trial.stem}.report"])
-            raise
-    elif args.jobs > 1:
-        from exubio.run.study import map_in_processes
-
-        done = map_in_processes(_run_trial, jobs, args.jobs,
-                                on_error=lambda job, exc: (str(job.trial), None, EXIT_FAILED, f"{type(exc).__name__}: {exc}"))
-    else:
-        done = [_run_trial(j) for j in jobs]
+        raise
     for trial, result, code, message in done:
         print(f"== {trial}")
         if result is not None:

@@ -1,8 +1,56 @@
-"""Fixtures shared by the test modules: the generic model and its kinematics."""
+"""Fixtures shared by the test modules (the generic model and its kinematics), and the markers that
+show the layers: ``exudyn`` (the test runs the PF engine) and ``slow`` (an end-to-end run: the CLI,
+a study, the real trials, a browser). ``pytest -m "not exudyn and not slow"`` runs the pure layers
+alone in seconds; then Exudyn cannot be imported at all, so a test that needs it and is not marked
+fails by name instead of passing unnoticed."""
+import importlib.abc
+import sys
+
 import pytest
 
 from exubio.model.kinematics import Kinematics
 from exubio.model.load import load_model
+
+
+class _NoExudyn(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path=None, target=None):
+        if name == "exudyn" or name.startswith("exudyn."):
+            raise ImportError("exudyn is blocked: this test runs the PF engine, mark it @pytest.mark.exudyn")
+        return None
+
+
+# Test modules that run the PF engine (Exudyn), and the slow end-to-end ones: every test in them
+# carries the marker. A module importing the PF method at its top is left uncollected when exudyn
+# is deselected (it could not even be imported).
+EXUDYN = {"test_angle_status.py", "test_api.py", "test_api_face.py", "test_arms.py", "test_atomic_results.py",
+          "test_calibrate.py", "test_cli.py", "test_exudyn_system.py", "test_hold.py", "test_live.py", "test_ls.py",
+          "test_mismatch.py", "test_pf.py", "test_quality.py", "test_rates.py", "test_real_data.py", "test_report.py",
+          "test_run_once.py", "test_streaming.py", "test_study.py", "test_thorax_check.py", "test_trial_report.py",
+          "test_viewer.py", "test_same_outputs.py"}
+SLOW = {"test_atomic_results.py", "test_cli.py", "test_labels.py", "test_permutation.py", "test_real_data.py",
+        "test_session_check.py", "test_study.py", "test_viewer.py", "test_same_outputs.py"}
+
+
+def _blocking(config) -> bool:
+    return "not exudyn" in (config.option.markexpr or "")
+
+
+def pytest_configure(config):
+    if _blocking(config):
+        sys.meta_path.insert(0, _NoExudyn())
+
+
+def pytest_ignore_collect(collection_path, config):
+    return True if _blocking(config) and collection_path.name in EXUDYN else None
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        name = item.path.name
+        if name in EXUDYN:
+            item.add_marker(pytest.mark.exudyn)
+        if name in SLOW:
+            item.add_marker(pytest.mark.slow)
 
 
 @pytest.fixture(scope="module")

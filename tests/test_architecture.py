@@ -16,8 +16,8 @@ OWNERS = {
     "ezc3d": {"io/c3d.py"},
     "matplotlib": {"report/trial_report.py", "report/validation_report.py", "report/study_report.py"},
     "plotly": {"report/viewer.py"},
-    "distributed": {"run/study.py"},
-    "dask": {"run/study.py"},
+    "distributed": {"run/executors.py"},
+    "dask": {"run/executors.py"},
     "pandas": {"api.py"},
     "pylsl": {"run/live/transport.py"},
 }
@@ -177,3 +177,30 @@ def test_every_subpackage_is_installed():
     listed = set(tomllib.loads((root / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]["packages"])
     found = {".".join(p.parent.relative_to(root).parts) for p in (root / "exubio").rglob("__init__.py")}
     assert found <= listed, f"add to [tool.setuptools] packages: {sorted(found - listed)}"
+
+
+# What needs Exudyn: the backend, the PF method and the live loop built on it; nothing else does
+# (the trust layer, the pipeline, the API and the CLI import without it: it loads when PF runs).
+NEEDS_EXUDYN = {"exubio.backend.exudyn_system", "exubio.methods.pf", "exubio.run.live.app", "exubio.run.live.display",
+                "exubio.run.live.loop", "exubio.run.live.record"}
+
+
+def test_only_the_pf_engine_needs_exudyn_to_import():
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, importlib, pkgutil\n"
+        "class Block:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name.split('.')[0] == 'exudyn': raise ImportError('blocked')\n"
+        "sys.meta_path.insert(0, Block())\n"
+        "import exubio\n"
+        "bad = []\n"
+        "for m in pkgutil.walk_packages(exubio.__path__, 'exubio.'):\n"
+        "    try: importlib.import_module(m.name)\n"
+        "    except ImportError: bad.append(m.name)\n"
+        "print(' '.join(sorted(bad)))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=300)
+    assert set(out.stdout.split()) == NEEDS_EXUDYN

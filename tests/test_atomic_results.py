@@ -1,6 +1,6 @@
 """`exubio reconstruct`'s result sets are complete or absent whatever happens: a full disk, SIGINT or
 SIGKILL at every write, two runs into one folder at once; Ctrl-C of any command is one line and exit
-130 within about a second (exubio.io.results.ResultSet, claim; exubio.run.study.map_in_processes)."""
+130 within about a second (exubio.io.results.ResultSet, claim; exubio.run.executors.map_in_processes)."""
 from __future__ import annotations
 
 import errno

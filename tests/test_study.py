@@ -205,7 +205,7 @@ def test_local_dask_workers_keep_glibc_malloc_defaults_and_no_profiler():
     """The workers of a local cluster do not get Dask's MALLOC_TRIM_THRESHOLD_ (it fixes glibc's
     mmap threshold: every trial array above 128 kB mapped afresh) nor its statistical profiler."""
     pytest.importorskip("distributed")
-    from exubio.run.study import map_on_scheduler
+    from exubio.run.executors import map_on_scheduler
 
     def probe(_):
         import dask

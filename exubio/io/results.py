@@ -51,7 +51,7 @@ _TIME_FORMAT = "%.6f"  # seconds
 # --------------------------------------------------------------------------------------------
 _IN_PROGRESS: dict[Path, None] = {}
 """Temporary files and folders this process is writing (removed by ``remove_in_progress`` when a
-pool worker is stopped at once: exubio.run.study.map_in_processes)."""
+pool worker is stopped at once: exubio.run.executors.map_in_processes)."""
 
 
 def in_progress(path: Path, /) -> Path:

@@ -112,3 +112,15 @@ def assemble(kin: Kinematics, points: PointSet, targets: MarkerTargets, /, *, me
         info=dict(info),
         gaps=tuple(gaps) if gaps else tuple(targets.gaps),
     )
+
+
+def unobserved_segments(kin: Kinematics, points, /) -> tuple[int, ...]:
+    """Segments with no tracked marker on them or on any segment they carry: no spring can move
+    them, so their joints are locked at the start posture (a marker set without forearm or hand
+    markers, e.g. the thoracoscapular TRC set, leaves elbow, forearm and wrist unobserved)."""
+    observed = set()
+    for s in set(int(i) for i in points.segment_index):
+        while s >= 0 and s not in observed:
+            observed.add(s)
+            s = int(kin.parent_index[s])
+    return tuple(i for i in range(1, kin.n_segments) if i not in observed)

@@ -50,7 +50,7 @@ import numpy as np
 from exubio.backend.exudyn_system import IntegratorOptions, PFSystem, SpringSet
 from exubio.errors import ReconstructionError
 from exubio.model.kinematics import Kinematics
-from exubio.methods.common import CHUNK_FRAMES, ChunkSink, Collector, assemble, target_chunk, tracked_points
+from exubio.methods.common import CHUNK_FRAMES, ChunkSink, Collector, assemble, target_chunk, tracked_points, unobserved_segments
 from exubio.methods.constraints import project_on_constraints
 from exubio.types import StopReason
 from exubio.methods.poses import RATES_REGULARISATION, Limits, LSOptions, held_mask, solve_positions, solve_rates
@@ -171,18 +171,6 @@ def with_lead_in(targets: MarkerTargets, lead: int, frame_dt_s: float, /) -> Mar
         targets, time_s=np.concatenate([targets.time_s[0] + t[:, 0, 0], targets.time_s]),
         positions_m=np.concatenate([pos, targets.positions_m]), velocities_m_s=np.concatenate([vel, targets.velocities_m_s]),
         accelerations_m_s2=np.concatenate([acc, targets.accelerations_m_s2]), gaps=())
-
-
-def unobserved_segments(kin: Kinematics, points, /) -> tuple[int, ...]:
-    """Segments with no tracked marker on them or on any segment they carry: no spring can move
-    them, so their joints are locked at the start posture (a marker set without forearm or hand
-    markers, e.g. the thoracoscapular TRC set, leaves elbow, forearm and wrist unobserved)."""
-    observed = set()
-    for s in set(int(i) for i in points.segment_index):
-        while s >= 0 and s not in observed:
-            observed.add(s)
-            s = int(kin.parent_index[s])
-    return tuple(i for i in range(1, kin.n_segments) if i not in observed)
 
 
 def initial_state(kin: Kinematics, points, targets: MarkerTargets, stiffness: np.ndarray, /, *,

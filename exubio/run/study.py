@@ -49,13 +49,13 @@ import re
 import shutil
 import time
 import traceback
-from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
 
 from exubio.io.yaml import read_yaml
 from exubio.errors import ExubioError, InputError
+from exubio.run.executors import run_all
 
 if TYPE_CHECKING:
     from exubio.run.job import TrialResult
@@ -432,224 +432,9 @@ def plan(spec: StudySpec, out_dir: Path) -> tuple[list[TrialTask], list[TrialOut
     return tasks, skipped
 
 
-def _submit_local(tasks: list[TrialTask], jobs: int, on_done: Callable[[TrialOutcome], None]) -> list[TrialOutcome]:
-    if jobs == 1:
-        outs = []
-        for t in tasks:
-            outs.append(run_trial_task(t))
-            on_done(outs[-1])
-        return outs
-
-    def failed(t: TrialTask, exc: BaseException) -> TrialOutcome:  # a worker that died (e.g. out of memory)
-        return TrialOutcome(t.subject, t.session, t.trial, t.final_dir, "failed", error=f"{type(exc).__name__}: {exc}")
-
-    return map_in_processes(run_trial_task, tasks, jobs, on_error=failed, on_done=on_done)
-
-
-STOP_WAIT_S = 0.5
-"""After Ctrl-C, how long the workers of a process pool get to remove their unfinished files after
-SIGTERM before they are killed (what a killed worker leaves, the next run removes)."""
-
-
-def map_in_processes(fn: Callable, items: list, jobs: int, /, *, on_error: Callable[[Any, BaseException], Any],
-                     on_done: Callable[[Any], None] | None = None) -> list:
-    """``[fn(item) for item in items]`` in a pool of ``jobs`` local processes, in the items' order; a
-    failed item gives ``on_error(item, exception)`` in its place. Ctrl-C reaches this process only
-    (the workers ignore SIGINT): the pool is stopped at once, every worker is sent SIGTERM (it then
-    stops as on Ctrl-C, removing its unfinished files) and killed after STOP_WAIT_S, and the
-    KeyboardInterrupt goes on to the caller (the CLI: one line, exit 130)."""
-    pool = ProcessPoolExecutor(max_workers=jobs, initializer=_pool_worker_signals)
-    try:
-        futures: list[Future] = [pool.submit(fn, item) for item in items]
-        outs = []
-        for f, item in zip(futures, items):
-            try:
-                outs.append(f.result())
-            except Exception as exc:  # noqa: BLE001 - a worker that died fails only its item
-                outs.append(on_error(item, exc))
-            if on_done is not None:
-                on_done(outs[-1])
-        pool.shutdown(wait=True)
-        return outs
-    except BaseException:
-        _stop_pool(pool)
-        raise
-
-
-def _pool_worker_signals() -> None:
-    """In a pool worker: Ctrl-C is the parent's to handle; SIGTERM (the parent stopping the pool)
-    removes the temporary files and folders the worker is writing and ends it at once (not by an
-    exception, which an Exudyn callback would catch and print). A result set being placed holds
-    SIGTERM back until it is complete (exubio.io.results.ResultSet)."""
-    import signal
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-    def stop(signum, frame):  # noqa: ARG001 - the signal handler's signature
-        from exubio.io.results import remove_in_progress
-
-        remove_in_progress()
-        os._exit(128 + signum)
-
-    signal.signal(signal.SIGTERM, stop)
-
-
-def _stop_pool(pool: ProcessPoolExecutor) -> None:
-    processes = list((getattr(pool, "_processes", None) or {}).values())  # before shutdown clears them
-    pool.shutdown(wait=False, cancel_futures=True)
-    for proc in processes:
-        try:
-            proc.terminate()
-        except (OSError, ValueError):
-            pass
-    deadline = time.monotonic() + STOP_WAIT_S
-    for proc in processes:
-        proc.join(timeout=max(deadline - time.monotonic(), 0.0))
-        if proc.is_alive():
-            proc.kill()
-            proc.join(timeout=1.0)
-
-
-def _result_or_failure(f, t: TrialTask) -> TrialOutcome:
-    try:
-        return f.result()
-    except Exception as exc:  # noqa: BLE001 - a worker that died (e.g. out of memory) fails only its trial
-        return TrialOutcome(t.subject, t.session, t.trial, t.final_dir, "failed", error=f"{type(exc).__name__}: {exc}")
-
-
-def _worker_setup() -> None:
-    """Imported once per Dask worker: exubio and its solvers stay loaded for every trial."""
-    import exubio.methods.ls  # noqa: F401
-    import exubio.methods.pf  # noqa: F401
-    import exubio.run.pipeline  # noqa: F401
-
-
-_LOCAL_CLUSTER_CONFIG = {
-    # Dask sets MALLOC_TRIM_THRESHOLD_=65536 in the worker processes it spawns, which also fixes
-    # glibc's mmap threshold at 128 kB: every array of a trial above that (a 5000-frame trial's
-    # marker arrays are 2 MB) is then mapped and unmapped afresh, page faults included (measured:
-    # about 0.2 s more system time per 25 s trial). A study's workers run one trial after another
-    # and hold no data between them: glibc's defaults suit them.
-    "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
-    # the statistical profiler samples the task thread's stack every 10 ms (for the dashboard,
-    # which a local study cluster does not start)
-    "distributed.worker.profile.enabled": False,
-}
-"""Dask settings of the local clusters ``map_on_scheduler`` starts ("local:N"); a running
-scheduler's workers ("tcp://...") keep their own."""
-
-
-def map_on_scheduler(fn: Callable, items: list, scheduler: str, /, *,
-                     on_error: Callable[[Any, BaseException], Any],
-                     on_done: Callable[[Any], None] | None = None) -> list:
-    """``[fn(item) for item in items]`` on Dask: ``scheduler`` is "local:N" (a local cluster of N
-    single-threaded worker processes, started and closed here) or "tcp://HOST:PORT" (a running
-    scheduler). Workers import exubio once (``_worker_setup``) and keep it. A failed item gives
-    ``on_error(item, exception)`` in its place; results come back in the items' order."""
-    try:
-        from distributed import Client, LocalCluster, as_completed
-    except ImportError as exc:  # pragma: no cover - a dependency of exubio
-        raise InputError(f"--scheduler {scheduler}: Dask distributed is not installed ({exc})") from None
-    for name in ("distributed", "bokeh", "tornado"):  # their INFO lines are not the user's business
-        logging.getLogger(name).setLevel(logging.ERROR)
-    cluster = None
-    if scheduler.startswith("local:"):
-        try:
-            n = int(scheduler.split(":", 1)[1])
-        except ValueError:
-            n = 0
-        if n < 1:
-            raise InputError(f"--scheduler {scheduler}: expected local:N with N >= 1 workers")
-        import dask
-
-        try:
-            with dask.config.set(_LOCAL_CLUSTER_CONFIG):  # silence_logs: also the workers' logs (their processes)
-                # dashboard_address ":0": Dask's HTTP server on a free port (None still asks for 8787, and
-                # warns on stderr when another cluster holds it)
-                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                                       silence_logs=logging.CRITICAL)
-            client = Client(cluster)
-        except KeyboardInterrupt:  # Ctrl-C while the cluster starts
-            if cluster is not None:
-                _stop_dask(None, cluster, [])
-            _quiet_dask_exit()
-            raise
-    elif scheduler.startswith("tcp://"):
-        try:
-            client = Client(scheduler, timeout=10)
-        except OSError as exc:
-            raise InputError(f"--scheduler {scheduler}: cannot reach a Dask scheduler there ({exc})") from None
-    else:
-        raise InputError(f"--scheduler {scheduler}: expected local:N or tcp://HOST:PORT")
-    futures: dict = {}
-    try:
-        client.run(_worker_setup)
-        futures = {client.submit(fn, item, pure=False): k for k, item in enumerate(items)}
-        out: list = [None] * len(items)
-        for f in as_completed(list(futures)):
-            k = futures[f]
-            try:
-                out[k] = f.result()
-            except Exception as exc:  # noqa: BLE001 - a worker that died fails only its item
-                out[k] = on_error(items[k], exc)
-            if on_done is not None:
-                on_done(out[k])
-        return out
-    except KeyboardInterrupt:
-        _stop_dask(client, cluster, list(futures))
-        cluster = None
-        raise
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
-
-
-def _stop_dask(client: Any, cluster: Any, futures: list, /) -> None:
-    """After Ctrl-C: cancel the work, close the client and the local cluster within about a second
-    each, and say nothing of the connections that close meanwhile (Dask logs them as errors)."""
-    _quiet_dask_exit()
-    if cluster is not None:  # a local cluster's worker processes are this process's children: stopped now
-        import multiprocessing
-
-        workers = multiprocessing.active_children()
-        for proc in workers:
-            proc.terminate()
-        deadline = time.monotonic() + STOP_WAIT_S
-        for proc in workers:
-            proc.join(timeout=max(deadline - time.monotonic(), 0.0))
-            if proc.is_alive():
-                proc.kill()
-    for step in (lambda: client.cancel(futures, force=True) if client is not None else None,
-                 lambda: client.close(timeout=0.5) if client is not None else None,
-                 lambda: cluster.close(timeout=0.5) if cluster is not None else None):
-        try:
-            step()
-        except BaseException:  # noqa: BLE001 - stopping: whatever Dask raises while it closes goes unsaid
-            pass
-
-
-def _quiet_dask_exit() -> None:
-    """Say nothing of what Dask reports while it stops after Ctrl-C: its loggers off, and its exit
-    hook (which would close a half-started or half-closed cluster again and print why it cannot)
-    unregistered."""
-    for name in ("distributed", "tornado", "asyncio"):
-        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
-    try:
-        import atexit
-
-        from distributed.deploy.spec import close_clusters
-
-        atexit.unregister(close_clusters)
-    except ImportError:  # pragma: no cover - another layout of distributed
-        pass
-
-
-def _submit_dask(tasks: list[TrialTask], scheduler: str, on_done: Callable[[TrialOutcome], None]) -> list[TrialOutcome]:
-    def failed(t: TrialTask, exc: BaseException) -> TrialOutcome:
-        return TrialOutcome(t.subject, t.session, t.trial, t.final_dir, "failed", error=f"{type(exc).__name__}: {exc}")
-
-    return map_on_scheduler(run_trial_task, tasks, scheduler, on_error=failed, on_done=on_done)
+def _failed(t: TrialTask, exc: BaseException) -> TrialOutcome:
+    """The outcome of a trial whose worker died (e.g. out of memory)."""
+    return TrialOutcome(t.subject, t.session, t.trial, t.final_dir, "failed", error=f"{type(exc).__name__}: {exc}")
 
 
 def write_table(out_dir: Path, spec: StudySpec, outcomes: Iterable[TrialOutcome]) -> tuple[Path, Path]:
@@ -696,7 +481,7 @@ def run_study(spec: StudySpec, out_dir: str | Path, /, *, jobs: int = 1, schedul
 
     if tasks:
         try:
-            outcomes += (_submit_dask(tasks, scheduler, on_done) if scheduler else _submit_local(tasks, jobs, on_done))
+            outcomes += run_all(run_trial_task, tasks, jobs=jobs, scheduler=scheduler, on_error=_failed, on_done=on_done)
         except KeyboardInterrupt:
             if scheduler:  # Dask's workers were stopped: their unfinished folders go now, not at the next run
                 _remove_after_dask(out)

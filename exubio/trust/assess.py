@@ -13,9 +13,8 @@ from exubio.trust import quality as Q
 from exubio.calibration import SCALE_BOUNDS
 from exubio.trust.evaluate import per_frame_residuals_mm, residual_statistics
 from exubio.model.kinematics import Kinematics
-from exubio.methods.common import tracked_points
+from exubio.methods.common import tracked_points, unobserved_segments
 from exubio.methods.poses import held_mask
-from exubio.methods.pf import unobserved_segments
 from exubio.trust.mismatch import MismatchAssessment, assess_mismatch, mismatch_reasons
 from exubio.trust.observability import UNDETERMINED_TRIAL_FRACTION, AngleDeterminacy, AngleStatus, Determinacy, angle_determinacy, determinacy
 from exubio.model.ranges import limit_report
