@@ -96,7 +96,11 @@ def breakdown(trials: list[Path], out: Path, methods: tuple[str, ...]) -> None:
     pipeline calls, wrapped with timers), median over the trials after the first two."""
     import importlib
 
+    from exubio.run.inputs import load_session
+    from exubio.run.job import TrialJob
     from exubio.run.study import TrialTask, run_trial_task
+
+    session = load_session()  # as a study does: once per session, carried by every job
 
     spent: dict[str, float] = {}
 
@@ -116,8 +120,8 @@ def breakdown(trials: list[Path], out: Path, methods: tuple[str, ...]) -> None:
     for k, trial in enumerate(trials):
         spent.clear()
         t0 = time.process_time()
-        done = run_trial_task(TrialTask(subject="S", session="s", trial=str(trial), final_dir=str(out / f"t{k}"),
-                                        methods=methods, protocol=None, model=None, static_frames=None, report=True))
+        job = TrialJob(trial, out / f"t{k}", methods=methods, session=session, report=True)
+        done = run_trial_task(TrialTask(subject="S", session="s", trial=str(trial), final_dir=str(out / f"t{k}"), job=job))
         if done.status != "done":
             raise SystemExit(f"{trial}: {done.error}")
         spent["whole trial"] = time.process_time() - t0

@@ -2,9 +2,7 @@
 loader (protocols, models) applies."""
 from __future__ import annotations
 
-import copy
 import difflib
-import functools
 import math
 import os
 from pathlib import Path
@@ -34,13 +32,12 @@ def read_yaml(path: str | os.PathLike[str], /, *, error: type[ExubioError] = Pro
         raise error(f"{p}: file not found") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise error(f"{p}: cannot read the file ({exc})") from None
-    return copy.deepcopy(_parse(text, str(p), error))
+    return _parse(text, str(p), error)
 
 
-@functools.lru_cache(maxsize=64)
 def _parse(text: str, path: str, error: type[ExubioError]) -> dict[str, Any]:
-    """The parsed mapping of a file's text, cached: a worker of a study parses the same model and
-    protocol for every trial (0.3-0.4 s each time); callers get a deep copy."""
+    """The parsed mapping of a file's text. Not cached: a run parses each file once and passes the
+    loaded objects on (exubio.run.inputs.Session travels to the study's workers whole)."""
     p = Path(path)
     try:
         _check_nesting(text, p, error)
