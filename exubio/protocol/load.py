@@ -326,7 +326,7 @@ def _parse_thorax_frame(data: Mapping[str, Any], src: str) -> ThoraxFrameSpec:
 
 def _parse_filter(data: Mapping[str, Any], src: str) -> tuple[float | str | None, int]:
     """(cutoff, order) of the 'filter' key: cutoff a number > 0 (Hz), "auto" (Winter's residual
-    analysis per marker, exubio.prep.targets.residual_cutoffs) or None ('filter: none')."""
+    analysis per marker, exubio.prep.filtering.residual_cutoffs) or None ('filter: none')."""
     if "filter" not in data:
         return _FALLBACK_CUTOFF, _FALLBACK_ORDER
     raw = data["filter"]
