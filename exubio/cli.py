@@ -237,7 +237,7 @@ def _reconstruct_arms(args: argparse.Namespace, protocols: list[str]) -> int:
 
 def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
     from exubio.io.trial import read_trial
-    from exubio.protocol.load import parse_relabel, relabel_trajectories
+    from exubio.protocol.labels import parse_relabel, relabel_trajectories
     from exubio.run.session import calibrate_session
 
     model_path, extra = args.model, {}

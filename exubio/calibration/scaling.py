@@ -9,7 +9,7 @@ import numpy as np
 
 from exubio.calibration.window import _nanmean
 from exubio.prep.thorax import isb_landmarks, thorax_frame, to_thorax_frame
-from exubio.protocol.load import resolve_labels
+from exubio.protocol.labels import resolve_labels
 from exubio.types import Model, Protocol, Trajectories
 
 DEFAULT_SCALE_GROUPS: Mapping[str, str] = {"ulna": "forearm", "radius": "forearm"}

@@ -16,7 +16,7 @@ from scipy.interpolate import CubicSpline
 from exubio.errors import InputError
 from exubio.prep.filtering import as_series, detect_gaps, fill_short_gaps, filter_markers, valid_runs
 from exubio.prep.thorax import MAX_THORAX_GAP_S, isb_landmarks, thorax_frame, to_thorax_frame
-from exubio.protocol.load import resolve_labels
+from exubio.protocol.labels import resolve_labels
 from exubio.types import MarkerTargets, Protocol, Trajectories
 
 __all__ = ["PLAUSIBLE_MEDIAN_DISTANCE_M", "prepare_targets", "spline_derivatives"]

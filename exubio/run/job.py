@@ -20,7 +20,7 @@ from typing import Any, Callable, Mapping
 from exubio.errors import PartialReconstructionError
 from exubio.io import results
 from exubio.io.trial import read_trial
-from exubio.protocol.load import relabel_trajectories
+from exubio.protocol.labels import relabel_trajectories
 from exubio.run.pipeline import Method, reconstruct_file
 
 

@@ -381,7 +381,7 @@ def _calibrate_session(s: SessionSpec, folder: Path) -> tuple[str | None, dict |
         static_relabel = s.relabel if s.static_relabel is None else s.static_relabel
         if static_relabel:
             from exubio.io.trial import read_trial
-            from exubio.protocol.load import relabel_trajectories
+            from exubio.protocol.labels import relabel_trajectories
 
             static = relabel_trajectories(read_trial(s.static), static_relabel, option=f"{s.subject}/{s.session} relabel")
         model_tmp, _, summary = calibrate_session(static, tmp, s.static.stem, protocol_path=s.protocol,
