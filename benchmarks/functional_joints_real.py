@@ -46,7 +46,8 @@ from pathlib import Path
 
 import numpy as np
 
-from exubio.calibration.functional import FunctionalAxis, FunctionalCentre, cluster_poses, path_axis, sara, score
+from exubio.calibration.cluster import cluster_poses
+from exubio.calibration.functional import FunctionalAxis, FunctionalCentre, path_axis, sara, score
 from exubio.errors import InputError
 from exubio.io.trial import read_trial
 from exubio.prep.thorax import thorax_frame
