@@ -83,7 +83,7 @@ def overheads(out: Path) -> tuple[list[float], list[float]]:
 _STAGES = (("exubio.run.job", "read_trial", "read the trial"),
            ("exubio.run.pipeline", "read_trial", "read the trial"),
            ("exubio.run.pipeline", "prepare_targets", "prepare targets (thorax frame, cut-off, filter, splines)"),
-           ("exubio.prep.targets", "residual_cutoffs", "  of which the automatic cut-off"),
+           ("exubio.prep.filtering", "residual_cutoffs", "  of which the automatic cut-off"),
            ("exubio.run.pipeline", "stream_reconstruct", "reconstruction (PF)"),
            ("exubio.trust.assess", "trial_label_findings", "label checks"),
            ("exubio.trust.assess", "assess_trial", "assessment (determinacy, limits, verdict)"),

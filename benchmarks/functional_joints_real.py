@@ -46,10 +46,11 @@ from pathlib import Path
 
 import numpy as np
 
-from exubio.calibration.functional import FunctionalAxis, FunctionalCentre, cluster_poses, path_axis, sara, score
+from exubio.calibration.cluster import cluster_poses
+from exubio.calibration.functional import FunctionalAxis, FunctionalCentre, path_axis, sara, score
 from exubio.errors import InputError
 from exubio.io.trial import read_trial
-from exubio.prep.targets import thorax_frame
+from exubio.prep.thorax import thorax_frame
 
 ROOT = Path(__file__).resolve().parents[1]
 C3D = ROOT.parent / "shared" / "data" / "c3d"

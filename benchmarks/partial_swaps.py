@@ -15,7 +15,7 @@ from pathlib import Path
 from exubio.io.trial import read_trial
 from exubio.trust.label_ranges import GAIN_MM, find_partial_swaps
 from exubio.run.inputs import load_model_and_protocol, protocol_for_model
-from exubio.protocol.load import resolve_labels
+from exubio.protocol.labels import resolve_labels
 from exubio.io.resources import shipped_file
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"

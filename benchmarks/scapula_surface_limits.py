@@ -21,7 +21,7 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from exubio.calibration import calibrate_model, calibrated_protocol
-from exubio.calibration.functional import cluster_poses
+from exubio.calibration.cluster import cluster_poses
 from exubio.calibration.scapula_motion import scapula_markers
 from exubio.io.trial import read_trial
 from exubio.run.inputs import load_model_and_protocol

@@ -73,7 +73,7 @@ def run_one(spec: dict, work: Path) -> dict:
         static = spec["static"]
         if spec.get("static_relabel"):
             from exubio.io.trial import read_trial
-            from exubio.protocol.load import relabel_trajectories
+            from exubio.protocol.labels import relabel_trajectories
 
             static = relabel_trajectories(read_trial(static), spec["static_relabel"])
         cal = calibrate_session(static, session, out_dir, "static",

@@ -1,7 +1,11 @@
 """The ``exubio`` command: parse, call, print. Exit codes: 0 ok (verdicts ok or check), 1 a
 reconstruction failed or a verdict is fail (with --method both: one method failed and the other's
 result is written), 2 bad input (also an output folder that cannot be written or fills up), 130
-interrupted (Ctrl-C). Results go to files, logs to stderr."""
+interrupted (Ctrl-C). Results go to files, logs to stderr.
+
+Kept whole: the command line's one job (parse, call, print) for every command; the bulk is the
+parser's options with their help, examples and exit codes, each command's body a few calls into the run layer.
+"""
 from __future__ import annotations
 
 import signal
@@ -246,7 +250,7 @@ def _reconstruct_arms(args: argparse.Namespace, protocols: list[str]) -> int:
 
 def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
     from exubio.io.trial import read_trial
-    from exubio.protocol.load import parse_relabel, relabel_trajectories
+    from exubio.protocol.labels import parse_relabel, relabel_trajectories
     from exubio.run.session import calibrate_session
 
     if args.also_static and not args.static:

@@ -12,7 +12,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "exubio"
 
 # library -> the only modules (paths relative to exubio/) allowed to import it
 OWNERS = {
-    "exudyn": {"backend/exudyn_system.py"},
+    "exudyn": {"backend/exudyn_system.py", "backend/exudyn_limits.py", "backend/exudyn_integrate.py"},
     "ezc3d": {"io/c3d.py"},
     "matplotlib": {"report/trial_report.py", "report/validation_report.py", "report/study_report.py"},
     "plotly": {"report/viewer.py"},
@@ -181,7 +181,8 @@ def test_every_subpackage_is_installed():
 
 # What needs Exudyn: the backend, the PF method and the live loop built on it; nothing else does
 # (the trust layer, the pipeline, the API and the CLI import without it: it loads when PF runs).
-NEEDS_EXUDYN = {"exubio.backend.exudyn_system", "exubio.methods.pf", "exubio.run.live.app", "exubio.run.live.display",
+NEEDS_EXUDYN = {"exubio.backend.exudyn_system", "exubio.backend.exudyn_limits", "exubio.backend.exudyn_integrate",
+                "exubio.backend.exudyn_live", "exubio.methods.pf", "exubio.run.live.app", "exubio.run.live.display",
                 "exubio.run.live.loop", "exubio.run.live.record"}
 
 
@@ -204,3 +205,23 @@ def test_only_the_pf_engine_needs_exudyn_to_import():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=300)
     assert set(out.stdout.split()) == NEEDS_EXUDYN
+
+
+MAX_LINES = 500
+SPLIT_PENDING = {"report/validation_report.py", "report/viewer.py", "run/live/loop.py", "validation/results.py"}
+"""Oversized modules whose split by job is not done yet (issue 19): named here so that no other
+module grows past MAX_LINES unnoticed; each leaves this set when it is split."""
+
+
+def test_no_module_over_500_lines_without_a_stated_reason():
+    """A module longer than MAX_LINES says why it stays whole: a line 'Kept whole: ...' in its
+    docstring (one job whose parts only make sense together)."""
+    long = []
+    for rel, path in _modules().items():
+        text = path.read_text(encoding="utf-8")
+        doc = ast.get_docstring(ast.parse(text)) or ""
+        if text.count("\n") > MAX_LINES and "Kept whole:" not in doc and rel not in SPLIT_PENDING:
+            long.append(f"{rel} ({text.count(chr(10))} lines)")
+        if rel in SPLIT_PENDING and text.count("\n") <= MAX_LINES:
+            long.append(f"{rel} is split now: take it off SPLIT_PENDING")
+    assert not long, long

@@ -1,13 +1,13 @@
-"""Functional joint centres and axes (exubio.calibration.functional) on simulated segments with a
-known centre / axis: SCoRE, SARA, the cluster pose fit and the path-axis fit."""
+"""Functional joint centres and axes (exubio.calibration.functional, .cluster) on simulated
+segments with a known centre / axis: SCoRE, SARA, the cluster pose fit and the path-axis fit."""
 import math
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from exubio.calibration.functional import (FunctionalAxis, FunctionalCentre, cluster_poses, cluster_reference,
-                                           path_axis, relative_rotation_range_deg, sara, score)
+from exubio.calibration.cluster import cluster_poses, cluster_reference
+from exubio.calibration.functional import FunctionalAxis, FunctionalCentre, path_axis, relative_rotation_range_deg, sara, score
 from exubio.errors import InputError
 
 NOISE_M = 1e-3

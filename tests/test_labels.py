@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from exubio.trust import label_expectations as LE
 from exubio.trust import labels as L
 from exubio.calibration import scale_model
 from exubio.errors import InputError
@@ -131,8 +132,8 @@ def test_expectations_are_computed_once_per_content_and_bound_to_the_objects_giv
 
     other_model = load_model()  # the same file, loaded again: another object, the same content
     other_protocol = protocol_for_model(other_model)
-    a = L._expectations(model, protocol, None)
-    b = L._expectations(other_model, other_protocol, None)
+    a = LE.cached_expectations(model, protocol, None)
+    b = LE.cached_expectations(other_model, other_protocol, None)
     assert a.model is model and a.protocol is protocol and b.model is other_model and b.protocol is other_protocol
     assert b.relations is a.relations and b.model_median_m is a.model_median_m  # computed once
     for name in ("relations", "min_ratio", "rigid", "rigid_model_m", "model_median_m", "ranges_rad"):
@@ -142,12 +143,12 @@ def test_expectations_are_computed_once_per_content_and_bound_to_the_objects_giv
         [(c.root, c.markers.tolist(), c.coordinates.tolist()) for c in expect.chains]
     # other content (ranges, a model point, a protocol marker) is another entry
     narrow = model.coordinate_ranges_rad * 0.5
-    c = L._expectations(model, protocol, narrow)
+    c = LE.cached_expectations(model, protocol, narrow)
     assert c.relations is not a.relations
     assert np.array_equal(c.relations, L.model_expectations(model, protocol, narrow).relations)
     moved = dataclasses.replace(protocol, markers=(dataclasses.replace(
         protocol.markers[0], local_position_m=protocol.markers[0].local_position_m + 0.05),) + protocol.markers[1:])
-    assert L._expectations(model, moved, None).model_median_m is not a.model_median_m
+    assert LE.cached_expectations(model, moved, None).model_median_m is not a.model_median_m
 
 
 def test_side_relations_hold_in_postures_not_sampled(model, protocol, expect):

@@ -12,7 +12,7 @@ from exubio.io.trial import read_trial
 from exubio.trust.labels import check_trial, pair_distances
 from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
-from exubio.protocol.load import relabel_trajectories
+from exubio.protocol.labels import relabel_trajectories
 
 C3D = Path(__file__).resolve().parents[2] / "shared" / "data" / "c3d"
 pytestmark = pytest.mark.skipif(not C3D.is_dir(), reason=f"real data folder {C3D} is absent")

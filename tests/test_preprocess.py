@@ -1,5 +1,5 @@
-"""Tests of exubio.prep.targets: thorax frame, gaps, zero-lag filter, spline derivatives and the
-whole chain to MarkerTargets (unit trap, missing markers, real C3D smoke test)."""
+"""Tests of exubio.prep (thorax, filtering, targets): thorax frame, gaps, zero-lag filter, spline
+derivatives and the whole chain to MarkerTargets (unit trap, missing markers, real C3D smoke test)."""
 from __future__ import annotations
 
 import warnings
@@ -10,17 +10,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from exubio.errors import InputError
-from exubio.prep.targets import (
-    detect_gaps,
-    fill_short_gaps,
-    lowpass,
-    prepare_targets,
-    residual_cutoffs,
-    spline_derivatives,
-    thorax_frame,
-    to_thorax_frame,
-    valid_runs,
-)
+from exubio.prep.filtering import detect_gaps, fill_short_gaps, lowpass, residual_cutoffs, valid_runs
+from exubio.prep.targets import prepare_targets, spline_derivatives
+from exubio.prep.thorax import thorax_frame, to_thorax_frame
 from exubio.types import Gap, MarkerSpec, Protocol, ThoraxFrameSpec, Trajectories
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
@@ -269,9 +261,9 @@ def _lowpass_time_first(p, rate_hz, cutoff_hz, order):
     indexed by a list, extended by the cubic end fits and filtered along axis 0."""
     from scipy.signal import butter, filtfilt
 
-    from exubio.prep import targets as pp
+    from exubio.prep import filtering as pp
 
-    s = pp._as_series(p)
+    s = pp.as_series(p)
     cut = np.broadcast_to(np.asarray(cutoff_hz, dtype=float), (s.shape[1],))
     out = np.full_like(s, np.nan)
     groups = {}

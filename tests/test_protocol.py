@@ -1,4 +1,4 @@
-"""Tests of exubio.protocol.load: loading and validating protocol YAML files, matching trial labels."""
+"""Tests of exubio.protocol.load and .labels: loading and validating protocol YAML files, matching trial labels."""
 from __future__ import annotations
 
 import logging
@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from exubio.errors import InputError, ProtocolError
-from exubio.protocol.load import LabelMatch, check_keys, load_protocol, read_yaml, resolve_labels
+from exubio.protocol.labels import LabelMatch, resolve_labels
+from exubio.protocol.load import check_keys, load_protocol, read_yaml
 from exubio.types import ThoraxFrameSpec
 
 REPO = Path(__file__).resolve().parents[1]
@@ -354,7 +355,7 @@ def test_resolve_by_name_alias_optional_and_unused(tmp_path):
 def test_resolve_prefers_name_then_first_alias(tmp_path, caplog):
     prot = load(write(tmp_path, ALIASES))
     labels = ("R_ARM", "RARM", "HAND", "IJ", "PX", "C7", "T8")
-    with caplog.at_level(logging.WARNING, logger="exubio.protocol.load"):
+    with caplog.at_level(logging.WARNING, logger="exubio.protocol.labels"):
         match = resolve_labels(prot, labels)
     assert match.columns["ARM"] == 1  # RARM comes before R_ARM in the aliases
     assert match.unused == ("R_ARM",)

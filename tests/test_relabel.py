@@ -9,7 +9,7 @@ from exubio.cli import main
 from exubio.errors import InputError
 from exubio.io.c3d import write_c3d
 from exubio.model.load import load_model
-from exubio.protocol.load import parse_relabel, relabel_trajectories
+from exubio.protocol.labels import parse_relabel, relabel_trajectories
 from exubio.synth.simulate import simulate_trial
 
 

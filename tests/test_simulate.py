@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from exubio.errors import InputError
-from exubio.prep.targets import thorax_frame
+from exubio.prep.thorax import thorax_frame
 from exubio.synth.simulate import (
     DEFAULT_MARKERS,
     LUDEWIG_2009,

@@ -1,5 +1,5 @@
-"""The pure-numpy side of the potential-field backend (exubio.backend.exudyn_system, which alone
-imports Exudyn): Euler-parameter kinematics of the system coordinates, the Hermite interpolation of
+"""The pure-numpy side of the potential-field backend (the exudyn_* modules of exubio.backend, which
+alone import Exudyn): Euler-parameter kinematics of the system coordinates, the Hermite interpolation of
 targets between frames and of step states at the frame times, the record of the accepted steps, and
 the geometry of the range-of-motion limit elements and their switching."""
 from __future__ import annotations

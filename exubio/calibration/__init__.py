@@ -4,10 +4,11 @@ out; no file is read or written here (``exubio.run.pipeline`` does that).
 
 Modules, one job each: ``window`` (which frames hold the static pose), ``scaling`` (segment scale
 factors), ``posefit`` (the static pose and the scales of the scaled generic model), ``landmarks``
-(ISB anatomical frames from landmarks), ``functional`` (SCoRE joint centres, SARA axes),
-``ellipsoid`` (the thorax ellipsoid through the scapula contact points), ``scapula_motion`` (the
-ellipsoid through the scapula postures of a movement trial), ``registration`` (marker
-<-> model point), ``report`` (the typed result) and ``core`` (the calibration itself).
+(ISB anatomical frames from landmarks), ``cluster`` (the poses of marker clusters),
+``functional`` (SCoRE joint centres, SARA axes), ``ellipsoid`` (the thorax ellipsoid through the
+scapula contact points), ``scapula_motion`` (the ellipsoid through the scapula postures of a
+movement trial), ``registration`` (marker <-> model point), ``report`` (the typed result) and
+``core`` (the calibration itself).
 """
 from exubio.calibration.core import calibrate_model
 from exubio.calibration.ellipsoid import fit_ellipsoid

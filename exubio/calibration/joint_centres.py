@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from exubio.calibration.functional import FunctionalCentre, cluster_poses, score
+from exubio.calibration.cluster import cluster_poses
+from exubio.calibration.functional import FunctionalCentre, score
 from exubio.errors import InputError
 from exubio.types import MarkerTargets, Model, Protocol
 

@@ -8,8 +8,8 @@ from typing import Mapping
 import numpy as np
 
 from exubio.calibration.window import _nanmean
-from exubio.prep.targets import isb_landmarks, thorax_frame, to_thorax_frame
-from exubio.protocol.load import resolve_labels
+from exubio.prep.thorax import isb_landmarks, thorax_frame, to_thorax_frame
+from exubio.protocol.labels import resolve_labels
 from exubio.types import Model, Protocol, Trajectories
 
 DEFAULT_SCALE_GROUPS: Mapping[str, str] = {"ulna": "forearm", "radius": "forearm"}

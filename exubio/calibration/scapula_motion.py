@@ -12,7 +12,7 @@ one or more planes) gives hundreds of postures.
 Algorithm (pure: arrays and a Model in, an Ellipsoid and a typed report out)
 ---------------------------------------------------------------------------
 1. The scapula's pose in every used frame of the movement from its markers: the rigid
-   least-squares fit (Kabsch, ``exubio.calibration.functional.cluster_poses``) of the markers'
+   least-squares fit (Kabsch, ``exubio.calibration.cluster.cluster_poses``) of the markers'
    registered local positions on the calibrated scapula to the frame's markers. Every protocol
    marker on the scapula that the static trial registered takes part (the reconstruction sees the
    scapula through all of them too); at least 3, not collinear. The fit's RMS per frame and per
@@ -64,7 +64,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from exubio.calibration.ellipsoid import surface_distance
-from exubio.calibration.functional import cluster_poses
+from exubio.calibration.cluster import cluster_poses
 from exubio.errors import InputError
 from exubio.types import Ellipsoid, MarkerTargets, Model, Protocol
 

@@ -7,7 +7,7 @@ import warnings
 import numpy as np
 
 from exubio.errors import InputError
-from exubio.prep.targets import valid_runs
+from exubio.prep.filtering import valid_runs
 from exubio.types import MarkerTargets
 
 log = logging.getLogger(__name__)

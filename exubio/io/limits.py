@@ -2,7 +2,7 @@
 io/trc.py) before any work: a header is data from outside, and the work after reading (filter
 padding, splines, steps) grows with what it says.
 
-The filter pads each run of samples by a few periods of its cut-off (exubio.prep.targets), i.e. by
+The filter pads each run of samples by a few periods of its cut-off (exubio.prep.filtering), i.e. by
 about rate / cut-off samples: a rate of 1e9 Hz asks for 2e9 samples (15 GB) per marker coordinate.
 Optical motion capture records at 30 Hz to about 10 kHz (high-speed modes of Qualisys and Vicon
 cameras); MAX_RATE_HZ is ten times that, and at it the padding stays a few hundred thousand

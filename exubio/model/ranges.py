@@ -6,7 +6,7 @@ methods enforce it with the same one-sided quadratic potential
 
     V(q) = 0.5 k_lim sum_j v_j(q)^2,   v_j = max(0, q_j - hi_j) - max(0, lo_j - q_j),
 
-PF as Exudyn elements that push back beyond a limit (exubio.backend.exudyn_system), LS inside its
+PF as Exudyn elements that push back beyond a limit (exubio.backend.exudyn_limits), LS inside its
 solve: LS minimises sum_i w_i |r_i - m_i|^2 with w_i = c_i / c_default, i.e. (2 / c_default) times
 the springs' potential, so it adds (2 / c_default) V = kappa sum_j v_j^2 with
 kappa = k_lim / c_default (m^2/rad^2). The quasi-static equilibrium of PF and the LS optimum are

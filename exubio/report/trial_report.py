@@ -7,6 +7,9 @@ comparison of the measured anatomical angles with the truth of a simulated trial
 findings and the angles that are not measurements. Page 2: the anatomical angles of every method
 against time (``<trial>.<method>.csv``; one colour per angle, PF solid, LS dashed, the truth dotted;
 modelled and not measured in grey). Page 3: marker residuals (mean ± SD over markers per frame, per-marker RMSE), constraint residuals and the gaps.
+
+Kept whole: one report, its three pages drawn from the same loaded results (one figure module per
+page would pass the same loaded arrays around three times).
 """
 from __future__ import annotations
 

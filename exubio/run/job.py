@@ -21,7 +21,7 @@ from exubio.errors import PartialReconstructionError
 from exubio.io import results
 from exubio.io.trial import read_trial
 from exubio.prep.targets import preparation_key, prepare_targets
-from exubio.protocol.load import relabel_trajectories
+from exubio.protocol.labels import relabel_trajectories
 from exubio.run.inputs import Session, load_session
 from exubio.run.pipeline import Prepared, RunSettings, reconstruct_file
 from exubio.types import Method

@@ -419,7 +419,7 @@ def angle_header(det, trial: str, method: str, side: str) -> tuple[str, ...]:
 
 
 def _unused(inputs: TrialInputs) -> list[str]:
-    from exubio.protocol.load import resolve_labels
+    from exubio.protocol.labels import resolve_labels
 
     match = resolve_labels(inputs.protocol, inputs.trial.labels, source=inputs.trial.source)
     return list(match.unused) + list(inputs.trial.ignored_labels)

@@ -379,7 +379,7 @@ def _calibrate_session(s: SessionSpec, folder: Path) -> tuple[Any, Any, str]:
         static = read_trial(s.static)
         static_relabel = s.relabel if s.static_relabel is None else s.static_relabel
         if static_relabel:
-            from exubio.protocol.load import relabel_trajectories
+            from exubio.protocol.labels import relabel_trajectories
 
             static = relabel_trajectories(static, static_relabel, option=f"{s.subject}/{s.session} relabel")
         cal = calibrate_session(static, session, tmp, s.static.stem, overwrite=True,

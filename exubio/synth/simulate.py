@@ -69,6 +69,9 @@ Noise (``noise_mm``): independent Gaussian, SD ``noise_mm`` per coordinate and s
 marker (thorax markers included). STA and noise use independent seeded streams
 (``numpy.random.SeedSequence(seed).spawn(2)``); ``sta_m`` and ``noise_m`` are stored in the same
 frame as the trajectories (lab frame when ``lab_transform``), trajectories = points + sta + noise.
+
+Kept whole: one model of a motion: the prescribed coordinates, the ellipsoid-solved ones and their
+exact rates are one computation; noise and soft-tissue artefact are a few lines on top.
 """
 from __future__ import annotations
 

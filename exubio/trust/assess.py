@@ -118,7 +118,7 @@ _POSTURES_SIZE = 8
 def reference_postures_of(model: Model, /) -> np.ndarray:
     """exubio.synth.simulate.reference_postures of the model (the q = 0 posture where its girdle cannot be
     driven on the rhythm), computed once per process for a given geometry (it takes ~0.3 s)."""
-    from exubio.trust.labels import _content_digest
+    from exubio.trust.digest import content_digest as _content_digest
     from exubio.synth.simulate import reference_postures
 
     try:

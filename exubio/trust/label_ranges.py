@@ -19,7 +19,7 @@ from typing import Sequence
 
 import numpy as np
 
-from exubio.protocol.load import resolve_labels
+from exubio.protocol.labels import resolve_labels
 from exubio.types import Model, Protocol, Trajectories
 
 __all__ = ["GAIN_MM", "MIN_RUN_FRAMES", "PartialSwap", "find_partial_swaps", "repair_partial_swaps"]

@@ -21,7 +21,7 @@ import numpy as np
 
 from exubio.errors import InputError
 from exubio.model.kinematics import Kinematics
-from exubio.protocol.load import resolve_labels
+from exubio.protocol.labels import resolve_labels
 from exubio.types import Model, Protocol, Trajectories
 
 __all__ = ["SWAP_RATIO", "ThoraxLabels", "check_thorax_labels", "thorax_label_fit"]

@@ -32,7 +32,7 @@ from exubio.model.angles import anatomical_frames, euler_angles, humerothoracic_
     segment_anatomical_rotations
 from exubio.calibration import calibrate_model, calibrated_protocol
 from exubio.calibration.ellipsoid import surface_distance
-from exubio.calibration.functional import cluster_poses
+from exubio.calibration.cluster import cluster_poses
 from exubio.calibration.scapula_motion import scapula_markers
 from exubio.errors import ExubioError
 from exubio.literature.invivo import compare_elevation

@@ -29,8 +29,8 @@ import numpy as np
 from scipy.signal import butter, sosfilt_zi
 
 from exubio.errors import InputError
-from exubio.prep.targets import MAX_THORAX_GAP_S, isb_landmarks, thorax_frame
-from exubio.protocol.load import resolve_labels
+from exubio.prep.thorax import MAX_THORAX_GAP_S, isb_landmarks, thorax_frame
+from exubio.protocol.labels import resolve_labels
 from exubio.types import Protocol
 
 __all__ = ["CausalOptions", "CausalTargets", "CausalFrame"]

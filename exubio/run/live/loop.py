@@ -260,7 +260,7 @@ class LiveRecording:
 
     def targets(self) -> MarkerTargets:
         """The causal targets the PF tracked, as MarkerTargets (gaps from the missing samples)."""
-        from exubio.prep.targets import detect_gaps
+        from exubio.prep.filtering import detect_gaps
 
         return MarkerTargets(time_s=self.time_s, marker_names=self.marker_names, positions_m=self.positions_m,
                              velocities_m_s=self.velocities_m_s, accelerations_m_s2=self.accelerations_m_s2,
