@@ -63,8 +63,11 @@ class SessionCalibration:
         return out
 
     def moved_to(self, model_file: Path, /) -> "SessionCalibration":
-        """The same calibration, its model file moved (a study renames its calibration folder)."""
-        return dataclasses.replace(self, model_file=Path(model_file))
+        """The same calibration, its model file moved (a study renames its calibration folder): the
+        model's ``source`` names the file where it is now, as a model read from there would."""
+        model = dataclasses.replace(self.session.model, source=str(model_file))
+        session = dataclasses.replace(self.session, model=model)
+        return dataclasses.replace(self, session=session, model_file=Path(model_file))
 
 
 def _read(source: str | Path | Trajectories) -> Trajectories:
