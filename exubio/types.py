@@ -379,40 +379,36 @@ class Method(str, enum.Enum):
             raise InputError(f"unknown method '{value}'; valid methods are {[m.value for m in cls]}") from None
 
 
-class Verdict(str, enum.Enum):
+class _Word(str, enum.Enum):
+    """A string enum that prints and formats as its value ("ok", not "Verdict.OK"), as the files
+    and the console write it."""
+
+    def __str__(self) -> str:
+        return self.value
+
+    def __format__(self, spec: str) -> str:
+        return format(self.value, spec)
+
+
+class Verdict(_Word):
     """A result's verdict: ok (believe it), check (look at the reasons first), fail (do not use it)."""
 
     OK = "ok"
     CHECK = "check"
     FAIL = "fail"
 
-    def __str__(self) -> str:
-        return self.value
 
-    def __format__(self, spec: str) -> str:
-        return format(self.value, spec)
-
-
-class Severity(str, enum.Enum):
+class Severity(_Word):
     """How much a reason weighs: a note leaves the verdict as it is, a check makes it 'check' at
-    least, a fail makes it 'fail' (ordered: NOTE < CHECK < FAIL)."""
+    least, a fail makes it 'fail' (ordered as declared: NOTE < CHECK < FAIL)."""
 
     NOTE = "note"
     CHECK = "check"
     FAIL = "fail"
 
-    def __str__(self) -> str:
-        return self.value
-
-    def __format__(self, spec: str) -> str:
-        return format(self.value, spec)
-
     @property
     def rank(self) -> int:
-        return _SEVERITY_RANK[self]
-
-
-_SEVERITY_RANK = {Severity.NOTE: 0, Severity.CHECK: 1, Severity.FAIL: 2}
+        return tuple(Severity).index(self)
 
 
 class StopReason(enum.IntEnum):
