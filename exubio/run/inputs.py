@@ -49,20 +49,23 @@ def load_session(*, model_path: str | Path | None = None, protocol_path: str | P
     if not calibration:
         protocol = protocol_for_model(model, protocol_path)
         return Session(model, protocol, model, protocol)
-    generic_path = Path(str(calibration.get("generic_model") or ""))
-    generic = load_model(generic_path if generic_path.is_file() else DEFAULT_MODEL, body_mass_kg=model.body_mass_kg)
+    generic = _generic_model(model)
     protocol = protocol_for_model(generic, protocol_path)
     return Session(generic, protocol, generic, protocol).with_model(model)
+
+
+def _generic_model(calibrated: Model, /) -> Model:
+    """The generic model a calibration started from: its recorded file, else the shipped one."""
+    path = Path(str(calibrated.metadata["calibration"].get("generic_model") or ""))
+    return load_model(path if path.is_file() else DEFAULT_MODEL, body_mass_kg=calibrated.body_mass_kg)
 
 
 def generic_of(model: Model, protocol: Protocol, /) -> tuple[Model, Protocol]:
     """The generic model a calibrated model was made from (its recorded file, else the shipped one)
     and the protocol bound to it; ``model`` and ``protocol`` themselves when not calibrated."""
-    calibration = model.metadata.get("calibration")
-    if not calibration:
+    if not model.metadata.get("calibration"):
         return model, protocol
-    generic_path = Path(str(calibration.get("generic_model") or ""))
-    generic = load_model(generic_path if generic_path.is_file() else DEFAULT_MODEL, body_mass_kg=model.body_mass_kg)
+    generic = _generic_model(model)
     return generic, protocol_for_model(generic, protocol.source or None)
 
 
