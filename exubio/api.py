@@ -200,8 +200,8 @@ def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str
     header), ``.npz`` and ``.summary.json`` into out_dir, as one set complete or absent; refuses to
     replace earlier results unless ``overwrite``. Returns the paths by kind."""
     from exubio.model.angles import anatomical_table
-    from exubio.trust.evaluate import summary
     from exubio.io import results
+    from exubio.run.summary_file import reconstruction_summary
     from exubio.run.pipeline import AngleOutputs, angle_header, write_outputs
 
     model = model if model is not None else load_model()
@@ -212,7 +212,7 @@ def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str
     names, values = anatomical_table(model, reconstruction.q_rad)
     meta = {"written_by": "exubio.write_results", "method": reconstruction.method,
             "units": {"angles_in_files": "deg", "positions_in_npz": "m", "time": "s"}}
-    summ = summary(reconstruction, source=stem, extra={"anatomical_angles": det.to_dict()})
+    summ = reconstruction_summary(reconstruction, det, source=stem)
     angles = AngleOutputs(names, values, det.status, angle_header(det, stem, reconstruction.method, protocol.side))
     return write_outputs(reconstruction, out_dir, full, metadata=meta, summary_data=summ, angles=angles,
                          overwrite=overwrite)

@@ -295,8 +295,8 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
 
             print(format_report(calibration.report))
         print(f"calibrated model: {calibration.model_file}")
-        for f in calibration.summary()["labels"]:
-            print(f"static trial {args.static}: {f['severity']}: {f['kind']} ({', '.join(f['markers'])}): {f['evidence']}")
+        for f in calibration.labels:
+            print(f"static trial {args.static}: {f.severity}: {f.kind} ({', '.join(f.markers)}): {f.evidence}")
     from exubio.run.job import TrialJob, run_job
 
     methods = _methods(args.method)

@@ -61,3 +61,21 @@ def model():
 @pytest.fixture(scope="module")
 def kin(model):
     return Kinematics(model)
+
+
+@pytest.fixture
+def make_report():
+    """A CalibrationReport with the given fields (the rest empty): the calibration checks of
+    exubio.trust.quality read nothing else."""
+    import numpy as np
+
+    from exubio.calibration.report import CalibrationReport
+
+    def make(**fields):
+        base = dict(source="", frames=(0, 1, 1), frames_chosen_automatically=False, rate_hz=100.0, body_mass_kg=70.0,
+                    generic_model="", protocol="", scale_factors={}, thorax_scale_measured=False,
+                    static_q_rad=np.zeros(0), coordinate_names=(), ellipsoid_centre_m=np.zeros(3),
+                    ellipsoid_radii_m=np.ones(3), ellipsoid_scale=1.0, constraint_abs=0.0, markers=(), fit_iterations=0)
+        return CalibrationReport(**{**base, **fields})
+
+    return make

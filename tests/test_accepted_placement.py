@@ -10,19 +10,25 @@ from exubio.model.load import load_model
 from exubio.run.inputs import protocol_for_model
 from exubio.io.resources import shipped_file
 
-CAL = {"source": "static.c3d", "landmark_offsets_mm": {"CLAV_AC": 66.0, "EPI_med": 45.0}}
+OFFSETS_MM = {"CLAV_AC": 66.0, "EPI_med": 45.0}
 
 
-def _landmark_reasons(accepted):
-    return [r for r in Q.calibration_reasons(CAL, scale_bounds=SCALE_BOUNDS, accepted_offsets_mm=accepted)
-            if r.code == "calibration_landmark"]
+@pytest.fixture
+def landmark_reasons(make_report):
+    cal = make_report(source="static.c3d", landmark_offsets_mm=OFFSETS_MM)
+
+    def reasons(accepted):
+        return [r for r in Q.calibration_reasons(cal, scale_bounds=SCALE_BOUNDS, accepted_offsets_mm=accepted)
+                if r.code == "calibration_landmark"]
+
+    return reasons
 
 
-def test_an_accepted_offset_is_not_named_again_but_a_larger_one_is():
-    assert {r.message.split("marker ")[1].split(" ")[0] for r in _landmark_reasons({})} == {"CLAV_AC", "EPI_med"}
-    named = _landmark_reasons({"CLAV_AC": 65.0})
+def test_an_accepted_offset_is_not_named_again_but_a_larger_one_is(landmark_reasons):
+    assert {r.message.split("marker ")[1].split(" ")[0] for r in landmark_reasons({})} == {"CLAV_AC", "EPI_med"}
+    named = landmark_reasons({"CLAV_AC": 65.0})
     assert [r.message.split("marker ")[1].split(" ")[0] for r in named] == ["EPI_med"]
-    beyond = _landmark_reasons({"CLAV_AC": 40.0})  # 66 > 40 + 15: still named, with what the protocol accepts
+    beyond = landmark_reasons({"CLAV_AC": 40.0})  # 66 > 40 + 15: still named, with what the protocol accepts
     assert any("CLAV_AC" in r.message and "accepts 40 mm" in r.message for r in beyond)
 
 

@@ -350,7 +350,7 @@ def test_the_report_says_how_the_fits_stopped(calibrated):
     d = report.to_dict()
     assert d["fit_stop"] == {"start_pose": "converged", "pose_and_scales": "converged", "reweighting": "converged"}
     assert cal.metadata["calibration"]["fit_stop"] == d["fit_stop"]
-    assert not [r for r in Q.calibration_reasons(d, scale_bounds=SCALE_BOUNDS) if r.code == "calibration_fit"]
+    assert not [r for r in Q.calibration_reasons(report, scale_bounds=SCALE_BOUNDS) if r.code == "calibration_fit"]
     assert "stopped before converging" not in format_report(report)
 
 
@@ -366,11 +366,11 @@ def test_a_fit_that_did_not_converge_is_a_check(calibrated, fit, stop):
     from exubio.calibration import SCALE_BOUNDS
 
     _, report, _ = calibrated
-    d = dc.replace(report, fit_stop={**report.fit_stop, fit: stop}).to_dict()
+    d = dc.replace(report, fit_stop={**report.fit_stop, fit: stop})
     found = [r for r in Q.calibration_reasons(d, scale_bounds=SCALE_BOUNDS) if r.code == "calibration_fit"]
     assert len(found) == 1 and found[0].level == "check" and stop.replace("_", " ") in found[0].message
     assert "stopped before converging" in format_report(dc.replace(report, fit_stop={**report.fit_stop, fit: stop}))
-    seed = dc.replace(report, fit_stop={**report.fit_stop, "start_pose": "damping_exhausted"}).to_dict()
+    seed = dc.replace(report, fit_stop={**report.fit_stop, "start_pose": "damping_exhausted"})
     assert not [r for r in Q.calibration_reasons(seed, scale_bounds=SCALE_BOUNDS) if r.code == "calibration_fit"]
 
 

@@ -209,11 +209,11 @@ def test_gaps_are_handled_and_named(tmp_path, trajectories):
         assert {g["marker"] for g in s["gaps"]} == {"MET2", "SEML"}
 
 
-def test_calibration_criteria_name_scale_at_bound_pose_at_limit_and_moving_window():
+def test_calibration_criteria_name_scale_at_bound_pose_at_limit_and_moving_window(make_report):
     from exubio.trust import quality as Q
 
-    cal = {"source": "static.c3d", "scale_factors": {"humerus": 0.7, "hand": 1.0},
-           "static_pose_at_limit_deg": {"pronation": -20.0}, "window_motion_mm": {"MET2": 9.0, "ARM": 1.0}}
+    cal = make_report(source="static.c3d", scale_factors={"humerus": 0.7, "hand": 1.0},
+                      static_pose_at_limit_deg={"pronation": -20.0}, window_motion_mm={"MET2": 9.0, "ARM": 1.0})
     reasons = Q.calibration_reasons(cal, scale_bounds=(0.7, 1.4), off_segment={"ARM": 0.2})
     codes = {r.code: r for r in reasons}
     assert "humerus" in codes["calibration_scale"].message and "hand" not in codes["calibration_scale"].message

@@ -17,11 +17,11 @@ import numpy as np
 
 import exubio
 from exubio.errors import InputError, PartialReconstructionError, ReconstructionError
-from exubio.trust.evaluate import summary
 from exubio.io import results
 from exubio.io.trial import read_trial
 from exubio.prep.targets import preparation_key, prepare_targets
 from exubio.run.inputs import Session, load_session
+from exubio.run.summary_file import RunNotes, trial_summary
 from exubio.types import MarkerTargets, Method, Model, Protocol, Reconstruction, Trajectories
 
 log = logging.getLogger(__name__)
@@ -277,10 +277,9 @@ class _Run:
         if not recons:
             raise ReconstructionError("; ".join(f"{m.upper()}: {reason}" for m, reason in failures.items()))
         assessment = self.assess(recons)
-        extra = {} if self.calibration is None else {"calibration": self.calibration.summary()}
         out = write_assessed(inputs, self.trial_path, out_dir,
                              [(m, s, r, sink.model_points) for (m, s), r, sink in zip(done, recons, sinks)], assessment,
-                             summary_extra=extra, failures=failures, overwrite=self.settings.overwrite)
+                             notes=RunNotes(self.calibration, failures=failures), overwrite=self.settings.overwrite)
         if failures:
             raise PartialReconstructionError(
                 "; ".join(f"{m.upper()} failed: {reason}" for m, reason in failures.items())
@@ -308,46 +307,28 @@ def assess_inputs(inputs: TrialInputs, recons: list[Reconstruction], calibration
         trial_pd = pair_distances(inputs.targets.positions_m, inputs.targets.marker_names)
         session = tuple(placed_anew(static_consistency(reference, trial_pd, inputs.protocol)))
     return assess_trial(inputs.model, inputs.protocol, inputs.targets, recons, label_findings=findings,
-                        calibration=None if calibration is None else calibration.summary(), session=session,
+                        calibration=None if calibration is None else calibration.report,
+                        static_labels=() if calibration is None else calibration.labels, session=session,
                         dropped=inputs.dropped, partial_swaps=inputs.partial_swaps, repaired=inputs.repaired,
                         static_name=getattr(reference, "source", "") or "")
 
 
 def write_assessed(inputs: TrialInputs, trial_path: str | Path, out_dir: str | Path, done: list[tuple], assessment: Any,
-                   /, *, summary_extra: Mapping[str, Any] | None = None, failures: Mapping[str, str] | None = None,
-                   overwrite: bool = True) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
+                   /, *, notes: Any = None, overwrite: bool = True
+                   ) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
     """Write every method's result set (write_outputs: the anatomical angles with their status, the
-    assessment's verdict in summary.json); ``done``: per method (Method, stem, reconstruction, its
-    streamed model points (exubio.io.streamed) or None when the reconstruction holds them);
-    ``summary_extra``: further summary entries (the session's calibration, a live recording);
-    ``failures``: the methods of the run that failed, named in each summary. Returns
-    (reconstruction, paths, summary) per method."""
-    from exubio.model.angles import ANATOMICAL_ANGLES, anatomical_table
+    assessment's verdict in summary.json, made by exubio.run.summary_file); ``done``: per method
+    (Method, stem, reconstruction, its streamed model points (exubio.io.streamed) or None when the
+    reconstruction holds them); ``notes``: the run's calibration, live figures and failed methods
+    (exubio.run.summary_file.RunNotes). Returns (reconstruction, paths, summary) per method."""
+    from exubio.model.angles import anatomical_table
 
-    failures = failures or {}
     out = []
     for method, stem, recon, model_points in done:
         meta = run_metadata(inputs, trial_path, method)
-        extra = {"unused_trial_labels": _unused(inputs), **(summary_extra or {})}
-        if "mean_spring_deflection_mm" in recon.info:
-            extra["mean_spring_deflection_mm"] = recon.info["mean_spring_deflection_mm"]
-        if inputs.targets.cutoff_hz:
-            extra["filter_cutoff_hz"] = dict(inputs.targets.cutoff_hz)
-        extra.update(assessment.summary_for(recon.method))
-        cal = extra.get("calibration") if isinstance(extra.get("calibration"), dict) else {}
-        file_findings = tuple(dict.fromkeys(tuple(inputs.trial.input_findings) + tuple(
-            f"static trial: {f}" for f in cal.get("input_findings") or () if f not in inputs.trial.input_findings)))
-        if file_findings:
-            extra["input_findings"] = list(file_findings)
-            extra["quality"] = with_input_findings(extra["quality"], file_findings)
-        if failures:
-            extra["failed_methods"] = dict(failures)
-            extra["quality"] = with_failed_methods(extra["quality"], failures)
+        summ = trial_summary(recon, assessment, inputs, source=str(trial_path), stem=stem, notes=notes or RunNotes())
         names, values = anatomical_table(inputs.model, recon.q_rad)
         det = assessment.angles[recon.method]
-        extra["angles"] = {"files": [f"{stem}.csv", f"{stem}.mot"], "units": "deg", "side": inputs.protocol.side,
-                           "definitions": {n: {"definition": d, "meaning": m} for n, d, m in ANATOMICAL_ANGLES}}
-        summ = summary(recon, source=str(trial_path), extra=extra)
         angles = AngleOutputs(names, values, det.status,
                               angle_header(det, Path(trial_path).name, method.value, inputs.protocol.side),
                               assessment.determinacy[recon.method].undetermined)
@@ -356,25 +337,6 @@ def write_assessed(inputs: TrialInputs, trial_path: str | Path, out_dir: str | P
                               overwrite=overwrite)
         out.append((recon, paths, summ))
     return out
-
-
-def with_input_findings(quality: dict[str, Any], findings: tuple[str, ...], /) -> dict[str, Any]:
-    """A summary's ``quality`` with a note per input finding (what the reader read around: the file is
-    named, the result stands: exubio.trust.quality's "note" level, which leaves the verdict as it is)."""
-    from exubio.trust.quality import Reason
-
-    notes = [Reason("input_file", "note", f"input file: {f}").to_dict() for f in findings]
-    return {**quality, "reasons": list(quality["reasons"]) + notes}
-
-
-def with_failed_methods(quality: dict[str, Any], failures: dict[str, str], /) -> dict[str, Any]:
-    """A summary's ``quality`` with a note per method of the run that failed (this result stands
-    on its own: no PF-LS agreement was measured)."""
-    from exubio.trust.quality import Reason
-
-    notes = [Reason("method_failed", "note", f"{m.upper()} failed on this trial, so this result is not compared with it "
-                    f"(no PF-LS agreement): {reason}").to_dict() for m, reason in failures.items()]
-    return {**quality, "reasons": list(quality["reasons"]) + notes}
 
 
 MAX_STATUS_RUNS = 12
@@ -416,10 +378,3 @@ def angle_header(det, trial: str, method: str, side: str) -> tuple[str, ...]:
         runs = ", ".join(f"{AngleStatus(int(col[a])).label} {a}-{b - 1}" for a, b in zip(starts, ends))
         lines.append(f"status {n}: by frame: {runs}{rule}")
     return tuple(lines)
-
-
-def _unused(inputs: TrialInputs) -> list[str]:
-    from exubio.protocol.labels import resolve_labels
-
-    match = resolve_labels(inputs.protocol, inputs.trial.labels, source=inputs.trial.source)
-    return list(match.unused) + list(inputs.trial.ignored_labels)

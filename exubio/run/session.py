@@ -50,18 +50,6 @@ class SessionCalibration:
     reference: Any = None
     input_findings: tuple[str, ...] = ()
 
-    def summary(self) -> dict[str, Any]:
-        """The calibration as summary.json records it (the full report dict under ``report``, the
-        label findings on the static trial under ``labels``)."""
-        from exubio.trust.assess import _finding_dict
-
-        out = {"static": self.static, "frames": self.frames, "model_file": str(self.model_file),
-               "mean_residual_mm": self.report.mean_residual_mm, "residual_mm": self.report.to_dict().get("residual_mm"),
-               "report": self.report.to_dict(), "labels": [_finding_dict(f) for f in self.labels]}
-        if self.input_findings:  # what the reader read around in the static trial's file (io/trc.py, io/c3d.py)
-            out["input_findings"] = list(self.input_findings)
-        return out
-
     def moved_to(self, model_file: Path, /) -> "SessionCalibration":
         """The same calibration, its model file moved (a study renames its calibration folder): the
         model's ``source`` names the file where it is now, as a model read from there would."""

@@ -25,8 +25,8 @@ from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Reconstruc
 class TrialAssessment:
     """Per method: determinacy, limit reports, quality; and the PF-LS agreement (deg RMSE on the
     frames where each coordinate is determined by both), the label findings, the solved mask.
-    ``calibration`` (assess_trial): the calibration summary (``report``: the CalibrationReport
-    dict; ``labels``: the label findings on the static trial)."""
+    The calibration enters through assess_trial (its CalibrationReport and the label findings on
+    the static trial) as reasons of the verdicts."""
 
     determinacy: Mapping[str, Determinacy]
     limits: Mapping[str, list]
@@ -38,33 +38,10 @@ class TrialAssessment:
     structural: Mapping[str, str] | None = None  # per anatomical angle: what the marker set can do (angle_status_of_protocol)
     mismatch: Mapping[str, MismatchAssessment] | None = None  # per method: model-mismatch evidence (exubio.trust.mismatch)
 
-    def summary_for(self, method: str) -> dict[str, Any]:
-        """What goes into that method's summary.json."""
-        angles = {} if self.angles is None else {"anatomical_angles": {
-            **self.angles[method].to_dict(), "protocol_can": dict(self.structural or {})}}
-        mismatch = {} if not self.mismatch or method not in self.mismatch else {
-            "model_mismatch": self.mismatch[method].to_dict()}
-        return {**angles, **mismatch,
-            "quality": self.quality[method].to_dict(),
-            "determinacy": self.determinacy[method].to_dict(),
-            "limits": [lim.to_dict() for lim in self.limits[method]],
-            "labels": [_finding_dict(f) for f in self.labels],
-            "pf_ls_agreement_deg": None if self.agreement_deg is None else {
-                "definition": "RMSE over the frames where the coordinate is determined in both reconstructions",
-                **{k: (None if v is None or not np.isfinite(v) else round(float(v), 4)) for k, v in self.agreement_deg.items()}},
-            "not_measured": list(self.not_solved),
-        }
 
-
-def _finding_dict(f) -> dict[str, Any]:
-    if isinstance(f, Mapping):
-        return dict(f)
-    if hasattr(f, "to_dict"):
-        return f.to_dict()
-    out = {k: getattr(f, k) for k in ("kind", "markers", "evidence", "severity") if hasattr(f, k)}
-    if "markers" in out:
-        out["markers"] = list(out["markers"])
-    return out
+def _field(f: Any, key: str, default: Any = None) -> Any:
+    """A finding's field, whether the finding is typed or read from a file."""
+    return f.get(key, default) if isinstance(f, Mapping) else getattr(f, key, default)
 
 
 def trial_label_findings(model: Model, protocol: Protocol, targets: MarkerTargets, /, *, reference: Any = None,
@@ -81,10 +58,10 @@ def trial_label_findings(model: Model, protocol: Protocol, targets: MarkerTarget
                        reference=reference)
 
 
-def _same_finding(f: Mapping[str, Any], findings: Sequence) -> bool:
+def _same_finding(f: Any, findings: Sequence) -> bool:
     """A static-trial finding that the trial repeats (same kind and markers) is reported once."""
-    return any(_finding_dict(g).get("kind") == f.get("kind") and set(_finding_dict(g).get("markers", ()))
-               == set(f.get("markers", ())) for g in findings)
+    return any(_field(g, "kind") == _field(f, "kind") and set(_field(g, "markers", ())) == set(_field(f, "markers", ()))
+               for g in findings)
 
 
 def not_solved_mask(model: Model, protocol: Protocol, kin: Kinematics | None = None) -> np.ndarray:
@@ -185,7 +162,7 @@ about 10x cheaper at 200 Hz."""
 
 
 def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recons: Sequence[Reconstruction], /, *,
-                 label_findings: Sequence = (), calibration: Mapping[str, Any] | None = None,
+                 label_findings: Sequence = (), calibration: Any = None, static_labels: Sequence = (),
                  determinacy_every: int | None = None, session: Sequence = (),
                  static_name: str = "", dropped: Sequence[str] = (), partial_swaps: Sequence = (),
                  repaired: bool = False) -> TrialAssessment:
@@ -194,7 +171,9 @@ def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recon
     named as a check on the static; ``static_name``: that static trial; ``dropped``: protocol markers
     the trial lacks, left out (exubio.trust.missing_markers): a check naming them; ``partial_swaps``: labels
     exchanged in part of the trial (exubio.trust.label_ranges): a fail, or with ``repaired`` a check that
-    says where they were exchanged back."""
+    says where they were exchanged back. ``calibration``: the session's CalibrationReport
+    (exubio.calibration), checked as the verdict's calibration reasons; ``static_labels``: the label
+    findings on its static trial (one the trial repeats is named once)."""
     kin = Kinematics(model)
     if determinacy_every is None:
         dt = float(np.median(np.diff(targets.time_s))) if targets.n_frames > 1 else 1.0
@@ -217,17 +196,16 @@ def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recon
     by = {r.method: r for r in recons}
     if "pf" in by and "ls" in by:
         agreement = agreement_on_measured(model, by["pf"], angles["pf"], by["ls"], angles["ls"])
-    off = Q.off_segment_markers(model, protocol) if calibration else {}
-    report = (calibration or {}).get("report")
-    static_labels = [f for f in (calibration or {}).get("labels", []) if not _same_finding(f, label_findings)]
+    off = Q.off_segment_markers(model, protocol) if calibration is not None else {}
+    static_labels = [f for f in static_labels if not _same_finding(f, label_findings)]
     common = (Q.label_reasons(label_findings) + Q.label_reasons(static_labels, prefix="static trial: ")
-              + Q.calibration_reasons(report, scale_bounds=SCALE_BOUNDS, off_segment=off, not_measured=unmeasurable,
+              + Q.calibration_reasons(calibration, scale_bounds=SCALE_BOUNDS, off_segment=off, not_measured=unmeasurable,
                                       accepted_offsets_mm={m.name: m.landmark_offset_mm for m in protocol.markers
                                                            if m.landmark_offset_mm is not None})
               + Q.session_reasons(session, static_name) + Q.dropped_reasons(dropped)
               + Q.partial_swap_reasons(partial_swaps, repaired))
-    named = sorted({m for f in label_findings if _finding_dict(f).get("severity") not in ("info", "note")
-                    for m in _finding_dict(f).get("markers", ())})  # their residuals are the label's, not the model's
+    named = sorted({m for f in label_findings if _field(f, "severity") not in ("info", "note")
+                    for m in _field(f, "markers", ())})  # their residuals are the label's, not the model's
     mismatch = {r.method: assess_mismatch(kin, points, r.q_rad, targets.positions_m, targets.time_s, skip_markers=named)
                 for r in recons}
     quality = {}

@@ -7,7 +7,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from exubio.types import FrameStatus, Model, Reconstruction
+from exubio.types import Model, Reconstruction
 
 
 def residual_statistics(recon: Reconstruction, /) -> dict[str, Any]:
@@ -48,41 +48,6 @@ def per_frame_residuals_mm(recon: Reconstruction, /) -> tuple[np.ndarray, np.nda
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         return np.nanmean(res, axis=1), np.nanstd(res, axis=1)
-
-
-def summary(recon: Reconstruction, /, *, source: str = "", extra: dict[str, Any] | None = None) -> dict[str, Any]:
-    """The machine-readable summary of one reconstruction (summary.json)."""
-    total = float(recon.timings_s.get("total", np.nan))
-    status = np.asarray(recon.status)
-    out: dict[str, Any] = {
-        "method": recon.method,
-        "source": source,
-        "n_frames": recon.n_frames,
-        "duration_s": float(recon.time_s[-1] - recon.time_s[0]) if recon.n_frames else 0.0,
-        "wall_time_s": total,
-        "ms_per_frame": total / max(recon.n_frames, 1) * 1000.0,
-        "timings_s": dict(recon.timings_s),
-        "residual_mm": residual_statistics(recon),
-        "constraint_max_abs": float(np.nanmax(np.abs(recon.constraint))),
-        "constraint_velocity_max_abs_per_s": float(np.nanmax(np.abs(recon.constraint_velocity))),
-        "frames": {s.name.lower(): int((status == s.value).sum()) for s in FrameStatus},
-        "markers": list(recon.marker_names),
-        "coordinates": list(recon.coordinate_names),
-        "gaps": [{"marker": g.marker, "start_frame": g.start, "stop_frame": g.stop,
-                  "start_s": float(recon.time_s[g.start]) if g.start < recon.n_frames else None,
-                  "duration_s": g.n_frames / _rate(recon)} for g in recon.gaps if g.n_frames < recon.n_frames],
-        "absent_markers": [g.marker for g in recon.gaps if g.n_frames >= recon.n_frames],
-        "info": dict(recon.info),
-    }
-    if extra:
-        out.update(extra)
-    return out
-
-
-def _rate(recon: Reconstruction) -> float:
-    if recon.n_frames < 2:
-        return 1.0
-    return 1.0 / float(np.median(np.diff(recon.time_s)))
 
 
 def rmse_deg(q_a: np.ndarray, q_b: np.ndarray, names: Sequence[str], /) -> dict[str, float]:

@@ -107,6 +107,10 @@ class Quality:
     def to_dict(self) -> dict[str, Any]:
         return {"verdict": self.verdict.value, "reasons": [r.to_dict() for r in self.reasons]}
 
+    def with_reasons(self, more: Iterable[Reason], /) -> "Quality":
+        """The same judgement with ``more`` reasons added (notes leave the verdict as it is)."""
+        return Quality.of((*self.reasons, *more))
+
     @staticmethod
     def of(reasons: Iterable[Reason]) -> "Quality":
         reasons = tuple(sorted(reasons, key=lambda r: -r.level.rank))
@@ -161,7 +165,8 @@ def agreement_reasons(agreement_deg: Mapping[str, float] | None, undetermined: S
 
 
 def limit_reasons(limits: Sequence[Mapping[str, Any]], n_frames: int, *, not_measured: Sequence[str] = ()) -> list[Reason]:
-    """``not_measured``: coordinates the marker set cannot determine: at a limit, the limit is what
+    """The checks on a calibration (``cal``: exubio.calibration.CalibrationReport, or None).
+    ``not_measured``: coordinates the marker set cannot determine: at a limit, the limit is what
     holds them (a note naming it), not markers asking for an implausible posture."""
     out = []
     for lim in limits:
@@ -294,48 +299,49 @@ def label_reasons(findings: Iterable[Any], *, prefix: str = "") -> list[Reason]:
     return out
 
 
-def calibration_reasons(cal: Mapping[str, Any] | None, *, scale_bounds: tuple[float, float],
+def calibration_reasons(cal: Any, *, scale_bounds: tuple[float, float],
                         off_segment: Mapping[str, float] | None = None,
                         not_measured: Sequence[str] = (),
                         accepted_offsets_mm: Mapping[str, float] | None = None) -> list[Reason]:
-    """``not_measured``: coordinates the marker set cannot determine (exubio.trust.assess): their range
+    """The checks on a calibration (``cal``: exubio.calibration.CalibrationReport, or None).
+    ``not_measured``: coordinates the marker set cannot determine (exubio.trust.assess): their range
     limit holds them, which is a note, not an implausible posture the markers ask for.
     ``accepted_offsets_mm``: per marker, the landmark distance the protocol accepts as the lab's
     placement (``landmark_offset_mm``), instead of LANDMARK_OFFSET_MM."""
-    if not cal:
+    if cal is None:
         return []
     out = []
-    src = cal.get("source") or "the static trial"
-    for name, value in (cal.get("static_pose_at_limit_deg") or {}).items():
+    src = cal.source or "the static trial"
+    for name, value in cal.static_pose_at_limit_deg.items():
         if name in not_measured:
             out.append(Reason("calibration_pose", "note", f"calibration ({src}): the static pose leaves {name}, which "
                               f"this marker set does not measure, at its range limit ({value:.1f} deg)"))
             continue
         out.append(Reason("calibration_pose", "check", f"calibration ({src}): the static pose puts {name} at its "
                           f"range limit ({value:.1f} deg): the markers ask for an implausible posture"))
-    for seg, s in (cal.get("scale_factors") or {}).items():
+    for seg, s in cal.scale_factors.items():
         if min(abs(s - scale_bounds[0]), abs(s - scale_bounds[1])) < SCALE_AT_BOUND:
             out.append(Reason("calibration_scale", "check", f"calibration ({src}): {seg} scale factor {s:.2f} at its "
                               f"bound {scale_bounds}: the subject does not fit the model (another subject's static? a label?)"))
-    motion = cal.get("window_motion_mm") or {}
+    motion = dict(cal.window_motion_mm)
     if motion:
         worst = max(motion, key=motion.get)
         if motion[worst] > WINDOW_MOTION_MM:
             out.append(Reason("calibration_motion", "check", f"calibration ({src}): the static window moves: {worst} "
                               f"{motion[worst]:.1f} mm RMS about its mean (above {WINDOW_MOTION_MM:.0f} mm)"))
-    for fit, stop in (cal.get("fit_stop") or {}).items():
+    for fit, stop in cal.fit_stop.items():
         if fit != "start_pose" and stop not in FIT_SETTLED:  # the start pose only seeds the final fit
             what = {"pose_and_scales": "the final fit of the static pose and the scale factors",
                     "reweighting": "the robust reweighting of the static-pose fit"}.get(fit, f"the fit of the {fit}")
             out.append(Reason("calibration_fit", "check", f"calibration ({src}): {what} stopped before converging "
                               f"({stop.replace('_', ' ')}): the calibrated geometry may rest on a pose that is not "
                               f"the optimum"))
-    gh = (cal.get("functional") or {}).get("gh") or {}
+    gh = cal.functional.get("gh") or {}
     if gh and not gh.get("used"):
         out.append(Reason("calibration_functional", "note", f"calibration ({src}): functional glenohumeral centre "
                           f"not used: {gh.get('reason')}"))
     accepted = dict(accepted_offsets_mm or {})
-    for name, d in ((cal.get("landmark_offsets_mm") or {}).items()):
+    for name, d in cal.landmark_offsets_mm.items():
         limit = max(LANDMARK_OFFSET_MM, accepted.get(name, 0.0) + LANDMARK_ACCEPT_MARGIN_MM) if name in accepted \
             else LANDMARK_OFFSET_MM
         if d > limit:

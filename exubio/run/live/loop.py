@@ -992,7 +992,7 @@ class LiveSession:
             from exubio.calibration import SCALE_BOUNDS
 
             self.calibration_reasons = Q.calibration_reasons(  # as exubio.trust.assess does for the recording
-                report.to_dict(), scale_bounds=SCALE_BOUNDS, off_segment=Q.off_segment_markers(self.model, self.protocol))
+                report, scale_bounds=SCALE_BOUNDS, off_segment=Q.off_segment_markers(self.model, self.protocol))
             if self.on_ready is not None:
                 self.on_ready(self)
         self._check_units()

@@ -33,6 +33,7 @@ def write_recording(rec: LiveRecording, out_dir: str | os.PathLike, name: str, /
     from exubio.io.c3d import write_c3d
     from exubio.io.results import atomic_write, write_json, writable_folder
     from exubio.run.pipeline import TrialInfo, TrialInputs, write_assessed
+    from exubio.run.summary_file import RunNotes
     from exubio.types import Method
     from exubio.run.inputs import generic_of
 
@@ -61,12 +62,11 @@ def write_recording(rec: LiveRecording, out_dir: str | os.PathLike, name: str, /
                              rec.model, rec.protocol, targets)
         recon = rec.reconstruction()
         findings = trial_label_findings(rec.model, rec.protocol, targets, expect=generic_of(rec.model, rec.protocol))
-        calibration = {"report": rec.calibration.to_dict()} if rec.calibration is not None else None
         assessment = assess_trial(rec.model, rec.protocol, targets, [recon], label_findings=findings,
-                                  calibration=calibration)
+                                  calibration=rec.calibration)
         live = live_summary(rec)
         outputs = write_assessed(inputs, f"{name}.c3d", tmp, [(Method.PF, f"{name}.pf", recon, None)], assessment,
-                                 summary_extra={"live": live})
+                                 notes=RunNotes(live=live))
         write_json(tmp / f"{name}.live.json", {**live, "offline_verdict": assessment.quality["pf"].to_dict()})
         if report:
             from exubio.report.trial_report import build_trial_report

@@ -1,0 +1,156 @@
+"""summary.json: the one place where a trial's typed results (its reconstruction, its assessment,
+the session's calibration, the notes on the input files) become the file's plain data (mm, deg,
+strings). Everything above hands this module objects; nothing below it builds the file's dicts."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from exubio.model.angles import ANATOMICAL_ANGLES
+from exubio.protocol.labels import resolve_labels
+from exubio.trust.assess import TrialAssessment
+from exubio.trust.evaluate import residual_statistics
+from exubio.trust.quality import Quality, Reason
+from exubio.types import FrameStatus, Reconstruction
+
+AGREEMENT_DEFINITION = "RMSE over the frames where the coordinate is determined in both reconstructions"
+
+
+def finding_entry(f: Any, /) -> dict[str, Any]:
+    """One label or model finding as the file records it."""
+    if isinstance(f, Mapping):
+        return dict(f)
+    if hasattr(f, "to_dict"):
+        return f.to_dict()
+    out = {k: getattr(f, k) for k in ("kind", "markers", "evidence", "severity") if hasattr(f, k)}
+    if "markers" in out:
+        out["markers"] = list(out["markers"])
+    return out
+
+
+def calibration_entry(cal: Any, /) -> dict[str, Any]:
+    """The session's calibration (exubio.run.session.SessionCalibration) as summary.json records
+    it: the full report under ``report``, the label findings on the static trial under ``labels``."""
+    report = cal.report.to_dict()
+    out = {"static": cal.static, "frames": cal.frames, "model_file": str(cal.model_file),
+           "mean_residual_mm": cal.report.mean_residual_mm, "residual_mm": report.get("residual_mm"),
+           "report": report, "labels": [finding_entry(f) for f in cal.labels]}
+    if cal.input_findings:  # what the reader read around in the static trial's file (io/trc.py, io/c3d.py)
+        out["input_findings"] = list(cal.input_findings)
+    return out
+
+
+def reconstruction_entries(recon: Reconstruction, /, *, source: str = "") -> dict[str, Any]:
+    """What summary.json says of the reconstruction itself: frames, timings, residuals, constraint,
+    gaps, the markers and coordinates."""
+    total = float(recon.timings_s.get("total", np.nan))
+    status = np.asarray(recon.status)
+    rate = 1.0 / float(np.median(np.diff(recon.time_s))) if recon.n_frames > 1 else 1.0
+    return {
+        "method": recon.method,
+        "source": source,
+        "n_frames": recon.n_frames,
+        "duration_s": float(recon.time_s[-1] - recon.time_s[0]) if recon.n_frames else 0.0,
+        "wall_time_s": total,
+        "ms_per_frame": total / max(recon.n_frames, 1) * 1000.0,
+        "timings_s": dict(recon.timings_s),
+        "residual_mm": residual_statistics(recon),
+        "constraint_max_abs": float(np.nanmax(np.abs(recon.constraint))),
+        "constraint_velocity_max_abs_per_s": float(np.nanmax(np.abs(recon.constraint_velocity))),
+        "frames": {s.name.lower(): int((status == s.value).sum()) for s in FrameStatus},
+        "markers": list(recon.marker_names),
+        "coordinates": list(recon.coordinate_names),
+        "gaps": [{"marker": g.marker, "start_frame": g.start, "stop_frame": g.stop,
+                  "start_s": float(recon.time_s[g.start]) if g.start < recon.n_frames else None,
+                  "duration_s": g.n_frames / rate} for g in recon.gaps if g.n_frames < recon.n_frames],
+        "absent_markers": [g.marker for g in recon.gaps if g.n_frames >= recon.n_frames],
+        "info": dict(recon.info),
+    }
+
+
+def assessment_entries(a: TrialAssessment, method: str, /, *, quality: Quality | None = None) -> dict[str, Any]:
+    """That method's assessment as summary.json records it; ``quality``: its verdict with the run's
+    notes added (default: the assessment's own)."""
+    angles = {} if a.angles is None else {"anatomical_angles": {
+        **a.angles[method].to_dict(), "protocol_can": dict(a.structural or {})}}
+    mismatch = {} if not a.mismatch or method not in a.mismatch else {"model_mismatch": a.mismatch[method].to_dict()}
+    return {**angles, **mismatch,
+            "quality": (quality or a.quality[method]).to_dict(),
+            "determinacy": a.determinacy[method].to_dict(),
+            "limits": [lim.to_dict() for lim in a.limits[method]],
+            "labels": [finding_entry(f) for f in a.labels],
+            "pf_ls_agreement_deg": None if a.agreement_deg is None else {
+                "definition": AGREEMENT_DEFINITION,
+                **{k: (None if v is None or not np.isfinite(v) else round(float(v), 4))
+                   for k, v in a.agreement_deg.items()}},
+            "not_measured": list(a.not_solved)}
+
+
+def input_notes(findings: Sequence[str], /) -> list[Reason]:
+    """A note per input finding (what the reader read around: the file is named, the result stands)."""
+    return [Reason("input_file", "note", f"input file: {f}") for f in findings]
+
+
+def failure_notes(failures: Mapping[str, str], /) -> list[Reason]:
+    """A note per method of the run that failed (this result stands on its own: no PF-LS agreement)."""
+    return [Reason("method_failed", "note", f"{m.upper()} failed on this trial, so this result is not compared with "
+                   f"it (no PF-LS agreement): {reason}") for m, reason in failures.items()]
+
+
+@dataclass(frozen=True)
+class RunNotes:
+    """What a trial's summaries say beyond its reconstruction and assessment: the session's
+    calibration (exubio.run.session.SessionCalibration), a live recording's figures, the run's
+    methods that failed (name -> reason)."""
+
+    calibration: Any = None
+    live: Mapping[str, Any] | None = None
+    failures: Mapping[str, str] = field(default_factory=dict)
+
+
+def unused_labels(inputs: Any, /) -> list[str]:
+    """The trial's labels the protocol does not use, and those the reader ignored."""
+    match = resolve_labels(inputs.protocol, inputs.trial.labels, source=inputs.trial.source)
+    return list(match.unused) + list(inputs.trial.ignored_labels)
+
+
+def trial_summary(recon: Reconstruction, assessment: TrialAssessment, inputs: Any, /, *, source: str, stem: str,
+                  notes: RunNotes = RunNotes()) -> dict[str, Any]:
+    """One method's summary.json: ``inputs`` the trial's (exubio.run.pipeline.TrialInputs),
+    ``source`` the trial file, ``stem`` the result set's, ``notes`` the run's (RunNotes)."""
+    cal = notes.calibration
+    out = reconstruction_entries(recon, source=source)
+    out["unused_trial_labels"] = unused_labels(inputs)
+    if cal is not None:
+        out["calibration"] = calibration_entry(cal)
+    if notes.live is not None:
+        out["live"] = dict(notes.live)
+    if "mean_spring_deflection_mm" in recon.info:
+        out["mean_spring_deflection_mm"] = recon.info["mean_spring_deflection_mm"]
+    if inputs.targets.cutoff_hz:
+        out["filter_cutoff_hz"] = dict(inputs.targets.cutoff_hz)
+    read_around = tuple(inputs.trial.input_findings)
+    file_findings = tuple(dict.fromkeys(read_around + tuple(
+        f"static trial: {f}" for f in (cal.input_findings if cal is not None else ()) if f not in read_around)))
+    quality = assessment.quality[recon.method].with_reasons(input_notes(file_findings) + failure_notes(notes.failures))
+    out.update(assessment_entries(assessment, recon.method, quality=quality))
+    if file_findings:
+        out["input_findings"] = list(file_findings)
+    if notes.failures:
+        out["failed_methods"] = dict(notes.failures)
+    out["angles"] = {"files": [f"{stem}.csv", f"{stem}.mot"], "units": "deg", "side": inputs.protocol.side,
+                     "definitions": {n: {"definition": d, "meaning": m} for n, d, m in ANATOMICAL_ANGLES}}
+    return out
+
+
+def reconstruction_summary(recon: Reconstruction, angles: Any, /, *, source: str = "") -> dict[str, Any]:
+    """The summary.json of a reconstruction written on its own (exubio.write_results): the
+    reconstruction, its anatomical angles' status (``angles``: AngleDeterminacy) and, when the
+    reconstruction carries one (exubio.reconstruct), its verdict."""
+    out = reconstruction_entries(recon, source=source)
+    out["anatomical_angles"] = angles.to_dict()
+    if getattr(recon, "quality", None) is not None:
+        out["quality"] = recon.quality.to_dict()
+    return out
