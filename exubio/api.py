@@ -195,18 +195,32 @@ def to_dataframe(reconstruction: Reconstruction, /, *, model: Model | None = Non
 
 
 def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str, /, *, model: Model | None = None,
-                  protocol: Protocol | None = None, overwrite: bool = False) -> dict[str, Path]:
+                  protocol: Protocol | None = None, trial: Trajectories | str | Path | None = None,
+                  overwrite: bool = False) -> dict[str, Path]:
     """Write ``<stem>.<method>.csv`` and ``.mot`` (the anatomical angles, each one's status in the
     header), ``.npz`` and ``.summary.json`` into out_dir, as one set complete or absent; refuses to
-    replace earlier results unless ``overwrite``. Returns the paths by kind."""
-    from exubio.model.angles import anatomical_table
+    replace earlier results unless ``overwrite``. Returns the paths by kind. Given the ``trial``
+    it was reconstructed from (its file, or the read trial), the files are those ``exubio
+    reconstruct`` writes for it (the same assessment, verdict, label checks and header lines; only
+    the wall-clock timings differ); without it, the reconstruction with its angles' status and
+    the verdict it carries (exubio.reconstruct)."""
     from exubio.io import results
+    from exubio.model.angles import anatomical_table
+    from exubio.run.pipeline import AngleOutputs, angle_header, assess_inputs, write_assessed, write_outputs
     from exubio.run.summary_file import reconstruction_summary
-    from exubio.run.pipeline import AngleOutputs, angle_header, write_outputs
+    from exubio.types import Method
 
+    full = f"{stem}.{reconstruction.method}"
+    if trial is not None:
+        session = _session(model, protocol)
+        inputs = _inputs(trial, session)
+        assessment = assess_inputs(inputs, [reconstruction])
+        results.prepare_output_dir(out_dir, [full], overwrite=overwrite)
+        source = str(trial) if isinstance(trial, (str, Path)) else inputs.trial.source
+        done = [(Method.parse(reconstruction.method), full, reconstruction, None)]
+        return write_assessed(inputs, source, out_dir, done, assessment, overwrite=overwrite)[0][1]
     model = model if model is not None else load_model()
     protocol = protocol if protocol is not None else load_protocol(model=model)
-    full = f"{stem}.{reconstruction.method}"
     results.prepare_output_dir(out_dir, [full], overwrite=overwrite)
     det = angle_status(reconstruction, model, protocol)
     names, values = anatomical_table(model, reconstruction.q_rad)
