@@ -294,7 +294,8 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
             from exubio.calibration import format_report
 
             print(format_report(calibration.report))
-        print(f"calibrated model: {calibration.model_file}")
+        print(f"calibration reused (same static, protocol, model and options): {calibration.model_file}"
+              if calibration.reused else f"calibrated model: {calibration.model_file}")
         for f in calibration.labels:
             print(f"static trial {args.static}: {f.severity}: {f.kind} ({', '.join(f.markers)}): {f.evidence}")
     from exubio.run.job import TrialJob, run_job

@@ -148,6 +148,34 @@ class CalibrationReport:
         }
 
 
+    @staticmethod
+    def from_dict(d: Mapping[str, Any], /) -> "CalibrationReport":
+        """The report as a model file's ``calibration`` section records it (to_dict): what a
+        session folder's calibration, reused, reports (its values as written: mm to the µm)."""
+        names = tuple(d["static_pose_deg"])
+        markers = tuple(MarkerCalibration(
+            name, m["segment"], m["point"], np.asarray(m["local_position_mm"], float) / 1000.0, bool(m["registered"]),
+            float("nan") if m["residual_mm"] is None else float(m["residual_mm"]),
+            float("nan") if m["generic_offset_mm"] is None else float(m["generic_offset_mm"]), float(m["fit_weight"]))
+            for name, m in d["markers"].items())
+        fr, el = d["frames"], d["ellipsoid"]
+        return CalibrationReport(
+            source=d["source"], frames=(fr["start"], fr["stop"], fr["step"]),
+            frames_chosen_automatically=bool(fr["chosen_automatically"]), rate_hz=float(fr["rate_hz"]),
+            body_mass_kg=float(d["body_mass_kg"]), generic_model=d["generic_model"], protocol=d["protocol"],
+            scale_factors=dict(d["scale_factors"]), thorax_scale_measured=bool(d["thorax_scale_measured"]),
+            static_q_rad=np.radians([float(v) for v in d["static_pose_deg"].values()]), coordinate_names=names,
+            ellipsoid_centre_m=np.asarray(el["centre_mm"], float) / 1000.0,
+            ellipsoid_radii_m=np.asarray(el["radii_mm"], float) / 1000.0,
+            ellipsoid_scale=float(el["radii_scale_fitted"]), constraint_abs=float(el["max_abs_g_at_static_pose"]),
+            markers=markers, fit_iterations=int(d["fit_iterations"]),
+            window_motion_mm=dict(d.get("window_motion_mm") or {}),
+            static_pose_at_limit_deg=dict(d.get("static_pose_at_limit_deg") or {}),
+            functional=dict(d.get("functional") or {}),
+            ellipsoid_poses_mm=dict(d.get("ellipsoid_poses_mm") or {}),
+            joint_centres_mm={k: v for k, v in (d.get("joint_centres_mm") or {}).items() if k != "definition"},
+            landmark_offsets_mm=dict(d.get("landmark_offsets_mm") or {}), fit_stop=dict(d.get("fit_stop") or {}))
+
 
 def format_report(report: CalibrationReport, /) -> str:
     """A short text table of the calibration for the terminal."""

@@ -7,6 +7,7 @@ and prepared once, for the calibration and its label checks alike."""
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -49,6 +50,7 @@ class SessionCalibration:
     labels: tuple = ()
     reference: Any = None
     input_findings: tuple[str, ...] = ()
+    reused: bool = False  # the session folder's calibration from the same inputs, read, not fitted again
 
     def moved_to(self, model_file: Path, /) -> "SessionCalibration":
         """The same calibration, its model file moved (a study renames its calibration folder): the
@@ -108,14 +110,57 @@ def calibrate_session(static: str | Path | Trajectories, session: Session, out_d
 
     source = _read(static)  # read once for the calibration and the checks
     model_file = Path(out_dir) / f"{stem}.model.yaml"
-    results.prepare_output_dir(out_dir, [model_file.name], overwrite=overwrite)
+    key = calibration_key(source, session, spec)
+    reused = None if overwrite else reusable_calibration(model_file, key)
     gmodel, gprot = session.generic_model, session.generic_protocol
     targets = targets if targets is not None else prepare_targets(source, gprot)  # prepared once
-    model, report = calibrate(source, session, spec, targets=targets)
-    save_model(model, model_file, calibration=report.to_dict())
-    model = as_written(model, calibration=report.to_dict(), source=model_file)
+    if reused is not None:
+        model, report = reused
+    else:
+        results.prepare_output_dir(out_dir, [model_file.name], overwrite=overwrite)
+        model, report = calibrate(source, session, spec, targets=targets)
+        written = {**report.to_dict(), **({"inputs_sha256": key} if key else {})}
+        save_model(model, model_file, calibration=written)
+        model = as_written(model, calibration=written, source=model_file)
     pos = targets.positions_m[slice(*report.frames)] if parse_frames(spec.frames) is not None else targets.positions_m
     findings = check_trial(targets, model=gmodel, protocol=gprot, ranges_rad=gmodel.coordinate_ranges_rad)
     return SessionCalibration(session.with_model(model), report, source.source, model_file, spec.frames, tuple(findings),
                               pair_distances(pos, targets.marker_names, source=source.source) if reference else None,
-                              tuple(source.input_findings))
+                              tuple(source.input_findings), reused is not None)
+
+
+def calibration_key(static: Trajectories, session: Session, spec: StaticSpec, /) -> str | None:
+    """A fingerprint of what a calibration is made from: the static trial's file and labels (a
+    relabel changes them), the generic model and protocol files, the static options and their
+    files, exubio's version. None when the static is not a file (nothing to find again)."""
+    import exubio
+
+    files = [static.source, session.generic_model.source, session.generic_protocol.source,
+             spec.functional, *spec.more_statics, *spec.scapula_trials]
+    if not static.source or not Path(static.source).is_file():
+        return None
+    h = hashlib.sha256()
+    for f in files:
+        h.update(hashlib.sha256(Path(f).read_bytes() if f and Path(f).is_file() else str(f).encode()).digest())
+    h.update(repr((tuple(static.labels), spec.frames, exubio.__version__)).encode())
+    return h.hexdigest()
+
+
+def reusable_calibration(model_file: Path, key: str | None, /) -> tuple[Any, Any] | None:
+    """The calibrated model and its report in ``model_file``, when that file was calibrated from
+    the inputs ``key`` fingerprints (calibration_key); None otherwise (no file, other inputs, a
+    file exubio did not write)."""
+    from exubio.calibration.report import CalibrationReport
+    from exubio.errors import ExubioError
+    from exubio.model.load import load_model
+
+    if key is None or not model_file.is_file():
+        return None
+    try:
+        model = load_model(model_file)
+        cal = model.metadata.get("calibration") or {}
+        if cal.get("inputs_sha256") != key:
+            return None
+        return model, CalibrationReport.from_dict(cal)
+    except (ExubioError, KeyError, TypeError, ValueError):
+        return None
