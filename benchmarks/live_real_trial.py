@@ -69,7 +69,8 @@ def main(argv=None) -> int:
     from exubio.io.results import read_npz
     from exubio.io.trial import read_trial
     from exubio.run.live.causal import CausalOptions
-    from exubio.run.live.loop import LiveOptions, reconstruct_causal
+    from exubio.run.live.offline import reconstruct_causal
+    from exubio.run.live.options import LiveOptions
     from exubio.run.live.transport import use_config
     from exubio.run.pipeline import load_inputs, reconstruct
     from exubio.run.inputs import load_model_and_protocol, load_session

@@ -519,7 +519,7 @@ def cmd_live(args: argparse.Namespace) -> int:
     from exubio.run.live.app import LiveControl, LiveOutput, run_live
     from exubio.run.live.causal import CausalOptions
     from exubio.run.live.display import Display
-    from exubio.run.live.loop import LiveOptions
+    from exubio.run.live.options import LiveOptions
     from exubio.run.live.transport import LSLSource, load_pylsl
     from exubio.run.inputs import load_model_and_protocol
 

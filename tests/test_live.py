@@ -22,7 +22,10 @@ from exubio.errors import InputError
 from exubio.io.c3d import write_c3d
 from exubio.io.trial import read_trial
 from exubio.run.live.causal import CausalOptions, CausalTargets
-from exubio.run.live.loop import LiveOptions, LiveSession, angles_measured, reconstruct_causal
+from exubio.run.live.loop import LiveSession
+from exubio.run.live.offline import reconstruct_causal
+from exubio.run.live.options import LiveOptions
+from exubio.run.live.outputs import angles_measured
 from exubio.run.live.record import read_recorded_markers, write_recording
 from exubio.run.live.sources import Faults, ReplaySource, StreamInfo
 from exubio.run.live.transport import marker_labels
@@ -435,7 +438,7 @@ def test_the_display_shows_latency_backlog_residual_verdict_and_key_angles():
     import io
 
     from exubio.run.live.display import Display
-    from exubio.run.live.loop import Event
+    from exubio.run.live.outputs import Event
 
     out = io.StringIO()
     d = Display(out)

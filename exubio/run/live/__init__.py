@@ -1,5 +1,7 @@
 """Live reconstruction from a marker stream (issue 22): causal preprocessing (causal), the live
-loop shared with the offline causal run (loop), marker sources (sources: the interface and an
+loop (loop; its settings in options, what it puts out (the output channels, the events, the
+recording) in outputs, the samples it takes in in intake, its running checks and verdict in
+monitor), the offline causal run on it (offline), marker sources (sources: the interface and an
 in-process replay; transport: Lab Streaming Layer, the only pylsl user), the recording written as
 ``exubio reconstruct`` writes a trial (record), the terminal display (display) and what the two
 commands do (app).
@@ -9,8 +11,8 @@ loop fed by an in-process replay); the names below load their module on first us
 ``exubio.run.live`` loads no solver)."""
 from __future__ import annotations
 
-_LAZY = {"reconstruct_causal": "loop", "LiveOptions": "loop", "LiveSession": "loop", "LiveRecording": "loop",
-         "Event": "loop", "CausalOptions": "causal", "ReplaySource": "sources", "Faults": "sources",
+_LAZY = {"reconstruct_causal": "offline", "LiveOptions": "options", "LiveSession": "loop", "LiveRecording": "outputs",
+         "Event": "outputs", "CausalOptions": "causal", "ReplaySource": "sources", "Faults": "sources",
          "StreamInfo": "sources", "write_recording": "record"}
 
 __all__ = sorted(_LAZY)

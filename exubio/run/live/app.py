@@ -11,7 +11,9 @@ from pathlib import Path
 from typing import Any, Callable
 
 from exubio.errors import InputError
-from exubio.run.live.loop import OUTPUT_CHANNELS, Event, LiveOptions, LiveRecording, LiveSession, SessionHooks
+from exubio.run.live.loop import LiveSession, SessionHooks
+from exubio.run.live.options import LiveOptions
+from exubio.run.live.outputs import OUTPUT_CHANNELS, Event, LiveRecording
 from exubio.types import Model, Protocol, Trajectories
 
 log = logging.getLogger(__name__)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 from typing import TextIO
 
-from exubio.run.live.loop import Event
+from exubio.run.live.outputs import Event
 
 _SHORT = {"HT_X_elevation": "HT elev", "GH_X_elevation": "GH elev", "ST_X_upward_rotation": "ST upward",
           "GH_Y_internal_rotation": "GH int rot"}

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from exubio.errors import InputError
-from exubio.run.live.loop import LiveRecording
+from exubio.run.live.outputs import LiveRecording
 
 __all__ = ["write_recording", "read_recorded_markers"]
 

@@ -240,7 +240,7 @@ class LSLSource:
 
 class LSLPublisher:
     """The live output as two LSL outlets: ``<name>`` (one double64 sample per frame, channels
-    exubio.run.live.loop.OUTPUT_CHANNELS with their units, the input sample's timestamp) and
+    exubio.run.live.outputs.OUTPUT_CHANNELS with their units, the input sample's timestamp) and
     ``<name>_events`` (irregular, one string channel: each Event as JSON)."""
 
     def __init__(self, name: str, channels: Sequence[tuple[str, str]], rate_hz: float, /, *,

@@ -1,0 +1,214 @@
+"""The running checks of a live session (LiveMonitor), frame by frame as the loop
+(exubio.run.live.loop) hands them over: the gaps of single markers, label swaps (whose springs it
+switches off), which angles the markers determine (the noise gain, every DETERMINACY_PERIOD_S),
+the running residual and joint-limit figures, the running verdict, a diverged PF run, and the
+status summary for a display. It reports what it sees through the session's ``event``."""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Callable, Mapping, Sequence
+
+import numpy as np
+
+from exubio.trust import quality as Q
+from exubio.trust.assess import (DETERMINACY_PERIOD_S, angle_status_of_protocol, coordinates_not_measured_by_protocol,
+                                  not_solved_mask)
+from exubio.trust.observability import determinacy
+from exubio.model.ranges import AT_LIMIT_TOLERANCE_RAD
+from exubio.run.live.outputs import ISB_NAMES, Event, angles_measured
+from exubio.types import Gap, Model, Protocol
+
+if TYPE_CHECKING:
+    from exubio.run.live.options import LiveOptions
+
+__all__ = ["LiveMonitor", "LABEL_SWAP_FRAMES"]
+
+LABEL_SWAP_FRAMES = 3
+"""Frames in a row a pair must look swapped before its springs go off (one frame can be noise)."""
+LABEL_SWAP_MIN_MM = Q.RESIDUAL_MEAN_MM[0]
+"""A marker must be this far from its model point to be a swap candidate: the residual at which a
+trial's mean residual is already a check (quality.RESIDUAL_MEAN_MM)."""
+LABEL_SWAP_RATIO = 0.5
+"""Swapped, the pair's residuals must sum to less than this fraction of the unswapped sum."""
+
+
+class LiveMonitor:
+    """The running checks of one live session on its bound model (``kin``, tracked ``points``):
+    ``measured`` (the angles the markers measure, ISB order), ``quarantine`` (the springs a label
+    swap switched off) and ``quality`` (the running verdict) are what the loop reads back.
+    ``in_stream``: the markers the stream carries (the others get no gap events); ``event(kind,
+    frame, message, markers)``: the session's event report; ``calibration_reasons``: the findings of
+    a calibration on the stream's first frames, part of every verdict."""
+
+    def __init__(self, model: Model, protocol: Protocol, kin, points, rate: float, options: "LiveOptions",
+                 in_stream: np.ndarray, event: Callable[..., None]):
+        self.model, self.protocol, self.kin, self.points, self.rate = model, protocol, kin, points, rate
+        self.options, self.in_stream, self._event = options, in_stream, event
+        self.marker_names = protocol.marker_names
+        k, m = len(self.marker_names), model.n_coordinates
+        self.excluded = not_solved_mask(model, protocol, kin)
+        self.not_solved = tuple(n for n, e in zip(model.coordinate_names, self.excluded) if e)
+        self.unmeasurable = coordinates_not_measured_by_protocol(model, protocol, kin=kin)
+        self.structural = angle_status_of_protocol(model, protocol, kin=kin)  # once, not per frame
+        self.measured = angles_measured(model, self.not_solved, unmeasurable=self.unmeasurable,
+                                        structural=self.structural)
+        self.ranges = model.coordinate_ranges_rad
+        self.calibration_reasons: list[Q.Reason] = []
+        self.quarantine = np.zeros(k, dtype=bool)
+        self.swap_count: dict = {}
+        self.swapped: dict = {}
+        self.in_gap = np.zeros(k, dtype=bool)
+        self.gap_start = np.zeros(k, dtype=int)
+        self.gaps: list[Gap] = []
+        self.res_sum, self.res_sq, self.res_n = np.zeros(k), np.zeros(k), np.zeros(k, dtype=int)
+        self.frame_means: list[float] = []
+        self.lim_count, self.lim_first, self.lim_beyond = np.zeros(m, dtype=int), np.zeros(m, dtype=int), np.zeros(m)
+        self.undetermined_frames = np.zeros(m, dtype=int)
+        self.quality = Q.Quality.of([])
+        self.verdict_every = max(int(round(options.verdict_every_s * rate)), 1)
+        self.verdict_due = self.verdict_every - 1
+        self.det_every = max(int(round(DETERMINACY_PERIOD_S * rate)), 1)
+        self.det_due = 0
+
+    def track_gaps(self, g: int, present: np.ndarray, dropped: bool) -> None:
+        """Gaps of single markers (not whole missing frames) reported by marker name."""
+        names = self.marker_names
+        if dropped:
+            return
+        for j in np.flatnonzero(~present & ~self.in_gap & self.in_stream):
+            self.in_gap[j] = True
+            self.gap_start[j] = g
+            self._event("gap", g, f"marker {names[j]} missing: its spring is off", (names[j],))
+        for j in np.flatnonzero(present & self.in_gap):
+            self.in_gap[j] = False
+            self.gaps.append(Gap(names[j], int(self.gap_start[j]), g))
+            self._event("gap_end", g, f"marker {names[j]} back after {(g - self.gap_start[j]) / self.rate:.2f} s "
+                        f"({g - self.gap_start[j]} frames)", (names[j],))
+
+    def diverged(self, g: int, q: np.ndarray, res: np.ndarray, present: np.ndarray) -> str:
+        """Why the run diverged at this frame ("" if not): exubio.methods.pf's criterion, a spring
+        longer than divergence_deflection_m or angles that are not finite."""
+        if not np.isfinite(q).all():
+            return f"the PF solution is not finite at t = {g / self.rate:.3f} s"
+        limit = self.options.pf.divergence_deflection_m
+        bad = present & ~(res <= limit)
+        if bad.any():
+            j = int(np.flatnonzero(bad)[np.argmax(res[bad])])
+            return (f"the PF run diverged at t = {g / self.rate:.3f} s: spring '{self.marker_names[j]}' is "
+                    f"{res[j] * 1e3:.0f} mm long (limit {limit * 1e3:.0f} mm)")
+        return ""
+
+    def determinacy(self, g: int, q: np.ndarray, active: np.ndarray) -> None:
+        """Every ``det_every`` frames: the angles the springs ``active`` in frame g determine at q."""
+        if g < self.det_due:
+            return
+        self.det_due = g + self.det_every
+        present = active[None]
+        det = determinacy(self.kin, self.points, q[None], present, self.protocol.weights, excluded=self.excluded)
+        und = [n for n, u in zip(self.model.coordinate_names, det.undetermined[0] & ~det.near_gimbal_lock[0]) if u]
+        self.measured = angles_measured(self.model, self.not_solved, und, unmeasurable=self.unmeasurable,
+                                        structural=self.structural)
+        self.undetermined_frames += det.undetermined[0]
+
+    def label_check(self, g: int, res: np.ndarray, pts: np.ndarray, meas: np.ndarray) -> None:
+        """A swapped pair: both far from their own model points, each close to the other's (residuals
+        res (k,), model points and measured positions (k, 3) of this frame)."""
+        far = np.flatnonzero(res > LABEL_SWAP_MIN_MM * 1e-3)
+        seen = set()
+        for a_i, a in enumerate(far):
+            for b in far[a_i + 1:]:
+                swapped = np.linalg.norm(pts[a] - meas[b]) + np.linalg.norm(pts[b] - meas[a])
+                if swapped < LABEL_SWAP_RATIO * (res[a] + res[b]):
+                    seen.add((int(a), int(b)))
+        for pair in list(self.swap_count):
+            if pair not in seen and pair not in self.swapped:
+                del self.swap_count[pair]
+        names = self.marker_names
+        for pair in seen:
+            self.swap_count[pair] = self.swap_count.get(pair, 0) + 1
+            if self.swap_count[pair] >= LABEL_SWAP_FRAMES and pair not in self.swapped:
+                self.swapped[pair] = g
+                self.quarantine[list(pair)] = True
+                self._event("label_swap", g, f"markers {names[pair[0]]} and {names[pair[1]]} look swapped "
+                            f"({res[pair[0]] * 1e3:.0f} and {res[pair[1]] * 1e3:.0f} mm from their model points, "
+                            f"{LABEL_SWAP_FRAMES} frames in a row): both springs off", (names[pair[0]], names[pair[1]]))
+        for pair, since in list(self.swapped.items()):
+            a, b = pair
+            if res[a] < LABEL_SWAP_MIN_MM * 1e-3 and res[b] < LABEL_SWAP_MIN_MM * 1e-3:
+                del self.swapped[pair]
+                self.swap_count.pop(pair, None)
+                self.quarantine[[a, b]] = False
+                self._event("label_swap_end", g, f"markers {names[a]} and {names[b]} fit their model points again "
+                            f"(swapped for {(g - since) / self.rate:.2f} s): springs on", (names[a], names[b]))
+
+    def running(self, g: int, q: np.ndarray, res: np.ndarray) -> None:
+        """The running residual figures and the frames at a joint limit, with frame g's q and residuals."""
+        ok = np.isfinite(res)
+        self.res_sum += np.where(ok, res, 0.0)
+        self.res_sq += np.where(ok, res * res, 0.0)
+        self.res_n += ok
+        self.frame_means.append(float(res[ok].mean()) * 1e3 if ok.any() else np.nan)
+        lo, hi = self.ranges[:, 0], self.ranges[:, 1]
+        at = ((q >= hi - AT_LIMIT_TOLERANCE_RAD) | (q <= lo + AT_LIMIT_TOLERANCE_RAD)) & ~self.excluded
+        if at.any():
+            beyond = np.maximum(np.maximum(q - hi, lo - q), 0.0)
+            for j in np.flatnonzero(at):
+                if self.lim_count[j] == 0:
+                    self.lim_first[j] = g
+                self.lim_count[j] += 1
+                self.lim_beyond[j] = max(self.lim_beyond[j], beyond[j])
+
+    def verdict(self, g: int, counts: Mapping[str, int], events: Sequence[Event]) -> None:
+        """The running verdict: the criteria of exubio.trust.quality on the frames so far, plus what the
+        live loop saw (stalls, restarts, skips, label swaps). ``counts``: the session's frames
+        "dropped", "late", "skipped", "failed" and "no_state" so far; ``events``: its events so far."""
+        self.verdict_due = g + self.verdict_every
+        n = g + 1
+        reasons: list[Q.Reason] = list(self.calibration_reasons)
+        if self.res_n.any():
+            with np.errstate(all="ignore"):
+                rmse = np.sqrt(self.res_sq / self.res_n) * 1e3
+            stats = {"mean": float(self.res_sum.sum() / self.res_n.sum()) * 1e3,
+                     "per_marker_rmse": {m: (None if self.res_n[j] == 0 else float(rmse[j]))
+                                         for j, m in enumerate(self.marker_names)}}
+            reasons += Q.residual_reasons(stats, np.asarray(self.frame_means))
+        names = self.model.coordinate_names
+        lims = [{"coordinate": names[j], "range_deg": [float(np.degrees(self.ranges[j, 0])), float(np.degrees(self.ranges[j, 1]))],
+                 "frames_at_limit": int(self.lim_count[j]), "first_frame": int(self.lim_first[j]),
+                 "max_beyond_deg": float(np.degrees(self.lim_beyond[j]))} for j in np.flatnonzero(self.lim_count)]
+        reasons += Q.limit_reasons(lims, n, not_measured=self.unmeasurable)  # as the offline assessment
+        open_gaps = [Gap(self.marker_names[j], int(self.gap_start[j]), n) for j in np.flatnonzero(self.in_gap)]
+        reasons += Q.gap_reasons(self.gaps + open_gaps, n, self.rate)
+        reasons += Q.convergence_reasons({"not_converged": counts["failed"], "too_few_markers": counts["no_state"]}, n)
+        names_m = self.marker_names
+        for (a, b), since in self.swapped.items():
+            reasons.append(Q.Reason("label", "fail", f"markers {names_m[a]} and {names_m[b]} look swapped since "
+                                    f"t = {since / self.rate:.2f} s (springs off)"))
+        if counts["dropped"]:
+            reasons.append(Q.Reason("live_dropped", "note", f"{counts['dropped']} frame(s) never came (springs off "
+                                    "there; see the events)"))
+        if counts["late"]:
+            reasons.append(Q.Reason("live_late", "note", f"{counts['late']} sample(s) came late and were dropped"))
+        if counts["skipped"]:
+            reasons.append(Q.Reason("live_skip", "check", f"{counts['skipped']} frames skipped: the solver fell more "
+                                    f"than {self.options.max_behind_s:g} s behind"))
+        restarts = sum(1 for e in events if e.kind in ("restart", "diverged"))
+        if restarts:
+            reasons.append(Q.Reason("live_restart", "note", f"{restarts} PF run(s) restarted from the LS pose "
+                                    "(stream restarted or diverged)"))
+        quality = Q.Quality.of(reasons)
+        if quality.verdict != self.quality.verdict:
+            self._event("verdict", g, f"{quality.verdict}" + (f": {quality.reasons[0].message}" if quality.reasons else ""))
+        self.quality = quality
+
+    def status(self, g: int, isb: np.ndarray, mean_res: float, behind: int, *, latency: Sequence[float],
+               counts: Mapping[str, int], tracking: bool) -> dict:
+        """The summary for a display at frame g (``latency``: the session's loop latencies, s)."""
+        lat = np.asarray(latency[-200:]) * 1e3
+        key = {n: float(np.degrees(isb[ISB_NAMES.index(n)])) for n in ("HT_X_elevation", "GH_X_elevation",
+                                                                      "ST_X_upward_rotation", "GH_Y_internal_rotation")}
+        return {"frame": g, "time_s": g / self.rate, "latency_ms_p50": float(np.median(lat)) if lat.size else np.nan,
+                "latency_ms_max": float(lat.max()) if lat.size else np.nan, "frames_behind": int(behind),
+                "residual_mean_mm": mean_res, "verdict": self.quality.verdict,
+                "reason": self.quality.reasons[0].message if self.quality.reasons else "",
+                "angles_deg": key, "dropped": counts["dropped"], "late": counts["late"], "skipped": counts["skipped"],
+                "tracking": tracking, "gaps": [self.marker_names[j] for j in np.flatnonzero(self.in_gap)]}

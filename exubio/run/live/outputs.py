@@ -1,0 +1,298 @@
+"""What a live session puts out, the types the rest of the live package reads: the output
+stream's channels (OUTPUT_CHANNELS, VERDICT_CODES), which angles the markers measure
+(angles_measured), the events (Event) and the recording of every frame (LiveRecording, filled row
+by row in _Growing arrays). The files of a recording are written by exubio.run.live.record."""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
+
+import numpy as np
+
+from exubio.trust import quality as Q
+from exubio.model.angles import ISB_COLUMNS, isb_table, measured_isb_joints
+from exubio.run.live.sources import StreamInfo
+from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Reconstruction, Trajectories
+
+if TYPE_CHECKING:
+    from exubio.run.live.options import LiveOptions
+
+__all__ = ["OUTPUT_CHANNELS", "VERDICT_CODES", "ISB_NAMES", "angles_measured", "Event", "LiveRecording",
+           "FrameRecord", "PublishedAngles"]
+
+VERDICT_CODES = {"ok": 0, "check": 1, "fail": 2}
+
+ISB_NAMES = tuple(c for cols in ISB_COLUMNS.values() for c in cols)
+ISB_JOINT_OF = tuple(j for j, cols in ISB_COLUMNS.items() for _ in cols)
+
+
+def OUTPUT_CHANNELS(marker_names: Sequence[str]) -> tuple[tuple[str, str], ...]:
+    """(label, unit) of every channel of the output stream, in order."""
+    ch = [(f"{n}", "degrees") for n in ISB_NAMES]
+    ch += [(f"{n}_rate", "degrees/s") for n in ISB_NAMES]
+    ch += [(f"{n}_measured", "bool") for n in ISB_NAMES]
+    ch += [(f"residual_{m}", "mm") for m in marker_names]
+    ch += [("residual_mean", "mm"), ("verdict", "0 ok, 1 check, 2 fail"), ("tracking", "1 PF state, 0 none"),
+           ("frames_behind", "frames"), ("frame", "index"), ("input_timestamp", "s")]
+    return tuple(ch)
+
+
+_ISB_AS_ANATOMICAL = {"GH_X_elevation": "GH_phadke_X_elevation", "GH_Z_flexion": "GH_phadke_Z_flexion",
+                      "GH_Y_internal_rotation": "GH_phadke_Y_internal_rotation"}
+"""The ISB table's GH columns (Phadke's sequence) under their anatomical-angle names."""
+
+
+def angles_measured(model: Model, not_solved: Sequence[str], undetermined: Sequence[str] = (), /, *,
+                    protocol: Protocol | None = None, unmeasurable: Sequence[str] = (),
+                    structural: Mapping[str, str] | None = None) -> np.ndarray:
+    """(15,) bool, per ISB angle (ISB_COLUMNS order): measured by the markers. The one place the
+    live output decides it. With ``protocol``: an angle the marker set cannot measure in any
+    reference posture (exubio.trust.assess.angle_status_of_protocol, the status the files give) is not
+    measured; of the others, a joint's angles are not measured in a frame where one of its own
+    coordinates is not solved (held, locked) or undetermined there (exubio.trust.observability's noise
+    gain), ``unmeasurable`` coordinates (the set cannot determine them anyway) left aside.
+    ``structural``: that status, computed once by a caller that asks frame after frame."""
+    joints = set(measured_isb_joints(model, set(not_solved) | (set(undetermined) - set(unmeasurable))))
+    out = np.array([j in joints for j in ISB_JOINT_OF], dtype=bool)
+    if structural is None and protocol is not None:
+        from exubio.trust.assess import angle_status_of_protocol
+
+        structural = angle_status_of_protocol(model, protocol)
+    if structural is not None:
+        status = structural
+        for i, name in enumerate(ISB_NAMES):
+            if status.get(_ISB_AS_ANATOMICAL.get(name, name), "measured") != "measured":
+                out[i] = False
+            elif not any(c in set(not_solved) for c in _joint_coordinates(model, ISB_JOINT_OF[i])) and \
+                    not any(c in set(undetermined) - set(unmeasurable) for c in _joint_coordinates(model, ISB_JOINT_OF[i])):
+                out[i] = True  # the set measures it and nothing of this frame says otherwise
+    return out
+
+
+def _joint_coordinates(model: Model, joint: str) -> tuple[str, ...]:
+    """The model coordinates of the segments an ISB angle set relates (exubio.model.frame_definitions)."""
+    from exubio.model.frame_definitions import JOINT_SEGMENTS
+
+    segs = set(JOINT_SEGMENTS[joint]) - {"thorax"}
+    return tuple(c for s in model.segments if s.name in segs and s.joint for c in s.joint.coordinates)
+
+
+
+@dataclass(frozen=True)
+class Event:
+    """Something the live loop saw and handled: ``kind`` (gap, gap_end, dropped, late, stall,
+    resumed, restart, run_start, run_end, behind, caught_up, skip, label_swap, label_swap_end,
+    diverged, verdict, end), at ``frame`` (stream frame index) and ``time_s`` (its time on the frame grid)."""
+
+    kind: str
+    frame: int
+    time_s: float
+    message: str
+    markers: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"kind": self.kind, "frame": self.frame, "time_s": round(self.time_s, 6), "message": self.message,
+                "markers": list(self.markers)}
+
+
+class _Growing:
+    """A (n, ...) float array appended one row at a time (amortised doubling)."""
+
+    def __init__(self, shape: tuple[int, ...], fill: float = np.nan, dtype=float):
+        self.a = np.full((256,) + tuple(shape), fill, dtype=dtype)
+        self.n, self.fill = 0, fill
+
+    def set(self, i: int, row) -> None:
+        if i >= self.a.shape[0]:
+            new = np.full((max(2 * self.a.shape[0], i + 1),) + self.a.shape[1:], self.fill, dtype=self.a.dtype)
+            new[:self.n] = self.a[:self.n]
+            self.a = new
+        self.a[i] = row
+        self.n = max(self.n, i + 1)
+
+    def grow_to(self, n: int) -> None:
+        if n > self.n:
+            self.set(n - 1, self.fill)
+            self.n = n
+
+    def view(self, n: int | None = None) -> np.ndarray:
+        return self.a[: self.n if n is None else n]
+
+
+class FrameRecord:
+    """A session's LiveRecording as it fills, frame by frame (each array in a _Growing, under its
+    LiveRecording field name, for ``n_labels`` stream labels, ``k`` markers, ``m`` coordinates), and
+    ``latency``: from taking each sample off the source to publishing its angles (s)."""
+
+    def __init__(self, n_labels: int, k: int, m: int):
+        L, a = n_labels, len(ISB_NAMES)
+        self.rows = {"raw_m": _Growing((L, 3)), "timestamps_s": _Growing(()), "received_s": _Growing(()),
+                     "published_s": _Growing(()), "positions_m": _Growing((k, 3)),
+                     "velocities_m_s": _Growing((k, 3), 0.0), "accelerations_m_s2": _Growing((k, 3), 0.0),
+                     "active": _Growing((k,), False, bool), "q_rad": _Growing((m,)), "qd_rad_s": _Growing((m,)),
+                     "qdd_rad_s2": _Growing((m,)), "model_points_m": _Growing((k, 3)), "residuals_m": _Growing((k,)),
+                     "constraint": _Growing((2,)), "constraint_velocity": _Growing((2,)),
+                     "status": _Growing((), int(FrameStatus.TOO_FEW_MARKERS), int), "run": _Growing((), -1, int),
+                     "isb_rad": _Growing((a,)), "isb_rate_rad_s": _Growing((a,)), "measured": _Growing((a,), False, bool),
+                     "verdict": _Growing((), 0, int)}
+        self.latency: list[float] = []
+
+    def input(self, g: int, raw: np.ndarray, sample, frame) -> None:
+        """Frame g's raw samples, its ``sample`` (timestamp, time received; None: never came) and
+        its causal targets (``frame``, a CausalFrame)."""
+        r = self.rows
+        r["raw_m"].set(g, raw)
+        r["timestamps_s"].set(g, np.nan if sample is None else sample.timestamp)
+        r["received_s"].set(g, np.nan if sample is None else sample.received)
+        r["positions_m"].set(g, frame.positions_m)
+        r["velocities_m_s"].set(g, frame.velocities_m_s)
+        r["accelerations_m_s2"].set(g, frame.accelerations_m_s2)
+
+    def published(self, g: int, now: float, sample, isb: np.ndarray, rate: np.ndarray, measured: np.ndarray) -> None:
+        """Frame g's output went out at ``now``: its angles, their rates, the measured flags."""
+        self.rows["published_s"].set(g, now)
+        if sample is not None:
+            self.latency.append(now - sample.received)
+        self.rows["isb_rad"].set(g, isb)
+        self.rows["isb_rate_rad_s"].set(g, rate)
+        self.rows["measured"].set(g, measured)
+
+    def output(self, g: int, out: tuple | None, status: FrameStatus, run: int) -> None:
+        """Frame g's PF result ``out`` (q, qd, qdd, model points, residuals, constraint and its
+        velocity) of PF run ``run``, or none (None: ``status`` says why)."""
+        r = self.rows
+        if out is not None:
+            for key, value in zip(("q_rad", "qd_rad_s", "qdd_rad_s2", "model_points_m", "residuals_m", "constraint",
+                                   "constraint_velocity"), out):
+                r[key].set(g, value)
+            r["status"].set(g, int(FrameStatus.CONVERGED))
+            r["run"].set(g, run)
+        else:
+            r["status"].set(g, int(status))
+            r["run"].set(g, -1)
+
+    def arrays(self, n: int) -> dict[str, np.ndarray]:
+        """The n frames' arrays (copies), by LiveRecording field name."""
+        for arr in self.rows.values():
+            arr.grow_to(n)
+        return {key: arr.view(n).copy() for key, arr in self.rows.items()}
+
+    def latency_ms(self) -> dict[str, Any]:
+        """The loop latency's median, 99th percentile and maximum (ms; None without a sample)."""
+        lat = np.asarray(self.latency) * 1e3
+        return {"p50": float(np.percentile(lat, 50)) if lat.size else None,
+                "p99": float(np.percentile(lat, 99)) if lat.size else None,
+                "max": float(lat.max()) if lat.size else None,
+                "definition": "from taking a sample off the source to publishing its angles"}
+
+
+class PublishedAngles:
+    """The ISB angles a session publishes, frame after frame: those of q (15,), unwrapped against the
+    previous frame, and their rates (backward differences of the published angles)."""
+
+    def __init__(self, model: Model, kin, rate: float):
+        from exubio.model.angles import anatomical_frames
+
+        self.model, self.kin, self.rate = model, kin, rate
+        self.anatomical = anatomical_frames(model)
+        self.last_isb = None
+        self.last_isb_row = None
+
+    def of(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The angles of q and their rates (zero after a frame without angles)."""
+        isb = self._isb(q)
+        rate = (isb - self.last_isb_row) * self.rate if self.last_isb_row is not None else np.zeros_like(isb)
+        self.last_isb_row = isb
+        return isb, rate
+
+    def none(self) -> tuple[np.ndarray, np.ndarray]:
+        """A frame without angles (NaN, and the next frame's rates start again at zero)."""
+        isb = rate = np.full(len(ISB_NAMES), np.nan)
+        self.last_isb_row = None
+        return isb, rate
+
+    def _isb(self, q: np.ndarray) -> np.ndarray:
+        """The ISB angles of q (15,), unwrapped against the previous frame."""
+        _, table = isb_table(self.model, q, kinematics=self.kin, frames=self.anatomical)
+        ang = table
+        if self.last_isb is not None:
+            ang = self.last_isb + (ang - self.last_isb + np.pi) % (2 * np.pi) - np.pi
+        self.last_isb = ang
+        return ang
+
+
+@dataclass
+class LiveRecording:
+    """Everything a live session saw and computed, one row per stream frame (SI units).
+
+    raw_m: (n, n_labels, 3) the samples as received (lab frame, NaN = missing or never came);
+    timestamps_s: (n,) the sample timestamps (NaN for frames that never came); received_s,
+    published_s: (n,) perf_counter when the sample was taken from the source and its result
+    published; targets: the causal targets (thorax frame); active: (n, k) the springs used;
+    q/qd/qdd, model points, residuals, constraints, status (FrameStatus; TOO_FEW_MARKERS where
+    no PF run held the frame), run (n,) the PF run (segment) of each frame (-1: none)."""
+
+    info: StreamInfo
+    model: Model
+    protocol: Protocol
+    options: LiveOptions
+    marker_names: tuple[str, ...]
+    raw_m: np.ndarray
+    timestamps_s: np.ndarray
+    received_s: np.ndarray
+    published_s: np.ndarray
+    positions_m: np.ndarray
+    velocities_m_s: np.ndarray
+    accelerations_m_s2: np.ndarray
+    active: np.ndarray
+    q_rad: np.ndarray
+    qd_rad_s: np.ndarray
+    qdd_rad_s2: np.ndarray
+    model_points_m: np.ndarray
+    residuals_m: np.ndarray
+    constraint: np.ndarray
+    constraint_velocity: np.ndarray
+    status: np.ndarray
+    run: np.ndarray
+    isb_rad: np.ndarray
+    isb_rate_rad_s: np.ndarray
+    measured: np.ndarray
+    verdict: np.ndarray
+    events: list[Event] = field(default_factory=list)
+    live_quality: Q.Quality | None = None
+    ended_by: str = ""
+    calibration: Any = None
+    stats: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.q_rad.shape[0])
+
+    @property
+    def time_s(self) -> np.ndarray:
+        return np.arange(self.n_frames) / self.info.rate_hz
+
+    def trajectories(self) -> Trajectories:
+        """The input markers as received (lab frame, m) as a trial."""
+        return Trajectories(labels=self.info.labels, positions_m=self.raw_m, rate_hz=self.info.rate_hz,
+                            time_s=self.time_s, source=self.info.name, units_in_file=self.info.units)
+
+    def targets(self) -> MarkerTargets:
+        """The causal targets the PF tracked, as MarkerTargets (gaps from the missing samples)."""
+        from exubio.prep.filtering import detect_gaps
+
+        return MarkerTargets(time_s=self.time_s, marker_names=self.marker_names, positions_m=self.positions_m,
+                             velocities_m_s=self.velocities_m_s, accelerations_m_s2=self.accelerations_m_s2,
+                             gaps=detect_gaps(self.positions_m, self.marker_names), source=self.info.name)
+
+    def reconstruction(self) -> Reconstruction:
+        t = self.targets()
+        return Reconstruction(
+            method="pf", time_s=self.time_s, coordinate_names=self.model.coordinate_names, q_rad=self.q_rad,
+            qd_rad_s=self.qd_rad_s, qdd_rad_s2=self.qdd_rad_s2, marker_names=self.marker_names,
+            model_points_m=self.model_points_m, measured_m=self.positions_m, residuals_m=self.residuals_m,
+            constraint=self.constraint, constraint_velocity=self.constraint_velocity, status=self.status,
+            timings_s={"total": float(np.nansum(self.published_s - self.received_s))},
+            info={"live": True, "causal": self.options.causal.describe(), "runs": int(self.run.max() + 1) if self.n_frames else 0,
+                  "options": dataclasses.asdict(self.options.pf)}, gaps=t.gaps)
