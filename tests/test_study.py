@@ -269,3 +269,21 @@ def test_leftovers_of_killed_runs_go_a_running_studys_stay(tmp_path):
     removed = clean_leftovers(tmp_path)
     assert sorted(removed) == sorted(killed + [killed_file])
     assert all(p.exists() for p in running + [running_file])
+
+
+def test_a_trial_calibrated_on_its_own_frames_names_its_model_where_it_is(data, tmp_path):
+    """A study writes each trial in a temporary folder and renames it into place: the calibrated
+    model file its summary and .npz name is the one in the trial's folder, not the temporary one."""
+    import numpy as np
+
+    study = _study(data, [{"subject": "S01", "session": "day1", "trials": ["a/*.c3d"], "methods": ["ls"],
+                           "static_frames": "0:30"}])
+    out = tmp_path / "out"
+    assert main(["-q", "study", str(study), "--out", str(out)]) == 0
+    folder = out / "S01" / "day1" / "trial"
+    summary = json.loads((folder / "trial.ls.summary.json").read_text(encoding="utf-8"))
+    named = Path(summary["calibration"]["model_file"])
+    assert named == folder / "trial.model.yaml" and named.is_file()
+    with np.load(folder / "trial.ls.npz") as z:
+        assert Path(json.loads(str(z["metadata_json"]))["model"]) == named
+    assert ".tmp-" not in (folder / "trial.ls.summary.json").read_text(encoding="utf-8")

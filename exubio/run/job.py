@@ -39,7 +39,9 @@ class TrialJob:
     summary and verdict); relabel: this trial's labels read as other labels ({file label: read
     as}), for this trial only (exubio.protocol.load.relabel_trajectories), before the protocol's
     own relabel; repair_labels: exchange back labels exchanged in part of the trial
-    (exubio.trust.label_ranges), reported frame range by range."""
+    (exubio.trust.label_ranges), reported frame range by range; final_dir: the folder out_dir
+    becomes when the job is complete (a study writes each trial in a temporary folder): the
+    calibrated model file the results name is the one there."""
 
     trial: Path
     out_dir: Path
@@ -52,6 +54,7 @@ class TrialJob:
     calibration: SessionCalibration | None = None
     relabel: Mapping[str, str] = field(default_factory=dict)
     repair_labels: bool = False
+    final_dir: Path | None = None  # where out_dir is renamed to once complete (a study's trial): what the files name
 
     def __post_init__(self) -> None:
         from exubio.methods import method_spec
@@ -126,6 +129,8 @@ def _run_job(job: TrialJob, progress_factory: Callable[[str, int], Callable[[int
         static = prepare_targets(trajectories, session.generic_protocol)  # the calibration's and the trial's
         calibration = calibrate_session(trajectories, session, job.out_dir, stem, spec=StaticSpec(frames=job.static_frames),
                                         overwrite=job.overwrite, reference=False, targets=static)
+        if job.final_dir is not None:
+            calibration = calibration.moved_to(Path(job.final_dir) / calibration.model_file.name)
         calibrated = Calibrated(str(calibration.model_file), calibration.report)
         prepared = Prepared(preparation_key(session.generic_protocol), static)
     if calibration is not None:

@@ -279,7 +279,7 @@ def run_trial_task(task: TrialTask) -> TrialOutcome:
     try:
         tmp.mkdir(parents=True)
         in_progress(tmp)
-        result = run_job(dataclasses.replace(task.job, out_dir=tmp))
+        result = run_job(dataclasses.replace(task.job, out_dir=tmp, final_dir=final))
         _fill(out, result)
         out.status = "done"
         out.wall_s = time.perf_counter() - t0
