@@ -98,6 +98,19 @@ PATH_PLACEHOLDERS = {
     "<DATA>": "the folder of the real trials (../shared/data), the same for both unless a kept base run "
               "was made elsewhere",
 }
+# Changes made on purpose since 336130f, each undone before the comparison (base: in the base run's
+# text, head: in the head run's), so that everything else is still compared exactly. Each is one
+# pattern whose every match is replaced; --no-ignore shows them.
+KNOWN_CHANGES = (
+    ("base", r"written by exubio\.model\.save_model\.", "written by exubio.model.load.save_model.",
+     "model YAML header: save_model moved with the model layer (exubio/model/load.py)"),
+    ("base", r"/\.tmp-([^/\s\"']+)-\d+-\d+/", r"/\1/",
+     "a study's trial calibrated on its own frames named the temporary folder it was written in (fixed: its "
+     "folder after the rename)"),
+    ("head", r"(?m)^  inputs_sha256: [0-9a-f]{64}\n", "",
+     "model YAML calibration section: the fingerprint of the calibration's inputs (a session folder's "
+     "calibration is reused when they are the same)"),
+)
 PDF_REASON = ("PDF reports print wall times and ms per frame (trial report, study table), and matplotlib "
               "writes the creation date: their bytes differ run to run. Compared: the page count. The "
               "numbers they plot are the CSV/NPZ files compared exactly, and a trial report's first page "
@@ -347,6 +360,7 @@ class Side:
     root: Path  # the folder holding manifest.json, outputs/, logs/
     manifest: dict
     ignore: bool = True
+    side: str = "base"
 
     def mask(self, text: str) -> str:
         if not self.ignore:
@@ -357,6 +371,9 @@ class Side:
             pairs += [(p, ph), (str(Path(p).resolve()), ph)]
         for p, ph in sorted(set(pairs), key=lambda t: -len(t[0])):
             text = text.replace(p, ph)
+        for side, pattern, replacement, _ in KNOWN_CHANGES:
+            if side == self.side:
+                text = re.sub(pattern, replacement, text)
         return text
 
 
@@ -582,6 +599,9 @@ def print_ignored() -> None:
         for k, why in table.items():
             print(textwrap.fill(f"{title} {k}: {why}", 110, initial_indent="  ", subsequent_indent="      "))
     print(textwrap.fill(f"PDF: {PDF_REASON}", 110, initial_indent="  ", subsequent_indent="      "))
+    print("undone before the comparison (changes made on purpose):")
+    for side, pattern, _, why in KNOWN_CHANGES:
+        print(textwrap.fill(f"{side} {pattern}: {why}", 110, initial_indent="  ", subsequent_indent="      "))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -695,7 +715,7 @@ def main(argv: list[str] | None = None) -> int:
         head_manifest = run_side("head", head_dir, tmp / "run-head", sets, data, head_commit)
 
         base = Side(base_root, base_manifest, ignore=not args.no_ignore)
-        head = Side(tmp / "run-head", head_manifest, ignore=not args.no_ignore)
+        head = Side(tmp / "run-head", head_manifest, ignore=not args.no_ignore, side="head")
         if base_manifest["check"]["versions"] != head_manifest["check"]["versions"] or \
                 base_manifest["check"]["python"] != head_manifest["check"]["python"]:
             print(f"WARNING: the base run used other package versions: {base_manifest['check']['versions']} "
