@@ -22,12 +22,12 @@ class _NoExudyn(importlib.abc.MetaPathFinder):
 # Test modules that run the PF engine (Exudyn), and the slow end-to-end ones: every test in them
 # carries the marker. A module importing the PF method at its top is left uncollected when exudyn
 # is deselected (it could not even be imported).
-EXUDYN = {"test_angle_status.py", "test_api.py", "test_api_face.py", "test_arms.py", "test_atomic_results.py",
+EXUDYN = {"test_angle_status.py", "test_api.py", "test_api_files.py", "test_session_folder.py", "test_api_face.py", "test_arms.py", "test_atomic_results.py",
           "test_calibrate.py", "test_cli.py", "test_exudyn_system.py", "test_hold.py", "test_live.py", "test_ls.py",
           "test_mismatch.py", "test_pf.py", "test_quality.py", "test_rates.py", "test_real_data.py", "test_report.py",
           "test_run_once.py", "test_streaming.py", "test_study.py", "test_thorax_check.py", "test_trial_report.py",
           "test_viewer.py", "test_same_outputs.py"}
-SLOW = {"test_atomic_results.py", "test_cli.py", "test_labels.py", "test_permutation.py", "test_real_data.py",
+SLOW = {"test_atomic_results.py", "test_session_folder.py", "test_cli.py", "test_labels.py", "test_permutation.py", "test_real_data.py",
         "test_session_check.py", "test_study.py", "test_viewer.py", "test_same_outputs.py"}
 
 

@@ -118,3 +118,47 @@ def test_titles_are_fixed_only_where_matplotlib_would_leave_them():
         fig.savefig(buf, format="png", dpi=80)
         images.append(buf.getvalue())
     assert images[0] == images[1]
+
+
+def _page_one(npz_paths, summaries):
+    from exubio.io.results import read_npz, read_npz_metadata
+
+    recons = [read_npz(p, points=False) for p in npz_paths]
+    angles = {r.method: tr.read_angles(p) for p, r in zip(npz_paths, recons)}
+    return tr.verdict_page(recons, read_npz_metadata(npz_paths[0]), summaries, angles=angles), recons
+
+
+@pytest.mark.parametrize("n_reasons", [1, 4, 30])
+def test_page_one_never_overlaps_whatever_the_number_of_reasons(result_sets, n_reasons):
+    """Page 1 a supervisor reads: however many and however long the reasons, no text block overlaps
+    another or the picture, every one stays on the page, a reason both methods give is written
+    once, absolute paths are written as file names, and what does not fit is counted."""
+    import json
+
+    paths = result_sets["both"]
+    long = ("calibration (/very/long/folder/of/the/lab/session/static_trial.c3d): marker ULNA is 58 mm from the "
+            "landmark it is declared over (above 40 mm): misplaced, mislabelled, or a wrong static pose; " * 2)
+    summaries = {}
+    for p in paths:
+        s = json.loads((p.parent / (p.name[:-len(".npz")] + ".summary.json")).read_text())
+        method = s["method"]
+        s["quality"] = {"verdict": "check", "reasons": [{"code": "x", "level": "check", "message": f"{k}: {long}"}
+                                                        for k in range(n_reasons)]
+                        + [{"code": "y", "level": "note", "message": f"{method} only"}]}
+        summaries[method] = s
+    fig, recons = _page_one(paths, summaries)
+    fig.set_dpi(tr.PAGE1_DPI)
+    renderer = fig.canvas.get_renderer()
+    inv = fig.transFigure.inverted()
+    boxes = [(t.get_text(), t.get_window_extent(renderer).transformed(inv)) for t in fig.texts if t.get_text()]
+    boxes += [("axes", ax.get_tightbbox(renderer).transformed(inv)) for ax in fig.axes]
+    for i, (a, ba) in enumerate(boxes):
+        assert ba.x0 >= -1e-3 and ba.x1 <= 1.0 + 1e-3 and ba.y0 >= -1e-3 and ba.y1 <= 1.0 + 1e-3, a[:60]
+        for b, bb in boxes[i + 1:]:
+            assert not ba.overlaps(bb), (a[:60], b[:60])
+    texts = [t for t, _ in boxes]
+    assert sum(t.startswith("check: 0: ") for t in texts) == 1  # both methods' reason, once
+    assert all("/very/long" not in t for t in texts) and any("static_trial.c3d" in t for t in texts)
+    assert {f"note: {r.method} only" for r in recons} <= set(texts)  # each method's own reason, under it
+    if n_reasons == 30:
+        assert any(t.startswith("... ") and "more" in t for t in texts)

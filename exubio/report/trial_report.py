@@ -14,6 +14,7 @@ page would pass the same loaded arrays around three times).
 from __future__ import annotations
 
 import json
+import re
 import threading
 from dataclasses import dataclass
 from pathlib import Path
@@ -210,36 +211,109 @@ _VERDICT_COLOURS = {"ok": "tab:green", "check": "tab:orange", "fail": "tab:red"}
 
 def verdict_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[str, dict], *,
                  truth: "Truth | None" = None, angles: dict[str, Angles] | None = None) -> Figure:
-    """Page 1: what a supervisor reads first: the verdict of every method with its reasons, the key
-    figures, the worst markers, the comparison with the truth when it is known, the findings."""
+    """Page 1: what a supervisor reads first: the verdict of every method with the figures and the
+    reasons (a reason every method shares is written once, files by their names), the comparison
+    with the truth when it is known, the findings, and the key angles over time. Every text block
+    is measured as drawn: the reasons stop above the findings (the rest: '... N more', in the
+    summary.json) and nothing overlaps the picture."""
     fig = _figure()
     fig.suptitle(_title(recons, meta), fontsize=9)
+    fig.set_dpi(PAGE1_DPI)  # measured at the resolution of the PNG, where the lines break the same way
+    renderer = fig.canvas.get_renderer()
+    footer = _bisect_wrap(fig.text(0.04, FOOTER_BOTTOM, "\n".join(_findings(recons, meta, summaries, truth, angles)),
+                                   fontsize=8, va="bottom", family="monospace", wrap=True))
+    floor = _box(footer, fig, renderer).y1 + 0.015
+    quality = {r.method: summaries.get(r.method, {}).get("quality") or {"verdict": "unknown", "reasons": []}
+               for r in recons}
+    shared = _shared_reasons([q["reasons"] for q in quality.values()]) if len(recons) > 1 else []
     y = 0.90
-    for r in recons:
-        s = summaries.get(r.method, {})
-        q = s.get("quality") or {"verdict": "unknown", "reasons": []}
-        colour = _VERDICT_COLOURS.get(q["verdict"], "grey")
-        fig.text(0.04, y, f"{r.method.upper()}: {q['verdict'].upper()}", fontsize=18, color=colour, weight="bold",
-                 va="top")
-        rs = s.get("residual_mm", {})
-        per = {k: v for k, v in (rs.get("per_marker_rmse") or {}).items() if v is not None}
-        worst = sorted(per, key=per.get, reverse=True)[:3]
-        figures = (f"{s.get('n_frames', r.n_frames)} frames; residual mean {rs.get('mean', float('nan')):.1f} mm, "
-                   f"worst markers (RMSE): " + ", ".join(f"{m} {per[m]:.1f} mm" for m in worst)
-                   + f"; max |g| {np.nanmax(np.abs(r.constraint)):.0e}")
-        fig.text(0.22, y - 0.005, figures, fontsize=8, va="top")
+    for i, r in enumerate(recons):
+        s, q = summaries.get(r.method, {}), quality[r.method]
+        fig.text(0.04, y, f"{r.method.upper()}: {q['verdict'].upper()}", fontsize=18,
+                 color=_VERDICT_COLOURS.get(q["verdict"], "grey"), weight="bold", va="top")
+        fig.text(0.22, y - 0.005, _figures_line(r, s), fontsize=8, va="top")
         y -= 0.045
-        shown = q["reasons"][:REASONS_ON_PAGE_1]
-        for reason in shown:
-            text = f"{reason['level']}: {reason['message']}"
-            _bisect_wrap(fig.text(0.06, y, text, fontsize=7, va="top", wrap=True,
-                                  color=_VERDICT_COLOURS.get(reason["level"], "black") if reason["level"] != "note"
-                                  else "dimgrey"))
-            y -= 0.017 * max(1, -(-len(text) // REASON_CHARS_PER_LINE)) + 0.006
-        if len(q["reasons"]) > len(shown):
-            fig.text(0.06, y, f"... {len(q['reasons']) - len(shown)} more in {r.method}.summary.json", fontsize=7, va="top")
-            y -= 0.024
-        y -= 0.02
+        own = [x for x in q["reasons"] if _reason_key(x) not in {_reason_key(z) for z in shared}]
+        if shared and own:
+            own = own + [{"level": "note", "message": "and the reasons of every method, below"}]
+        blocks = len(recons) - i + bool(shared)  # this one and those below share what is left
+        headers_below = 0.06 * (len(recons) - i - 1) + 0.04 * bool(shared)
+        share = (y - floor - headers_below) / blocks
+        y = _reasons(fig, renderer, own, y, floor if blocks == 1 else y - share, f"{r.method}.summary.json")
+        y -= 0.015
+    if shared:
+        fig.text(0.04, y, "every method:", fontsize=9, weight="bold", va="top")
+        y = _reasons(fig, renderer, shared, y - 0.025, floor, "each summary.json")
+    height = floor - 0.015 - FOOTER_BOTTOM
+    bottom = max(FOOTER_BOTTOM, y - 0.02 - height)  # the findings just below the reasons
+    footer.set_y(bottom)
+    if angles:
+        _key_angles(fig, recons, angles, summaries, top=bottom - 0.045)
+    return fig
+
+
+PAGE1_DPI = 110  # page 1 as a PNG
+FOOTER_BOTTOM = 0.36  # the findings end above the key angles' picture (its axes, title and labels)
+
+
+def _box(text: Text, fig: Figure, renderer):
+    return text.get_window_extent(renderer).transformed(fig.transFigure.inverted())
+
+
+def _reason_key(reason: dict) -> tuple:
+    return reason.get("level"), reason.get("message")
+
+
+def _shared_reasons(per_method: Sequence[Sequence[dict]]) -> list[dict]:
+    """The reasons every method gives (same level and words), in the first method's order."""
+    keys = [{_reason_key(x) for x in reasons} for reasons in per_method]
+    common = set.intersection(*keys) if keys else set()
+    return [x for x in per_method[0] if _reason_key(x) in common]
+
+
+_PATH = re.compile(r"(?<![\w.])(?:[A-Za-z]:)?(?:[\\/][^\s()\\/,:;]+)+[\\/]([^\s()\\/,:;]+)")
+
+
+def short_paths(text: str) -> str:
+    """A message with every absolute path written as its file name (page 1 names the trial's
+    files; the full paths are in the summary.json)."""
+    return _PATH.sub(lambda m: m.group(1), text)
+
+
+def _reasons(fig: Figure, renderer, reasons: Sequence[dict], y: float, floor: float, where: str) -> float:
+    """Draw ``reasons`` from ``y`` down, each wrapped and measured; those that would pass ``floor``
+    are counted in one '... N more' line. Returns the y below the last line."""
+    for i, reason in enumerate(reasons):
+        level = reason["level"]
+        t = _bisect_wrap(fig.text(0.06, y, f"{level}: {short_paths(reason['message'])}", fontsize=7, va="top",
+                                  wrap=True, color="dimgrey" if level == "note" else _VERDICT_COLOURS.get(level, "black")))
+        bottom = _box(t, fig, renderer).y0
+        if bottom < floor + 0.02 * (i < len(reasons) - 1):
+            t.remove()
+            fig.text(0.06, y, f"... {len(reasons) - i} more (the first: {level}) in {where}", fontsize=7, va="top")
+            return y - 0.022
+        y = bottom - 0.006
+    return y
+
+
+def _figures_line(r: Reconstruction, s: dict) -> str:
+    rs = s.get("residual_mm", {})
+    per = {k: v for k, v in (rs.get("per_marker_rmse") or {}).items() if v is not None}
+    worst = sorted(per, key=per.get, reverse=True)[:3]
+    return (f"{s.get('n_frames', r.n_frames)} frames; residual mean {rs.get('mean', float('nan')):.1f} mm, "
+            f"worst markers (RMSE): " + ", ".join(f"{m} {per[m]:.1f} mm" for m in worst)
+            + f"; max |g| {np.nanmax(np.abs(r.constraint)):.0e}")
+
+
+def _ellipsis(text: str, n: int) -> str:
+    """``text`` cut at a word before ``n`` characters, with an ellipsis when cut."""
+    return text if len(text) <= n else text[:n].rsplit(" ", 1)[0].rstrip(",;:") + " …"
+
+
+def _findings(recons: Sequence[Reconstruction], meta: dict, summaries: dict[str, dict], truth: "Truth | None",
+              angles: dict[str, Angles] | None) -> list[str]:
+    """Page 1's lines below the verdicts: truth, relabel, agreement, filter, angle status, labels,
+    calibration, how to read the verdict."""
     first = summaries.get(recons[0].method, {})
     lines = []
     if truth is not None:
@@ -270,7 +344,7 @@ def verdict_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[s
                 n + (" in part" if status[n].startswith("partly") else "") for n in these)
                 + (f" (rule: {'; '.join(rule)})" if rule else ""))
     for f in first.get("labels") or []:
-        lines.append(f"labels: {f.get('kind')} {', '.join(f.get('markers', []))}: {f.get('evidence', '')}"[:190])
+        lines.append(_ellipsis(f"labels: {f.get('kind')} {', '.join(f.get('markers', []))}: {f.get('evidence', '')}", 190))
     cal = first.get("calibration") or {}
     if cal:
         lines.append(f"calibrated on {Path(str(cal.get('static', ''))).name}"
@@ -278,10 +352,7 @@ def verdict_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[s
                      + f": calibration residual mean {cal.get('mean_residual_mm', float('nan')):.2f} mm")
     lines.append("verdict: ok = nothing found; check = read the reasons before using the angles; "
                  "fail = the angles are wrong as they stand (exit code 1). Thresholds: exubio/trust/quality.py.")
-    _bisect_wrap(fig.text(0.04, max(y, 0.36), "\n".join(lines), fontsize=8, va="top", family="monospace", wrap=True))
-    if angles:
-        _key_angles(fig, recons, angles, summaries)
-    return fig
+    return lines
 
 
 KEY_ANGLES = (("HT_X_elevation", "HT elevation"), ("GH_phadke_X_elevation", "GH elevation (Phadke)"),
@@ -289,16 +360,15 @@ KEY_ANGLES = (("HT_X_elevation", "HT elevation"), ("GH_phadke_X_elevation", "GH 
               ("elbow_flexion", "elbow flexion"))
 """The angles page 1 draws: what a shoulder study reads first."""
 
-REASONS_ON_PAGE_1 = 7
-REASON_CHARS_PER_LINE = 175  # about what a 7-point line of page 1 holds (for the spacing; the text wraps itself)
 
 
-def _key_angles(fig: Figure, recons: Sequence[Reconstruction], angles: dict[str, Angles], summaries: dict) -> None:
+def _key_angles(fig: Figure, recons: Sequence[Reconstruction], angles: dict[str, Angles], summaries: dict, *,
+                top: float = FOOTER_BOTTOM - 0.045) -> None:
     """Page 1's picture: the key anatomical angles of the first method over time, in colour where
-    measured, grey where modelled or not measured (legend says which)."""
+    measured, grey where modelled or not measured (legend says which); its axes end at ``top``."""
     method = recons[0].method if recons[0].method in angles else next(iter(angles))
     a = angles[method]
-    ax = fig.add_axes([0.07, 0.06, 0.66, 0.26])
+    ax = fig.add_axes([0.07, 0.06, 0.66, min(top, 0.6) - 0.06])
     palette = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown")
     for (name, label), colour in zip(KEY_ANGLES, palette):
         if name not in a.names:
@@ -595,7 +665,7 @@ def build_trial_report(npz_paths: Sequence[str | Path], pdf_path: str | Path, /,
 
     atomic_write(pdf_path, write_pdf)
     png = pdf_path.with_suffix(".png")
-    atomic_write(png, lambda tmp: pages[0].savefig(tmp, dpi=110))
+    atomic_write(png, lambda tmp: pages[0].savefig(tmp, dpi=PAGE1_DPI))
     for page in pages:
         _release(page)
     return pdf_path, png
