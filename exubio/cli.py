@@ -52,7 +52,8 @@ EXAMPLES = {
     "calibrate": "exubio calibrate static.c3d --out subject.yaml   (then: exubio reconstruct trial.c3d --model subject.yaml ...)",
     "validate": "exubio validate            (about 4-6 minutes on 2 cores; --quick: a smoke run)",
     "export-model": "exubio export-model subject.yaml --format osim --out subject.osim   (exubio's .mot plays on it)",
-    "study": "exubio study study.yaml --out results/ --jobs 2   (the study file's format: exubio/run/study.py's docstring)",
+    "study": "exubio study --template > study.yaml   (a study file with every key explained)\n"
+             "  exubio study study.yaml --out results/ --jobs 2",
     "view": "exubio view results/trial.pf.npz --out trial.html",
     "demo": "exubio demo   (writes ./exubio_demo/)",
 }
@@ -472,8 +473,13 @@ def cmd_export_model(args: argparse.Namespace) -> int:
 
 
 def cmd_study(args: argparse.Namespace) -> int:
-    from exubio.run.study import load_study, run_study
+    from exubio.run.study import STUDY_TEMPLATE, load_study, run_study
 
+    if args.template:
+        print(STUDY_TEMPLATE, end="")
+        return 0
+    if not args.study or not args.out:
+        raise InputError("exubio study: expected STUDY.yaml and --out FOLDER (or --template to print a study file)")
     spec = load_study(args.study)  # every key, path and glob checked before any work
     if args.jobs < 1:
         raise InputError(f"--jobs {args.jobs}: expected a whole number of processes >= 1")
@@ -687,8 +693,9 @@ def build_parser() -> argparse.ArgumentParser:
     st = sub.add_parser("study", parents=[common], formatter_class=argparse.RawDescriptionHelpFormatter,
                         help="run a study file (subjects x sessions x trials); re-running resumes it",
                         epilog=_epilog("study", EXIT_CODES_HELP))
-    st.add_argument("study", help="STUDY.yaml (format: exubio/run/study.py)")
-    st.add_argument("--out", required=True, help="output folder: <subject>/<session>/<trial>/, study.csv, study.json")
+    st.add_argument("study", nargs="?", help="STUDY.yaml (its format: exubio study --template)")
+    st.add_argument("--out", help="output folder: <subject>/<session>/<trial>/, study.csv, study.json")
+    st.add_argument("--template", action="store_true", help="print a study file with every key explained, and exit")
     st.add_argument("--jobs", type=int, default=1, help="trials in parallel local processes (default 1)")
     st.add_argument("--scheduler", help="run the trials on Dask: local:N (a local cluster of N workers) or "
                                         "tcp://HOST:PORT (a running scheduler)")
