@@ -785,16 +785,35 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run one command; returns its exit code. An output folder the command created and left empty
+    (it failed before writing anything) is removed: a failed run leaves nothing behind."""
+    new_folder: list[Path] = []
+    try:
+        return _main(argv, new_folder)
+    finally:
+        for folder in new_folder:
+            try:
+                if folder.is_dir() and not any(folder.iterdir()):
+                    folder.rmdir()
+            except OSError:
+                pass
+
+
+def _main(argv: Sequence[str] | None, new_folder: list[Path]) -> int:
     if signal.getsignal(signal.SIGINT) is _interrupted_while_starting:
         signal.signal(signal.SIGINT, signal.default_int_handler)  # from here KeyboardInterrupt, caught below
     try:  # Ctrl-C at any moment, also while the command's modules are still being imported: exit 130
         args = build_parser().parse_args(argv)
         logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, stream=sys.stderr,
                             format="%(levelname)s %(name)s: %(message)s")
+        out = getattr(args, "out", None)
+        if isinstance(out, str) and out:  # the folders the run may create, deepest first
+            new_folder += [f for f in (Path(out), *Path(out).parents) if not f.exists()]
         return int(args.func(args))
     except KeyboardInterrupt:
-        print("exubio: interrupted; results that were not complete were not written (the next run cleans up)",
-              file=sys.stderr)
+        newline = "\n" if sys.stderr.isatty() else ""  # a progress bar's line is left open
+        print(f"{newline}exubio: interrupted; results that were not complete were not written (the next run "
+              "cleans up)", file=sys.stderr)
         return EXIT_INTERRUPTED
     except (InputError, ProtocolError, ModelError) as exc:
         print(f"exubio: error: {exc}", file=sys.stderr)

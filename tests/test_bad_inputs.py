@@ -46,7 +46,9 @@ def c3d(tmp_path, trajectories):
 
 
 def refused(capsys, argv: list[str], out: Path, *needles: str) -> str:
-    """main(argv) exits 2 with one message holding every needle, no traceback, and --out holds no file."""
+    """main(argv) exits 2 with one message holding every needle, no traceback, and --out holds no
+    file; an --out the run would have created is not left behind, empty."""
+    existed = out.exists()
     code = main(["-q", *argv])
     err = capsys.readouterr().err
     assert code == 2, err
@@ -54,6 +56,7 @@ def refused(capsys, argv: list[str], out: Path, *needles: str) -> str:
     for needle in needles:
         assert needle in err, (needle, err)
     assert not out.exists() or not [p for p in out.rglob("*") if p.is_file()], list(out.rglob("*"))
+    assert existed or not out.exists(), f"{out} was created and left empty"
     return err
 
 
