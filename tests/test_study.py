@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -287,3 +288,14 @@ def test_a_trial_calibrated_on_its_own_frames_names_its_model_where_it_is(data, 
     with np.load(folder / "trial.ls.npz") as z:
         assert Path(json.loads(str(z["metadata_json"]))["model"]) == named
     assert ".tmp-" not in (folder / "trial.ls.summary.json").read_text(encoding="utf-8")
+
+
+def test_a_study_says_which_trial_of_how_many_and_the_time_left(data, tmp_path, capsys):
+    study = _study(data, [{"subject": "S01", "session": "day1", "trials": ["a/*.c3d"], "methods": ["ls"]},
+                          {"subject": "S01", "session": "day2", "trials": ["b/*.c3d"], "methods": ["ls"]}])
+    assert main(["study", str(study), "--out", str(tmp_path / "out")]) == 0
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("[")]
+    assert len(lines) == 3, lines
+    assert re.match(r"\[1/3, about \d+ (s|min) left\] S01/day\d/\w+\.c3d: done", lines[0]), lines
+    assert re.match(r"\[2/3, about \d+ (s|min) left\] S01/day\d/\w+\.c3d: done", lines[1]), lines
+    assert re.match(r"\[3/3\] S01/day\d/\w+\.c3d: done", lines[2]), lines

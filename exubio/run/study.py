@@ -497,6 +497,14 @@ def write_table(out_dir: Path, spec: StudySpec, outcomes: Iterable[TrialOutcome]
     return csv_path, json_path
 
 
+def _duration(seconds: float) -> str:
+    """A time left as a person reads it: 45 s, 3 min, 1 h 20 min."""
+    if seconds < 90:
+        return f"{max(1, round(seconds))} s"
+    minutes = round(seconds / 60)
+    return f"{minutes} min" if minutes < 90 else f"{minutes // 60} h {minutes % 60:02d} min"
+
+
 def run_study(spec: StudySpec, out_dir: str | Path, /, *, jobs: int = 1, scheduler: str | None = None,
               progress: Callable[[str], None] | None = None) -> list[TrialOutcome]:
     """Run (or resume) a study into out_dir; returns every trial's outcome, writes the study table
@@ -514,8 +522,14 @@ def run_study(spec: StudySpec, out_dir: str | Path, /, *, jobs: int = 1, schedul
     say(f"study {spec.name}: {n_total} trial(s), {len(tasks)} to run, "
         f"{sum(o.status.startswith('skipped') for o in outcomes)} complete already")
 
+    started, n_done = time.perf_counter(), 0
+
     def on_done(o: TrialOutcome) -> None:
-        say(f"{o.subject}/{o.session}/{Path(o.trial).name}: {o.status}"
+        nonlocal n_done
+        n_done += 1
+        left = len(tasks) - n_done  # the time left: the mean time per finished trial so far (the jobs included)
+        eta = f", about {_duration((time.perf_counter() - started) / n_done * left)} left" if left else ""
+        say(f"[{n_done}/{len(tasks)}{eta}] {o.subject}/{o.session}/{Path(o.trial).name}: {o.status}"
             + (f" ({', '.join(f'{m} {v}' for m, v in o.verdicts.items())})" if o.verdicts else "")
             + (f": {o.error}" if o.error else ""))
 
