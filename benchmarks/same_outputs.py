@@ -21,7 +21,10 @@ Sets of command lines (``--set``):
               martin_dynamique with martin_statique, F0_boire_05 on its first 20 frames, the two
               TRC trials with thoracoscapular_9 on their first 50 frames (as
               benchmarks/trust_real_trials.py runs them); then export-model of two calibrated models
-  real-quick  martin_dynamique with martin_statique only (what tests/test_same_outputs.py runs)
+  real-quick  martin_dynamique with martin_statique only
+  study100    a study of 100 trials written by ``exubio simulate`` (10 subjects x 10 trials of 4 s at
+              100 Hz, the four motions, 1 mm noise, 5 mm soft-tissue artefact; odd subjects calibrated
+              on their trials' first frames), both methods, reports on, ``exubio study --jobs 2``
 
 Comparison of the two output trees: the same set of files and the same exit code for every
 command; text files (CSV, .mot, .json, YAML, .osim, .bioMod, .trc, ...) byte for byte once the
@@ -64,7 +67,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_DATA = ROOT.parent / "shared" / "data"
-ALL_SETS = ("demo", "study", "real", "real-quick")
+ALL_SETS = ("demo", "study", "real", "real-quick", "study100")
 DEFAULT_SETS = "demo,study,real"
 MANIFEST = "manifest.json"
 
@@ -184,6 +187,18 @@ def steps(set_name: str) -> list[Step]:
         return out
     if set_name == "real-quick":
         return [_MARTIN]
+    if set_name == "study100":
+        motions = ("abduction", "flexion", "scaption", "sier")
+        out = [Step(f"simulate S{s:02d}/t{t}", ("simulate", "--motion", motions[(s + t) % 4], "--duration", "4",
+                                                "--rate", "100", "--noise-mm", "1", "--sta-mm", "5",
+                                                "--seed", str(100 * s + t), "--out", f"{{out}}/trials/S{s:02d}/t{t}.c3d"))
+               for s in range(10) for t in range(10)]
+        sessions = "".join(f"  - subject: S{s:02d}\n    trials: [\"trials/S{s:02d}/t*.c3d\"]\n"
+                           + ('    static_frames: "0:30"\n' if s % 2 else "") for s in range(10))
+        out.append(Step("study.yaml", write=("study.yaml", f"schema_version: 1\nname: study100\nmethods: [pf, ls]\n"
+                                                          f"sessions:\n{sessions}")))
+        out.append(Step("study", ("study", "{out}/study.yaml", "--out", "{out}/results", "--jobs", "2")))
+        return out
     if set_name == "real":
         static = _c3d("kinova_martin_statique")
         return [
