@@ -73,10 +73,11 @@ class MethodResult:
     method: str
     paths: Mapping[str, str]
     summary: Mapping[str, Any]
+    quality: Any = None  # exubio.trust.quality.Quality: the verdict and its reasons, as summary.json gives them
 
     @property
     def verdict(self) -> str:
-        return self.summary["quality"]["verdict"]
+        return self.quality.verdict.value
 
 
 @dataclass(frozen=True)
@@ -143,7 +144,8 @@ def _run_job(job: TrialJob, progress_factory: Callable[[str, int], Callable[[int
                                    trajectories=trajectories, calibration=calibration, prepared=prepared)
     except PartialReconstructionError as exc:  # one method failed, the others' results are written
         outputs, failed = exc.outputs, dict(exc.failures)
-    methods = tuple(MethodResult(r.method, {k: str(v) for k, v in paths.items()}, summ) for r, paths, summ in outputs)
+    methods = tuple(MethodResult(r.method, {k: str(v) for k, v in paths.items()}, summ, r.quality)
+                    for r, paths, summ in outputs)
     agreement = None
     if len(outputs) == 2:
         agree = outputs[0][2].get("pf_ls_agreement_deg") or {}

@@ -7,6 +7,7 @@ session's calibration: exubio.run.session.
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import platform
 from dataclasses import dataclass, field
@@ -21,7 +22,7 @@ from exubio.io import results
 from exubio.io.trial import read_trial
 from exubio.prep.targets import preparation_key, prepare_targets
 from exubio.run.inputs import Session, load_session
-from exubio.run.summary_file import RunNotes, trial_summary
+from exubio.run.summary_file import RunNotes, trial_quality, trial_summary
 from exubio.types import MarkerTargets, Method, Model, Protocol, Reconstruction, Trajectories
 
 log = logging.getLogger(__name__)
@@ -326,7 +327,10 @@ def write_assessed(inputs: TrialInputs, trial_path: str | Path, out_dir: str | P
     out = []
     for method, stem, recon, model_points in done:
         meta = run_metadata(inputs, trial_path, method)
-        summ = trial_summary(recon, assessment, inputs, source=str(trial_path), stem=stem, notes=notes or RunNotes())
+        quality = trial_quality(assessment, recon.method, inputs, notes or RunNotes())
+        recon = dataclasses.replace(recon, quality=quality)  # the verdict travels typed, as the file gives it
+        summ = trial_summary(recon, assessment, inputs, source=str(trial_path), stem=stem, notes=notes or RunNotes(),
+                             quality=quality)
         names, values = anatomical_table(inputs.model, recon.q_rad)
         det = assessment.angles[recon.method]
         angles = AngleOutputs(names, values, det.status,

@@ -116,10 +116,25 @@ def unused_labels(inputs: Any, /) -> list[str]:
     return list(match.unused) + list(inputs.trial.ignored_labels)
 
 
+def _file_findings(inputs: Any, cal: Any) -> tuple[str, ...]:
+    """What the readers of the trial and of its static read around (the static's named as such)."""
+    read_around = tuple(inputs.trial.input_findings)
+    return tuple(dict.fromkeys(read_around + tuple(
+        f"static trial: {f}" for f in (cal.input_findings if cal is not None else ()) if f not in read_around)))
+
+
+def trial_quality(assessment: TrialAssessment, method: str, inputs: Any, /, notes: RunNotes = RunNotes()) -> Quality:
+    """That method's verdict as its files give it: the assessment's, with a note per input finding
+    and per failed method of the run."""
+    return assessment.quality[method].with_reasons(input_notes(_file_findings(inputs, notes.calibration))
+                                                   + failure_notes(notes.failures))
+
+
 def trial_summary(recon: Reconstruction, assessment: TrialAssessment, inputs: Any, /, *, source: str, stem: str,
-                  notes: RunNotes = RunNotes()) -> dict[str, Any]:
+                  notes: RunNotes = RunNotes(), quality: Quality | None = None) -> dict[str, Any]:
     """One method's summary.json: ``inputs`` the trial's (exubio.run.pipeline.TrialInputs),
-    ``source`` the trial file, ``stem`` the result set's, ``notes`` the run's (RunNotes)."""
+    ``source`` the trial file, ``stem`` the result set's, ``notes`` the run's (RunNotes),
+    ``quality`` its verdict (default: trial_quality)."""
     cal = notes.calibration
     out = reconstruction_entries(recon, source=source)
     out["unused_trial_labels"] = unused_labels(inputs)
@@ -131,10 +146,8 @@ def trial_summary(recon: Reconstruction, assessment: TrialAssessment, inputs: An
         out["mean_spring_deflection_mm"] = recon.info["mean_spring_deflection_mm"]
     if inputs.targets.cutoff_hz:
         out["filter_cutoff_hz"] = dict(inputs.targets.cutoff_hz)
-    read_around = tuple(inputs.trial.input_findings)
-    file_findings = tuple(dict.fromkeys(read_around + tuple(
-        f"static trial: {f}" for f in (cal.input_findings if cal is not None else ()) if f not in read_around)))
-    quality = assessment.quality[recon.method].with_reasons(input_notes(file_findings) + failure_notes(notes.failures))
+    file_findings = _file_findings(inputs, cal)
+    quality = quality if quality is not None else trial_quality(assessment, recon.method, inputs, notes)
     out.update(assessment_entries(assessment, recon.method, quality=quality))
     if file_findings:
         out["input_findings"] = list(file_findings)
