@@ -473,7 +473,8 @@ def cmd_export_model(args: argparse.Namespace) -> int:
 
 
 def cmd_study(args: argparse.Namespace) -> int:
-    from exubio.run.study import STUDY_TEMPLATE, load_study, run_study
+    from exubio.run.study import load_study, run_study
+    from exubio.run.study_template import STUDY_TEMPLATE
 
     if args.template:
         print(STUDY_TEMPLATE, end="")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from importlib import resources
 from pathlib import Path
+from typing import Any
 
 _CHECKOUT = Path(__file__).resolve().parents[2]  # exubio/io/resources.py -> the checkout
 
@@ -36,6 +37,16 @@ def resolve(value: str | Path, package: str, checkout_dir: str, probe: str, /) -
         if (folder / name).is_file():
             return folder / name
     return path
+
+
+def shipped_beside(value: Any, base: Path, package: str, checkout_dir: str, probe: str, /) -> Any:
+    """A file named in a file in folder ``base`` (a study file's protocol or model): the shipped one
+    when ``value`` is a bare name that is not a file in ``base``, else ``value`` as given."""
+    if isinstance(value, str) and value and not (Path(base) / value).exists() and Path(value).parent == Path("."):
+        shipped = resolve(value, package, checkout_dir, probe)
+        if shipped.is_file():
+            return str(shipped)
+    return value
 
 
 def shipped_names(package: str, checkout_dir: str, probe: str, /) -> list[str]:

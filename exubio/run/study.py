@@ -1,27 +1,8 @@
 """Studies: subjects x sessions x trials from one study file, run locally or on Dask, resumable.
 
-A study file (YAML, paths relative to it; ``exubio study --template`` prints one with every key explained:
-STUDY_TEMPLATE)::
-
-    schema_version: 1
-    name: shoulder study            # optional
-    methods: [pf, ls]               # optional (default [pf, ls]); a session may override
-    report: true                    # optional: the per-trial PDF/PNG report (default true)
-    sessions:
-      - subject: S01
-        session: day1               # optional (default: s1, s2, ... in order)
-        protocol: protocols/upper_limb_21.yaml      # optional (default: the shipped 21-marker one)
-        model: subject01.yaml       # optional (default: the generic model)
-        static: S01/static.c3d      # optional: calibrate the session's model on it first
-        functional: S01/move.c3d    # optional, with static: SCoRE glenohumeral centre
-        scapula_trial: S01/raise.c3d  # optional (or a list), with static: thorax ellipsoid through its scapula postures
-        static_frames: "0:50"       # optional, without static: each trial calibrated on its own frames
-        trials: ["S01/task_*.c3d"]  # globs
-        relabel: {RADIUS: ULNA, ULNA: RADIUS}   # optional: read these labels as others in every trial
-                                    # of the session, the static included
-        static_relabel: {MET2: MET5, MET5: MET2}  # optional: the static only (replaces relabel for it)
-        trial_relabel:              # optional: per trial file name, for that trial only (replaces
-          task_03.c3d: {EPI_lat: EPI_med, EPI_med: EPI_lat}   # relabel for it)
+A study file (YAML, paths relative to it) lists sessions (subject, protocol, model, static trial,
+functional and scapula trials, static frames, trials by glob, relabellings) under ``sessions``:
+``exubio study --template`` prints one with every key explained (exubio.run.study_template).
 
 Results: ``OUT/<subject>/<session>/<trial>/`` holds one trial's result set (the files of
 ``exubio reconstruct``) and ``DONE.json`` (written last); the session's calibrated model is in
@@ -54,6 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
 
+from exubio.io.resources import shipped_beside
 from exubio.io.yaml import read_yaml
 from exubio.errors import ExubioError, InputError
 from exubio.run.executors import run_all
@@ -68,31 +50,6 @@ __all__ = ["StudySpec", "SessionSpec", "TrialTask", "TrialOutcome", "load_study"
 
 DONE_FILE = "DONE.json"
 
-STUDY_TEMPLATE = """\
-# An exubio study file: exubio study study.yaml --out results/   (paths are relative to this file;
-# a key marked optional may go). Each trial's results: results/<subject>/<session>/<trial>/.
-schema_version: 1
-name: shoulder study                # optional
-methods: [pf, ls]                   # optional (default [pf, ls]); a session may override
-report: true                        # optional: the per-trial PDF/PNG report (default true)
-sessions:
-  - subject: S01
-    session: day1                   # optional (default: s1, s2, ... in order)
-    protocol: upper_limb_21         # optional: a shipped protocol by name, or a YAML file (default upper_limb_21)
-    model: upper_extremity          # optional: a shipped model by name, or a YAML file (default: the generic model)
-    static: S01/static.c3d          # optional: calibrate the session's model on this static trial first
-    functional: S01/move.c3d        # optional, with static: a movement trial for a SCoRE glenohumeral centre
-    scapula_trial: S01/raise.c3d    # optional (or a list), with static: the thorax ellipsoid through its scapula postures
-    trials: ["S01/task_*.c3d"]      # globs: the session's trials
-    relabel: {RADIUS: ULNA, ULNA: RADIUS}        # optional: read these labels as others in every trial, the static too
-    static_relabel: {MET2: MET5, MET5: MET2}     # optional: the static only (replaces relabel for it)
-    trial_relabel:                  # optional: per trial file name, for that trial only (replaces relabel for it)
-      task_03.c3d: {EPI_lat: EPI_med, EPI_med: EPI_lat}
-  - subject: S02                    # a session without a static trial
-    static_frames: "0:50"           # optional: each trial calibrated on these frames of its own (0-based, end excluded)
-    trials: ["S02/*.trc"]
-"""
-"""A study file with every key, as ``exubio study --template`` prints it (a test loads it)."""
 _TMP_PREFIX = ".tmp-"
 _STUDY_KEYS = {"schema_version", "name", "methods", "report", "sessions"}
 _SESSION_KEYS = {"subject", "session", "protocol", "model", "static", "functional", "scapula_trial", "static_frames",
@@ -177,17 +134,6 @@ def _path(value: Any, base: Path, where: str) -> Path | None:
     if not p.exists():
         raise InputError(f"{where}: {p} does not exist")
     return p
-
-
-def _shipped_or_path(value: Any, base: Path, where: str, package: str, checkout_dir: str, probe: str) -> Path | None:
-    """A protocol or model: a file relative to the study file, or a shipped one by name."""
-    from exubio.io.resources import resolve
-
-    if isinstance(value, str) and value and not (base / value).exists() and Path(value).parent == Path("."):
-        shipped = resolve(value, package, checkout_dir, probe)
-        if shipped.is_file():
-            return shipped
-    return _path(value, base, where)
 
 
 def _methods(value: Any, where: str) -> tuple[str, ...]:
@@ -293,10 +239,10 @@ def load_study(path: str | Path, /) -> StudySpec:
         sessions.append(SessionSpec(
             subject=subject, session=session, trials=tuple(trials), relabel=relabel, static_relabel=static_relabel,
             trial_relabel=trial_relabel,
-            protocol=_shipped_or_path(s.get("protocol"), base, f"{where}.protocol", "exubio.protocols", "protocols",
-                                      "upper_limb_21.yaml"),
-            model=_shipped_or_path(s.get("model"), base, f"{where}.model", "exubio.models", "models",
-                                   "upper_extremity.yaml"), static=static, functional=functional,
+            protocol=_path(shipped_beside(s.get("protocol"), base, "exubio.protocols", "protocols", "upper_limb_21.yaml"),
+                           base, f"{where}.protocol"),
+            model=_path(shipped_beside(s.get("model"), base, "exubio.models", "models", "upper_extremity.yaml"),
+                        base, f"{where}.model"), static=static, functional=functional,
             static_frames=None if frames is None else str(frames), scapula_trials=scapula_trials,
             methods=_methods(s["methods"], f"{where}.methods") if "methods" in s else methods))
     return StudySpec(name=str(data.get("name", path.stem)), source=path, sessions=tuple(sessions), report=report)
