@@ -101,6 +101,19 @@ def _new_figure(size) -> Figure:
     return fig
 
 
+def _paragraphs(fig: Figure, paragraphs, y: float, *, width: int, fontsize: float, gap: float) -> float:
+    """Paragraphs of text from ``y`` down, each wrapped at ``width`` characters (0.022 per line,
+    ``gap`` between paragraphs); returns the y below the last."""
+    import textwrap
+
+    for text in paragraphs:
+        for line in textwrap.wrap(text, width):
+            fig.text(0.03, y, line, fontsize=fontsize)
+            y -= 0.022
+        y -= gap
+    return y
+
+
 def _footer(fig: Figure, text: str) -> None:
     fig.text(0.01, 0.005, text, fontsize=6.5, color="0.35", ha="left", va="bottom", wrap=True)
 

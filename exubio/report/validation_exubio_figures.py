@@ -6,7 +6,6 @@ Angles are in degrees, lengths in mm, times in s; every figure names its data so
 """
 from __future__ import annotations
 
-import textwrap
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -18,6 +17,7 @@ from exubio.report.validation_common import (
     _fmt,
     _footer,
     _new_figure,
+    _paragraphs,
 )
 from exubio.validation.results import (
     TRIALS,
@@ -211,12 +211,7 @@ def fig_mismatch(r: ValidationResults) -> Figure:
              "a scapula with fewer than 3 markers; a segment-length error with no marker distal to it; what noise and "
              "soft-tissue artefact cost by themselves (up to ~5 deg here with 20 mm STA; not a model mismatch). A static "
              "calibration removes most of these generic-model mismatches (benchmarks/model_mismatch.py --calibrate)."]
-    y = 0.29
-    for line in lines:
-        for part in textwrap.wrap(line, 185):
-            fig.text(0.03, y, part, fontsize=7.5)
-            y -= 0.022
-        y -= 0.006
+    _paragraphs(fig, lines, 0.29, width=185, fontsize=7.5, gap=0.006)
     _footer(fig, "Data: simulated (exubio.synth.simulate with exubio.synth.perturb). " + f"exubio {r.exubio_version}"
             + (" — QUICK RUN (two cases, abduction, LS only)" if r.quick else ""))
     return fig

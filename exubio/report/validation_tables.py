@@ -21,6 +21,7 @@ from exubio.report.validation_common import (
     _fmt,
     _footer,
     _new_figure,
+    _paragraphs,
     _residuals,
     _table,
 )
@@ -342,11 +343,6 @@ def scapula_page(r: ValidationResults) -> Figure:
         f"{pooled} mm RMS off it: the two planes' scapula paths do not lie on one such surface, which bounds "
         "what a cross-validated calibration can reach on these data.",
     ]
-    y = 0.33
-    for text in lines:
-        for line in textwrap.wrap(text, 200):
-            fig.text(0.03, y, line, fontsize=7.2)
-            y -= 0.022
-        y -= 0.01
+    _paragraphs(fig, lines, 0.33, width=200, fontsize=7.2, gap=0.01)
     _footer(fig, _data_footer(r))
     return fig

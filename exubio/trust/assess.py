@@ -39,11 +39,6 @@ class TrialAssessment:
     mismatch: Mapping[str, MismatchAssessment] | None = None  # per method: model-mismatch evidence (exubio.trust.mismatch)
 
 
-def _field(f: Any, key: str, default: Any = None) -> Any:
-    """A finding's field, whether the finding is typed or read from a file."""
-    return f.get(key, default) if isinstance(f, Mapping) else getattr(f, key, default)
-
-
 def trial_label_findings(model: Model, protocol: Protocol, targets: MarkerTargets, /, *, reference: Any = None,
                          expect: tuple[Model, Protocol] | None = None) -> tuple:
     """The label checks of exubio.trust.labels on a prepared trial, against what ``expect`` (the
@@ -60,8 +55,8 @@ def trial_label_findings(model: Model, protocol: Protocol, targets: MarkerTarget
 
 def _same_finding(f: Any, findings: Sequence) -> bool:
     """A static-trial finding that the trial repeats (same kind and markers) is reported once."""
-    return any(_field(g, "kind") == _field(f, "kind") and set(_field(g, "markers", ())) == set(_field(f, "markers", ()))
-               for g in findings)
+    kind, markers = Q.finding_field(f, "kind"), set(Q.finding_field(f, "markers", ()))
+    return any(Q.finding_field(g, "kind") == kind and set(Q.finding_field(g, "markers", ())) == markers for g in findings)
 
 
 def not_solved_mask(model: Model, protocol: Protocol, kin: Kinematics | None = None) -> np.ndarray:
@@ -204,8 +199,8 @@ def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recon
                                                            if m.landmark_offset_mm is not None})
               + Q.session_reasons(session, static_name) + Q.dropped_reasons(dropped)
               + Q.partial_swap_reasons(partial_swaps, repaired))
-    named = sorted({m for f in label_findings if _field(f, "severity") not in ("info", "note")
-                    for m in _field(f, "markers", ())})  # their residuals are the label's, not the model's
+    named = sorted({m for f in label_findings if Q.finding_field(f, "severity") not in ("info", "note")
+                    for m in Q.finding_field(f, "markers", ())})  # their residuals are the label's, not the model's
     mismatch = {r.method: assess_mismatch(kin, points, r.q_rad, targets.positions_m, targets.time_s, skip_markers=named)
                 for r in recons}
     quality = {}

@@ -9,6 +9,8 @@ with code 1. ``check``: the result may be right but something a reader must look
 """
 from __future__ import annotations
 
+from functools import partial
+
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping, Sequence
 
@@ -284,13 +286,19 @@ def convergence_reasons(frames: Mapping[str, int], n_frames: int) -> list[Reason
     return [Reason("convergence", lvl, f"{bad} of {n_frames} frames not converged or with too few markers")]
 
 
+def finding_field(f: Any, key: str, default: Any = None) -> Any:
+    """A finding's field, whether the finding is typed (exubio.trust.labels.LabelFinding, ...) or read
+    from a file."""
+    return f.get(key, default) if isinstance(f, Mapping) else getattr(f, key, default)
+
+
 def label_reasons(findings: Iterable[Any], *, prefix: str = "") -> list[Reason]:
     out = []
     for f in findings:
-        get = f.get if isinstance(f, Mapping) else (lambda k, _f=f: getattr(_f, k))
+        get = partial(finding_field, f)
         lvl = {"error": "fail", "fail": "fail", "warning": "check", "check": "check", "info": "note",
                "note": "note"}.get(get("severity"), "check")
-        relabel = (f.get("relabel") if isinstance(f, Mapping) else getattr(f, "relabel", None)) or {}
+        relabel = get("relabel") or {}
         fix = ""
         if relabel:
             option = "--static-relabel" if prefix.startswith("static") else "--relabel"
