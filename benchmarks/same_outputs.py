@@ -113,6 +113,9 @@ KNOWN_CHANGES = (
     ("head", r"(?m)^  inputs_sha256: [0-9a-f]{64}\n", "",
      "model YAML calibration section: the fingerprint of the calibration's inputs (a session folder's "
      "calibration is reused when they are the same)"),
+    ("head", r',\n\s*"inputs_sha256": "[0-9a-f]{64}"', "",
+     "summary.json: the fingerprint of the run's inputs (a re-run of the same inputs keeps a complete set: "
+     "exubio.run.resume)"),
 )
 PDF_REASON = ("PDF reports print wall times and ms per frame (trial report, study table), and matplotlib "
               "writes the creation date: their bytes differ run to run. Compared: the page count. The "

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
@@ -207,7 +207,7 @@ def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str
     from exubio.io import results
     from exubio.model.angles import anatomical_table
     from exubio.run.pipeline import AngleOutputs, angle_header, assess_inputs, write_assessed, write_outputs
-    from exubio.run.summary_file import reconstruction_summary
+    from exubio.run.summary_file import RunNotes, reconstruction_summary
     from exubio.types import Method
 
     full = f"{stem}.{reconstruction.method}"
@@ -218,7 +218,14 @@ def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str
         results.prepare_output_dir(out_dir, [full], overwrite=overwrite)
         source = str(trial) if isinstance(trial, (str, Path)) else inputs.trial.source
         done = [(Method.parse(reconstruction.method), full, reconstruction, None)]
-        return write_assessed(inputs, source, out_dir, done, assessment, overwrite=overwrite)[0][1]
+        key = None  # the fingerprint `exubio reconstruct` gives the same run (exubio.run.resume)
+        if isinstance(trial, (str, Path)) and isinstance(reconstruction.info.get("options"), Mapping):
+            from exubio.run.resume import run_key
+
+            key = run_key(trial, session.model, session.protocol, reconstruction.method,
+                          options=dict(reconstruction.info["options"]))
+        return write_assessed(inputs, source, out_dir, done, assessment, overwrite=overwrite,
+                              notes=RunNotes(inputs_sha256=key))[0][1]
     model = model if model is not None else load_model()
     protocol = protocol if protocol is not None else load_protocol(model=model)
     results.prepare_output_dir(out_dir, [full], overwrite=overwrite)

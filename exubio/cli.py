@@ -44,6 +44,7 @@ EXIT_CODES_HELP = (
 
 
 SIMPLE_EXIT_CODES = "exit codes: 0 done; 2 bad input (the file, key or value is named), nothing written; 130 interrupted."
+PRINT_EXIT_CODES = "exit codes: 0 printed; 2 bad input (the name, file or segment is named, with what exists)."
 
 EXAMPLES = {
     "simulate": "exubio simulate --motion abduction --duration 10 --rate 100 --noise-mm 1 --sta-mm 10 --out abd.c3d",
@@ -56,6 +57,9 @@ EXAMPLES = {
              "  exubio study study.yaml --out results/ --jobs 2",
     "view": "exubio view results/trial.pf.npz --out trial.html",
     "demo": "exubio demo   (writes ./exubio_demo/)",
+    "protocols": "exubio protocols   (the shipped ones)\n  exubio protocols upper_limb_21   (its markers)",
+    "model-points": "exubio model-points --segment humerus\n"
+                    "  exubio model-points subject.yaml   (a calibrated model)",
 }
 """An example per command, shown by its --help."""
 
@@ -138,20 +142,27 @@ def _print_result(recon, paths, summ) -> None:
 def _print_trial(result: TrialResult, quiet: bool) -> None:
     from exubio.calibration import format_report
 
-    if result.calibration:
-        if not quiet:
-            print(format_report(result.calibration.report))
+    if result.calibration and not quiet:
+        print(format_report(result.calibration.report))
         print(f"calibrated model: {result.calibration.model_file}")
     for m in result.methods:
-        _print_summary(m.method, m.paths, m.summary)
-    if result.agreement_deg:
+        if m.method in result.kept:
+            print(f"[{m.method}] kept: its result set is complete from an earlier run of the same inputs "
+                  f"(resumed; --overwrite computes it again)")
+        if not quiet:
+            _print_summary(m.method, m.paths, m.summary)
+    if result.agreement_deg and not quiet:
         agree = result.agreement_deg
         worst = max(agree, key=agree.get)
         print(f"PF-LS agreement: max RMSE {agree[worst]:.3f} deg ({worst})")
-    if result.report:
-        print(f"report: {result.report['pdf']} (+ .png)")
+    if result.report and not quiet:
+        kept = " (kept from the earlier run)" if "report" in result.kept else ""
+        print(f"report: {result.report['pdf']} (+ .png){kept}")
     for m in result.methods:
-        _print_quality(m.method, m.summary)
+        if quiet:
+            _print_quality_short(m.method, m.paths, m.summary)
+        else:
+            _print_quality(m.method, m.summary)
     for method, reason in result.failed.items():
         print(f"[{method}] FAILED, nothing written for it: {reason}")
         print(f"[{method}] the other method's result is written (exit code 1)")
@@ -166,6 +177,26 @@ def _print_quality(method: str, summ: dict) -> None:
         print(f"[{method}]   {r['level']}: {r['message']}")
     if summ.get("not_measured"):
         print(f"[{method}]   not measured (held or not observed): {', '.join(summ['not_measured'])}")
+
+
+def _print_quality_short(method: str, paths: dict, summ: dict) -> None:
+    """-q: the verdict with the result files and the residual on one line, then only the reasons
+    that make it a check or a fail (the notes are in summary.json and the report)."""
+    q = summ.get("quality")
+    files = str(paths["summary"])[: -len(".summary.json")] + ".*"
+    r = summ["residual_mm"]
+    verdict = q["verdict"].upper() if q else "NOT ASSESSED"
+    print(f"[{method}] QUALITY: {verdict}: {files} ({summ['n_frames']} frames, residual mean {r['mean']:.2f} mm)")
+    for reason in (q or {}).get("reasons", ()):
+        if reason["level"] != "note" or reason["code"] in QUIET_NOTES or reason["code"].startswith("live_"):
+            print(f"[{method}]   {reason['level']}: {reason['message']}")
+
+
+QUIET_NOTES = ("gap", "input_file", "method_failed", "label_repaired", "missing_marker")
+"""Notes -q still prints: what happened to this trial's data (a gap, a file read around, a method
+that failed, labels repaired, a marker left out; live: frames dropped, late, skipped, restarts).
+The notes on the marker set and the model (angles it cannot measure, gimbal lock, calibration
+details) are the same for every trial of a protocol: summary.json and the report give them."""
 
 
 def _trial_code(result: TrialResult) -> int:
@@ -295,8 +326,9 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
             from exubio.calibration import format_report
 
             print(format_report(calibration.report))
-        print(f"calibration reused (same static, protocol, model and options): {calibration.model_file}"
-              if calibration.reused else f"calibrated model: {calibration.model_file}")
+            print(f"calibrated model: {calibration.model_file}")
+        if calibration.reused:
+            print(f"calibration reused (same static, protocol, model and options): {calibration.model_file}")
         for f in calibration.labels:
             print(f"static trial {args.static}: {f.severity}: {f.kind} ({', '.join(f.markers)}): {f.evidence}")
     from exubio.run.job import TrialJob, run_job
@@ -712,15 +744,16 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--max-frames", type=int, default=300, help="at most this many animation frames (default 300)")
     w.set_defaults(func=cmd_view)
 
-    pr = sub.add_parser("protocols", parents=[common], help="list the shipped protocols (by name, usable from any folder) "
-                        "and, with a name, the markers of one", epilog="example: exubio protocols upper_limb_21")
+    pr = sub.add_parser("protocols", parents=[common], formatter_class=argparse.RawDescriptionHelpFormatter,
+                        help="list the shipped protocols (by name, usable from any folder) and, with a name, the "
+                        "markers of one", epilog=_epilog("protocols", PRINT_EXIT_CODES))
     pr.add_argument("name", nargs="?", help="a shipped protocol's name or a protocol file: list its markers")
     pr.set_defaults(func=cmd_protocols)
 
     mp = sub.add_parser("model-points", parents=[common], help="the model's points per segment in the segment frames "
                         "a protocol's local_position_mm uses (mm), to write a protocol for your marker set",
-                        epilog="example: exubio model-points --segment humerus   (or a calibrated model: "
-                               "exubio model-points subject.yaml)")
+                        formatter_class=argparse.RawDescriptionHelpFormatter,
+                        epilog=_epilog("model-points", PRINT_EXIT_CODES))
     mp.add_argument("model", nargs="?", default="upper_extremity", help="model YAML or a shipped model's name "
                     "(default: upper_extremity)")
     mp.add_argument("--segment", help="only this segment")
@@ -813,8 +846,8 @@ def _main(argv: Sequence[str] | None, new_folder: list[Path]) -> int:
         return int(args.func(args))
     except KeyboardInterrupt:
         newline = "\n" if sys.stderr.isatty() else ""  # a progress bar's line is left open
-        print(f"{newline}exubio: interrupted; results that were not complete were not written (the next run "
-              "cleans up)", file=sys.stderr)
+        print(f"{newline}exubio: interrupted; results that were not complete were not written (the same command "
+              "again resumes: it keeps what is complete)", file=sys.stderr)
         return EXIT_INTERRUPTED
     except (InputError, ProtocolError, ModelError) as exc:
         print(f"exubio: error: {exc}", file=sys.stderr)

@@ -458,6 +458,8 @@ class Reconstruction:
     timings_s:      named wall times (build, initial, solve, ... total).
     info:           method-specific figures (iterations, mean spring deflection, ...).
     quality:        the verdict and its reasons, once the trial is assessed (``verdict``).
+    resumed_from:   the summary.json it was read back from when a re-run kept an earlier run's
+                    complete result set of the same inputs (exubio.run.resume), else None.
     """
 
     method: str
@@ -477,6 +479,7 @@ class Reconstruction:
     info: Mapping[str, Any] = field(default_factory=dict)
     gaps: tuple[Gap, ...] = ()
     quality: Any = None  # once assessed (exubio.reconstruct): its verdict and reasons, exubio.trust.quality.Quality
+    resumed_from: str | None = None  # read back from this summary.json: kept from an earlier run (exubio.run.resume)
 
     @property
     def n_frames(self) -> int:

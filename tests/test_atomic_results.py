@@ -184,8 +184,8 @@ for line in sys.stdin:  # one run per request, each in a forked child: exubio is
     pid = os.fork()
     if pid == 0:
         state.update(kill_at=req["kill_at"], sig=req["sig"], log=req["log"], count=0)
-        with open(req["stderr"], "w") as err, open(os.devnull, "w") as null:
-            os.dup2(null.fileno(), 1)
+        with open(req["stderr"], "w") as err, open(req["stdout"], "w") as out:
+            os.dup2(out.fileno(), 1)
             os.dup2(err.fileno(), 2)
         code = main(req["argv"])
         sys.stdout.flush(); sys.stderr.flush()
@@ -210,12 +210,13 @@ class _Runner:
         assert json.loads(self.proc.stdout.readline()) == {"rc": 0}
 
     def run(self, argv: list[str], *, kill_at: int = 0, sig: int = 9, log: Path | None = None):
-        err = self.folder / "stderr.txt"
+        err, out = self.folder / "stderr.txt", self.folder / "stdout.txt"
         self.proc.stdin.write(json.dumps({"argv": argv, "kill_at": kill_at, "sig": int(sig), "stderr": str(err),
-                                          "log": None if log is None else str(log)}) + "\n")
+                                          "stdout": str(out), "log": None if log is None else str(log)}) + "\n")
         self.proc.stdin.flush()
         reply = json.loads(self.proc.stdout.readline())
-        return subprocess.CompletedProcess(argv, reply["rc"], "", err.read_text(encoding="utf-8"))
+        return subprocess.CompletedProcess(argv, reply["rc"], out.read_text(encoding="utf-8"),
+                                           err.read_text(encoding="utf-8"))
 
     def close(self) -> None:
         self.proc.stdin.close()
@@ -235,8 +236,8 @@ def test_sigint_or_sigkill_at_each_write_leaves_the_set_complete_or_absent(tmp_p
     """A run killed at its k-th write (each file written, each rename: 14 for one method's set), for
     every k: the set is complete or absent at once (SIGINT: exit 130 and one line; a set being placed
     holds SIGINT back until it is whole), or, SIGKILL among the renames, its journal is there and the
-    next run finishes it. The next run removes every leftover and replaces no complete set (exit 2
-    without --overwrite). It left a set without its summary.json."""
+    next run finishes it. The next run removes every leftover, replaces no complete set and keeps it
+    (the same inputs: exubio.run.resume). It left a set without its summary.json."""
     argv = ["-q", "reconstruct", str(tiny), "--method", "ls", "--no-report", "--out"]
     log = tmp_path / "events.txt"
     counted = runner.run(argv + [str(tmp_path / "count")], log=log)
@@ -259,10 +260,11 @@ def test_sigint_or_sigkill_at_each_write_leaves_the_set_complete_or_absent(tmp_p
                 assert "link" in events[k - 1], (events[k - 1], state)
                 assert any((out / h / "COMMIT.json").is_file() for h in hidden(out)), hidden(out)
         before = (out / "tiny.ls.npz").read_bytes() if state == "complete" else None
-        again = runner.run(argv + [str(out)])  # cleans up; refuses to replace a complete set (no --overwrite)
+        again = runner.run(argv + [str(out)])  # cleans up; keeps a complete set of the same inputs (resumes)
+        assert again.returncode == 0, (events[k - 1], again.stderr)
         assert set_state(out, "tiny", "ls") == "complete", (events[k - 1], again.stderr)
-        if again.returncode != 0:  # the set was complete, or made complete from its journal: not replaced
-            assert again.returncode == 2 and "already exists" in one_error_line(again.stderr), again.stderr
+        if state != "absent":  # the set was complete, or made complete from its journal: kept, not replaced
+            assert "[ls] kept" in again.stdout, (events[k - 1], again.stdout)
             assert before is None or (out / "tiny.ls.npz").read_bytes() == before
         assert hidden(out) == [], (events[k - 1], hidden(out))
     # killed before the set was placed, and while it was placed: SIGINT waits for the set to be

@@ -96,6 +96,7 @@ class TrialResult:
     calibration: Calibrated | None = None
     report: Mapping[str, str] | None = None  # "pdf", "png"
     failed: Mapping[str, str] = field(default_factory=dict)  # methods that failed: their reason (no files)
+    kept: tuple[str, ...] = ()  # methods (and "report") an earlier run of the same inputs left complete: kept (resumed)
 
     @property
     def verdicts(self) -> dict[str, str]:
@@ -112,7 +113,11 @@ def run_job(job: TrialJob, /, *, progress_factory: Callable[[str, int], Callable
         return _run_job(job, progress_factory)
     results.writable_folder(job.out_dir)
     with results.claim(job.out_dir, [f"{stem}.report"]):  # no other run writes this trial's report meanwhile
-        results.prepare_output_dir(job.out_dir, [f"{stem}.report.pdf", f"{stem}.report.png"], overwrite=job.overwrite)
+        # a report beside complete result sets may be a resumed run's (exubio.run.resume): judged once
+        # the sets are found kept or refused; otherwise refused here, before any work
+        sets_there = all((job.out_dir / f"{stem}.{m}.summary.json").is_file() for m in job.methods)
+        results.prepare_output_dir(job.out_dir, [f"{stem}.report.pdf", f"{stem}.report.png"],
+                                   overwrite=job.overwrite or sets_there)
         return _run_job(job, progress_factory)
 
 
@@ -150,10 +155,26 @@ def _run_job(job: TrialJob, progress_factory: Callable[[str, int], Callable[[int
     if len(outputs) == 2:
         agree = outputs[0][2].get("pf_ls_agreement_deg") or {}
         agreement = {k: v for k, v in agree.items() if isinstance(v, float)}
-    result = TrialResult(str(job.trial), methods, agreement, calibrated, failed=failed)
+    result = TrialResult(str(job.trial), methods, agreement, calibrated, failed=failed,
+                         kept=tuple(r.method for r, _, _ in outputs if r.resumed_from))
     if job.report:
-        from exubio.report.trial_report import build_trial_report
-
-        pdf, png = build_trial_report([m.paths["npz"] for m in methods], job.out_dir / f"{stem}.report.pdf")
-        result = dataclasses.replace(result, report={"pdf": str(pdf), "png": str(png)})
+        report, kept = _report(job, methods, resumed=len(result.kept) == len(methods))
+        result = dataclasses.replace(result, report=report, kept=result.kept + (("report",) if kept else ()))
     return result
+
+
+def _report(job: TrialJob, methods: tuple[MethodResult, ...], /, *, resumed: bool) -> tuple[dict[str, str], bool]:
+    """The trial's report: built, or kept when every result set was kept from an earlier run of the
+    same inputs and the report that run left is not older than them (exubio.run.resume)."""
+    from exubio.run.resume import fresh_report
+
+    pdf, png = job.out_dir / f"{job.trial.stem}.report.pdf", job.out_dir / f"{job.trial.stem}.report.png"
+    there = pdf.exists() or png.exists()
+    if there and resumed and fresh_report([pdf, png], [m.paths for m in methods]):
+        return {"pdf": str(pdf), "png": str(png)}, True
+    if there and not (job.overwrite or resumed):  # sets computed now beside an earlier run's report
+        results.prepare_output_dir(job.out_dir, [pdf.name, png.name], overwrite=False)  # refused, named
+    from exubio.report.trial_report import build_trial_report
+
+    pdf, png = build_trial_report([m.paths["npz"] for m in methods], pdf)
+    return {"pdf": str(pdf), "png": str(png)}, False

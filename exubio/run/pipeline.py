@@ -232,15 +232,27 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
 
     from exubio.io.streamed import StreamedReconstruction
 
+    from exubio.run.resume import kept_set, run_key
+
     methods = [Method.parse(m) for m in methods]
     stems = [output_stem(trial_path, m) for m in methods]
     results.writable_folder(out_dir)
+    session = session if session is not None else load_session()
+    labels = trajectories.labels if trajectories is not None else ()
+    keys = {s: run_key(trial_path, session.model, session.protocol, m.value, labels=labels,
+                       options=settings.method_options.get(m.value), repair_labels=settings.repair_labels)
+            for m, s in zip(methods, stems)}
     with ExitStack() as parts:  # the locks, and the streamed model points' part files, go whatever happens
         parts.enter_context(results.claim(out_dir, stems))  # no other run writes these results meanwhile
-        results.prepare_output_dir(out_dir, stems, overwrite=settings.overwrite)
+        results.remove_leftovers(Path(out_dir), stems)  # a killed run's set is finished from its journal first
+        kept = {} if settings.overwrite else {s: k for s in stems if (k := kept_set(out_dir, s, keys[s])) is not None}
+        if len(kept) == len(stems):  # an earlier run of the same inputs completed them all: resumed
+            log.info("kept the complete result sets of an earlier run of the same inputs: %s", ", ".join(stems))
+            return [kept[s] for s in stems]
+        results.prepare_output_dir(out_dir, [s for s in stems if s not in kept], overwrite=settings.overwrite)
         inputs = load_inputs(trajectories if trajectories is not None else trial_path, session,
                              repair_labels=settings.repair_labels, prepared=prepared)
-        run = _Run(inputs, Path(trial_path), Path(out_dir), settings, calibration)
+        run = _Run(inputs, Path(trial_path), Path(out_dir), settings, calibration, keys, kept)
         return run.reconstruct(methods, stems, parts, StreamedReconstruction)
 
 
@@ -253,6 +265,8 @@ class _Run:
     out_dir: Path
     settings: RunSettings
     calibration: Any
+    keys: Mapping[str, str | None] = field(default_factory=dict)  # stem -> its inputs' fingerprint (resume.run_key)
+    kept: Mapping[str, tuple] = field(default_factory=dict)  # stem -> a complete set of an earlier run, kept
 
     def reconstruct(self, methods, stems, parts, sink_type) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
         inputs, out_dir = self.inputs, self.out_dir
@@ -278,9 +292,14 @@ class _Run:
         if not recons:
             raise ReconstructionError("; ".join(f"{m.upper()}: {reason}" for m, reason in failures.items()))
         assessment = self.assess(recons)
-        out = write_assessed(inputs, self.trial_path, out_dir,
-                             [(m, s, r, sink.model_points) for (m, s), r, sink in zip(done, recons, sinks)], assessment,
-                             notes=RunNotes(self.calibration, failures=failures), overwrite=self.settings.overwrite)
+        out = []
+        for (method, stem), recon, sink in zip(done, recons, sinks):
+            if stem in self.kept:
+                out.append(self.kept[stem])
+                continue
+            notes = RunNotes(self.calibration, failures=failures, inputs_sha256=self.keys.get(stem))
+            out += write_assessed(inputs, self.trial_path, out_dir, [(method, stem, recon, sink.model_points)],
+                                  assessment, notes=notes, overwrite=self.settings.overwrite)
         if failures:
             raise PartialReconstructionError(
                 "; ".join(f"{m.upper()} failed: {reason}" for m, reason in failures.items())

@@ -103,11 +103,13 @@ def failure_notes(failures: Mapping[str, str], /) -> list[Reason]:
 class RunNotes:
     """What a trial's summaries say beyond its reconstruction and assessment: the session's
     calibration (exubio.run.session.SessionCalibration), a live recording's figures, the run's
-    methods that failed (name -> reason)."""
+    methods that failed (name -> reason), the fingerprint of the run's inputs (exubio.run.resume:
+    a re-run of the same inputs keeps a complete set)."""
 
     calibration: Any = None
     live: Mapping[str, Any] | None = None
     failures: Mapping[str, str] = field(default_factory=dict)
+    inputs_sha256: str | None = None
 
 
 def unused_labels(inputs: Any, /) -> list[str]:
@@ -155,6 +157,8 @@ def trial_summary(recon: Reconstruction, assessment: TrialAssessment, inputs: An
         out["failed_methods"] = dict(notes.failures)
     out["angles"] = {"files": [f"{stem}.csv", f"{stem}.mot"], "units": "deg", "side": inputs.protocol.side,
                      "definitions": {n: {"definition": d, "meaning": m} for n, d, m in ANATOMICAL_ANGLES}}
+    if notes.inputs_sha256:
+        out["inputs_sha256"] = notes.inputs_sha256
     return out
 
 

@@ -109,6 +109,11 @@ class Quality:
     def to_dict(self) -> dict[str, Any]:
         return {"verdict": self.verdict.value, "reasons": [r.to_dict() for r in self.reasons]}
 
+    @staticmethod
+    def from_dict(data: Mapping[str, Any], /) -> "Quality":
+        """The Quality ``to_dict`` gave (a summary.json's ``quality``)."""
+        return Quality(data["verdict"], tuple(Reason(r["code"], r["level"], r["message"]) for r in data["reasons"]))
+
     def with_reasons(self, more: Iterable[Reason], /) -> "Quality":
         """The same judgement with ``more`` reasons added (notes leave the verdict as it is)."""
         return Quality.of((*self.reasons, *more))

@@ -1,0 +1,76 @@
+"""Resuming an interrupted run: a method's result set that an earlier run of the same inputs left
+complete is kept, not refused and not computed again.
+
+Every summary.json that ``exubio reconstruct`` writes carries ``inputs_sha256``: a fingerprint of
+what the result is made from (the trial file's bytes and the labels read from it, the model and
+protocol files (a calibrated model's file holds its calibration), the method's options, the label
+repair, exubio's version). A plain re-run (no ``--overwrite``) finds a set complete (ResultSet:
+summary.json is placed last) with the same fingerprint and keeps it: the results are
+deterministic, so computing them again would give the same files. A set of other inputs is still
+refused; ``--overwrite`` computes everything again.
+"""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+SET_SUFFIXES = {"csv": ".csv", "mot": ".mot", "npz": ".npz", "summary": ".summary.json"}
+
+
+def run_key(trial_path: str | Path, model: Any, protocol: Any, method: str, /, *, options: Any = None,
+            labels: Sequence[str] = (), repair_labels: bool = False) -> str | None:
+    """The fingerprint of one method's run on one trial (see the module docstring); ``options``: the
+    method's options object or a dict of its fields (None: the defaults). None when the trial, the
+    model or the protocol is not a file (nothing to find again)."""
+    import exubio
+    from exubio.methods import method_spec
+
+    files = [Path(trial_path), Path(str(model.source or "")), Path(str(protocol.source or ""))]
+    if not all(f.is_file() for f in files):
+        return None
+    h = hashlib.sha256()
+    for f in files:
+        h.update(hashlib.sha256(f.read_bytes()).digest())
+    opts = repr(method_spec(method).make_options(options))
+    h.update(repr((method, tuple(labels), opts, bool(repair_labels), exubio.__version__)).encode())
+    return h.hexdigest()
+
+
+def set_paths(out_dir: str | Path, stem: str, /) -> dict[str, Path]:
+    return {kind: Path(out_dir) / f"{stem}{suffix}" for kind, suffix in SET_SUFFIXES.items()}
+
+
+def kept_set(out_dir: str | Path, stem: str, key: str | None, /) -> tuple[Any, dict[str, Path], dict[str, Any]] | None:
+    """(reconstruction, paths, summary) of the result set ``stem`` in ``out_dir`` when it is complete
+    and was made from the inputs ``key`` fingerprints; None otherwise. The reconstruction is read
+    back without its model points (exubio.io.results.read_npz) and carries the verdict its
+    summary.json gives and ``resumed_from`` (its summary.json)."""
+    from exubio.io.results import read_npz
+    from exubio.trust.quality import Quality
+
+    if key is None:
+        return None
+    paths = set_paths(out_dir, stem)
+    if not all(p.is_file() for p in paths.values()):
+        return None
+    try:
+        summ = json.loads(paths["summary"].read_text(encoding="utf-8"))
+        if summ.get("inputs_sha256") != key:
+            return None
+        recon = read_npz(paths["npz"], points=False)
+        quality = Quality.from_dict(summ["quality"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    return dataclasses.replace(recon, quality=quality, resumed_from=str(paths["summary"])), paths, summ
+
+
+def fresh_report(report_files: Sequence[Path], sets: Sequence[Mapping[str, Path]], /) -> bool:
+    """True when every file of a trial's report exists and is not older than any of its result
+    sets' summary.json (a report an interrupted run left from before its sets is not fresh)."""
+    if not report_files or not all(Path(p).is_file() for p in report_files):
+        return False
+    oldest = min(Path(p).stat().st_mtime_ns for p in report_files)
+    return all(oldest >= Path(s["summary"]).stat().st_mtime_ns for s in sets)
