@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import os
 import platform
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -197,7 +198,7 @@ def run_metadata(inputs: TrialInputs, trial_path: str | Path, method: Method) ->
     return {
         "exubio_version": exubio.__version__,
         "python": platform.python_version(),
-        "trial": str(trial_path),
+        "trial": os.path.abspath(trial_path),
         "model": inputs.model.source,
         "model_name": inputs.model.name,
         "body_mass_kg": inputs.model.body_mass_kg,

@@ -3,6 +3,7 @@ the session's calibration, the notes on the input files) become the file's plain
 strings). Everything above hands this module objects; nothing below it builds the file's dicts."""
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
@@ -30,11 +31,17 @@ def finding_entry(f: Any, /) -> dict[str, Any]:
     return out
 
 
+def _absolute(path: Any, /) -> Any:
+    """A file's path as summary.json gives every path: absolute (not relative to where the run
+    was started); "" and None as they are."""
+    return os.path.abspath(path) if path else path
+
+
 def calibration_entry(cal: Any, /) -> dict[str, Any]:
     """The session's calibration (exubio.run.session.SessionCalibration) as summary.json records
     it: the full report under ``report``, the label findings on the static trial under ``labels``."""
     report = cal.report.to_dict()
-    out = {"static": cal.static, "frames": cal.frames, "model_file": str(cal.model_file),
+    out = {"static": _absolute(cal.static), "frames": cal.frames, "model_file": _absolute(cal.model_file),
            "mean_residual_mm": cal.report.mean_residual_mm, "residual_mm": report.get("residual_mm"),
            "report": report, "labels": [finding_entry(f) for f in cal.labels]}
     if cal.input_findings:  # what the reader read around in the static trial's file (io/trc.py, io/c3d.py)
@@ -138,7 +145,7 @@ def trial_summary(recon: Reconstruction, assessment: TrialAssessment, inputs: An
     ``source`` the trial file, ``stem`` the result set's, ``notes`` the run's (RunNotes),
     ``quality`` its verdict (default: trial_quality)."""
     cal = notes.calibration
-    out = reconstruction_entries(recon, source=source)
+    out = reconstruction_entries(recon, source=_absolute(source))
     out["unused_trial_labels"] = unused_labels(inputs)
     if cal is not None:
         out["calibration"] = calibration_entry(cal)
