@@ -78,11 +78,12 @@ def test_section_records_round_trip():
     assert set(noisy.qdd_rmse_deg_s2) == {"pf", "ls", "pf_fd", "ls_fd"}
 
 
-def test_a_failed_pf_run_says_where():
+def test_a_failed_pf_run_says_where_and_the_default_inertia_converges_there():
     """Springs far too soft and barely damped for the motion (c = 26.8 N/m, d = 2.7 Ns/m, a corner
-    of the sensitivity grid, Fig. 2) on the real abduction: the run stops; its error names the time,
-    the worst spring and the coordinates beyond their range of motion at the last frame (a PF that
-    converges here one day makes this test obsolete: replace it by the grid converging)."""
+    of the sensitivity grid, Fig. 2) on the real abduction, with the segments' physical inertia
+    (inertia_scale 1.0, the paper's): the run stops; its error names the time, the worst spring and
+    the coordinates beyond their range of motion at the last frame. With the default inertia
+    (PFOptions.inertia_scale 0.1) the same springs carry the motion to its end."""
     from exubio.errors import ReconstructionError
     from exubio.run.pipeline import reconstruct
     from exubio.validation.sensitivity import with_springs
@@ -91,11 +92,14 @@ def test_a_failed_pf_run_says_where():
     if why_no_real_trial("abduction"):
         pytest.skip(why_no_real_trial("abduction"))
     model, protocol, targets, _ = real_trial("abduction")
+    soft = with_springs(protocol, 26.8, 2.68)
     with pytest.raises(ReconstructionError) as err:
-        reconstruct(model, with_springs(protocol, 26.8, 2.68), targets, method="pf")
+        reconstruct(model, soft, targets, method="pf", inertia_scale=1.0)
     msg = str(err.value)
     assert "stopped at t =" in msg or "diverged at t =" in msg
     assert "beyond their range of motion there: gh_internal_rotation" in msg, msg
+    rec = reconstruct(model, soft, targets, method="pf")
+    assert rec.n_frames == targets.n_frames and np.all(np.isfinite(rec.q_rad))
 
 
 def test_lead_in_extrapolates_the_first_frame_backwards():

@@ -99,7 +99,7 @@ class PFSystem:
                  gravity: bool = False, kinematics: Kinematics | None = None, locked_segments: Sequence[int] = (),
                  held_coordinates: Sequence[int] = (), limits_rad: np.ndarray | None = None,
                  limit_stiffness_nm_per_rad: float = DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD,
-                 limit_max_rate_rad_s: float = DEFAULT_LIMIT_MAX_RATE_RAD_S):
+                 limit_max_rate_rad_s: float = DEFAULT_LIMIT_MAX_RATE_RAD_S, inertia_scale: float = 1.0):
         self.model = model
         self.locked_segments = frozenset(int(i) for i in locked_segments)
         self.held_coordinates = frozenset(int(i) for i in held_coordinates)
@@ -143,16 +143,18 @@ class PFSystem:
             node = mbs.AddNode(eii.NodeRigidBodyEP(
                 referenceCoordinates=list(p0[i]) + list(ep), initialVelocities=list(v0[i]) + list(ep_t),
                 visualization=eii.VNodeRigidBodyEP(show=False)))
-            mass = float(seg.mass_kg)
+            mass = float(seg.mass_kg) * inertia_scale  # the springs accelerate this (PFOptions.inertia_scale)
             com = np.asarray(seg.com_m, dtype=float)
-            inertia = np.asarray(seg.inertia_kgm2, dtype=float) + mass * (com @ com * np.eye(3) - np.outer(com, com))
+            inertia = (np.asarray(seg.inertia_kgm2, dtype=float) * inertia_scale
+                       + mass * (com @ com * np.eye(3) - np.outer(com, com)))
             body = mbs.AddObject(eii.ObjectRigidBody(
                 nodeNumber=node, mass=mass, centerOfMass=list(com),
                 inertia=[inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[1, 2], inertia[0, 2], inertia[0, 1]],
                 visualization=eii.VObjectRigidBody(show=False)))
-            if gravity:
-                mk = mbs.AddMarker(eii.MarkerBodyMass(bodyNumber=body))
-                mbs.AddLoad(eii.LoadMassProportional(markerNumber=mk, loadVector=list(GRAVITY_M_S2)))
+            if gravity:  # the segment's real weight, whatever inertia the dynamics are given
+                mk = mbs.AddMarker(eii.MarkerBodyPosition(bodyNumber=body, localPosition=list(com)))
+                mbs.AddLoad(eii.LoadForceVector(markerNumber=mk,
+                                                loadVector=list(float(seg.mass_kg) * np.asarray(GRAVITY_M_S2))))
             self._nodes.append(node)
             self._bodies.append(body)
 
