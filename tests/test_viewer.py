@@ -22,7 +22,7 @@ import pytest
 
 from exubio.errors import InputError
 from exubio.io.results import read_npz, read_npz_metadata, write_npz
-from exubio.model.load import DEFAULT_MODEL
+from exubio.model.load import DEFAULT_MODEL, load_model
 from exubio.run.inputs import load_session
 from exubio.run.pipeline import reconstruct_file
 from exubio.io.resources import shipped_file
@@ -120,7 +120,24 @@ def test_page_data_frames_markers_methods_verdicts(results, page):
     assert [b["label"] for b in layout["updatemenus"][0]["buttons"]] == ["▶ Play", "❚❚ Pause"]
     assert "OK" in layout["title"]["text"] or "CHECK" in layout["title"]["text"] or "FAIL" in layout["title"]["text"]
     names = [t["name"] for t in traces]
-    assert names.count("thorax ellipsoid") == 2 and names.count("bones") == 2
+    ellipsoid = "thorax ellipsoid (scapula glides on it)"
+    assert names.count(ellipsoid) == 2 and names.count("bones") == 2
+    # the body: the ellipsoid at the model's place and size, the torso's ISB landmarks, a legend of
+    # the segments whose points are drawn (their colours), nothing shown that only a test reads
+    model = load_model(DEFAULT_MODEL)
+    mesh = traces[names.index(ellipsoid)]
+    xyz = np.column_stack([mesh[c] for c in "xyz"]).astype(float)
+    centre, radii = np.asarray(model.ellipsoid.centre_m) * 1000, np.asarray(model.ellipsoid.radii_m) * 1000
+    np.testing.assert_allclose((xyz.max(axis=0) + xyz.min(axis=0)) / 2, centre, atol=1.0)
+    np.testing.assert_allclose((xyz.max(axis=0) - xyz.min(axis=0)) / 2, radii, rtol=0.02)
+    torso = traces[names.index("thorax landmarks")]
+    for name in ("IJ", "C7", "T8", "PX"):
+        i = torso["text"].index(name)
+        np.testing.assert_allclose([torso[c][i] for c in "xyz"], np.asarray(model.segments[0].points[name]) * 1000,
+                                   atol=0.051)
+    legend = [n for n, t in zip(names, traces) if t.get("legendgroup") == "segments"]
+    assert legend == [f"{g} points" for g in model.segment_names if g in data["marker_segments"].values()]
+    assert "Long trial" not in text
     assert names.count("measured markers") == 2 and names.count("model points") == 2
     assert names.count("residuals (marker to model point)") == 2
     measured = [i for i, t in enumerate(traces) if t["name"] == "measured markers"]
@@ -292,7 +309,9 @@ def test_page_renders_in_headless_chromium(page, tmp_path):
     attrs = dict(re.findall(r'data-([a-z]+)="([^"]*)"', status.group(1)))
     data = page_data(html_path.read_text(encoding="utf-8"))
     assert int(attrs["frames"]) == data["n_frames_shown"] == 250  # the live plot holds every frame
-    assert int(attrs["traces"]) == 10 and int(attrs["canvases"]) >= 2  # 5 traces x 2 WebGL scenes
+    traces, _, _ = plotly_call(html_path.read_text(encoding="utf-8"))
+    assert int(attrs["traces"]) == len(traces) and int(attrs["canvases"]) >= 2  # every trace, 2 WebGL scenes
+    assert "hidden" in status.group(1)  # the render check is for the test, not shown to the reader
     assert attrs["external"] == ""  # nothing was loaded from the network: it works offline
     assert re.search(r'class="[^"]*js-plotly-plot', dom)
     assert dom.count('class="gl-container"') == 2 or dom.count("<canvas") >= 2

@@ -81,8 +81,8 @@ def _build_page(results: list[_Result], model: Model, model_file: Path, *,
             log.warning(notes[-1])
     trial = Path(str(results[0].metadata.get("trial") or results[0].path.name)).name
     if step > 1:
-        notes.insert(0, f"Long trial: one frame in {step} is shown ({len(frames)} of {first.n_frames} frames; "
-                        f"at most {max_frames} animation frames).")
+        notes.insert(0, f"Animation: one frame in {step} is shown ({len(frames)} of {first.n_frames} frames; "
+                        f"at most {max_frames} animation frames; every frame is in the result files).")
     else:
         notes.insert(0, f"All {first.n_frames} frames are shown.")
 
@@ -121,6 +121,22 @@ def _build_page(results: list[_Result], model: Model, model_file: Path, *,
     return _page(results, trial, data, div, notes), data
 
 
+_SCENES_WIDTH = 0.84  # of the page's width; the legend is right of the scenes
+_TORSO_COLOUR = "#34495e"
+_TORSO_LOOP = ("IJ", "C7", "T8", "PX", "IJ")  # the ISB thorax landmarks, around the sagittal outline
+
+
+def _torso(model) -> dict[str, list] | None:
+    """The thorax's ISB landmarks joined around the sagittal outline of the torso (IJ, C7, T8, PX),
+    mm in the thorax frame (the thorax is fixed), with their names; None when the model lacks one."""
+    thorax = model.segments[0]
+    if not all(n in thorax.points for n in _TORSO_LOOP):
+        return None
+    pts = np.array([thorax.points[n] for n in _TORSO_LOOP], dtype=float) * 1000.0
+    return {"x": pts[:, 0].round(1).tolist(), "y": pts[:, 1].round(1).tolist(), "z": pts[:, 2].round(1).tolist(),
+            "text": [*_TORSO_LOOP[:-1], ""]}
+
+
 def _round_or_none(x: float, nd: int = 3):
     return round(float(x), nd) if math.isfinite(x) else None
 
@@ -129,7 +145,7 @@ def _figure(results, scenes, seg_of, times, bone_labels, model, trial, *, frames
     """The plotly figure as a dict (data, layout, frames) and the number of animated traces per scene."""
     n_scenes = len(results)
     gap = 0.02
-    width = (1.0 - gap * (n_scenes - 1)) / n_scenes
+    width = (_SCENES_WIDTH - gap * (n_scenes - 1)) / n_scenes  # the legend takes the right edge
     allpts = [model_pt for s in scenes for model_pt in (s.bones, s.measured, s.model_points)]
     ell = _ellipsoid_mesh(model)
     stack = np.concatenate([a.reshape(-1, 3) for a in allpts] +
@@ -147,7 +163,8 @@ def _figure(results, scenes, seg_of, times, bone_labels, model, trial, *, frames
                   "x": 0.5, "xanchor": "center", "y": 0.97, "yanchor": "top"},
         "template": _template(),
         "margin": {"l": 0, "r": 0, "t": 110, "b": 95},
-        "legend": {"orientation": "h", "x": 0.5, "xanchor": "center", "y": 1.0, "yanchor": "bottom"},
+        "legend": {"orientation": "v", "x": 1.0, "xanchor": "right", "y": 0.9, "yanchor": "top",
+                   "font": {"size": 11}, "tracegroupgap": 4},
         "annotations": [],
         "uirevision": "exubio",
     }
@@ -159,10 +176,10 @@ def _figure(results, scenes, seg_of, times, bone_labels, model, trial, *, frames
             return {"title": {"text": title}, "range": [float(lo[i]), float(hi[i])], "autorange": False, "nticks": 5}
 
         layout[scene] = {
-            "domain": {"x": [x0, x0 + width], "y": [0.0, 0.94]},
+            "domain": {"x": [x0, x0 + width], "y": [0.02, 0.94]},
             "xaxis": axis("X anterior (mm)", 0), "yaxis": axis("Y superior (mm)", 1), "zaxis": axis("Z right (mm)", 2),
             "aspectmode": "manual", "aspectratio": {"x": aspect[0], "y": aspect[1], "z": aspect[2]},
-            "camera": {"up": {"x": 0, "y": 1, "z": 0}, "eye": {"x": 1.25, "y": 0.25, "z": 0.65},
+            "camera": {"up": {"x": 0, "y": 1, "z": 0}, "eye": {"x": 1.55, "y": 0.3, "z": 0.85},
                        "center": {"x": 0, "y": 0, "z": 0}},
         }
         title = _METHOD_TITLES.get(res.recon.method, res.recon.method.upper())
@@ -175,9 +192,15 @@ def _figure(results, scenes, seg_of, times, bone_labels, model, trial, *, frames
         show = s == 0
         names = list(res.recon.marker_names)
         colours = [seg_colour.get(g, "#000000") for g in seg_of[s]]
-        traces.append({"type": "mesh3d", "scene": scene, "name": "thorax ellipsoid", "legendgroup": "ellipsoid",
-                       "showlegend": show, **ell, "color": _ELLIPSOID_COLOUR, "opacity": 0.22,
-                       "hoverinfo": "skip", "flatshading": False})
+        traces.append({"type": "mesh3d", "scene": scene, "name": "thorax ellipsoid (scapula glides on it)",
+                       "legendgroup": "ellipsoid", "showlegend": show, **ell, "color": _ELLIPSOID_COLOUR,
+                       "opacity": 0.3, "hoverinfo": "skip", "flatshading": False})
+        torso = _torso(model)
+        if torso is not None:
+            traces.append({"type": "scatter3d", "scene": scene, "mode": "lines+markers+text", "name": "thorax landmarks",
+                           "legendgroup": "torso", "showlegend": show, **torso, "textposition": "middle left",
+                           "line": {"color": _TORSO_COLOUR, "width": 5}, "marker": {"color": _TORSO_COLOUR, "size": 3},
+                           "hoverinfo": "text", "textfont": {"size": 10, "color": _TORSO_COLOUR}})
         first = [
             {"type": "scatter3d", "scene": scene, "mode": "lines+markers", "name": "bones",
              "legendgroup": "bones", "showlegend": show, "line": {"color": _BONE_COLOUR, "width": 7},
@@ -201,6 +224,11 @@ def _figure(results, scenes, seg_of, times, bone_labels, model, trial, *, frames
             animated.append(len(traces))
             traces.append(tr)
     per_scene = 4
+    drawn = [g for g in model.segment_names if any(g in segs for segs in seg_of)]
+    for g in drawn:  # a legend of the model points' colours (no data: the points are the animated trace)
+        traces.append({"type": "scatter3d", "scene": "scene", "mode": "markers", "name": f"{g} points",
+                       "legendgroup": "segments", "showlegend": True, "x": [None], "y": [None], "z": [None],
+                       "marker": {"color": seg_colour[g], "size": 5, "symbol": "diamond"}, "hoverinfo": "skip"})
 
     def frame_data(i: int) -> list[dict]:
         out = []
@@ -279,6 +307,7 @@ function exubioRendered() {
     .map(function(r) { return r.name; }).filter(function(u) { return !/^(file|data|blob|about):/.test(u); });
   status.setAttribute('data-external', external.join(' '));
   status.textContent = 'rendered: ' + frames + ' frames, ' + gd.data.length + ' traces, ' + gl + ' canvases';
+  status.hidden = true;  // for a headless browser to check, not for the reader
 }
 // a time in the address, e.g. view.html#t=4.5, shows the frame nearest that time
 var hashTime = /(?:^#|&)t=([0-9.]+)/.exec(window.location.hash);
