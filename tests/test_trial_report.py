@@ -162,3 +162,28 @@ def test_page_one_never_overlaps_whatever_the_number_of_reasons(result_sets, n_r
     assert {f"note: {r.method} only" for r in recons} <= set(texts)  # each method's own reason, under it
     if n_reasons == 30:
         assert any(t.startswith("... ") and "more" in t for t in texts)
+
+
+def test_a_marker_absent_from_the_whole_trial_is_not_shaded_as_a_gap(tmp_path):
+    """An optional marker the trial lacks (ELB, as in the shared C3D sessions) shaded the whole
+    residual plot as an 837-frame gap; a real gap is still shaded, and the absent marker is named."""
+    from exubio.io.results import read_npz, read_npz_metadata
+    from exubio.synth.simulate import DEFAULT_MARKERS
+
+    sim = simulate_trial(load_model(), "abduction", duration_s=2.0, rate_hz=50.0, noise_mm=0.5, seed=2,
+                         marker_names=[m for m in DEFAULT_MARKERS if m != "ELB"])
+    pos = sim.trajectories.positions_m.copy()
+    pos[40:55, sim.trajectories.labels.index("ARM")] = np.nan  # one real gap, 15 frames
+    path = write_c3d(tmp_path / "t.c3d", dataclasses.replace(sim.trajectories, positions_m=pos))
+    assert main(["-q", "reconstruct", str(path), "--method", "ls", "--no-report", "--out", str(tmp_path / "o")]) == 0
+    npz = tmp_path / "o" / "t.ls.npz"
+    recon = read_npz(npz, points=False)
+    assert {g.marker for g in recon.gaps} == {"ELB", "ARM"}  # ELB is in the protocol and missing throughout
+    fig = tr.residuals_page([recon], read_npz_metadata(npz), {})
+    ax = next(a for a in fig.axes if "marker gaps" in a.get_title())
+    shaded = [p for p in ax.patches if p.get_facecolor()[:3] == pytest.approx((1.0, 0.647, 0.0), abs=0.01)]
+    assert len(shaded) == 1
+    x0, width = shaded[0].get_x(), shaded[0].get_width()  # a Rectangle spanning the gap's times
+    assert (x0, x0 + width) == pytest.approx((recon.time_s[40], recon.time_s[54]))
+    text = " ".join(t.get_text() for a in fig.axes for t in a.texts)
+    assert "absent from the whole trial" in text and "ELB" in text

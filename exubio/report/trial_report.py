@@ -529,7 +529,10 @@ def residuals_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict
         stats = residual_statistics(r)
         rmse = [stats["per_marker_rmse"].get(m) or np.nan for m in markers]
         ax_m.bar(np.arange(len(markers)) + k * width, rmse, width, color=c, label=r.method.upper())
-    for g in recons[0].gaps:
+    n0 = recons[0].n_frames
+    gaps = [g for g in recons[0].gaps if g.n_frames < n0]  # a marker absent throughout is no gap
+    absent = [g.marker for g in recons[0].gaps if g.n_frames >= n0]
+    for g in gaps:
         t = recons[0].time_s
         ax_t.axvspan(t[g.start], t[min(g.stop, len(t)) - 1], color="orange", alpha=0.2)
     ax_t.set_xlabel("time (s)")
@@ -557,9 +560,10 @@ def residuals_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict
                   f"max |G q̇| {np.nanmax(np.abs(r.constraint_velocity)):.1e} 1/s",
                   f"  frames not converged / too few markers: {int((np.asarray(r.status) == FrameStatus.NOT_CONVERGED).sum())} / "
                   f"{int((np.asarray(r.status) == FrameStatus.TOO_FEW_MARKERS).sum())}", ""]
-    gaps = recons[0].gaps
     lines.append(f"gaps: {len(gaps)}" + ("" if not gaps else " — " + ", ".join(
         f"{g.marker} ({g.n_frames} frames)" for g in gaps[:6]) + (" ..." if len(gaps) > 6 else "")))
+    if absent:
+        lines.append(f"markers absent from the whole trial (left out, not gaps): {', '.join(absent)}")
     unused = meta.get("ignored_labels", [])
     if unused:
         lines.append(f"ignored trial labels: {', '.join(unused[:10])}")
