@@ -289,9 +289,9 @@ def test_a_calibrated_trial_report_has_a_calibration_page(tmp_path):
     from exubio.report.trial_report import calibration_page
 
     fig = calibration_page({}, {"ls": summary})
-    text = "\n".join(t.get_text() for t in fig.texts)
-    for needle in ("scale factors: thorax", "joint centres at the static pose", "gh [", "static pose (deg)", "EPI_lat",
-                   "SCAP_FRONT"):
+    text = "\n".join([t.get_text() for t in fig.texts] + [t.get_text() for t in fig.axes[0].get_yticklabels()])
+    for needle in ("segment scale factors\n  thorax", "joint centres, static pose", "  gh      [", "static pose (deg)",
+                   "EPI_lat", "SCAP_FRONT"):
         assert needle in text, needle
 
 

@@ -187,3 +187,40 @@ def test_a_marker_absent_from_the_whole_trial_is_not_shaded_as_a_gap(tmp_path):
     assert (x0, x0 + width) == pytest.approx((recon.time_s[40], recon.time_s[54]))
     text = " ".join(t.get_text() for a in fig.axes for t in a.texts)
     assert "absent from the whole trial" in text and "ELB" in text
+
+
+def test_the_calibration_page_is_readable_whatever_the_checks_say():
+    """It was small text on an empty page, a check cut at 170 characters ('...an implausible postur'):
+    now every text block stays on the page and apart from the others and the marker chart, each
+    check is written in full (paths as file names) up to a count of the rest, the worst landmark
+    distance is marked."""
+    from exubio.report.calibration_page import calibration_page
+
+    markers = {f"M{k:02d}": {"segment": "humerus", "registered": k != 3, "residual_mm": 0.1 * k,
+                             "generic_offset_mm": 5.0 * k} for k in range(20)}
+    rep = {"frames": {"start": 0, "stop": 50, "n_frames": 50, "chosen_automatically": True},
+           "scale_factors": {s: 1.0 for s in ("thorax", "clavicle", "scapula", "humerus", "ulna", "radius", "hand")},
+           "ellipsoid": {"centre_mm": [-90.4, -46.0, 0.0], "radii_mm": [80.0, 130.0, 123.0]},
+           "joint_centres_mm": {"definition": "x", "gh": [1.0, 2.0, 3.0], "elbow": [4.0, 5.0, 6.0]},
+           "static_pose_deg": {f"q{k}": float(k) for k in range(13)}, "static_pose_at_limit_deg": {"q2": 2.0},
+           "markers": markers, "landmark_offsets_mm": {"M05": 12.0, "M07": 58.0, "M09": 20.0}}
+    end = "and this is the last word of a long check: posture"
+    long = "calibration (/a/very/long/folder/of/the/session/static_trial.c3d): marker M07 is 58 mm from its landmark; " * 3
+    for n_checks in (1, 12):
+        reasons = [{"code": "calibration_landmark", "level": "check", "message": f"{k}: {long}{end}"}
+                   for k in range(n_checks)]
+        fig = calibration_page({}, {"pf": {"calibration": {"static": "/x/static.c3d", "report": rep},
+                                           "quality": {"reasons": reasons}}})
+        renderer = fig.canvas.get_renderer()
+        inv = fig.transFigure.inverted()
+        boxes = [(t.get_text(), t.get_window_extent(renderer).transformed(inv)) for t in fig.texts if t.get_text()]
+        boxes += [("axes", ax.get_tightbbox(renderer).transformed(inv)) for ax in fig.axes]
+        for i, (a, ba) in enumerate(boxes):
+            assert ba.x0 >= -1e-3 and ba.x1 <= 1.0 + 1e-3 and ba.y0 >= -1e-3 and ba.y1 <= 1.0 + 1e-3, a[:60]
+            for b, bb in boxes[i + 1:]:
+                assert not ba.overlaps(bb), (a[:60], b[:60])
+        text = " ".join(t for t, _ in boxes).replace("\n    ", " ")
+        assert end in text and "/a/very/long" not in text and "static_trial.c3d" in text
+        assert (" more in the summary.json" in text) == (n_checks == 12)
+        labels = [t.get_text() for t in fig.axes[0].get_yticklabels()]
+        assert "M07 (worst)" in labels

@@ -14,7 +14,6 @@ page would pass the same loaded arrays around three times).
 from __future__ import annotations
 
 import json
-import re
 import threading
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +33,7 @@ from exubio.trust.evaluate import per_frame_residuals_mm, residual_statistics
 from exubio.errors import InputError
 from exubio.io.results import atomic_write, read_angles_csv, read_npz, read_npz_arrays, read_npz_metadata
 from exubio.types import FrameStatus, Reconstruction
+from exubio.report.calibration_page import calibration_page, short_paths
 
 _COLOURS = {"pf": "black", "ls": "tab:red"}
 _JOINTS = (("SC (ISB Y-X'-Z'')", "SC_"), ("AC (ISB Y-X'-Z'')", "AC_"), ("ST (ISB Y-X'-Z'')", "ST_"),
@@ -269,15 +269,6 @@ def _shared_reasons(per_method: Sequence[Sequence[dict]]) -> list[dict]:
     keys = [{_reason_key(x) for x in reasons} for reasons in per_method]
     common = set.intersection(*keys) if keys else set()
     return [x for x in per_method[0] if _reason_key(x) in common]
-
-
-_PATH = re.compile(r"(?<![\w.])(?:[A-Za-z]:)?(?:[\\/][^\s()\\/,:;]+)+[\\/]([^\s()\\/,:;]+)")
-
-
-def short_paths(text: str) -> str:
-    """A message with every absolute path written as its file name (page 1 names the trial's
-    files; the full paths are in the summary.json)."""
-    return _PATH.sub(lambda m: m.group(1), text)
 
 
 def _reasons(fig: Figure, renderer, reasons: Sequence[dict], y: float, floor: float, where: str) -> float:
@@ -572,71 +563,6 @@ def residuals_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict
     fig.suptitle(_title(recons, meta), fontsize=9)
     fig.subplots_adjust(left=0.07, right=0.98, top=0.90, bottom=0.13, hspace=0.35, wspace=0.2)
     return _pin_titles(fig)
-
-
-def calibration_page(meta: dict, summaries: dict[str, dict]) -> Figure | None:
-    """The subject calibration (when the trial was reconstructed with one): scale factors, joint
-    centres, the static pose, the functional glenohumeral centre, every marker's residual, offset
-    from its generic place and distance from its landmark, and the calibration warnings of the
-    verdict. None without a calibration."""
-    first = next(iter(summaries.values()), {})
-    cal = first.get("calibration") or {}
-    rep = cal.get("report") or {}
-    if not rep:
-        return None
-    fig = _figure()
-    fig.suptitle(f"Subject calibration: {Path(str(cal.get('static', ''))).name}"
-                 + (f" frames {cal['frames']}" if cal.get("frames") else ""), fontsize=10)
-    fr = rep.get("frames") or {}
-    lines = [f"static pose: frames {fr.get('start')}:{fr.get('stop')} ({fr.get('n_frames')} frames"
-             + (", still stretch found automatically" if fr.get("chosen_automatically") else "") + ")",
-             "scale factors: " + ", ".join(f"{k} {v:.3f}" for k, v in (rep.get("scale_factors") or {}).items())]
-    centres = {k: v for k, v in (rep.get("joint_centres_mm") or {}).items() if k != "definition"}
-    if centres:
-        lines.append("joint centres at the static pose (thorax frame, mm): " + "; ".join(
-            f"{k} {[round(float(x)) for x in v]}" for k, v in centres.items()))
-    pose = rep.get("static_pose_deg") or {}
-    at = rep.get("static_pose_at_limit_deg") or {}
-    lines.append("static pose (deg): " + ", ".join(f"{k} {v:.0f}" + (" (AT LIMIT)" if k in at else "")
-                                                  for k, v in pose.items()))
-    gh = (rep.get("functional") or {}).get("gh")
-    if gh:
-        lines.append(f"glenohumeral centre: SCoRE on {Path(str(gh.get('trial'))).name}, "
-                     f"{gh.get('shift_from_marker_fit_mm', float('nan')):.1f} mm from the marker fit's"
-                     if gh.get("used") else f"glenohumeral centre: functional trial not used: {gh.get('reason')}")
-    ell = rep.get("ellipsoid") or {}
-    if ell:
-        lines.append(f"thorax ellipsoid: centre {ell.get('centre_mm')} mm, radii {ell.get('radii_mm')} mm")
-    poses = rep.get("ellipsoid_poses_mm") or {}
-    if len(poses) > 1:
-        lines.append("ellipsoid through the contact points of several static poses: " + ", ".join(
-            f"{Path(str(k)).name} (up to {v:.1f} mm off)" for k, v in poses.items()))
-    lines.append("")
-    lines.append(f"{'marker':<12}{'segment':<10}{'residual mm':>12}{'generic offset mm':>19}{'from landmark mm':>18}"
-                 f"{'fit weight':>12}")
-    land = rep.get("landmark_offsets_mm") or {}
-    for name, m in (rep.get("markers") or {}).items():
-        if not m.get("registered"):
-            lines.append(f"{name:<12}{m.get('segment', ''):<10}  not in the calibration frames")
-            continue
-        lm = f"{land[name]:.0f}" if name in land else "-"
-        lines.append(f"{name:<12}{m.get('segment', ''):<10}{m.get('residual_mm') or 0:>12.2f}"
-                     f"{m.get('generic_offset_mm') or 0:>19.1f}{lm:>18}{m.get('fit_weight', 0):>12.2f}")
-    warnings = [r for s in summaries.values() for r in (s.get("quality") or {}).get("reasons", [])
-                if r["code"].startswith("calibration")]
-    seen = set()
-    lines.append("")
-    for r in warnings:
-        if r["message"] not in seen:
-            seen.add(r["message"])
-            lines.append(f"{r['level']}: {r['message']}"[:170])
-    if not warnings:
-        lines.append("no calibration warning (scales inside their bounds, static pose inside the ranges, a still window)")
-    import textwrap
-
-    wrapped = [w for line in lines for w in (textwrap.wrap(line, 165, subsequent_indent="    ") or [""])]
-    fig.text(0.03, 0.93, "\n".join(wrapped), fontsize=7, va="top", family="monospace")
-    return fig
 
 
 def build_trial_report(npz_paths: Sequence[str | Path], pdf_path: str | Path, /, *,
