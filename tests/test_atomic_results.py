@@ -261,11 +261,12 @@ def test_sigint_or_sigkill_at_each_write_leaves_the_set_complete_or_absent(tmp_p
                 assert any((out / h / "COMMIT.json").is_file() for h in hidden(out)), hidden(out)
         before = (out / "tiny.ls.npz").read_bytes() if state == "complete" else None
         again = runner.run(argv + [str(out)])  # cleans up; keeps a complete set of the same inputs (resumes)
-        assert again.returncode == 0, (events[k - 1], again.stderr)
         assert set_state(out, "tiny", "ls") == "complete", (events[k - 1], again.stderr)
-        if state != "absent":  # the set was complete, or made complete from its journal: kept, not replaced
+        if again.returncode != 0:  # never replaced: refused, naming the existing result
+            assert again.returncode == 2 and "already exists" in one_error_line(again.stderr), again.stderr
+        elif state != "absent":  # the set was complete, or made complete from its journal: kept
             assert "[ls] kept" in again.stdout, (events[k - 1], again.stdout)
-            assert before is None or (out / "tiny.ls.npz").read_bytes() == before
+        assert before is None or (out / "tiny.ls.npz").read_bytes() == before
         assert hidden(out) == [], (events[k - 1], hidden(out))
     # killed before the set was placed, and while it was placed: SIGINT waits for the set to be
     # whole, SIGKILL leaves part of it (which the next run finished, above)
