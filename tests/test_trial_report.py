@@ -20,6 +20,20 @@ from exubio.report import trial_report as tr
 from exubio.synth.simulate import simulate_trial
 
 
+def laid_out_apart(fig) -> list[tuple[str, object]]:
+    """Every text block and axes of ``fig`` with its box (figure fraction), asserted on the page
+    and apart from every other."""
+    renderer = fig.canvas.get_renderer()
+    inv = fig.transFigure.inverted()
+    boxes = [(t.get_text(), t.get_window_extent(renderer).transformed(inv)) for t in fig.texts if t.get_text()]
+    boxes += [("axes", ax.get_tightbbox(renderer).transformed(inv)) for ax in fig.axes]
+    for i, (a, ba) in enumerate(boxes):
+        assert ba.x0 >= -1e-3 and ba.x1 <= 1.0 + 1e-3 and ba.y0 >= -1e-3 and ba.y1 <= 1.0 + 1e-3, a[:60]
+        for b, bb in boxes[i + 1:]:
+            assert not ba.overlaps(bb), (a[:60], b[:60])
+    return boxes
+
+
 def _without_date(pdf: bytes) -> bytes:
     return re.sub(rb"/CreationDate \(D:[0-9Z'+-]+\)", b"", pdf)
 
@@ -148,14 +162,7 @@ def test_page_one_never_overlaps_whatever_the_number_of_reasons(result_sets, n_r
         summaries[method] = s
     fig, recons = _page_one(paths, summaries)
     fig.set_dpi(tr.PAGE1_DPI)
-    renderer = fig.canvas.get_renderer()
-    inv = fig.transFigure.inverted()
-    boxes = [(t.get_text(), t.get_window_extent(renderer).transformed(inv)) for t in fig.texts if t.get_text()]
-    boxes += [("axes", ax.get_tightbbox(renderer).transformed(inv)) for ax in fig.axes]
-    for i, (a, ba) in enumerate(boxes):
-        assert ba.x0 >= -1e-3 and ba.x1 <= 1.0 + 1e-3 and ba.y0 >= -1e-3 and ba.y1 <= 1.0 + 1e-3, a[:60]
-        for b, bb in boxes[i + 1:]:
-            assert not ba.overlaps(bb), (a[:60], b[:60])
+    boxes = laid_out_apart(fig)
     texts = [t for t, _ in boxes]
     assert sum(t.startswith("check: 0: ") for t in texts) == 1  # both methods' reason, once
     assert all("/very/long" not in t for t in texts) and any("static_trial.c3d" in t for t in texts)
@@ -211,14 +218,7 @@ def test_the_calibration_page_is_readable_whatever_the_checks_say():
                    for k in range(n_checks)]
         fig = calibration_page({}, {"pf": {"calibration": {"static": "/x/static.c3d", "report": rep},
                                            "quality": {"reasons": reasons}}})
-        renderer = fig.canvas.get_renderer()
-        inv = fig.transFigure.inverted()
-        boxes = [(t.get_text(), t.get_window_extent(renderer).transformed(inv)) for t in fig.texts if t.get_text()]
-        boxes += [("axes", ax.get_tightbbox(renderer).transformed(inv)) for ax in fig.axes]
-        for i, (a, ba) in enumerate(boxes):
-            assert ba.x0 >= -1e-3 and ba.x1 <= 1.0 + 1e-3 and ba.y0 >= -1e-3 and ba.y1 <= 1.0 + 1e-3, a[:60]
-            for b, bb in boxes[i + 1:]:
-                assert not ba.overlaps(bb), (a[:60], b[:60])
+        boxes = laid_out_apart(fig)
         text = " ".join(t for t, _ in boxes).replace("\n    ", " ")
         assert end in text and "/a/very/long" not in text and "static_trial.c3d" in text
         assert (" more in the summary.json" in text) == (n_checks == 12)
