@@ -104,6 +104,10 @@ three columns spell its sequence), what the angle is; signs as in ANGLE_NAMES.""
 
 # (proximal frame, distal frame) of every joint angle set; "thorax" is the global frame
 _JOINTS = JOINT_SEGMENTS
+_JOINT_NAMES = tuple(_JOINTS)
+_SEQUENCE_GROUPS: dict[tuple[str, bool], list[int]] = {}
+for _j, _name in enumerate(_JOINT_NAMES):  # HT: the middle angle <= 0
+    _SEQUENCE_GROUPS.setdefault((ISB_SEQUENCES[_name], _name == "HT"), []).append(_j)
 
 _AXES = {"X": 0, "Y": 1, "Z": 2}
 
@@ -206,32 +210,39 @@ def anatomical_frames(model: Model, /) -> dict[str, np.ndarray]:
 
 
 def segment_anatomical_rotations(model: Model, q: np.ndarray, /, *, kinematics: Kinematics | None = None,
-                                 frames: Mapping[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
-    """Global orientation (..., 3, 3) of every anatomical frame at coordinates q (..., m)."""
+                                 frames: Mapping[str, np.ndarray] | None = None,
+                                 rotations: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Global orientation (..., 3, 3) of every anatomical frame at coordinates q (..., m);
+    ``rotations``: the segment rotations of q (Kinematics.frames(q).R) where the caller has them."""
     kin = kinematics if kinematics is not None else Kinematics(model)
     frames = anatomical_frames(model) if frames is None else frames
     q = np.asarray(q, dtype=float)
     if q.shape[-1] != model.n_coordinates:
         raise InputError(f"q must have {model.n_coordinates} coordinates in its last axis, got shape {q.shape}")
-    R, _ = kin.poses(q)
+    R = kin.poses(q)[0] if rotations is None else rotations
     return {name: R[..., model.segment_index(name), :, :] @ A for name, A in frames.items()}
 
 
 def isb_angles(model: Model, q: np.ndarray, /, *, kinematics: Kinematics | None = None,
-               unwrap: bool = True, frames: Mapping[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
+               unwrap: bool = True, frames: Mapping[str, np.ndarray] | None = None,
+               rotations: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """ISB angles (radians) of every frame of q (n, m) or (m,): a dict with "SC", "AC", "ST",
     "GH" (X-Z'-Y'') and "HT" (Y-X'-Y'', middle angle <= 0), each (n, 3) (or (3,)); signs in the
     module docstring. ``unwrap``: remove 2 pi jumps along the frames (for plotting). ``frames``:
-    ``anatomical_frames(model)`` computed once by a caller that asks frame by frame (live)."""
-    Rg = segment_anatomical_rotations(model, q, kinematics=kinematics, frames=frames)
+    ``anatomical_frames(model)`` computed once by a caller that asks frame by frame (live), and
+    ``rotations`` the segment rotations of q where it has them."""
+    Rg = segment_anatomical_rotations(model, q, kinematics=kinematics, frames=frames, rotations=rotations)
+    Rrel = (np.swapaxes(np.stack([Rg[prox] for prox, _ in _JOINTS.values()], axis=-3), -1, -2)
+            @ np.stack([Rg[dist] for _, dist in _JOINTS.values()], axis=-3))  # (..., joints, 3, 3)
     out = {}
-    for joint, (prox, dist) in _JOINTS.items():
-        Rrel = np.swapaxes(Rg[prox], -1, -2) @ Rg[dist]
-        ang = euler_angles(Rrel, ISB_SEQUENCES[joint], negative_middle=(joint == "HT"))
-        if unwrap and ang.ndim == 2 and ang.shape[0] > 1:
-            ang = np.unwrap(ang, axis=0)
-        out[joint] = ang
-    return out
+    for (sequence, negative), joints in _SEQUENCE_GROUPS.items():  # the joints of one sequence at once
+        ang = euler_angles(Rrel[..., joints, :, :], sequence, negative_middle=negative)
+        for n, j in enumerate(joints):
+            out[_JOINT_NAMES[j]] = ang[..., n, :]
+    for joint in _JOINT_NAMES:
+        if unwrap and out[joint].ndim == 2 and out[joint].shape[0] > 1:
+            out[joint] = np.unwrap(out[joint], axis=0)
+    return {joint: out[joint] for joint in _JOINT_NAMES}
 
 
 def humerothoracic_elevation(model: Model, q: np.ndarray, /, *, kinematics: Kinematics | None = None) -> np.ndarray:
@@ -243,14 +254,16 @@ def humerothoracic_elevation(model: Model, q: np.ndarray, /, *, kinematics: Kine
 
 
 def isb_table(model: Model, q: np.ndarray, /, *, kinematics: Kinematics | None = None,
-              frames: Mapping[str, np.ndarray] | None = None) -> tuple[tuple[str, ...], np.ndarray]:
+              frames: Mapping[str, np.ndarray] | None = None,
+              rotations: np.ndarray | None = None) -> tuple[tuple[str, ...], np.ndarray]:
     """The ISB angles of q (n, m) as one table: (column names of ISB_COLUMNS, angles (n, 15) rad),
     unwrapped along the frames; computed ISB_BLOCK_FRAMES frames at a time (the segment frames of a
-    whole long trial would take ~2 kB per frame)."""
+    whole long trial would take ~2 kB per frame); ``rotations``: q's segment rotations, for one
+    frame (m,) only."""
     names = tuple(c for joint in _JOINTS for c in ISB_COLUMNS[joint])
     q = np.asarray(q, dtype=float)
     if q.ndim == 1:
-        ang = isb_angles(model, q, kinematics=kinematics, frames=frames)
+        ang = isb_angles(model, q, kinematics=kinematics, frames=frames, rotations=rotations)
         return names, np.concatenate([ang[joint] for joint in _JOINTS], axis=-1)
     kin = kinematics or Kinematics(model)
     table = np.empty((q.shape[0], len(names)))

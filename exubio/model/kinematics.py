@@ -124,6 +124,13 @@ class Kinematics:
         self.centre = np.asarray(ell.centre_m, dtype=float)
 
     # ---------------------------------------------------------------- points
+    @property
+    def _inverse(self) -> "_InverseTable":
+        t = self.__dict__.get("_inverse_table")
+        if t is None:
+            t = self.__dict__["_inverse_table"] = _InverseTable(self)
+        return t
+
     def point_set(self, items, /) -> PointSet:
         """PointSet from (segment name, point name or local position (3,) in m) pairs."""
         seg_idx, local, names = [], [], []
@@ -253,54 +260,57 @@ class Kinematics:
         first angle then keeps ``q_previous`` (or 0).
         """
         R = np.asarray(R, dtype=float)
-        q = np.zeros(R.shape[:-3] + (self.n_coordinates,))
+        t = self._inverse
         ranges = self.model.coordinate_ranges_rad
-        prev = None if q_previous is None else np.broadcast_to(np.asarray(q_previous, dtype=float), q.shape)
-        for s, par, idx, axes in self.joint_frames():
-            Rrel = np.swapaxes(R[..., par, :, :], -1, -2) @ R[..., s, :, :]
-            rng = ranges[idx]
-            ref = None if prev is None else prev[..., idx]
-            if len(idx) == 1:
-                a = axes[0]
-                vee = np.stack([Rrel[..., 2, 1] - Rrel[..., 1, 2], Rrel[..., 0, 2] - Rrel[..., 2, 0],
-                                Rrel[..., 1, 0] - Rrel[..., 0, 1]], axis=-1)
-                sin = 0.5 * vee @ a
-                # cos from the part of R orthogonal to the axis: trace of (I - aa^T) R (I - aa^T) = 2 cos
-                P = np.eye(3) - np.outer(a, a)
-                cos = 0.5 * np.einsum("ij,...jk,ki->...", P, Rrel, P)
-                q[..., idx] = wrap_into_range(np.arctan2(sin, cos)[..., None], rng, ref)
-                continue
-            B = np.column_stack([axes[0], axes[1], cross(axes[0], axes[1])])
-            Rs = B.T @ Rrel @ B  # = Rx(q1) Ry(q2) [Rz(sign * q3)]
-            if len(idx) == 2:  # cardan: Rx(q1) Ry(q2) = [[c2, 0, s2], [s1 s2, c1, -s1 c2], [-c1 s2, s1, c1 c2]]
-                q1 = np.arctan2(Rs[..., 2, 1], Rs[..., 1, 1])
-                q2 = np.arctan2(Rs[..., 0, 2], Rs[..., 0, 0])
-                q[..., idx] = wrap_into_range(np.stack([q1, q2], axis=-1), rng, ref)
-                continue
-            sign = float(np.sign(axes[2] @ B[:, 2]))
-            q2 = np.arctan2(Rs[..., 0, 2], np.hypot(Rs[..., 0, 0], Rs[..., 0, 1]))
-            q1 = np.arctan2(-Rs[..., 1, 2], Rs[..., 2, 2])
-            q3 = np.arctan2(-Rs[..., 0, 1], Rs[..., 0, 0])
+        prev = None if q_previous is None else np.broadcast_to(np.asarray(q_previous, dtype=float),
+                                                               R.shape[:-3] + (self.n_coordinates,))
+        # every joint's rotation relative to its parent, in its axes' basis B: Rs = B^T R_par^T R_s B
+        Rrel = np.swapaxes(R[..., t.parents, :, :], -1, -2) @ R[..., t.children, :, :]
+        Rs = t.Bt @ Rrel @ t.B
+        qa = np.empty(R.shape[:-3] + (self.n_coordinates,))
+        qb = qa  # the second angle triple of the spherical joints (the others have one)
+        for j, a, P, i in zip(t.rev, t.rev_axes, t.rev_proj, t.rev_q):  # revolute: the angle about the axis
+            Rr = Rrel[..., j, :, :]
+            vee = np.stack([Rr[..., 2, 1] - Rr[..., 1, 2], Rr[..., 0, 2] - Rr[..., 2, 0], Rr[..., 1, 0] - Rr[..., 0, 1]],
+                           axis=-1)
+            # cos from the part of R orthogonal to the axis: trace of (I - aa^T) R (I - aa^T) = 2 cos
+            qa[..., i] = np.arctan2(0.5 * vee @ a, 0.5 * np.einsum("ij,...jk,ki->...", P, Rr, P))
+        if t.card.size:  # cardan: Rx(q1) Ry(q2) = [[c2, 0, s2], [s1 s2, c1, -s1 c2], [-c1 s2, s1, c1 c2]]
+            Rc = Rs[..., t.card, :, :]
+            qa[..., t.card_q[:, 0]] = np.arctan2(Rc[..., 2, 1], Rc[..., 1, 1])
+            qa[..., t.card_q[:, 1]] = np.arctan2(Rc[..., 0, 2], Rc[..., 0, 0])
+        if t.sph.size:  # spherical: Rx(q1) Ry(q2) Rz(sign * q3), two triples
+            Rp = Rs[..., t.sph, :, :]
+            q2 = np.arctan2(Rp[..., 0, 2], np.hypot(Rp[..., 0, 0], Rp[..., 0, 1]))
+            q1 = np.arctan2(-Rp[..., 1, 2], Rp[..., 2, 2])
+            q3 = np.arctan2(-Rp[..., 0, 1], Rp[..., 0, 0])
             lock = np.cos(q2) < 1e-6
             if np.any(lock):
                 # Rx(q1) Ry(+-90) Rz(q3): only q1 +- q3 is defined; keep q1 and solve q3.
-                first = np.zeros_like(q1) if prev is None else prev[..., idx[0]]
+                first = np.zeros_like(q1) if prev is None else prev[..., t.sph_q[:, 0]]
                 q1 = np.where(lock, first, q1)
                 # R[1,0] = cos q1 sin q3 + sin q1 sin q2 cos q3 ; R[1,1] = cos q1 cos q3 - sin q1 sin q2 sin q3
-                s2 = np.sign(Rs[..., 0, 2])
-                phi = np.arctan2(Rs[..., 1, 0], Rs[..., 1, 1])  # = q3 + s2*q1 at lock
+                s2 = np.sign(Rp[..., 0, 2])
+                phi = np.arctan2(Rp[..., 1, 0], Rp[..., 1, 1])  # = q3 + s2*q1 at lock
                 q3 = np.where(lock, phi - s2 * q1, q3)
-            a_sol = wrap_into_range(np.stack([q1, q2, sign * q3], axis=-1), rng, ref)
-            b_sol = wrap_into_range(np.stack([q1 + np.pi, np.pi - q2, sign * (q3 + np.pi)], axis=-1), rng, ref)
-            cost_a = np.abs(violation(a_sol, rng)).sum(axis=-1)
-            cost_b = np.abs(violation(b_sol, rng)).sum(axis=-1)
-            take_b = cost_b < cost_a - 1e-12
-            if ref is not None:
-                tie = np.abs(cost_b - cost_a) <= 1e-12
-                near_b = np.abs(b_sol - ref).sum(axis=-1) < np.abs(a_sol - ref).sum(axis=-1)
-                take_b |= tie & near_b
-            q[..., idx] = np.where(take_b[..., None], b_sol, a_sol)
-        return q
+            qb = qa.copy()
+            qa[..., t.sph_q[:, 0]], qa[..., t.sph_q[:, 1]], qa[..., t.sph_q[:, 2]] = q1, q2, t.sph_sign * q3
+            qb[..., t.sph_q[:, 0]], qb[..., t.sph_q[:, 1]] = q1 + np.pi, np.pi - q2
+            qb[..., t.sph_q[:, 2]] = t.sph_sign * (q3 + np.pi)
+        a_sol = wrap_into_range(qa, ranges, prev)
+        if not t.sph.size:
+            return a_sol
+        b_sol = wrap_into_range(qb, ranges, prev)
+        cost_a = np.abs(violation(a_sol, ranges))[..., t.sph_q].sum(axis=-1)
+        cost_b = np.abs(violation(b_sol, ranges))[..., t.sph_q].sum(axis=-1)
+        take_b = cost_b < cost_a - 1e-12
+        if prev is not None:
+            tie = np.abs(cost_b - cost_a) <= 1e-12
+            ref = prev[..., t.sph_q]
+            near_b = np.abs(b_sol[..., t.sph_q] - ref).sum(axis=-1) < np.abs(a_sol[..., t.sph_q] - ref).sum(axis=-1)
+            take_b |= tie & near_b
+        a_sol[..., t.sph_q] = np.where(take_b[..., None], b_sol[..., t.sph_q], a_sol[..., t.sph_q])
+        return a_sol
 
     def coordinate_rates(self, q: np.ndarray, omega: np.ndarray, alpha: np.ndarray | None = None):
         """q̇ (and q̈) from segment angular velocities omega and accelerations alpha (..., n_seg, 3),
@@ -332,3 +342,36 @@ class Kinematics:
         fr = self.frames(q)
         wq = fr.axes * np.asarray(qd, dtype=float)[..., None]
         return np.einsum("sm,...mc->...sc", self.affects.astype(float), wq)
+
+
+class _InverseTable:
+    """The joints of a Kinematics grouped by kind, as index arrays and stacked constants, so that
+    coordinates_from_rotations treats every joint of a kind in one array operation (a frame at a
+    time, as the live loop asks, the cost is the number of operations, not of joints)."""
+
+    def __init__(self, kin: "Kinematics"):
+        joints = kin.joint_frames()
+        if sorted(int(j) for _, _, idx, _ in joints for j in idx) != list(range(kin.n_coordinates)):
+            raise ModelError(f"{kin.model.source}: every coordinate must belong to one joint")
+        self.children = np.array([s for s, *_ in joints], dtype=int)
+        self.parents = np.array([p for _, p, *_ in joints], dtype=int)
+        B = np.tile(np.eye(3), (len(joints), 1, 1))
+        rev, card, sph, signs = [], [], [], []
+        for n, (_, _, idx, axes) in enumerate(joints):
+            if len(idx) == 1:
+                rev.append(n)
+                continue
+            B[n] = np.column_stack([axes[0], axes[1], cross(axes[0], axes[1])])
+            if len(idx) == 2:
+                card.append(n)
+            else:
+                sph.append(n)
+                signs.append(float(np.sign(axes[2] @ B[n][:, 2])))
+        self.B, self.Bt = B, np.swapaxes(B, -1, -2).copy()
+        self.rev, self.card, self.sph = (np.array(v, dtype=int) for v in (rev, card, sph))
+        self.rev_q = np.array([joints[n][2][0] for n in rev], dtype=int)
+        self.rev_axes = np.array([joints[n][3][0] for n in rev], dtype=float).reshape(-1, 3)
+        self.rev_proj = [np.eye(3) - np.outer(a, a) for a in self.rev_axes]
+        self.card_q = np.array([joints[n][2] for n in card], dtype=int).reshape(-1, 2)
+        self.sph_q = np.array([joints[n][2] for n in sph], dtype=int).reshape(-1, 3)
+        self.sph_sign = np.array(signs, dtype=float)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from exubio.errors import InputError
+from exubio.model.kinematics import cross
 
 __all__ = ["MAX_THORAX_GAP_S", "isb_landmarks", "thorax_frame", "to_thorax_frame"]
 
@@ -31,7 +32,7 @@ def thorax_frame(
     mid_up = 0.5 * (ij + c7)
     mid_low = 0.5 * (px + t8)
     y = mid_up - mid_low
-    z = np.cross(ij - c7, mid_up - mid_low)
+    z = cross(ij - c7, mid_up - mid_low)
     ny = np.linalg.norm(y, axis=-1, keepdims=True)
     nz = np.linalg.norm(z, axis=-1, keepdims=True)
     scale = np.linalg.norm(ij - c7, axis=-1, keepdims=True) * ny
@@ -45,8 +46,8 @@ def thorax_frame(
         )
     y = y / ny
     z = z / nz
-    x = np.cross(y, z)
-    z = np.cross(x, y)  # exactly orthonormal despite rounding
+    x = cross(y, z)
+    z = cross(x, y)  # exactly orthonormal despite rounding
     rot = np.stack([x, y, z], axis=-1)
     return rot, ij.copy()
 

@@ -159,8 +159,9 @@ class LiveSession:
         published angles), the measured flags, the residuals, the running verdict."""
         k = len(self.marker_names)
         if q is not None:
-            isb, rate = self.angles.of(q)
-            pts = self.kin.points(q[None], self.points)[0]
+            fr = self.kin.frames(q)  # once, for the angles and the model points
+            isb, rate = self.angles.of(q, fr.R)
+            pts = self.kin.points(q, self.points, frames=fr)
             res = np.linalg.norm(pts - measured_m, axis=1)
         else:
             isb, rate = self.angles.none()

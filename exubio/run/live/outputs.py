@@ -199,9 +199,10 @@ class PublishedAngles:
         self.last_isb = None
         self.last_isb_row = None
 
-    def of(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The angles of q and their rates (zero after a frame without angles)."""
-        isb = self._isb(q)
+    def of(self, q: np.ndarray, rotations: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The angles of q (with its segment rotations where the caller has them) and their rates
+        (zero after a frame without angles)."""
+        isb = self._isb(q, rotations)
         rate = (isb - self.last_isb_row) * self.rate if self.last_isb_row is not None else np.zeros_like(isb)
         self.last_isb_row = isb
         return isb, rate
@@ -212,9 +213,9 @@ class PublishedAngles:
         self.last_isb_row = None
         return isb, rate
 
-    def _isb(self, q: np.ndarray) -> np.ndarray:
+    def _isb(self, q: np.ndarray, rotations: np.ndarray | None = None) -> np.ndarray:
         """The ISB angles of q (15,), unwrapped against the previous frame."""
-        _, table = isb_table(self.model, q, kinematics=self.kin, frames=self.anatomical)
+        _, table = isb_table(self.model, q, kinematics=self.kin, frames=self.anatomical, rotations=rotations)
         ang = table
         if self.last_isb is not None:
             ang = self.last_isb + (ang - self.last_isb + np.pi) % (2 * np.pi) - np.pi
