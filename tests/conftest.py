@@ -4,12 +4,20 @@ a study, the real trials, a browser). ``pytest -m "not exudyn and not slow"`` ru
 alone in seconds; then Exudyn cannot be imported at all, so a test that needs it and is not marked
 fails by name instead of passing unnoticed."""
 import importlib.abc
+import signal
 import sys
 
 import pytest
 
 from exubio.model.kinematics import Kinematics
 from exubio.model.load import load_model
+
+# A test suite started in the background of a non-interactive shell (`cmd &`, nohup) inherits SIGINT
+# ignored, and so would every exubio it starts: the tests of Ctrl-C (SIGINT sent to a child, exit
+# 130 expected) would see runs that never notice it. The tests need SIGINT deliverable: the default
+# handler here, so the children start with the default disposition.
+if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 class _NoExudyn(importlib.abc.MetaPathFinder):
