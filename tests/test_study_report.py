@@ -74,6 +74,15 @@ def test_a_hundred_trials_of_long_names_fit_their_pages_in_full_and_in_order():
     assert not any("/data/lab" in e for e in errors)  # paths as file names, as on the trial report
 
 
+def test_a_reason_longer_than_a_page_is_cut_where_it_says_so():
+    data = _study(3)
+    data["trials"][1].update(status="failed", error=LONG_ERROR * 200)  # some 40,000 characters
+    figs = study_pages(data)
+    texts = [t for fig in figs for t, _ in laid_out_apart(fig)]
+    reason = next(t for t in texts if "ACRO" in t)
+    assert reason.endswith("... (in full in study.json)") and reason.count("\n") == 7  # 8 lines
+
+
 def test_one_trial_and_no_trial_give_one_page(tmp_path):
     for n in (0, 1):
         figs = study_pages(_study(n))

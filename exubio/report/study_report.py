@@ -98,8 +98,19 @@ def _worst(row: dict) -> str:
     return max(verdicts, key=_ORDER.index, default="")
 
 
+MAX_CELL_LINES = 8
+"""A cell's lines at the most (a failure's reason longer than that ends with where it is in full)."""
+
+
 def _row_lines(row: dict, widths: list[int]) -> list[list[str]]:
-    return [_wrap(_cell(row, c), w - 1) for c, w in zip(_COLUMNS, widths)]
+    cells = []
+    for c, w in zip(_COLUMNS, widths):
+        lines = _wrap(_cell(row, c), w - 1)
+        if len(lines) > MAX_CELL_LINES:
+            more = " ... (in full in study.json)"
+            lines = lines[:MAX_CELL_LINES - 1] + [lines[MAX_CELL_LINES - 1][:max(0, w - 1 - len(more))] + more]
+        cells.append(lines)
+    return cells
 
 
 def _tallies(rows: list[dict]) -> str:
