@@ -102,3 +102,15 @@ def test_a_readme_example_runs_from_a_folder_outside_the_checkout(line, inputs, 
     done = _run(line, work)
     assert done.returncode == 0, (line, done.stdout[-2000:], done.stderr[-2000:])
     assert "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize("doc", ["README.md", "benchmarks/README.md"])
+def test_every_file_the_docs_name_is_there(doc):
+    """A module, test or benchmark the documentation points to (`exubio/...py`, `tests/...py`,
+    `benchmarks/...py`) exists: the README named `exubio/live/...` after the live loop had moved
+    to `exubio/run/live/`."""
+    text = (ROOT / doc).read_text(encoding="utf-8")
+    named = set(re.findall(r"`((?:exubio|tests|benchmarks)/[\w/]+\.py)`", text))
+    assert named, doc
+    missing = sorted(p for p in named if not (ROOT / p).is_file())
+    assert not missing, missing
