@@ -106,11 +106,11 @@ def test_a_readme_example_runs_from_a_folder_outside_the_checkout(line, inputs, 
 
 @pytest.mark.parametrize("doc", ["README.md", "benchmarks/README.md"])
 def test_every_file_the_docs_name_is_there(doc):
-    """A module, test or benchmark the documentation points to (`exubio/...py`, `tests/...py`,
-    `benchmarks/...py`) exists: the README named `exubio/live/...` after the live loop had moved
+    """A module, test or benchmark the documentation points to or runs (`exubio/...py`,
+    `tests/...py`, `python benchmarks/...py`) exists: the README named `exubio/live/...` after the live loop had moved
     to `exubio/run/live/`."""
     text = (ROOT / doc).read_text(encoding="utf-8")
-    named = set(re.findall(r"`((?:exubio|tests|benchmarks)/[\w/]+\.py)`", text))
+    named = set(re.findall(r"(?<![\w/.-])((?:exubio|tests|benchmarks)/[\w/]+\.py)\b", text))
     assert named, doc
     missing = sorted(p for p in named if not (ROOT / p).is_file())
     assert not missing, missing
