@@ -4,7 +4,10 @@ ellipsoids fitted to one trial (cross-validated on the other) or to both (pooled
 
 * thorax-aligned (centre 3 + radii 3, exubio's model) and rotated (3 more parameters);
 * aligned with the two contact points free on the scapula as well (6 more parameters, prior SD
-  10 / 20 mm): how far the points would have to move from TS/AI.
+  10 / 20 mm): how far the points would have to move from TS/AI;
+* the clavicle the data imply: the distance from the model's SC (fixed on the thorax) to AC of the
+  registered scapula in each frame, against the model's rigid clavicle length (no ellipsoid can
+  make up for an AC that does not stay on that sphere).
 
 Printed: RMS distance (mm) of the fitted and of the other trial's contact points from the surface.
 The calibration itself is exubio.calibration.scapula_motion (aligned, contact points at TS/AI).
@@ -24,6 +27,7 @@ from exubio.calibration import calibrate_model, calibrated_protocol
 from exubio.calibration.cluster import cluster_poses
 from exubio.calibration.scapula_motion import scapula_markers
 from exubio.io.trial import read_trial
+from exubio.model.kinematics import Kinematics
 from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.io.resources import shipped_file
@@ -90,6 +94,16 @@ def main() -> int:
             print(f"  {cal} -> {other} SD {sd * 1000:.0f} mm: {rms_mm(radial(p[:9], contacts(cal, p[9:]), False)):4.1f} / "
                   f"{rms_mm(radial(p[:9], contacts(other, p[9:]), False)):4.1f} mm; TS, AI moved "
                   f"{shift[0]:.0f}, {shift[1]:.0f} mm")
+    kin = Kinematics(model)
+    sc = kin.points(np.zeros(kin.n_coordinates), kin.point_set([("clavicle", "SC")]))[0]  # fixed on the thorax
+    clav = model.segment("clavicle").points
+    length = np.linalg.norm(clav["AC"] - clav["SC"]) * 1000.0
+    print(f"the clavicle the data imply: |AC - SC| of the registered scapula (model: rigid, {length:.1f} mm):")
+    for n in names:
+        R, t = poses[n]
+        d = np.linalg.norm(R @ pts["AC"] + t - sc, axis=1) * 1000.0
+        print(f"  {n}: {d.min():.1f}-{d.max():.1f} mm (SD {d.std():.1f}); AC up to {np.abs(d - length).max():.1f} mm "
+              f"off the model's sphere about SC")
     return 0
 
 
