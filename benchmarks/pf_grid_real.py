@@ -2,14 +2,16 @@
 sensitivity grid (Fig. 2: c x k = d/c) with what each run ends with (mean spring deflection, or the
 error saying where it stopped), the four soft corner runs again without range-of-motion limits,
 and the PF-LS marker-trajectory RMSE (Fig. 6) decomposed into its damping and inertia parts (PF
-with d varied and with every segment's mass and inertia x 0.01), on both real trials and on a
+with d varied, with the physical segments, PFOptions.inertia_scale 1, and with the default 0.01), on both real trials and on a
 simulated noise-free abduction.
 
-Usage:  python benchmarks/pf_grid_real.py      (needs ../shared/data/trc; ~2 minutes)
+Usage:  python benchmarks/pf_grid_real.py                  (needs ../shared/data/trc; ~2 minutes)
+        python benchmarks/pf_grid_real.py --inertia 0.01   (the grid with PFOptions.inertia_scale 0.01)
+        python benchmarks/pf_grid_real.py --inertia 0.01 --full-newton   (and modified_newton False)
 """
 from __future__ import annotations
 
-import dataclasses
+import argparse
 import logging
 import sys
 
@@ -25,21 +27,22 @@ from exubio.validation.settings import ValidationSettings
 from exubio.validation.trials import real_trial, why_no_real_trial
 
 
-def light(model, factor):
-    return dataclasses.replace(model, segments=tuple(
-        dataclasses.replace(s, mass_kg=s.mass_kg * factor, inertia_kgm2=np.asarray(s.inertia_kgm2) * factor)
-        for s in model.segments))
-
-
-def pf_ls(model, protocol, targets, ls, c, d, factor=1.0) -> str:
-    rec = reconstruct(light(model, factor), with_springs(protocol, c, d), targets, method="pf")
+def pf_ls(model, protocol, targets, ls, c, d, inertia) -> str:
+    rec = reconstruct(model, with_springs(protocol, c, d), targets, method="pf", inertia_scale=inertia)
     dist = np.linalg.norm(rec.model_points_m - ls.model_points_m, axis=2) * 1000.0
     rmse = np.sqrt(np.nanmean(dist**2, axis=0))
     j = int(np.argmax(rmse))
     return f"{rmse[j]:.2f} mm ({rec.marker_names[j]})"
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--inertia", type=float, default=None,
+                    help="PFOptions.inertia_scale for the grid (default: PF's default)")
+    ap.add_argument("--full-newton", action="store_true", help="PFOptions.modified_newton False for the grid")
+    args = ap.parse_args(argv)
+    grid_kw = ({} if args.inertia is None else {"inertia_scale": args.inertia}) | (
+        {"modified_newton": False} if args.full_newton else {})
     logging.basicConfig(level=logging.ERROR)
     why = why_no_real_trial("abduction")
     if why:
@@ -48,11 +51,13 @@ def main() -> int:
     model, protocol, targets, _ = real_trial("abduction")
     s = ValidationSettings()
     failed = []
-    print("sensitivity grid on the real ABD01 (c N/m, k = d/c s): mean spring deflection or why it stopped")
+    print("sensitivity grid on the real ABD01 (c N/m, k = d/c s): mean spring deflection or why it stopped"
+          + (f" (inertia x {args.inertia:g})" if args.inertia is not None else "")
+          + (" (full Newton)" if args.full_newton else ""))
     for k in s.sensitivity_ratio_s:
         for c in s.sensitivity_stiffness_n_per_m:
             try:
-                rec = reconstruct(model, with_springs(protocol, c, k * c), targets, method="pf")
+                rec = reconstruct(model, with_springs(protocol, c, k * c), targets, method="pf", **grid_kw)
                 print(f"  c {c:8.1f}  k {k:5g}: {np.nanmean(rec.residuals_m) * 1000:6.2f} mm")
             except ReconstructionError as exc:
                 failed.append((c, k))
@@ -60,7 +65,7 @@ def main() -> int:
     print(f"{32 - len(failed)} of 32 finish")
     for c, k in failed:
         try:
-            rec = reconstruct(model, with_springs(protocol, c, k * c), targets, method="pf",
+            rec = reconstruct(model, with_springs(protocol, c, k * c), targets, method="pf", **grid_kw,
                               limit_stiffness_nm_per_rad=None, divergence_deflection_m=5.0)
             sweep = np.degrees(np.ptp(rec.q_rad, axis=0))
             print(f"  without range limits c {c:.1f} k {k:g}: finishes, mean deflection "
@@ -68,8 +73,8 @@ def main() -> int:
         except ReconstructionError as exc:
             print(f"  without range limits c {c:.1f} k {k:g}: still fails: {exc}")
     print("\nPF-LS marker-trajectory RMSE, worst marker (c = 1500 N/m):")
-    cases = [(300, 1.0), (300, 0.01), (30, 1.0), (30, 0.01), (3, 0.01)]
-    print("  " + " | ".join(f"d {d:g}" + (", masses x 0.01" if f < 1 else "") for d, f in cases))
+    cases = [(300, 0.1), (300, 1.0), (300, 0.01), (30, 1.0), (30, 0.01), (3, 0.01)]
+    print("  " + " | ".join(f"d {d:g}, inertia x {f:g}" for d, f in cases))
     for name in ("abduction", "flexion"):
         m, p, tg, _ = real_trial(name)
         ls = reconstruct(m, p, tg, method="ls")

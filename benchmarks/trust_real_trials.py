@@ -128,12 +128,14 @@ def main(argv: list[str] | None = None) -> int:
             rec = run_one(spec, Path(tmp))
             if args.json:
                 print(json.dumps(rec), flush=True)
-            verdicts = ", ".join(f"{m} {v['verdict']}" for m, v in rec["methods"].items())
-            ls = rec["methods"]["ls"]
+            ran = rec["methods"]  # a method that failed has no entry: the other's reasons say why
+            verdicts = ", ".join(f"{m} {ran[m]['verdict']}" if m in ran else f"{m} FAILED" for m in ("pf", "ls"))
+            residual = " / ".join(str(ran[m]["mean_residual_mm"]) if m in ran else "-" for m in ("pf", "ls"))
+            either = ran.get("ls") or ran.get("pf") or {}
             print(f"\n{rec['trial']}  [static {rec['static']}, protocol {rec['protocol']}]: {verdicts}; "
-                  f"residual {rec['methods']['pf']['mean_residual_mm']} / {ls['mean_residual_mm']} mm; "
+                  f"residual {residual} mm; "
                   f"PF-LS max {rec['pf_ls_max_rmse_deg_determined']} deg ({rec['pf_ls_worst']}); "
-                  f"outside range: {ls['angles_outside_range_deg'] or 'none'}", file=err)
+                  f"outside range: {either.get('angles_outside_range_deg') or 'none'}", file=err)
             for m, v in rec["methods"].items():
                 for r in v["reasons"]:
                     print(f"    [{m}] {r}", file=err)

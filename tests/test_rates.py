@@ -102,6 +102,30 @@ def test_a_failed_pf_run_says_where_and_the_default_inertia_converges_there():
     assert rec.n_frames == targets.n_frames and np.all(np.isfinite(rec.q_rad))
 
 
+def test_the_sensitivity_corner_stops_at_the_defaults_and_finishes_with_the_robust_options():
+    """The grid's softest, least damped run (c = 10 N/m, k = 0.01 s: d = 0.1 Ns/m) on the real
+    abduction stops at PF's default options, with where; the study runs it again with PF's robust
+    options (inertia x 0.01, full Newton) and records that it then carries the whole trial, with
+    its mean spring deflection (about the 10 mm of every other run of the grid)."""
+    import dataclasses
+
+    from exubio.validation.sensitivity import ROBUST_PF, sensitivity_study
+    from exubio.validation.settings import ValidationSettings
+    from exubio.validation.trials import Trial, real_trial, why_no_real_trial
+
+    if why_no_real_trial("abduction"):
+        pytest.skip(why_no_real_trial("abduction"))
+    model, protocol, targets, _ = real_trial("abduction")
+    corner = dataclasses.replace(ValidationSettings(), sensitivity_stiffness_n_per_m=(10.0,), sensitivity_ratio_s=(0.01,))
+    sens = sensitivity_study(Trial("abduction", model, protocol, targets, data=None), corner, lambda _: None)
+    assert sens.runs == 1 and len(sens.failed_runs) == 1 and np.isnan(sens.mean_deflection_mm).all()
+    failed = sens.failed_runs[0]
+    assert "at t =" in failed.error and "beyond their range of motion there" in failed.error, failed.error
+    assert failed.robust_error is None and failed.robust_options == "inertia_scale 0.01, modified_newton False"
+    assert ROBUST_PF == {"inertia_scale": 0.01, "modified_newton": False}
+    assert 8.0 < failed.robust_deflection_mm < 13.0
+
+
 def test_lead_in_extrapolates_the_first_frame_backwards():
     """The lead-in's targets continue a quadratic path exactly, keep a missing marker missing, and
     fall back to a straight line when the first frame's acceleration is an edge spike."""

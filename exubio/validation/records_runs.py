@@ -128,11 +128,17 @@ class TrialData(Record):
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False, kw_only=True)
 class FailedRun(Record):
-    """A sensitivity run that raised ReconstructionError."""
+    """A sensitivity run that raised ReconstructionError at PF's default options (``error``), and
+    the same run again with PF's robust options (``robust_options``: less inertia, full Newton;
+    benchmarks/README.md, "PF across its parameters"): its mean spring deflection (mm) if it then
+    finishes, else ``robust_error``."""
 
     stiffness_n_per_m: float
     ratio_s: float
     error: str
+    robust_options: str | None = optional()
+    robust_deflection_mm: float | None = optional()
+    robust_error: str | None = optional()
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)

@@ -1,0 +1,89 @@
+"""PF's inertia (PFOptions.inertia_scale) on every real trial of ../shared/data and on the
+sensitivity grid's corner: which runs finish, per inertia. The measurement behind the default 0.1
+(benchmarks/README.md, "PF across its parameters"): a lower inertia lets the grid's softest,
+barely damped springs (c = 10 N/m, d = 0.1 Ns/m) carry the real abduction to its end, but makes the
+limits' stiff modes faster still, and modified Newton then fails on a strained real trial.
+
+Each run is calibrated as in benchmarks/trust_real_trials.py (the session's static, or the trial's
+first frames), then PF runs with the trial's protocol at each inertia (c, d the protocol's, or the
+corner's where said). Prints per run: the mean spring deflection (mm), or FAILED and where.
+
+    python benchmarks/pf_inertia_real.py                     # ~2 minutes on 2 cores
+    python benchmarks/pf_inertia_real.py --scales 0.1,0.01
+    python benchmarks/pf_inertia_real.py --scales 0.01 --full-newton   # Jacobian rebuilt every iteration
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from exubio.errors import ReconstructionError
+from exubio.io.trial import read_trial
+from exubio.prep.targets import prepare_targets
+from exubio.protocol.labels import relabel_trajectories
+from exubio.run.inputs import load_session
+from exubio.run.pipeline import reconstruct
+from exubio.run.session import StaticSpec, calibrate_session
+from exubio.validation.sensitivity import with_springs
+
+from trust_real_trials import SHARED, runs  # the same runs, calibrated the same way
+
+CORNER = (10.0, 0.1)  # c N/m, d Ns/m: the sensitivity grid's softest, least damped run (Fig. 2)
+
+
+def prepared(spec: dict, work: Path):
+    session = load_session(protocol_path=spec["protocol"])
+    trial = read_trial(spec["trial"])
+    if spec.get("relabel"):
+        trial = relabel_trajectories(trial, spec["relabel"])
+    static = spec.get("static")
+    if static and spec.get("static_relabel"):
+        static = relabel_trajectories(read_trial(static), spec["static_relabel"])
+    cal = calibrate_session(static if static else trial, session, work, spec["trial"].stem,
+                            spec=StaticSpec(frames=None if static else spec["static_frames"]))
+    protocol = cal.session.protocol
+    return cal.session.model, protocol, prepare_targets(trial, protocol)
+
+
+def one(model, protocol, targets, scale: float, modified_newton: bool = True) -> str:
+    try:
+        rec = reconstruct(model, protocol, targets, method="pf", inertia_scale=scale, modified_newton=modified_newton)
+    except ReconstructionError as exc:
+        text = str(exc)
+        return "FAILED " + text[text.find("the PF"):][:90]
+    return f"{np.nanmean(rec.residuals_m) * 1000:6.2f} mm"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--scales", default="1,0.1,0.03,0.01", help="inertia scales, comma-separated")
+    ap.add_argument("--full-newton", action="store_true", help="PFOptions.modified_newton False")
+    args = ap.parse_args(argv)
+    scales = [float(s) for s in args.scales.split(",")]
+    logging.basicConfig(level=logging.ERROR)
+    if not SHARED.is_dir():
+        print(f"{SHARED} is absent: nothing to run", file=sys.stderr)
+        return 2
+    print("PF per inertia scale: mean spring deflection, or why it stopped"
+          + (" (full Newton)" if args.full_newton else ""))
+    print("run | " + " | ".join(f"x {s:g}" for s in scales))
+    with tempfile.TemporaryDirectory() as tmp:
+        for i, spec in enumerate(runs()):
+            model, protocol, targets = prepared(spec, Path(tmp) / str(i))
+            what = (spec["trial"].name + (" [session relabel]" if "session" in str(spec["protocol"]) else "")
+                    + (" [OTHER SESSION'S STATIC]" if spec.get("cross") else ""))
+            print(f"{what} | " + " | ".join(one(model, protocol, targets, s, not args.full_newton) for s in scales), flush=True)
+            if spec["trial"].suffix == ".trc":
+                corner = with_springs(protocol, CORNER[0], CORNER[1])
+                print(f"{spec['trial'].name} at c {CORNER[0]:g} N/m, d {CORNER[1]:g} Ns/m | "
+                      + " | ".join(one(model, corner, targets, s, not args.full_newton) for s in scales), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
