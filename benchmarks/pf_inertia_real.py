@@ -11,13 +11,16 @@ corner's where said). Prints per run: the mean spring deflection (mm), or FAILED
     python benchmarks/pf_inertia_real.py                     # ~2 minutes on 2 cores
     python benchmarks/pf_inertia_real.py --scales 0.1,0.01
     python benchmarks/pf_inertia_real.py --scales 0.01 --full-newton   # Jacobian rebuilt every iteration
+    python benchmarks/pf_inertia_real.py --cost     # CPU time per frame: the defaults against x 0.01 + full Newton
 """
 from __future__ import annotations
 
 import argparse
 import logging
+import statistics
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -59,11 +62,42 @@ def one(model, protocol, targets, scale: float, modified_newton: bool = True) ->
     return f"{np.nanmean(rec.residuals_m) * 1000:6.2f} mm"
 
 
+def cost(runs: int = 3) -> None:
+    """PF's CPU time per frame (build and run, median of ``runs``) at the default options against
+    the robust ones, on the simulated 25 s abduction at 200 Hz (1.5 mm noise, as
+    bench_reconstruction.py) and on the real ABD01."""
+    from exubio import load_model, load_protocol
+    from exubio.synth.simulate import simulate_trial
+    from exubio.validation.sensitivity import ROBUST_PF
+    from exubio.validation.trials import real_trial
+
+    model, protocol = load_model(), load_protocol()
+    sim = simulate_trial(model, "abduction", duration_s=25.0, rate_hz=200.0, noise_mm=1.5, seed=1)
+    cases = {"simulated abduction 25 s, 200 Hz": (model, protocol, prepare_targets(sim.trajectories, protocol))}
+    if SHARED.is_dir():
+        cases["tsm_rmr_ABD01.trc"] = real_trial("abduction")[:3]
+    print(f"PF CPU time per frame (ms, median of {runs}): default options | {ROBUST_PF}")
+    for name, (m, p, t) in cases.items():
+        out = []
+        for kw in ({}, ROBUST_PF):
+            ts = []
+            for _ in range(runs):
+                c0 = time.process_time()
+                reconstruct(m, p, t, method="pf", **kw)
+                ts.append((time.process_time() - c0) / t.n_frames * 1000.0)
+            out.append(f"{statistics.median(ts):.3f} ({', '.join(f'{x:.3f}' for x in ts)})")
+        print(f"{name}: " + " | ".join(out), flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scales", default="1,0.1,0.03,0.01", help="inertia scales, comma-separated")
     ap.add_argument("--full-newton", action="store_true", help="PFOptions.modified_newton False")
+    ap.add_argument("--cost", action="store_true", help="only the CPU time of the defaults against the robust options")
     args = ap.parse_args(argv)
+    if args.cost:
+        cost()
+        return 0
     scales = [float(s) for s in args.scales.split(",")]
     logging.basicConfig(level=logging.ERROR)
     if not SHARED.is_dir():
