@@ -20,7 +20,6 @@ Usage:  python benchmarks/scapula_subject_model.py [--step N]   (needs ../shared
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import sys
 from pathlib import Path
 
@@ -28,18 +27,12 @@ import numpy as np
 
 from exubio.model.angles import euler_angles
 
+from calibration_trc_vs_tsm import _tsm_module  # models/sources/tsm_geometry.py, loaded from the checkout
+
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "data"
 FRAME_STEP = 10
 HT_BAND_DEG = (30.0, 120.0)
-
-
-def _tsm_module():
-    spec = importlib.util.spec_from_file_location("tsm_geometry", ROOT / "models" / "sources" / "tsm_geometry.py")
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["tsm_geometry"] = mod
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def st_deg(tg, thorax, aa, ts, ai) -> np.ndarray:
