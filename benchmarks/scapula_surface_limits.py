@@ -27,11 +27,11 @@ from exubio.calibration import calibrate_model, calibrated_protocol
 from exubio.calibration.cluster import cluster_poses
 from exubio.calibration.scapula_motion import scapula_markers
 from exubio.io.trial import read_trial
-from exubio.model.kinematics import Kinematics
 from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.io.resources import shipped_file
 from exubio.validation.paths import shared_data_dir
+from exubio.validation.scapula import data_clavicle_mm
 
 
 def radial(p, x, rotated):
@@ -94,14 +94,10 @@ def main() -> int:
             print(f"  {cal} -> {other} SD {sd * 1000:.0f} mm: {rms_mm(radial(p[:9], contacts(cal, p[9:]), False)):4.1f} / "
                   f"{rms_mm(radial(p[:9], contacts(other, p[9:]), False)):4.1f} mm; TS, AI moved "
                   f"{shift[0]:.0f}, {shift[1]:.0f} mm")
-    kin = Kinematics(model)
-    sc = kin.points(np.zeros(kin.n_coordinates), kin.point_set([("clavicle", "SC")]))[0]  # fixed on the thorax
-    clav = model.segment("clavicle").points
-    length = np.linalg.norm(clav["AC"] - clav["SC"]) * 1000.0
-    print(f"the clavicle the data imply: |AC - SC| of the registered scapula (model: rigid, {length:.1f} mm):")
+    print("the clavicle the data imply: |AC - SC| of the registered scapula in every frame "
+          f"(model: rigid, {data_clavicle_mm(model, bound, tg['FLX01'])[1]:.1f} mm):")
     for n in names:
-        R, t = poses[n]
-        d = np.linalg.norm(R @ pts["AC"] + t - sc, axis=1) * 1000.0
+        d, length = data_clavicle_mm(model, bound, tg[n])  # the validation's figure (exubio.validation.scapula)
         print(f"  {n}: {d.min():.1f}-{d.max():.1f} mm (SD {d.std():.1f}); AC up to {np.abs(d - length).max():.1f} mm "
               f"off the model's sphere about SC")
     return 0

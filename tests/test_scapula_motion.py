@@ -153,6 +153,34 @@ def _real():
     return files
 
 
+def test_the_clavicle_the_data_imply(setup, trials):
+    """exubio.validation.scapula.data_clavicle_mm: on data of the model itself the registered
+    scapula's AC stays on the model's clavicle sphere about SC (to 0.01 mm in every frame); with
+    the scapula markers moved 8 mm along SC -> AC in one frame, that frame's AC lies 8 mm further."""
+    from exubio.validation.scapula import data_clavicle_mm
+
+    generic, protocol, _ = setup
+    sim = simulate_trial(generic, "abduction", duration_s=3.0, rate_hz=RATE_HZ, marker_names=SIM_POINTS,
+                         lab_transform=False)
+    targets = prepare_targets(_trc_like(sim), protocol)
+    bound = calibrated_protocol(protocol, generic)
+    d, length = data_clavicle_mm(generic, bound, targets)
+    clav = generic.segment("clavicle").points
+    assert length == pytest.approx(np.linalg.norm(clav["AC"] - clav["SC"]) * 1000.0)
+    assert np.abs(d - length).max() < 0.01
+    kin = Kinematics(generic)
+    sc = kin.points(np.zeros(kin.n_coordinates), kin.point_set([("clavicle", "SC")]))[0]
+    ac = kin.points(sim.q_true[:1], kin.point_set([("scapula", "AC")]))[0, 0]
+    shift = 0.008 * (ac - sc) / np.linalg.norm(ac - sc)
+    names = list(targets.marker_names)
+    pos = targets.positions_m.copy()
+    for m in ("aa", "ts", "ai"):
+        pos[0, names.index(m)] += shift
+    moved, _ = data_clavicle_mm(generic, bound, dataclasses.replace(targets, positions_m=pos))
+    assert moved[0] - length == pytest.approx(8.0, abs=0.01)
+    assert np.abs(moved[1:] - d[1:]).max() < 1e-9
+
+
 def test_real_cross_validated_surface(setup):
     """TRC subject, calibrated on one trial's still frames and movement: the other trial's ts/ai
     (the registered contact points: a rigid triangle) come closer to the fitted surface than to the

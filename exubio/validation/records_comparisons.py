@@ -244,7 +244,9 @@ class ScapulaVariant(Record):
     "none") and its contact-point RMS off the ellipsoid before/after (mm); per method ("pf", "ls")
     the reconstructed trial's aa/ts/ai RMSE (mm), the model-minus-data ST angles (internal
     rotation, upward rotation, tilt; deg) RMSE and max over HT 30-120; PF's deviation from
-    Ludewig in his frames per ST key at HT 30/60/90/120 (deg) and the share inside the corridor."""
+    Ludewig in his frames per ST key at HT 30/60/90/120 (deg) and the share inside the corridor;
+    the clavicle the data imply: the registered scapula's AC from the model's SC, min and max over
+    the trial (mm), against the model's rigid SC-AC length."""
 
     motion_fit: str
     reason: str | None = optional()
@@ -256,6 +258,8 @@ class ScapulaVariant(Record):
     st_model_minus_data_max_deg: dict[str, tuple[float, float, float]]
     ludewig_deviation_deg: dict[str, tuple[float, ...]]
     ludewig_share_inside_corridor: dict[str, float]
+    data_ac_from_model_sc_mm: tuple[float, float] | None = optional()  # min, max over the trial (scapula.data_clavicle_mm)
+    model_clavicle_mm: float | None = optional()
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)

@@ -49,7 +49,8 @@ from exubio.validation.results import (Check, ScapulaCrossValidation, ScapulaDir
 from exubio.validation.settings import ValidationSettings
 from exubio.validation.trials import LUDEWIG_PLANE, REAL_PROTOCOL, REAL_TRIALS, Progress, why_no_real_trial
 
-__all__ = ["AIM_MARKER_RMSE_MM", "AIM_ST_RMSE_DEG", "HT_BAND_DEG", "ST_KEYS", "data_st_deg", "scapula_checks",
+__all__ = ["AIM_MARKER_RMSE_MM", "AIM_ST_RMSE_DEG", "HT_BAND_DEG", "ST_KEYS", "data_clavicle_mm", "data_st_deg",
+           "scapula_checks",
            "scapula_cross_validation", "simulated_subject"]
 
 ST_KEYS = ("ST_medRotation_X", "ST_protraction_Y", "ST_tilt_Z")
@@ -70,9 +71,25 @@ def data_st_deg(model, protocol, targets) -> np.ndarray:
     return np.degrees(euler_angles(R @ anatomical_frames(model)["scapula"], "YXZ"))
 
 
+def data_clavicle_mm(model, protocol, targets) -> tuple[np.ndarray, float]:
+    """The clavicle the data imply: per frame, the distance (mm) from the model's SC (fixed on the
+    thorax) to AC of the registered scapula rigidly fitted to the frame's scapula markers, and the
+    model's rigid SC-AC length (mm). The model's AC must stay on the sphere of that radius about SC;
+    where the data's does not, no ellipsoid lets the model follow the data's scapula."""
+    idx = scapula_markers(model, protocol, targets.positions_m[0])
+    local = np.array([protocol.markers[j].local_position_m for j in idx])
+    R, t, _ = cluster_poses(local, targets.positions_m[:, idx])
+    kin = Kinematics(model)
+    sc = kin.points(np.zeros(kin.n_coordinates), kin.point_set([("clavicle", "SC")]))[0]
+    clav = model.segment("clavicle").points
+    ac = model.segment("scapula").points["AC"]
+    return np.linalg.norm(R @ ac + t - sc, axis=1) * 1000.0, float(np.linalg.norm(clav["AC"] - clav["SC"]) * 1000.0)
+
+
 def _variant(model, protocol, targets, plane: str, info: dict) -> ScapulaVariant:
     recs = {m: reconstruct(model, protocol, targets, method=m) for m in ("ls", "pf")}
     data = data_st_deg(model, protocol, targets)
+    clavicle, length = data_clavicle_mm(model, protocol, targets)
     rmse, st_rmse, st_max = {}, {}, {}
     for m, rec in recs.items():
         names = list(rec.marker_names)
@@ -94,7 +111,8 @@ def _variant(model, protocol, targets, plane: str, info: dict) -> ScapulaVariant
         determined_directions=sc.get("determined_directions") if used else None,
         marker_rmse_mm=rmse, st_model_minus_data_rmse_deg=st_rmse, st_model_minus_data_max_deg=st_max,
         ludewig_deviation_deg={k: tuple(res["pf"][k]["deviation_deg"]) for k in ST_KEYS},
-        ludewig_share_inside_corridor={k: float(res["pf"][k]["share_inside_corridor"]) for k in ST_KEYS})
+        ludewig_share_inside_corridor={k: float(res["pf"][k]["share_inside_corridor"]) for k in ST_KEYS},
+        data_ac_from_model_sc_mm=(float(np.nanmin(clavicle)), float(np.nanmax(clavicle))), model_clavicle_mm=length)
 
 
 def _trc_like(sim):
@@ -186,11 +204,18 @@ def scapula_checks(scv: ScapulaCrossValidation) -> tuple[Check, ...]:
         if not isinstance(v, ScapulaVariant):
             continue
         worst = max(v.marker_rmse_mm["pf"].get("ts", np.nan), v.marker_rmse_mm["pf"].get("ai", np.nan))
+        st = max(v.st_model_minus_data_rmse_deg["pf"])
+        note = None
+        if v.data_ac_from_model_sc_mm is not None and (worst > AIM_MARKER_RMSE_MM or st > AIM_ST_RMSE_DEG):
+            lo, hi = v.data_ac_from_model_sc_mm
+            off = max(abs(lo - v.model_clavicle_mm), abs(hi - v.model_clavicle_mm))
+            note = (f"measured limit: the data's AC lies {lo:.1f}-{hi:.1f} mm from the model's SC, whose clavicle is a "
+                    f"rigid {v.model_clavicle_mm:.1f} mm: up to {off:.1f} mm off the sphere the model's AC must stay on, "
+                    "which no ellipsoid changes (benchmarks/README.md, issue 21)")
         out.append(Check(what=f"scapula calibrated over motion, {key.replace('_', ' ')}: PF ts/ai RMSE (worst)",
                          value=float(worst), limit=AIM_MARKER_RMSE_MM, unit="mm", kind="aim",
-                         passed=bool(worst <= AIM_MARKER_RMSE_MM)))
-        st = max(v.st_model_minus_data_rmse_deg["pf"])
+                         passed=bool(worst <= AIM_MARKER_RMSE_MM), note=note if worst > AIM_MARKER_RMSE_MM else None))
         out.append(Check(what=f"scapula calibrated over motion, {key.replace('_', ' ')}: PF model-minus-data ST "
                               f"RMSE over HT 30-120 (worst angle)", value=float(st), limit=AIM_ST_RMSE_DEG, unit="deg",
-                         kind="aim", passed=bool(st <= AIM_ST_RMSE_DEG)))
+                         kind="aim", passed=bool(st <= AIM_ST_RMSE_DEG), note=note if st > AIM_ST_RMSE_DEG else None))
     return tuple(out)
