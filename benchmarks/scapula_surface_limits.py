@@ -7,7 +7,8 @@ ellipsoids fitted to one trial (cross-validated on the other) or to both (pooled
   10 / 20 mm): how far the points would have to move from TS/AI;
 * the clavicle the data imply: the distance from the model's SC (fixed on the thorax) to AC of the
   registered scapula in each frame, against the model's rigid clavicle length (no ellipsoid can
-  make up for an AC that does not stay on that sphere).
+  make up for an AC that does not stay on that sphere); and the sphere the data's AC path does lie
+  on (a functional SC, fitted on one trial, tried on the other).
 
 Printed: RMS distance (mm) of the fitted and of the other trial's contact points from the surface.
 The calibration itself is exubio.calibration.scapula_motion (aligned, contact points at TS/AI).
@@ -27,6 +28,7 @@ from exubio.calibration import calibrate_model, calibrated_protocol
 from exubio.calibration.cluster import cluster_poses
 from exubio.calibration.scapula_motion import scapula_markers
 from exubio.io.trial import read_trial
+from exubio.model.kinematics import Kinematics
 from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.io.resources import shipped_file
@@ -100,6 +102,38 @@ def main() -> int:
         d, length = data_clavicle_mm(model, bound, tg[n])  # the validation's figure (exubio.validation.scapula)
         print(f"  {n}: {d.min():.1f}-{d.max():.1f} mm (SD {d.std():.1f}); AC up to {np.abs(d - length).max():.1f} mm "
               f"off the model's sphere about SC")
+    # the sphere the data's AC path does lie on: a functional SC (as SCoRE finds GH), fitted on one
+    # trial and tried on the other, with a prior holding its centre near the model's SC
+    kin = Kinematics(model)
+    sc = kin.points(np.zeros(kin.n_coordinates), kin.point_set([("clavicle", "SC")]))[0]
+    ac = model.segment("scapula").points["AC"]
+    paths = {n: (lambda R, t: R @ ac + t)(*cluster_poses(local, t.positions_m[:, idx])[:2]) for n, t in tg.items()}
+    print("the sphere the data's AC paths lie on (centre prior SD about the model's SC; residual RMS / max, mm):")
+    for sd in (0.005, 0.02):
+        for cal, other in (("FLX01", "ABD01"), ("ABD01", "FLX01")):
+            sol = least_squares(lambda p, cal=cal, sd=sd: np.r_[(np.linalg.norm(paths[cal] - p[:3], axis=1) - p[3]) / 0.002,
+                                                               (p[:3] - sc) / sd], np.r_[sc, length / 1000.0])
+            c, r = sol.x[:3], sol.x[3]
+            res = {n: (np.linalg.norm(paths[n] - c, axis=1) - r) * 1000.0 for n in (cal, other)}
+            print(f"  SD {sd * 1000:.0f} mm, fitted on {cal}: centre {np.linalg.norm(c - sc) * 1000:.0f} mm from the model's SC "
+                  f"({', '.join(f'{v:+.0f}' for v in (c - sc) * 1000)} mm, thorax x/y/z), radius {r * 1000:.0f} mm; "
+                  + "; ".join(f"{n} {np.sqrt(np.mean(v**2)):.1f} / {np.abs(v).max():.1f}" for n, v in res.items()))
+    # or the clavicle's attachment re-registered on the scapula: the point of the scapula that stays
+    # at one distance from the model's SC (a functional AC), fitted on one trial, tried on the other
+    poses_all = {n: cluster_poses(local, t.positions_m[:, idx])[:2] for n, t in tg.items()}
+    print("a functional AC: the scapula's point at one distance from the model's SC (prior SD about AC; "
+          "residual RMS / max, mm):")
+    for sd in (0.01, 0.02):
+        for cal, other in (("FLX01", "ABD01"), ("ABD01", "FLX01")):
+            R, t = poses_all[cal]
+            sol = least_squares(lambda p, R=R, t=t, sd=sd: np.r_[(np.linalg.norm(R @ p[:3] + t - sc, axis=1) - p[3]) / 0.002,
+                                                                 (p[:3] - ac) / sd], np.r_[ac, length / 1000.0])
+            q, r = sol.x[:3], sol.x[3]
+            res = {n: (np.linalg.norm(poses_all[n][0] @ q + poses_all[n][1] - sc, axis=1) - r) * 1000.0
+                   for n in (cal, other)}
+            print(f"  SD {sd * 1000:.0f} mm, fitted on {cal}: AC moved {np.linalg.norm(q - ac) * 1000:.0f} mm, clavicle "
+                  f"{r * 1000:.0f} mm; " + "; ".join(f"{n} {np.sqrt(np.mean(v**2)):.1f} / {np.abs(v).max():.1f}"
+                                                    for n, v in res.items()))
     return 0
 
 
