@@ -1,13 +1,14 @@
 """PF across its parameters on the real TRC abduction (issue 21, item 4): the 32 runs of the
-sensitivity grid (Fig. 2: c x k = d/c) with what each run ends with (mean spring deflection, or the
-error saying where it stopped), the four soft corner runs again without range-of-motion limits,
-and the PF-LS marker-trajectory RMSE (Fig. 6) decomposed into its damping and inertia parts (PF
-with d varied, with the physical segments, PFOptions.inertia_scale 1, and with the default 0.01), on both real trials and on a
-simulated noise-free abduction.
+sensitivity grid (Fig. 2: c x k = d/c) with what each run ends with (mean spring deflection, and
+whether it finished on PF's fallback; or the error saying where it stopped), the runs that stop
+again without range-of-motion limits, and the PF-LS marker-trajectory RMSE (Fig. 6) decomposed into
+its damping and inertia parts (PF with d varied and PFOptions.inertia_scale 1, the physical
+segments, 0.1, the default, and 0.01), on both real trials and on a simulated noise-free abduction.
 
 Usage:  python benchmarks/pf_grid_real.py                  (needs ../shared/data/trc; ~2 minutes)
         python benchmarks/pf_grid_real.py --inertia 0.01   (the grid with PFOptions.inertia_scale 0.01)
         python benchmarks/pf_grid_real.py --inertia 0.01 --full-newton   (and modified_newton False)
+        python benchmarks/pf_grid_real.py --no-fallback    (a run that stops fails: PF's options as given)
 """
 from __future__ import annotations
 
@@ -40,9 +41,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--inertia", type=float, default=None,
                     help="PFOptions.inertia_scale for the grid (default: PF's default)")
     ap.add_argument("--full-newton", action="store_true", help="PFOptions.modified_newton False for the grid")
+    ap.add_argument("--no-fallback", action="store_true", help="PFOptions.fallback False: a run that stops fails")
     args = ap.parse_args(argv)
     grid_kw = ({} if args.inertia is None else {"inertia_scale": args.inertia}) | (
-        {"modified_newton": False} if args.full_newton else {})
+        {"modified_newton": False} if args.full_newton else {}) | ({"fallback": False} if args.no_fallback else {})
     logging.basicConfig(level=logging.ERROR)
     why = why_no_real_trial("abduction")
     if why:
@@ -53,12 +55,14 @@ def main(argv: list[str] | None = None) -> int:
     failed = []
     print("sensitivity grid on the real ABD01 (c N/m, k = d/c s): mean spring deflection or why it stopped"
           + (f" (inertia x {args.inertia:g})" if args.inertia is not None else "")
-          + (" (full Newton)" if args.full_newton else ""))
+          + (" (full Newton)" if args.full_newton else "") + (" (no fallback)" if args.no_fallback else ""))
     for k in s.sensitivity_ratio_s:
         for c in s.sensitivity_stiffness_n_per_m:
             try:
                 rec = reconstruct(model, with_springs(protocol, c, k * c), targets, method="pf", **grid_kw)
-                print(f"  c {c:8.1f}  k {k:5g}: {np.nanmean(rec.residuals_m) * 1000:6.2f} mm")
+                fb = rec.info.get("fallback")
+                print(f"  c {c:8.1f}  k {k:5g}: {np.nanmean(rec.residuals_m) * 1000:6.2f} mm"
+                      + (f"  (on PF's fallback; its first run: {fb['first_run']})" if fb else ""))
             except ReconstructionError as exc:
                 failed.append((c, k))
                 print(f"  c {c:8.1f}  k {k:5g}: FAILED: {exc}")

@@ -12,6 +12,7 @@ corner's where said). Prints per run: the mean spring deflection (mm), or FAILED
     python benchmarks/pf_inertia_real.py --scales 0.1,0.01
     python benchmarks/pf_inertia_real.py --scales 0.01 --full-newton   # Jacobian rebuilt every iteration
     python benchmarks/pf_inertia_real.py --cost     # CPU time per frame: the defaults against x 0.01 + full Newton
+    python benchmarks/pf_inertia_real.py --agreement   # PF's fallback options against its defaults, every real run
 """
 from __future__ import annotations
 
@@ -55,7 +56,8 @@ def prepared(spec: dict, work: Path):
 
 def one(model, protocol, targets, scale: float, modified_newton: bool = True) -> str:
     try:
-        rec = reconstruct(model, protocol, targets, method="pf", inertia_scale=scale, modified_newton=modified_newton)
+        rec = reconstruct(model, protocol, targets, method="pf", inertia_scale=scale, modified_newton=modified_newton,
+                          fallback=False)  # the options as given: PF's fallback would hide a stop
     except ReconstructionError as exc:
         text = str(exc)
         return "FAILED " + text[text.find("the PF"):][:90]
@@ -68,7 +70,7 @@ def cost(runs: int = 3) -> None:
     bench_reconstruction.py) and on the real ABD01."""
     from exubio import load_model, load_protocol
     from exubio.synth.simulate import simulate_trial
-    from exubio.validation.sensitivity import ROBUST_PF
+    from exubio.methods.pf import FALLBACK_OPTIONS
     from exubio.validation.trials import real_trial
 
     model, protocol = load_model(), load_protocol()
@@ -76,10 +78,10 @@ def cost(runs: int = 3) -> None:
     cases = {"simulated abduction 25 s, 200 Hz": (model, protocol, prepare_targets(sim.trajectories, protocol))}
     if SHARED.is_dir():
         cases["tsm_rmr_ABD01.trc"] = real_trial("abduction")[:3]
-    print(f"PF CPU time per frame (ms, median of {runs}): default options | {ROBUST_PF}")
+    print(f"PF CPU time per frame (ms, median of {runs}): default options | {FALLBACK_OPTIONS}")
     for name, (m, p, t) in cases.items():
         out = []
-        for kw in ({}, ROBUST_PF):
+        for kw in ({}, FALLBACK_OPTIONS):
             ts = []
             for _ in range(runs):
                 c0 = time.process_time()
@@ -89,11 +91,28 @@ def cost(runs: int = 3) -> None:
         print(f"{name}: " + " | ".join(out), flush=True)
 
 
+def agreement(model, protocol, targets) -> str:
+    """The fallback's result against the defaults' (both without fallback): the worst coordinate's
+    RMSE (deg) and the largest model-point distance (mm) over the trial."""
+    from exubio.methods.pf import FALLBACK_OPTIONS
+
+    try:
+        a = reconstruct(model, protocol, targets, method="pf", fallback=False)
+        b = reconstruct(model, protocol, targets, method="pf", fallback=False, **FALLBACK_OPTIONS)
+    except ReconstructionError as exc:
+        return "FAILED " + str(exc)[:90]
+    rmse = np.degrees(np.sqrt(np.mean((a.q_rad - b.q_rad) ** 2, axis=0)))
+    j = int(np.argmax(rmse))
+    dist = np.linalg.norm(a.model_points_m - b.model_points_m, axis=2) * 1000.0
+    return f"worst coordinate RMSE {rmse[j]:.3f} deg ({a.coordinate_names[j]}), model points up to {np.nanmax(dist):.2f} mm"
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scales", default="1,0.1,0.03,0.01", help="inertia scales, comma-separated")
     ap.add_argument("--full-newton", action="store_true", help="PFOptions.modified_newton False")
     ap.add_argument("--cost", action="store_true", help="only the CPU time of the defaults against the robust options")
+    ap.add_argument("--agreement", action="store_true", help="only the fallback options' result against the defaults'")
     args = ap.parse_args(argv)
     if args.cost:
         cost()
@@ -103,14 +122,20 @@ def main(argv: list[str] | None = None) -> int:
     if not SHARED.is_dir():
         print(f"{SHARED} is absent: nothing to run", file=sys.stderr)
         return 2
-    print("PF per inertia scale: mean spring deflection, or why it stopped"
-          + (" (full Newton)" if args.full_newton else ""))
-    print("run | " + " | ".join(f"x {s:g}" for s in scales))
+    if args.agreement:
+        print("PF with its fallback options (inertia x 0.01, full Newton) against its defaults, both run to the end:")
+    else:
+        print("PF per inertia scale: mean spring deflection, or why it stopped"
+              + (" (full Newton)" if args.full_newton else ""))
+        print("run | " + " | ".join(f"x {s:g}" for s in scales))
     with tempfile.TemporaryDirectory() as tmp:
         for i, spec in enumerate(runs()):
             model, protocol, targets = prepared(spec, Path(tmp) / str(i))
             what = (spec["trial"].name + (" [session relabel]" if "session" in str(spec["protocol"]) else "")
                     + (" [OTHER SESSION'S STATIC]" if spec.get("cross") else ""))
+            if args.agreement:
+                print(f"{what}: {agreement(model, protocol, targets)}", flush=True)
+                continue
             print(f"{what} | " + " | ".join(one(model, protocol, targets, s, not args.full_newton) for s in scales), flush=True)
             if spec["trial"].suffix == ".trc":
                 corner = with_springs(protocol, CORNER[0], CORNER[1])

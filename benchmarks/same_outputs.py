@@ -119,6 +119,9 @@ KNOWN_CHANGES = (
     ("head", r',\s*"inertia_scale": 0\.1\b', "",
      "PF's options name inertia_scale (its default 0.1; the head runs with 1.0, the old dynamics: "
      "HEAD_BEHAVIOUR)"),
+    ("head", r',\s*"fallback": true\b', "",
+     "PF's options name fallback (a run that stops is run again with inertia x 0.01 and full Newton; "
+     "none of the compared runs stops, so none uses it)"),
 )
 # Changes of behaviour made on purpose since 336130f, undone in the head's runs (code its
 # sitecustomize runs before the command), so that everything else is compared exactly.

@@ -94,7 +94,7 @@ def test_a_failed_pf_run_says_where_and_the_default_inertia_converges_there():
     model, protocol, targets, _ = real_trial("abduction")
     soft = with_springs(protocol, 26.8, 2.68)
     with pytest.raises(ReconstructionError) as err:
-        reconstruct(model, soft, targets, method="pf", inertia_scale=1.0)
+        reconstruct(model, soft, targets, method="pf", inertia_scale=1.0, fallback=False)
     msg = str(err.value)
     assert "stopped at t =" in msg or "diverged at t =" in msg
     assert "beyond their range of motion there: gh_internal_rotation" in msg, msg
@@ -102,28 +102,44 @@ def test_a_failed_pf_run_says_where_and_the_default_inertia_converges_there():
     assert rec.n_frames == targets.n_frames and np.all(np.isfinite(rec.q_rad))
 
 
-def test_the_sensitivity_corner_stops_at_the_defaults_and_finishes_with_the_robust_options():
+def test_the_sensitivity_corner_finishes_on_pfs_fallback_and_says_so():
     """The grid's softest, least damped run (c = 10 N/m, k = 0.01 s: d = 0.1 Ns/m) on the real
-    abduction stops at PF's default options, with where; the study runs it again with PF's robust
-    options (inertia x 0.01, full Newton) and records that it then carries the whole trial, with
-    its mean spring deflection (about the 10 mm of every other run of the grid)."""
+    abduction: PF's run at the options asked for stops, saying where (fallback off); with the
+    fallback on (the default) PF runs it again with inertia x 0.01 and full Newton, carries the
+    whole trial (mean spring deflection about the 10 mm of every other run of the grid) and says
+    so in the result, in the trial's verdict and in the sensitivity study's record."""
     import dataclasses
 
-    from exubio.validation.sensitivity import ROBUST_PF, sensitivity_study
+    from exubio.errors import ReconstructionError
+    from exubio.methods.pf import FALLBACK_OPTIONS
+    from exubio.run.pipeline import reconstruct
+    from exubio.trust.quality import fallback_reasons
+    from exubio.validation.sensitivity import sensitivity_study, with_springs
     from exubio.validation.settings import ValidationSettings
     from exubio.validation.trials import Trial, real_trial, why_no_real_trial
 
     if why_no_real_trial("abduction"):
         pytest.skip(why_no_real_trial("abduction"))
     model, protocol, targets, _ = real_trial("abduction")
-    corner = dataclasses.replace(ValidationSettings(), sensitivity_stiffness_n_per_m=(10.0,), sensitivity_ratio_s=(0.01,))
-    sens = sensitivity_study(Trial("abduction", model, protocol, targets, data=None), corner, lambda _: None)
-    assert sens.runs == 1 and len(sens.failed_runs) == 1 and np.isnan(sens.mean_deflection_mm).all()
-    failed = sens.failed_runs[0]
-    assert "at t =" in failed.error and "beyond their range of motion there" in failed.error, failed.error
-    assert failed.robust_error is None and failed.robust_options == "inertia_scale 0.01, modified_newton False"
-    assert ROBUST_PF == {"inertia_scale": 0.01, "modified_newton": False}
-    assert 8.0 < failed.robust_deflection_mm < 13.0
+    corner = with_springs(protocol, 10.0, 0.1)
+    with pytest.raises(ReconstructionError) as err:
+        reconstruct(model, corner, targets, method="pf", fallback=False)
+    assert "at t =" in str(err.value) and "beyond their range of motion there" in str(err.value), err.value
+    ticks = []
+    rec = reconstruct(model, corner, targets, method="pf", progress=ticks.append)
+    assert rec.n_frames == targets.n_frames and np.isfinite(rec.q_rad).all()
+    assert sum(ticks) == targets.n_frames and min(ticks) > 0  # the second run counted on from the first's frames
+    assert 8.0 < np.nanmean(rec.residuals_m) * 1000 < 13.0
+    assert rec.info["fallback"]["first_run"] == str(err.value)
+    assert rec.info["fallback"]["options"] == FALLBACK_OPTIONS == {"inertia_scale": 0.01, "modified_newton": False}
+    assert rec.info["options"]["inertia_scale"] == 0.01 and rec.info["options"]["modified_newton"] is False
+    (note,) = fallback_reasons(rec.info)
+    assert note.level.value == "note" and "stopped" in note.message
+    settings = dataclasses.replace(ValidationSettings(), sensitivity_stiffness_n_per_m=(10.0,), sensitivity_ratio_s=(0.01,))
+    sens = sensitivity_study(Trial("abduction", model, protocol, targets, data=None), settings, lambda _: None)
+    assert sens.runs == 1 and sens.failed_runs == () and len(sens.fallback_runs) == 1
+    assert sens.fallback_runs[0].error == str(err.value)
+    assert sens.mean_deflection_mm[0, 0] == pytest.approx(sens.fallback_runs[0].robust_deflection_mm)
 
 
 def test_lead_in_extrapolates_the_first_frame_backwards():

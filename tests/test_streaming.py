@@ -3,6 +3,7 @@ warm start, and the result is the one-pass result; the pipeline writes the same 
 the chunk size and leaves no part file behind, also when a run fails."""
 from __future__ import annotations
 
+import dataclasses
 import filecmp
 import os
 
@@ -81,6 +82,35 @@ def test_array_file_round_trip_and_npz_layout(tmp_path):
     assert not (tmp_path / ".x.tmp.part").exists()
     with pytest.raises(ValueError):
         ArrayFile(tmp_path / ".y.tmp.part", (2, 4, 3)).append(np.zeros((3, 4, 3)))
+
+
+def test_a_restarted_sink_holds_only_the_second_run(inputs, tmp_path):
+    """PF's fallback runs the trial again into the same sink (restart): what the first run handed
+    on is gone, from memory and from the model points' part file, and the result is the second's."""
+    from exubio.io.streamed import StreamedReconstruction
+
+    recon = reconstruct_ls(inputs.model, inputs.protocol, inputs.targets)
+    n = recon.n_frames
+    other = dataclasses.replace(recon, q_rad=recon.q_rad + 1.0, model_points_m=recon.model_points_m + 1.0)
+    sink = StreamedReconstruction(tmp_path, "t_ls", inputs.targets, recon.coordinate_names)
+    sink(dataclasses.replace(other, **{k: getattr(other, k)[: n // 2] for k in _FRAME_FIELDS}))  # a first run, half way
+    sink.restart()
+    for a, b in ((0, n // 3), (n // 3, n)):
+        sink(dataclasses.replace(recon, **{k: getattr(recon, k)[a:b] for k in _FRAME_FIELDS}))
+    got = sink.reconstruction(timings_s={}, info={})
+    np.testing.assert_array_equal(got.q_rad, recon.q_rad)
+    np.testing.assert_array_equal(np.concatenate(list(sink.model_points.blocks())), recon.model_points_m)
+    sink.discard()
+    assert not [p for p in tmp_path.iterdir()]
+    chunks = Collector()
+    chunks(other)
+    chunks.restart()
+    chunks(recon)
+    np.testing.assert_array_equal(chunks.reconstruction(inputs.targets, timings_s={}, info={}).q_rad, recon.q_rad)
+
+
+_FRAME_FIELDS = ("time_s", "q_rad", "qd_rad_s", "qdd_rad_s2", "model_points_m", "measured_m", "residuals_m",
+                 "constraint", "constraint_velocity", "status")
 
 
 def test_streamed_npz_equals_the_in_memory_one(inputs, tmp_path):

@@ -53,6 +53,15 @@ class ArrayFile:
                              f"written") from None
         self.rows += block.shape[0]
 
+    def restart(self) -> None:
+        """Empty the file: the rows are written again from the first."""
+        try:
+            self._fh.seek(0)
+            self._fh.truncate()
+        except OSError as exc:
+            raise InputError(f"{self.path.parent}: cannot write ({exc.strerror or exc})") from None
+        self.rows = 0
+
     def blocks(self) -> Iterator[np.ndarray]:
         """The rows written, in blocks of about READ_BLOCK_BYTES."""
         try:
@@ -127,6 +136,11 @@ class StreamedReconstruction:
             measured_m=t.positions_m, residuals_m=self.residuals, constraint=self.constraint,
             constraint_velocity=self.constraint_velocity, status=self.status, timings_s=dict(timings_s),
             info=dict(info), gaps=tuple(t.gaps))
+
+    def restart(self) -> None:
+        """Forget what was handed on: the method runs the trial again from its first frame."""
+        self.filled, self.first = 0, None
+        self.model_points.restart()
 
     def discard(self) -> None:
         self.model_points.remove()

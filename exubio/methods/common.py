@@ -36,7 +36,8 @@ take ~5 MB with 22 markers, and the per-chunk overhead is negligible beside its 
 
 ChunkSink = Callable[[Reconstruction], None]
 """Receives a method's result chunk by chunk, in frame order (frames [first, first + n) of the
-trial, ``chunk.time_s`` telling which)."""
+trial, ``chunk.time_s`` telling which). A sink with a ``restart()`` method lets the method run the
+trial again from its first frame (PF's fallback, exubio.methods.pf.PFOptions.fallback)."""
 
 
 def target_chunk(targets: MarkerTargets, start: int, stop: int, /) -> MarkerTargets:
@@ -66,6 +67,10 @@ class Collector:
 
     def __call__(self, chunk: Reconstruction) -> None:
         self.chunks.append(chunk)
+
+    def restart(self) -> None:
+        """Forget the chunks: the method runs the trial again from its first frame."""
+        self.chunks.clear()
 
     def reconstruction(self, targets: MarkerTargets, *, timings_s: Mapping[str, float],
                        info: Mapping[str, Any]) -> Reconstruction:

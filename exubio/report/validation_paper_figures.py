@@ -55,12 +55,11 @@ def fig_sensitivity(r: ValidationResults) -> Figure:
             ax.plot(cs[bad], np.full(bad.sum(), top * 1.15), "x", color="tab:red", ms=9,
                     label="run failed (ReconstructionError)" if failed_label else None)
             failed_label = False
-    robust = [(f.stiffness_n_per_m, f.robust_deflection_mm) for f in sens.failed_runs
-              if f.robust_deflection_mm is not None]
-    if robust:  # the same run again with PF's robust options (exubio.validation.sensitivity.ROBUST_PF)
+    robust = [(f.stiffness_n_per_m, f.robust_deflection_mm) for f in sens.fallback_runs]
+    if robust:  # finished on PF's fallback (exubio.methods.pf.PFOptions.fallback)
         c_r, d_r = zip(*robust)
         ax.plot(c_r, d_r, "o", mfc="none", mec="tab:red", ms=11, mew=1.5,
-                label="a failed run, finished with inertia x 0.01 and full Newton")
+                label="first run stopped; finished on PF's fallback\n(inertia x 0.01, full Newton)")
     p = r.paper.sensitivity
     ax.axvline(p.chosen_stiffness_n_per_m, color="0.5", ls=":", lw=1)
     ax.text(p.chosen_stiffness_n_per_m * 1.08, 0.55, "c = 1500 N/m: the paper's and\nexubio's default "
@@ -72,7 +71,7 @@ def fig_sensitivity(r: ValidationResults) -> Figure:
     ax.legend(fontsize=8, loc="upper right")
     tr = sens.trial
     ax.set_title(f"Fig. 2 — PF sensitivity to spring constant c and damper-spring ratio k "
-                 f"({sens.runs} runs, {len(sens.failed_runs)} failed at PF's defaults)\n{MOTION_LABEL[tr]}: "
+                 f"({sens.runs} runs, {len(sens.failed_runs)} failed, {len(sens.fallback_runs)} on PF's fallback)\n{MOTION_LABEL[tr]}: "
                  f"{_source_label(r, tr)}, {sens.frames} frames\nall {sens.runs} runs: "
                  f"{sens.total_wall_s:.0f} s wall time on this machine", fontsize=9)
     _footer(fig, "Each point: one PF reconstruction of the whole trial with c_i = c and d_i = k·c for every marker. "

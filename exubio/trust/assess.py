@@ -214,6 +214,7 @@ def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recon
         frames = {"not_converged": int((status == FrameStatus.NOT_CONVERGED).sum()),
                   "too_few_markers": int((status == FrameStatus.TOO_FEW_MARKERS).sum())}
         reasons += Q.convergence_reasons(frames, r.n_frames)
+        reasons += Q.fallback_reasons(r.info)
         dt = float(np.median(np.diff(r.time_s))) if r.n_frames > 1 else 1.0
         reasons += Q.gap_reasons(r.gaps, r.n_frames, 1.0 / dt)
         reasons += Q.agreement_reasons(agreement, ())

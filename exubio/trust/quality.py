@@ -291,6 +291,17 @@ def convergence_reasons(frames: Mapping[str, int], n_frames: int) -> list[Reason
     return [Reason("convergence", lvl, f"{bad} of {n_frames} frames not converged or with too few markers")]
 
 
+def fallback_reasons(info: Mapping[str, Any]) -> list[Reason]:
+    """PF's fallback (exubio.methods.pf.PFOptions.fallback): its first run stopped and the result is
+    its second, with lighter segments and full Newton; said, not a fault of the result."""
+    fb = info.get("fallback") if info else None
+    if not fb:
+        return []
+    opts = ", ".join(f"{k} {v}" for k, v in (fb.get("options") or {}).items())
+    return [Reason("solver_fallback", "note", f"the result is PF's second run ({opts}): its first, with the "
+                   f"options asked for, stopped: {fb.get('first_run', '?')}")]
+
+
 def finding_field(f: Any, key: str, default: Any = None) -> Any:
     """A finding's field, whether the finding is typed (exubio.trust.labels.LabelFinding, ...) or read
     from a file."""

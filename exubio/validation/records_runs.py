@@ -128,17 +128,16 @@ class TrialData(Record):
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False, kw_only=True)
 class FailedRun(Record):
-    """A sensitivity run that raised ReconstructionError at PF's default options (``error``), and
-    the same run again with PF's robust options (``robust_options``: less inertia, full Newton;
-    benchmarks/README.md, "PF across its parameters"): its mean spring deflection (mm) if it then
-    finishes, else ``robust_error``."""
+    """A sensitivity run whose PF run stopped (``error``): in ``Sensitivity.failed_runs`` one that
+    raised ReconstructionError; in ``Sensitivity.fallback_runs`` one whose first run stopped and
+    that PF's fallback (``robust_options``: less inertia, full Newton; exubio.methods.pf) finished,
+    with its mean spring deflection (mm)."""
 
     stiffness_n_per_m: float
     ratio_s: float
     error: str
     robust_options: str | None = optional()
     robust_deflection_mm: float | None = optional()
-    robust_error: str | None = optional()
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -151,6 +150,7 @@ class Sensitivity(Record):
     frames: int
     runs: int
     failed_runs: tuple[FailedRun, ...]
+    fallback_runs: tuple[FailedRun, ...] = ()
     total_wall_s: float
     wall_s_per_run_max: float
     stiffness_n_per_m: np.ndarray = array(json=True)

@@ -1,11 +1,9 @@
 """Fig. 2: PF's sensitivity to the spring constant c and the damper-spring ratio k = d/c, the same
 for every marker: one PF reconstruction of the abduction trial per (c, k) of the settings' grid,
-its mean spring deflection over all markers and frames; a run that raises ReconstructionError is
-recorded as failed, and run again with ROBUST_PF (PF's inertia x 0.01 instead of 0.1, the Jacobian
-rebuilt every Newton iteration): what it then gives, or why it stops even so, is recorded with it.
-Not the defaults: measured on every real trial, they finish strained sessions that x 0.01 with
-modified Newton does not, and full Newton costs 40-55 % more time (benchmarks/README.md, "PF across
-its parameters")."""
+its mean spring deflection over all markers and frames. PF falls back on its own
+(exubio.methods.pf.PFOptions.fallback: a run that stops is run again with inertia x 0.01 and full
+Newton): a run that finished on the fallback is recorded with its first run's reason
+(``fallback_runs``); a run that raises ReconstructionError even so is recorded as failed."""
 from __future__ import annotations
 
 import dataclasses
@@ -20,9 +18,7 @@ from exubio.validation.results import FailedRun, Sensitivity
 from exubio.validation.settings import ValidationSettings
 from exubio.validation.trials import Progress, Trial
 
-__all__ = ["ROBUST_PF", "sensitivity_study", "with_springs"]
-
-ROBUST_PF = {"inertia_scale": 0.01, "modified_newton": False}  # PFOptions for a run that stops at the defaults
+__all__ = ["sensitivity_study", "with_springs"]
 
 
 def with_springs(protocol: Protocol, stiffness: float, damping: float) -> Protocol:
@@ -38,7 +34,7 @@ def sensitivity_study(trial: Trial, s: ValidationSettings, progress: Progress) -
     cs, ks = np.array(s.sensitivity_stiffness_n_per_m), np.array(s.sensitivity_ratio_s)
     defl = np.full((ks.size, cs.size), np.nan)
     wall = np.full((ks.size, cs.size), np.nan)
-    failures = []
+    failures, fell_back = [], []
     t_all = time.perf_counter()
     for a, k in enumerate(ks):
         for b, c in enumerate(cs):
@@ -48,21 +44,16 @@ def sensitivity_study(trial: Trial, s: ValidationSettings, progress: Progress) -
             try:
                 rec = reconstruct(trial.model, prot, trial.targets, method="pf")
                 defl[a, b] = float(np.nanmean(rec.residuals_m)) * 1000.0
+                fb = rec.info.get("fallback")
+                if fb:
+                    fell_back.append(FailedRun(stiffness_n_per_m=float(c), ratio_s=float(k), error=fb["first_run"],
+                                               robust_options=", ".join(f"{o} {v}" for o, v in fb["options"].items()),
+                                               robust_deflection_mm=defl[a, b]))
             except ReconstructionError as exc:
-                failures.append(_again_robust(trial, prot, FailedRun(stiffness_n_per_m=float(c), ratio_s=float(k),
-                                                                     error=str(exc))))
+                failures.append(FailedRun(stiffness_n_per_m=float(c), ratio_s=float(k), error=str(exc)))
             wall[a, b] = time.perf_counter() - t0
     total = time.perf_counter() - t_all
     return Sensitivity(trial=trial.name, frames=trial.targets.n_frames, runs=int(cs.size * ks.size),
-                       failed_runs=tuple(failures), total_wall_s=total, wall_s_per_run_max=float(np.nanmax(wall)),
+                       failed_runs=tuple(failures), fallback_runs=tuple(fell_back), total_wall_s=total, wall_s_per_run_max=float(np.nanmax(wall)),
                        stiffness_n_per_m=cs, ratio_s=ks, mean_deflection_mm=defl, wall_s=wall)
 
-
-def _again_robust(trial: Trial, protocol: Protocol, failed: FailedRun) -> FailedRun:
-    options = ", ".join(f"{k} {v}" for k, v in ROBUST_PF.items())
-    try:
-        rec = reconstruct(trial.model, protocol, trial.targets, method="pf", **ROBUST_PF)
-    except ReconstructionError as exc:
-        return dataclasses.replace(failed, robust_options=options, robust_error=str(exc))
-    return dataclasses.replace(failed, robust_options=options,
-                               robust_deflection_mm=float(np.nanmean(rec.residuals_m)) * 1000.0)
