@@ -179,3 +179,32 @@ def test_a_result_can_be_read_without_its_points(tmp_path):
     assert light.model_points_m is None and light.measured_m is None
     np.testing.assert_array_equal(light.q_rad, full.q_rad)
     np.testing.assert_array_equal(light.residuals_m, full.residuals_m)
+
+
+def test_a_file_run_that_finishes_on_pfs_fallback_writes_the_second_run_and_says_so(tmp_path):
+    """The sensitivity grid's corner springs (c = 10 N/m, d = 0.1 Ns/m) on the real abduction, run
+    as `exubio reconstruct` runs a trial (streamed in chunks to the part file): PF's first run stops,
+    the fallback runs it again into the same sink started again, and the files hold the second run
+    alone (the same as the in-memory run), the summary and the verdict say so, no part file is left."""
+    from exubio.run.inputs import load_session
+    from exubio.run.pipeline import reconstruct
+    from exubio.validation.sensitivity import with_springs
+    from exubio.validation.trials import why_no_real_trial
+    from exubio.validation.paths import shared_data_dir
+
+    if why_no_real_trial("abduction"):
+        pytest.skip(why_no_real_trial("abduction"))
+    session = load_session(protocol_path=shipped_file("exubio.protocols", "thoracoscapular_9.yaml", "protocols"))
+    corner = dataclasses.replace(session, protocol=with_springs(session.protocol, 10.0, 0.1))
+    trial = shared_data_dir() / "trc" / "tsm_rmr_ABD01.trc"
+    ((_, paths, summary),) = reconstruct_file(trial, tmp_path, methods=["pf"], session=corner,
+                                              settings=RunSettings(chunk_frames=200))
+    codes = {r["code"]: r["level"] for r in summary["quality"]["reasons"]}
+    assert codes.get("solver_fallback") == "note"
+    written = read_npz(paths["npz"])
+    inputs = load_inputs(trial, corner)
+    memory = reconstruct(inputs.model, inputs.protocol, inputs.targets, method="pf")
+    assert memory.info["fallback"]["options"] == {"inertia_scale": 0.01, "modified_newton": False}
+    np.testing.assert_allclose(written.q_rad, memory.q_rad, atol=1e-12)
+    np.testing.assert_allclose(written.model_points_m, memory.model_points_m, atol=1e-12)
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
