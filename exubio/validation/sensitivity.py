@@ -54,6 +54,6 @@ def sensitivity_study(trial: Trial, s: ValidationSettings, progress: Progress) -
             wall[a, b] = time.perf_counter() - t0
     total = time.perf_counter() - t_all
     return Sensitivity(trial=trial.name, frames=trial.targets.n_frames, runs=int(cs.size * ks.size),
-                       failed_runs=tuple(failures), fallback_runs=tuple(fell_back), total_wall_s=total, wall_s_per_run_max=float(np.nanmax(wall)),
+                       failed_runs=tuple(failures), fallback_runs=tuple(fell_back), total_wall_s=total,
+                       wall_s_per_run_max=float(np.nanmax(wall)),
                        stiffness_n_per_m=cs, ratio_s=ks, mean_deflection_mm=defl, wall_s=wall)
-
