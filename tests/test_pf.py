@@ -12,7 +12,8 @@ from exubio.errors import ReconstructionError  # noqa: E402
 from exubio.model.kinematics import Kinematics  # noqa: E402
 from exubio.methods.common import tracked_points  # noqa: E402
 from exubio.methods.constraints import project_on_constraints  # noqa: E402
-from exubio.methods.pf import PFOptions, integration_step, reconstruct_pf  # noqa: E402
+from exubio.methods.pf import PFOptions, reconstruct_pf  # noqa: E402
+from exubio.methods.pf_time import integration_step  # noqa: E402
 from exubio.run.pipeline import reconstruct  # noqa: E402
 from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets  # noqa: E402

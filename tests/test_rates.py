@@ -145,7 +145,7 @@ def test_the_sensitivity_corner_finishes_on_pfs_fallback_and_says_so():
 def test_lead_in_extrapolates_the_first_frame_backwards():
     """The lead-in's targets continue a quadratic path exactly, keep a missing marker missing, and
     fall back to a straight line when the first frame's acceleration is an edge spike."""
-    from exubio.methods.pf import LEAD_IN_MAX_BEND_M, lead_in_frames, with_lead_in
+    from exubio.methods.pf_time import LEAD_IN_MAX_BEND_M, lead_in_frames, with_lead_in
     from exubio.types import MarkerTargets
 
     dt, n = 0.01, 5
