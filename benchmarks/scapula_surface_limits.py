@@ -33,7 +33,7 @@ from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.io.resources import shipped_file
 from exubio.validation.paths import shared_data_dir
-from exubio.validation.scapula import data_clavicle_mm
+from exubio.validation.scapula import data_clavicle_mm, registered_scapula_poses
 
 
 def radial(p, x, rotated):
@@ -96,10 +96,12 @@ def main() -> int:
             print(f"  {cal} -> {other} SD {sd * 1000:.0f} mm: {rms_mm(radial(p[:9], contacts(cal, p[9:]), False)):4.1f} / "
                   f"{rms_mm(radial(p[:9], contacts(other, p[9:]), False)):4.1f} mm; TS, AI moved "
                   f"{shift[0]:.0f}, {shift[1]:.0f} mm")
-    print("the clavicle the data imply: |AC - SC| of the registered scapula in every frame "
-          f"(model: rigid, {data_clavicle_mm(model, bound, tg['FLX01'])[1]:.1f} mm):")
+    poses_all = {n: registered_scapula_poses(model, bound, t) for n, t in tg.items()}  # every frame
+    clavicle = {n: data_clavicle_mm(model, bound, tg[n], poses_all[n]) for n in names}  # the validation's figure
+    length = clavicle["FLX01"][1]
+    print(f"the clavicle the data imply: |AC - SC| of the registered scapula in every frame (model: rigid, {length:.1f} mm):")
     for n in names:
-        d, length = data_clavicle_mm(model, bound, tg[n])  # the validation's figure (exubio.validation.scapula)
+        d = clavicle[n][0]
         print(f"  {n}: {d.min():.1f}-{d.max():.1f} mm (SD {d.std():.1f}); AC up to {np.abs(d - length).max():.1f} mm "
               f"off the model's sphere about SC")
     # the sphere the data's AC path does lie on: a functional SC (as SCoRE finds GH), fitted on one
@@ -107,7 +109,7 @@ def main() -> int:
     kin = Kinematics(model)
     sc = kin.points(np.zeros(kin.n_coordinates), kin.point_set([("clavicle", "SC")]))[0]
     ac = model.segment("scapula").points["AC"]
-    paths = {n: (lambda R, t: R @ ac + t)(*cluster_poses(local, t.positions_m[:, idx])[:2]) for n, t in tg.items()}
+    paths = {n: R @ ac + t for n, (R, t) in poses_all.items()}
     print("the sphere the data's AC paths lie on (centre prior SD about the model's SC; residual RMS / max, mm):")
     for sd in (0.005, 0.02):
         for cal, other in (("FLX01", "ABD01"), ("ABD01", "FLX01")):
@@ -120,7 +122,6 @@ def main() -> int:
                   + "; ".join(f"{n} {np.sqrt(np.mean(v**2)):.1f} / {np.abs(v).max():.1f}" for n, v in res.items()))
     # or the clavicle's attachment re-registered on the scapula: the point of the scapula that stays
     # at one distance from the model's SC (a functional AC), fitted on one trial, tried on the other
-    poses_all = {n: cluster_poses(local, t.positions_m[:, idx])[:2] for n, t in tg.items()}
     print("a functional AC: the scapula's point at one distance from the model's SC (prior SD about AC; "
           "residual RMS / max, mm):")
     for sd in (0.01, 0.02):

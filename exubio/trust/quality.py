@@ -298,8 +298,10 @@ def fallback_reasons(info: Mapping[str, Any]) -> list[Reason]:
     if not fb:
         return []
     opts = ", ".join(f"{k} {v}" for k, v in (fb.get("options") or {}).items())
+    first = str(fb.get("first_run", "?"))  # "<trial>: the PF run diverged at t = ...; ...": its first clause here,
+    first = first.split(": ", 1)[-1].split("; ", 1)[0]  # the whole of it in summary.json (info.fallback)
     return [Reason("solver_fallback", "note", f"the result is PF's second run ({opts}): its first, with the "
-                   f"options asked for, stopped: {fb.get('first_run', '?')}")]
+                   f"options asked for, stopped ({first}; summary.json info.fallback has the whole reason)")]
 
 
 def finding_field(f: Any, key: str, default: Any = None) -> Any:

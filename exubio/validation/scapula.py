@@ -50,7 +50,7 @@ from exubio.validation.settings import ValidationSettings
 from exubio.validation.trials import LUDEWIG_PLANE, REAL_PROTOCOL, REAL_TRIALS, Progress, why_no_real_trial
 
 __all__ = ["AIM_MARKER_RMSE_MM", "AIM_ST_RMSE_DEG", "HT_BAND_DEG", "ST_KEYS", "data_clavicle_mm", "data_st_deg",
-           "scapula_checks",
+           "registered_scapula_poses", "scapula_checks",
            "scapula_cross_validation", "simulated_subject"]
 
 ST_KEYS = ("ST_medRotation_X", "ST_protraction_Y", "ST_tilt_Z")
@@ -62,23 +62,28 @@ SIM_RADII_FACTOR = (1.08, 0.92, 1.08)  # 8 %, not a common scale
 _SIM_POINTS = ("IJ", "C7", "PX", "T8", "AA", "TS", "AI", "GH", "EL", "EJC")
 
 
-def data_st_deg(model, protocol, targets) -> np.ndarray:
-    """ST angles (n, 3) deg of the data: the registered scapula (protocol bound to ``model``)
-    rigidly fitted to each frame's scapula markers, in the model's ISB scapula frame."""
-    idx = scapula_markers(model, protocol, targets.positions_m[0])
-    local = np.array([protocol.markers[j].local_position_m for j in idx])
-    R, _, _ = cluster_poses(local, targets.positions_m[:, idx])
-    return np.degrees(euler_angles(R @ anatomical_frames(model)["scapula"], "YXZ"))
-
-
-def data_clavicle_mm(model, protocol, targets) -> tuple[np.ndarray, float]:
-    """The clavicle the data imply: per frame, the distance (mm) from the model's SC (fixed on the
-    thorax) to AC of the registered scapula rigidly fitted to the frame's scapula markers, and the
-    model's rigid SC-AC length (mm). The model's AC must stay on the sphere of that radius about SC;
-    where the data's does not, no ellipsoid lets the model follow the data's scapula."""
+def registered_scapula_poses(model, protocol, targets) -> tuple[np.ndarray, np.ndarray]:
+    """The registered scapula (its markers' positions on it, protocol bound to ``model``) rigidly
+    fitted to each frame's scapula markers: R (n, 3, 3), t (n, 3), scapula to thorax."""
     idx = scapula_markers(model, protocol, targets.positions_m[0])
     local = np.array([protocol.markers[j].local_position_m for j in idx])
     R, t, _ = cluster_poses(local, targets.positions_m[:, idx])
+    return R, t
+
+
+def data_st_deg(model, protocol, targets, poses=None) -> np.ndarray:
+    """ST angles (n, 3) deg of the data: the registered scapula (``poses``, default
+    registered_scapula_poses) in the model's ISB scapula frame."""
+    R, _ = poses if poses is not None else registered_scapula_poses(model, protocol, targets)
+    return np.degrees(euler_angles(R @ anatomical_frames(model)["scapula"], "YXZ"))
+
+
+def data_clavicle_mm(model, protocol, targets, poses=None) -> tuple[np.ndarray, float]:
+    """The clavicle the data imply: per frame, the distance (mm) from the model's SC (fixed on the
+    thorax) to AC of the registered scapula (``poses``, default registered_scapula_poses), and the
+    model's rigid SC-AC length (mm). The model's AC must stay on the sphere of that radius about SC;
+    where the data's does not, no ellipsoid lets the model follow the data's scapula."""
+    R, t = poses if poses is not None else registered_scapula_poses(model, protocol, targets)
     kin = Kinematics(model)
     sc = kin.points(np.zeros(kin.n_coordinates), kin.point_set([("clavicle", "SC")]))[0]
     clav = model.segment("clavicle").points
@@ -88,8 +93,9 @@ def data_clavicle_mm(model, protocol, targets) -> tuple[np.ndarray, float]:
 
 def _variant(model, protocol, targets, plane: str, info: dict) -> ScapulaVariant:
     recs = {m: reconstruct(model, protocol, targets, method=m) for m in ("ls", "pf")}
-    data = data_st_deg(model, protocol, targets)
-    clavicle, length = data_clavicle_mm(model, protocol, targets)
+    poses = registered_scapula_poses(model, protocol, targets)
+    data = data_st_deg(model, protocol, targets, poses)
+    clavicle, length = data_clavicle_mm(model, protocol, targets, poses)
     rmse, st_rmse, st_max = {}, {}, {}
     for m, rec in recs.items():
         names = list(rec.marker_names)
