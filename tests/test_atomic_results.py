@@ -345,6 +345,25 @@ def test_ctrl_c_of_reconstruct_is_one_line_exit_130_and_leaves_sets_complete_or_
     assert hidden(out) == []  # the stopped workers' unfinished files went before the exit
 
 
+def test_a_ctrl_c_caught_inside_an_exec_still_exits_130_under_python_m(tmp_path):
+    """A Ctrl-C that landed while SciPy's import ran an exec of a string (0.3-0.4 s into a run) left
+    CPython's unhandled-KeyboardInterrupt flag set: `python -m exubio.cli` printed its one line and
+    then died by SIGINT (exit -2, 9 of 20 runs interrupted at 0.25-0.43 s). Here main() meets that
+    exec's KeyboardInterrupt for certain, catches it and returns 130, as the CLI's does."""
+    (tmp_path / "interrupted_in_exec.py").write_text(
+        "import exubio.cli as cli\n"
+        "def main():\n"
+        "    try:\n"
+        "        exec('raise KeyboardInterrupt')\n"
+        "    except KeyboardInterrupt:\n"
+        "        return 130\n"
+        "cli.main = main\n"
+        "cli.run()\n", encoding="utf-8")
+    done = subprocess.run([sys.executable, "-m", "interrupted_in_exec"], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 130, (done.returncode, done.stderr)
+
+
 def test_ctrl_c_of_a_study_with_2_jobs_is_one_line_exit_130(tmp_path, ctrl_c_trials):
     """It ended in `AttributeError: 'NoneType' object has no attribute 'values'` after 3.8 s."""
     import yaml
