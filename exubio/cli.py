@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Callable, Sequence  # noqa: E402
 
 import exubio  # noqa: E402
 from exubio.errors import ExubioError, InputError, ModelError, ProtocolError, ReconstructionError  # noqa: E402
+from exubio.run import interrupt  # noqa: E402 - Ctrl-C noted (small: no pipeline)
 
 if TYPE_CHECKING:  # the CLI imports the pipeline only when a command runs (fast --help)
     from exubio.run.job import TrialJob, TrialResult
@@ -836,28 +837,36 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _main(argv: Sequence[str] | None, new_folder: list[Path]) -> int:
     if signal.getsignal(signal.SIGINT) is _interrupted_while_starting:
         signal.signal(signal.SIGINT, signal.default_int_handler)  # from here KeyboardInterrupt, caught below
-    try:  # Ctrl-C at any moment, also while the command's modules are still being imported: exit 130
-        args = build_parser().parse_args(argv)
-        logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, stream=sys.stderr,
-                            format="%(levelname)s %(name)s: %(message)s")
-        out = getattr(args, "out", None)
-        if isinstance(out, str) and out:  # the folders the run may create, deepest first
-            new_folder += [f for f in (Path(out), *Path(out).parents) if not f.exists()]
-        return int(args.func(args))
-    except KeyboardInterrupt:
+    with interrupt.noted():
+        try:  # Ctrl-C at any moment, also while the command's modules are still being imported: exit 130
+            args = build_parser().parse_args(argv)
+            logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, stream=sys.stderr,
+                                format="%(levelname)s %(name)s: %(message)s")
+            out = getattr(args, "out", None)
+            if isinstance(out, str) and out:  # the folders the run may create, deepest first
+                new_folder += [f for f in (Path(out), *Path(out).parents) if not f.exists()]
+            return int(args.func(args))
+        except BaseException as exc:  # noqa: BLE001 - Ctrl-C as whatever Exudyn made of it (run.interrupt)
+            if not (isinstance(exc, KeyboardInterrupt) or interrupt.pressed() and not isinstance(exc, SystemExit)):
+                return _failed(exc)
         newline = "\n" if sys.stderr.isatty() else ""  # a progress bar's line is left open
         print(f"{newline}exubio: interrupted; results that were not complete were not written (the same command "
               "again resumes: it keeps what is complete)", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except (InputError, ProtocolError, ModelError) as exc:
+
+
+def _failed(exc: BaseException) -> int:
+    """The exit code of an error of exubio's (said on one line); any other error goes on."""
+    if isinstance(exc, (InputError, ProtocolError, ModelError)):
         print(f"exubio: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except ReconstructionError as exc:
+    if isinstance(exc, ReconstructionError):
         print(f"exubio: reconstruction failed: {exc}", file=sys.stderr)
         return EXIT_FAILED
-    except ExubioError as exc:
+    if isinstance(exc, ExubioError):
         print(f"exubio: error: {exc}", file=sys.stderr)
         return EXIT_FAILED
+    raise exc
 
 
 def run() -> None:

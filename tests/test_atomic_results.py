@@ -345,6 +345,90 @@ def test_ctrl_c_of_reconstruct_is_one_line_exit_130_and_leaves_sets_complete_or_
     assert hidden(out) == []  # the stopped workers' unfinished files went before the exit
 
 
+def test_ctrl_c_while_a_local_dask_cluster_starts_stops_it_whole(monkeypatch):
+    """Ctrl-C while LocalCluster started (the CLI's --scheduler local:2, 2 s in, on CI) gave up the
+    half-started cluster: its event loop went on spawning workers, one printed its traceback and
+    multiprocessing's resource tracker warned of a leaked semaphore after exubio's line. Here Ctrl-C
+    comes for certain as the cluster starts: KeyboardInterrupt comes out, the cluster is closed and
+    no worker process is left."""
+    distributed = pytest.importorskip("distributed")
+    import multiprocessing
+
+    from exubio.run.executors import map_on_scheduler
+
+    from distributed.process import AsyncProcess
+
+    made, made_ctrl_c = [], []
+    real_cluster, real_start = distributed.LocalCluster, AsyncProcess.start
+
+    def cluster(*args, **kwargs):
+        made.append(real_cluster(*args, **kwargs))
+        return made[-1]
+
+    def ctrl_c_then_start(self):  # on the cluster's event-loop thread, as a worker process starts
+        if not made_ctrl_c:  # one Ctrl-C (a second one stops at once, as far as it got)
+            made_ctrl_c.append(os.kill(os.getpid(), signal.SIGINT))  # handled in the main thread, which waits
+        return real_start(self)
+
+    monkeypatch.setattr(distributed, "LocalCluster", cluster)
+    monkeypatch.setattr(AsyncProcess, "start", ctrl_c_then_start)
+    before = set(multiprocessing.active_children())
+    with pytest.raises(KeyboardInterrupt):
+        map_on_scheduler(abs, [1, 2], "local:2", on_error=lambda item, exc: exc)
+    assert len(made) == 1 and made[0].status.name == "closed"  # the cluster came whole, and was closed
+    assert [p for p in multiprocessing.active_children() if p not in before] == []
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def _ctrl_c_as_exudyn_makes_it(*args, **kwargs):
+    """Ctrl-C, landing where Exudyn's C++ reads Python: what comes out (measured, a Ctrl-C 3-100 ms
+    into `import exudyn`, 2 of 200) is a RuntimeError naming the KeyboardInterrupt in its text."""
+    try:
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(5)
+    except KeyboardInterrupt:
+        raise RuntimeError("Error in Vector3DList::SetItem operator[]'KeyboardInterrupt: <EMPTY MESSAGE>") from None
+    raise AssertionError("no KeyboardInterrupt came")
+
+
+def test_a_ctrl_c_that_exudyn_turned_into_another_error_is_one_line_exit_130(tiny, tmp_path, monkeypatch, capsys):
+    """It was that error's traceback, exit 1 (also seen: `ImportError: Exudyn could not import its
+    compiled module`, a Ctrl-C 2.6 s into `reconstruct --scheduler local:2` on a loaded machine)."""
+    import exubio.run.pipeline
+
+    monkeypatch.setattr(exubio.run.pipeline, "stream_reconstruct", _ctrl_c_as_exudyn_makes_it)
+    out = tmp_path / "out"
+    assert main(["-q", "reconstruct", str(tiny), "--method", "both", "--no-report", "--out", str(out)]) == 130
+    assert "interrupted" in one_error_line(capsys.readouterr().err)
+    assert not out.exists() or sorted(out.iterdir()) == []
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the CLI's handler is gone again
+
+
+def test_a_study_stops_at_a_ctrl_c_that_exudyn_turned_into_another_error(tiny, tmp_path, monkeypatch, capsys):
+    """One process (--jobs 1): the first trial's converted Ctrl-C was recorded as its failure and the
+    study went on to the next trial."""
+    import yaml
+
+    import exubio.run.pipeline
+
+    calls = []
+
+    def first_trial(*args, **kwargs):
+        calls.append(1)
+        return _ctrl_c_as_exudyn_makes_it()
+
+    monkeypatch.setattr(exubio.run.pipeline, "stream_reconstruct", first_trial)
+    (tmp_path / "d").mkdir()
+    for k in range(3):
+        (tmp_path / "d" / f"t{k}.c3d").write_bytes(tiny.read_bytes())
+    study = tmp_path / "study.yaml"
+    study.write_text(yaml.safe_dump({"schema_version": 1, "name": "t", "report": False, "sessions": [
+        {"subject": "S01", "trials": ["d/*.c3d"], "methods": ["ls"]}]}), encoding="utf-8")
+    assert main(["-q", "study", str(study), "--jobs", "1", "--out", str(tmp_path / "out")]) == 130
+    assert "interrupted" in one_error_line(capsys.readouterr().err)
+    assert calls == [1]  # no second trial
+
+
 def test_a_ctrl_c_caught_inside_an_exec_still_exits_130_under_python_m(tmp_path):
     """A Ctrl-C that landed while SciPy's import ran an exec of a string (0.3-0.4 s into a run) left
     CPython's unhandled-KeyboardInterrupt flag set: `python -m exubio.cli` printed its one line and

@@ -6,9 +6,12 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
+import threading
 import time
 from concurrent.futures import Future, ProcessPoolExecutor
-from typing import Any, Callable
+from contextlib import contextmanager
+from typing import Any, Callable, Iterator
 
 from exubio.errors import InputError
 
@@ -95,6 +98,13 @@ def _stop_pool(pool: ProcessPoolExecutor) -> None:
             proc.join(timeout=1.0)
 
 
+DASK_CLOSE_WAIT_S = 5.0
+"""After Ctrl-C, how long a local cluster whose workers were stopped gets to close (measured: 0.45-0.50 s
+idle, 1.6 s on a loaded machine). It was 0.5 s: a close cut short left the cluster's event-loop thread
+closing while the interpreter ended, and its half-done work (a worker process's semaphores) came out
+as multiprocessing's resource-tracker warnings after exubio's one line."""
+
+
 def _worker_setup() -> None:
     """Imported once per Dask worker: exubio and its solvers stay loaded for every trial."""
     import exubio.methods.ls  # noqa: F401
@@ -131,6 +141,7 @@ def map_on_scheduler(fn: Callable, items: list, scheduler: str, /, *,
     for name in ("distributed", "bokeh", "tornado"):  # their INFO lines are not the user's business
         logging.getLogger(name).setLevel(logging.ERROR)
     cluster = None
+    pressed: list = []
     if scheduler.startswith("local:"):
         try:
             n = int(scheduler.split(":", 1)[1])
@@ -140,17 +151,16 @@ def map_on_scheduler(fn: Callable, items: list, scheduler: str, /, *,
             raise InputError(f"--scheduler {scheduler}: expected local:N with N >= 1 workers")
         import dask
 
+        client = None
         try:
-            with dask.config.set(_LOCAL_CLUSTER_CONFIG):  # silence_logs: also the workers' logs (their processes)
-                # dashboard_address ":0": Dask's HTTP server on a free port (None still asks for 8787, and
-                # warns on stderr when another cluster holds it)
+            with _ctrl_c_held_back() as pressed, dask.config.set(_LOCAL_CLUSTER_CONFIG):
+                # silence_logs: also the workers' logs (their processes); dashboard_address ":0": Dask's HTTP
+                # server on a free port (None still asks for 8787, and warns on stderr when another cluster holds it)
                 cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                                        silence_logs=logging.CRITICAL)
-            client = Client(cluster)
-        except KeyboardInterrupt:  # Ctrl-C while the cluster starts
-            if cluster is not None:
-                _stop_dask(None, cluster, [])
-            _quiet_dask_exit()
+                client = Client(cluster)
+        except KeyboardInterrupt:  # a second Ctrl-C while the cluster starts: at once, as far as it got
+            _stop_dask(client, cluster, [])
             raise
     elif scheduler.startswith("tcp://"):
         try:
@@ -161,6 +171,8 @@ def map_on_scheduler(fn: Callable, items: list, scheduler: str, /, *,
         raise InputError(f"--scheduler {scheduler}: expected local:N or tcp://HOST:PORT")
     futures: dict = {}
     try:
+        if pressed:  # Ctrl-C while the local cluster started: it is stopped below, now that it has
+            raise KeyboardInterrupt
         client.run(_worker_setup)
         futures = {client.submit(fn, item, pure=False): k for k, item in enumerate(items)}
         out: list = [None] * len(items)
@@ -183,9 +195,35 @@ def map_on_scheduler(fn: Callable, items: list, scheduler: str, /, *,
             cluster.close()
 
 
+@contextmanager
+def _ctrl_c_held_back() -> Iterator[list]:
+    """A first Ctrl-C is noted (in the list yielded) and held back until the block ends: a local Dask
+    cluster stopped half-started (its worker processes being spawned from its event loop's thread)
+    left a spawned child printing its traceback and multiprocessing's resource tracker warning of a
+    leaked semaphore after exubio's one line; one that has started stops quietly. A second Ctrl-C
+    goes to the handler in place before (KeyboardInterrupt: at once). Only where a Python handler
+    takes Ctrl-C, in the main thread; elsewhere nothing changes."""
+    pressed: list = []
+    previous = signal.getsignal(signal.SIGINT)
+    if threading.current_thread() is not threading.main_thread() or not callable(previous):
+        yield pressed
+        return
+
+    def hold(signum, frame):
+        if pressed:
+            previous(signum, frame)
+        pressed.append(signum)
+
+    signal.signal(signal.SIGINT, hold)
+    try:
+        yield pressed
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def _stop_dask(client: Any, cluster: Any, futures: list, /) -> None:
-    """After Ctrl-C: cancel the work, close the client and the local cluster within about a second
-    each, and say nothing of the connections that close meanwhile (Dask logs them as errors)."""
+    """After Ctrl-C: cancel the work, close the client (0.5 s) and the local cluster (DASK_CLOSE_WAIT_S),
+    and say nothing of the connections that close meanwhile (Dask logs them as errors)."""
     _quiet_dask_exit()
     if cluster is not None:  # a local cluster's worker processes are this process's children: stopped now
         import multiprocessing
@@ -200,7 +238,7 @@ def _stop_dask(client: Any, cluster: Any, futures: list, /) -> None:
                 proc.kill()
     for step in (lambda: client.cancel(futures, force=True) if client is not None else None,
                  lambda: client.close(timeout=0.5) if client is not None else None,
-                 lambda: cluster.close(timeout=0.5) if cluster is not None else None):
+                 lambda: cluster.close(timeout=DASK_CLOSE_WAIT_S) if cluster is not None else None):
         try:
             step()
         except BaseException:  # noqa: BLE001 - stopping: whatever Dask raises while it closes goes unsaid

@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
 from exubio.io.resources import shipped_beside
 from exubio.io.yaml import read_yaml
 from exubio.errors import ExubioError, InputError
+from exubio.run import interrupt
 from exubio.run.executors import run_all
 
 if TYPE_CHECKING:
@@ -284,6 +285,8 @@ def run_trial_task(task: TrialTask) -> TrialOutcome:
         done_with(tmp)
         if isinstance(exc, KeyboardInterrupt):
             raise
+        if interrupt.pressed():  # Ctrl-C, as whatever Exudyn made of it: the study stops
+            raise KeyboardInterrupt from exc
     return out
 
 

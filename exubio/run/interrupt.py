@@ -1,0 +1,45 @@
+"""Ctrl-C, remembered. Python's handler raises KeyboardInterrupt wherever the main thread is; inside
+Exudyn that exception does not always come out as itself: measured, a Ctrl-C while Exudyn's compiled
+module was imported came out as ``ImportError: Exudyn could not import its compiled module``
+(``.exudynCPP -> initialization failed``), and one while Exudyn's C++ read a Python list as
+``RuntimeError: Error in Vector3DList::SetItem ... KeyboardInterrupt``. A run would report either as
+a failed trial (a traceback, or a study going on to its next trial). The command line's handler
+(``handler``) also notes the press; code that catches errors asks ``pressed()`` and stops as on
+Ctrl-C (``exubio.cli``, a study's trial, one method of a trial)."""
+from __future__ import annotations
+
+import signal
+import threading
+from contextlib import contextmanager
+from typing import Iterator
+
+_pressed = threading.Event()
+
+
+def handler(signum, frame) -> None:  # noqa: ARG001 - the signal handler's signature
+    """Python's Ctrl-C (KeyboardInterrupt), with the press noted."""
+    _pressed.set()
+    raise KeyboardInterrupt
+
+
+def pressed() -> bool:
+    """Whether Ctrl-C was pressed while ``noted()`` was on (an error caught since is its doing)."""
+    return _pressed.is_set()
+
+
+@contextmanager
+def noted() -> Iterator[None]:
+    """While in the block, Ctrl-C raises KeyboardInterrupt as Python's handler does and is noted
+    (``pressed()``); on leaving, the note is cleared and the previous handler is back. Only where
+    Python's handler is the one in place (in the main thread); elsewhere nothing changes."""
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
+        yield
+        return
+    _pressed.clear()
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        _pressed.clear()
