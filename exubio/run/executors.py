@@ -6,14 +6,12 @@ from __future__ import annotations
 
 import logging
 import os
-import signal
-import threading
 import time
 from concurrent.futures import Future, ProcessPoolExecutor
-from contextlib import contextmanager
-from typing import Any, Callable, Iterator
+from typing import Any, Callable
 
 from exubio.errors import InputError
+from exubio.run import interrupt
 
 log = logging.getLogger(__name__)
 
@@ -153,7 +151,7 @@ def map_on_scheduler(fn: Callable, items: list, scheduler: str, /, *,
 
         client = None
         try:
-            with _ctrl_c_held_back() as pressed, dask.config.set(_LOCAL_CLUSTER_CONFIG):
+            with interrupt.held_back() as pressed, dask.config.set(_LOCAL_CLUSTER_CONFIG):
                 # silence_logs: also the workers' logs (their processes); dashboard_address ":0": Dask's HTTP
                 # server on a free port (None still asks for 8787, and warns on stderr when another cluster holds it)
                 cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
@@ -193,32 +191,6 @@ def map_on_scheduler(fn: Callable, items: list, scheduler: str, /, *,
         client.close()
         if cluster is not None:
             cluster.close()
-
-
-@contextmanager
-def _ctrl_c_held_back() -> Iterator[list]:
-    """A first Ctrl-C is noted (in the list yielded) and held back until the block ends: a local Dask
-    cluster stopped half-started (its worker processes being spawned from its event loop's thread)
-    left a spawned child printing its traceback and multiprocessing's resource tracker warning of a
-    leaked semaphore after exubio's one line; one that has started stops quietly. A second Ctrl-C
-    goes to the handler in place before (KeyboardInterrupt: at once). Only where a Python handler
-    takes Ctrl-C, in the main thread; elsewhere nothing changes."""
-    pressed: list = []
-    previous = signal.getsignal(signal.SIGINT)
-    if threading.current_thread() is not threading.main_thread() or not callable(previous):
-        yield pressed
-        return
-
-    def hold(signum, frame):
-        if pressed:
-            previous(signum, frame)
-        pressed.append(signum)
-
-    signal.signal(signal.SIGINT, hold)
-    try:
-        yield pressed
-    finally:
-        signal.signal(signal.SIGINT, previous)
 
 
 def _stop_dask(client: Any, cluster: Any, futures: list, /) -> None:

@@ -5,7 +5,7 @@ module was imported came out as ``ImportError: Exudyn could not import its compi
 ``RuntimeError: Error in Vector3DList::SetItem ... KeyboardInterrupt``. A run would report either as
 a failed trial (a traceback, or a study going on to its next trial). The command line's handler
 (``handler``) also notes the press; code that catches errors asks ``pressed()`` and stops as on
-Ctrl-C (``exubio.cli``, a study's trial, one method of a trial)."""
+Ctrl-C (``exubio.cli``, a study's trial). ``held_back`` keeps a first Ctrl-C for the end of a block."""
 from __future__ import annotations
 
 import signal
@@ -43,3 +43,30 @@ def noted() -> Iterator[None]:
     finally:
         signal.signal(signal.SIGINT, signal.default_int_handler)
         _pressed.clear()
+
+
+@contextmanager
+def held_back() -> Iterator[list]:
+    """A first Ctrl-C is noted (in the list yielded) and held back until the block ends, for work that
+    must not be stopped half-done: a local Dask cluster stopped half-started (its worker processes
+    being spawned from its event loop's thread) left a spawned child printing its traceback and
+    multiprocessing's resource tracker warning of a leaked semaphore after exubio's one line; one
+    that has started stops quietly (exubio.run.executors). A second Ctrl-C goes to the handler in
+    place before (KeyboardInterrupt: at once). Only where a Python handler takes Ctrl-C, in the main
+    thread; elsewhere nothing changes."""
+    pressed: list = []
+    previous = signal.getsignal(signal.SIGINT)
+    if threading.current_thread() is not threading.main_thread() or not callable(previous):
+        yield pressed
+        return
+
+    def hold(signum, frame):
+        if pressed:
+            previous(signum, frame)
+        pressed.append(signum)
+
+    signal.signal(signal.SIGINT, hold)
+    try:
+        yield pressed
+    finally:
+        signal.signal(signal.SIGINT, previous)
