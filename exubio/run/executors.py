@@ -46,7 +46,8 @@ def map_in_processes(fn: Callable, items: list, jobs: int, /, *, on_error: Calla
     KeyboardInterrupt goes on to the caller (the CLI: one line, exit 130)."""
     pool = ProcessPoolExecutor(max_workers=jobs, initializer=_pool_worker_signals)
     try:
-        futures: list[Future] = [pool.submit(fn, item) for item in items]
+        with interrupt.kept_from_new_processes():  # a terminal's Ctrl-C reaches the whole process group
+            futures: list[Future] = [pool.submit(fn, item) for item in items]
         outs = []
         for f, item in zip(futures, items):
             try:
@@ -151,15 +152,19 @@ def map_on_scheduler(fn: Callable, items: list, scheduler: str, /, *,
 
         client = None
         try:
-            with interrupt.held_back() as pressed, dask.config.set(_LOCAL_CLUSTER_CONFIG):
+            with interrupt.held_back() as pressed, interrupt.kept_from_new_processes(), dask.config.set(_LOCAL_CLUSTER_CONFIG):
                 # silence_logs: also the workers' logs (their processes); dashboard_address ":0": Dask's HTTP
                 # server on a free port (None still asks for 8787, and warns on stderr when another cluster holds it)
                 cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                                        silence_logs=logging.CRITICAL)
                 client = Client(cluster)
-        except KeyboardInterrupt:  # a second Ctrl-C while the cluster starts: at once, as far as it got
+        except BaseException as exc:  # noqa: BLE001 - a second Ctrl-C, or a start that failed after a first one
+            if not (pressed or isinstance(exc, KeyboardInterrupt)):
+                raise
+            # a terminal's Ctrl-C also reaches the worker processes being spawned (its process group):
+            # one that dies of it fails the start ("Nanny failed to start"), which is the Ctrl-C's doing
             _stop_dask(client, cluster, [])
-            raise
+            raise KeyboardInterrupt from exc
     elif scheduler.startswith("tcp://"):
         try:
             client = Client(scheduler, timeout=10)

@@ -5,7 +5,8 @@ module was imported came out as ``ImportError: Exudyn could not import its compi
 ``RuntimeError: Error in Vector3DList::SetItem ... KeyboardInterrupt``. A run would report either as
 a failed trial (a traceback, or a study going on to its next trial). The command line's handler
 (``handler``) also notes the press; code that catches errors asks ``pressed()`` and stops as on
-Ctrl-C (``exubio.cli``, a study's trial). ``held_back`` keeps a first Ctrl-C for the end of a block."""
+Ctrl-C (``exubio.cli``, a study's trial). ``held_back`` keeps a first Ctrl-C for the end of a block,
+``kept_from_new_processes`` keeps it from the processes started in one."""
 from __future__ import annotations
 
 import signal
@@ -64,9 +65,31 @@ def held_back() -> Iterator[list]:
         if pressed:
             previous(signum, frame)
         pressed.append(signum)
+        _pressed.set()  # a press all the same (pressed()), held or not
 
     signal.signal(signal.SIGINT, hold)
     try:
         yield pressed
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+@contextmanager
+def kept_from_new_processes() -> Iterator[None]:
+    """While in the block, SIGINT is blocked in this thread's signal mask. Threads started meanwhile
+    inherit the mask, and processes they start keep it: a terminal's Ctrl-C goes to the whole process
+    group, and a Dask worker process that met it while it started (importing) printed its
+    KeyboardInterrupt traceback and failed the cluster's start ("Nanny failed to start"). Such workers
+    never see SIGINT; the run stops them itself. This process still gets a Ctrl-C meanwhile (another
+    thread takes it, or it waits until the block ends): use it inside ``held_back`` to note it."""
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    from multiprocessing import resource_tracker
+
+    resource_tracker.ensure_running()  # started here, first: its start unblocks SIGINT in the thread starting it
+    before = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, before)
