@@ -54,7 +54,8 @@ def held_back() -> Iterator[list]:
     multiprocessing's resource tracker warning of a leaked semaphore after exubio's one line; one
     that has started stops quietly (exubio.run.executors). A second Ctrl-C goes to the handler in
     place before (KeyboardInterrupt: at once). Only where a Python handler takes Ctrl-C, in the main
-    thread; elsewhere nothing changes."""
+    thread; elsewhere nothing changes. (Inside ``kept_from_new_processes`` the main thread blocks
+    SIGINT: a second Ctrl-C then comes at once only if another thread takes it, else at the end.)"""
     pressed: list = []
     previous = signal.getsignal(signal.SIGINT)
     if threading.current_thread() is not threading.main_thread() or not callable(previous):
