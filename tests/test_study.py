@@ -218,6 +218,46 @@ def test_local_dask_workers_keep_glibc_malloc_defaults_and_no_profiler():
     assert out == [(inherited, False), (inherited, False)]
 
 
+def _listening_addresses(pid: int | None = None) -> list[str]:
+    """The local IPv4/IPv6 addresses (hex, as /proc/net/tcp* gives them) of the listening TCP sockets
+    of the process ``pid`` (None: the calling one)."""
+    pid = pid or os.getpid()
+    inodes = set()
+    for fd in Path(f"/proc/{pid}/fd").iterdir():
+        try:
+            link = os.readlink(fd)
+        except OSError:
+            continue
+        if link.startswith("socket:["):
+            inodes.add(link[8:-1])
+    out = []
+    for table in ("tcp", "tcp6"):
+        path = Path(f"/proc/{pid}/net/{table}")
+        for line in path.read_text().splitlines()[1:] if path.exists() else []:
+            fields = line.split()
+            if fields[3] == "0A" and fields[9] in inodes:  # state LISTEN, a socket of this process
+                out.append(fields[1].split(":")[0])
+    return out
+
+
+def test_a_local_dask_cluster_listens_on_the_loopback_only():
+    """Its HTTP server listened on 0.0.0.0 (dashboard_address ":0"): open to the lab's network while
+    a study ran. Every listening socket of this process and of its workers is on 127.0.0.1 now."""
+    pytest.importorskip("distributed")
+    if not Path("/proc/self/net/tcp").exists():
+        pytest.skip("reads Linux's /proc/net/tcp")
+    from exubio.run.executors import map_on_scheduler
+
+    loopback = {"0100007F", "00000000000000000000000001000000"}  # 127.0.0.1, ::1 as /proc writes them
+    seen = []
+    out = map_on_scheduler(_listening_addresses, [None], "local:1", on_error=lambda item, exc: exc,
+                           on_done=lambda _: seen.append(_listening_addresses(os.getpid())))
+    assert not isinstance(out[0], Exception), out
+    here, worker = seen[0], out[0]  # this process's sockets while the cluster runs; the worker's own
+    assert here and set(here) <= loopback, here
+    assert worker and set(worker) <= loopback, worker
+
+
 def test_a_relabel_fixes_one_trial_of_a_session_without_touching_the_others(data, tmp_path):
     """trial_relabel reads one trial's labels as others, for that trial only; the session's other
     trials and its static are read as they are; a relabel naming a trial the session lacks is refused."""

@@ -153,10 +153,11 @@ def map_on_scheduler(fn: Callable, items: list, scheduler: str, /, *,
         client = None
         try:
             with interrupt.held_back() as pressed, interrupt.kept_from_new_processes(), dask.config.set(_LOCAL_CLUSTER_CONFIG):
-                # silence_logs: also the workers' logs (their processes); dashboard_address ":0": Dask's HTTP
-                # server on a free port (None still asks for 8787, and warns on stderr when another cluster holds it)
-                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                                       silence_logs=logging.CRITICAL)
+                # silence_logs: also the workers' logs (their processes); dashboard_address: Dask's HTTP server
+                # on a free port (None still asks for 8787, and warns on stderr when another cluster holds it),
+                # on the loopback only (":0" listened on every interface of the lab's machine)
+                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                       dashboard_address="127.0.0.1:0", silence_logs=logging.CRITICAL)
                 client = Client(cluster)
         except BaseException as exc:  # noqa: BLE001 - a second Ctrl-C, or a start that failed after a first one
             if not (pressed or isinstance(exc, KeyboardInterrupt)):
