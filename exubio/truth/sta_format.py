@@ -46,14 +46,18 @@ class BoneSegment:
     origin: np.ndarray
     landmarks: Mapping[str, np.ndarray]
     note: str = ""
+    markers_bone_raw: np.ndarray | None = None
+    """``mrk_raw`` where the file gives it: the markers before the file's gap filling (NaN in gaps),
+    on the same ``marker_names`` (a marker only in the raw set is added to both, NaN in ``mrk``)."""
 
     @property
     def n_frames(self) -> int:
         return int(self.rotation.shape[0])
 
-    def markers_lab(self) -> np.ndarray:
-        """Skin markers in the lab (n_frames, n_markers, 3) m."""
-        return np.einsum("nij,nkj->nki", self.rotation, self.markers_bone) + self.origin[:, None, :]
+    def markers_lab(self, *, raw: bool = False) -> np.ndarray:
+        """Skin markers in the lab (n_frames, n_markers, 3) m; ``raw``: before the file's gap filling."""
+        m = self.markers_bone_raw if raw and self.markers_bone_raw is not None else self.markers_bone
+        return np.einsum("nij,nkj->nki", self.rotation, m) + self.origin[:, None, :]
 
     def landmarks_lab(self) -> dict[str, np.ndarray]:
         """Each anatomical landmark carried by the bone's pose into the lab, (n_frames, 3) m."""
@@ -129,15 +133,24 @@ def _segment(path: Path, key: str, raw: Any) -> BoneSegment:
     if origin.shape[0] != n:
         raise InputError(f"{path}: {key}.gta has {origin.shape[0]} frames, {key}.gRa {n}")
     mrk = raw.mrk
-    marker_names = tuple(_fields(mrk))
+    mrk_raw = raw.mrk_raw if "mrk_raw" in names else None
+    marker_names = tuple(dict.fromkeys(_fields(mrk) + (_fields(mrk_raw) if mrk_raw is not None else [])))
     if not marker_names:
         raise InputError(f"{path}: {key}.mrk holds no marker")
-    markers = np.empty((n, len(marker_names), 3))
-    for j, m in enumerate(marker_names):
-        a = _array(getattr(mrk, m), f"{key}.mrk.{m}", (3,), path)
-        if a.shape[0] != n:
-            raise InputError(f"{path}: {key}.mrk.{m} has {a.shape[0]} frames, {key}.gRa {n}")
-        markers[:, j] = a * _MM
+
+    def read_set(struct: Any, field_name: str) -> np.ndarray:
+        out = np.full((n, len(marker_names), 3), np.nan)
+        for j, m in enumerate(marker_names):
+            if m not in _fields(struct):
+                continue
+            a = _array(getattr(struct, m), f"{key}.{field_name}.{m}", (3,), path)
+            if a.shape[0] != n:
+                raise InputError(f"{path}: {key}.{field_name}.{m} has {a.shape[0]} frames, {key}.gRa {n}")
+            out[:, j] = a * _MM
+        return out
+
+    markers = read_set(mrk, "mrk")
+    markers_raw = read_set(mrk_raw, "mrk_raw") if mrk_raw is not None else None
     landmarks: dict[str, np.ndarray] = {}
     if "ALs" in names:
         for lm in _fields(raw.ALs):
@@ -146,7 +159,7 @@ def _segment(path: Path, key: str, raw: Any) -> BoneSegment:
                 raise InputError(f"{path}: {key}.ALs.{lm} has {v.size} values; expected 3 (mm)")
             landmarks[lm] = v * _MM
     note = str(raw.warning) if "warning" in names else ""
-    return BoneSegment(bone.lower(), side, marker_names, markers, rotation, origin, landmarks, note)
+    return BoneSegment(bone.lower(), side, marker_names, markers, rotation, origin, landmarks, note, markers_raw)
 
 
 def read_sta_trial(path: str | Path, /) -> BoneTrial:
