@@ -166,7 +166,7 @@ def angle_status(reconstruction: Reconstruction, model: Model | None = None, pro
     dt = float(np.median(np.diff(reconstruction.time_s))) if reconstruction.n_frames > 1 else 1.0
     return angle_determinacy(kin, tracked_points(kin, protocol), reconstruction.q_rad, present, protocol.weights,
                              held=held, locked=not_solved_mask(model, protocol, kin) & ~held,
-                             every=max(1, int(round(0.05 / dt))))
+                             every=max(1, int(round(0.05 / dt))), residuals_m=reconstruction.residuals_m)
 
 
 def to_dataframe(reconstruction: Reconstruction, /, *, model: Model | None = None,

@@ -73,6 +73,7 @@ __all__ = [
     "joint_angles",
     "measured_isb_joints",
     "anatomical_frames",
+    "angles_of_frames",
     "euler_angles",
     "humerothoracic_elevation",
     "isb_angles",
@@ -378,6 +379,30 @@ _DISTAL = {"elbow_flexion": "elbow_flexion", "forearm_pronation": "pronation", "
 """Anatomical angle -> the model coordinate it is."""
 
 
+_FRAME_ANGLE_SETS: dict[str, tuple[str, str, bool]] = {
+    # angle set: (joint, sequence, middle angle <= 0), in ANATOMICAL_ANGLES' order
+    "SC": ("SC", "YXZ", False), "AC": ("AC", "YXZ", False), "ST": ("ST", "YXZ", False),
+    "GH": ("GH", "YXY", True), "GH_phadke": ("GH", "XZY", False), "HT": ("HT", "YXY", True),
+}
+
+
+def angles_of_frames(Rg: Mapping[str, np.ndarray], /) -> dict[str, np.ndarray]:
+    """The shoulder's anatomical angle sets (ANATOMICAL_ANGLES: SC, AC, ST, GH in ISB's and Phadke's
+    sequences, HT; each (..., 3) rad) of global ISB frames ``Rg`` (segment -> (..., 3, 3); "thorax"
+    is the identity where absent). A set whose two frames are not both given is left out, so bone
+    truth with a scapula and a humerus gives ST, GH, GH_phadke and HT."""
+    frames = dict(Rg)
+    if "thorax" not in frames:
+        frames["thorax"] = np.eye(3)
+    out = {}
+    for key, (joint, sequence, negative) in _FRAME_ANGLE_SETS.items():
+        prox, dist = _JOINTS[joint]
+        if prox in frames and dist in frames:
+            rel = np.swapaxes(frames[prox], -1, -2) @ frames[dist]
+            out[key] = euler_angles(rel, sequence, negative_middle=negative)
+    return out
+
+
 def anatomical_table(model: Model, q: np.ndarray, /, *, kinematics: Kinematics | None = None,
                      unwrap: bool = True) -> tuple[tuple[str, ...], np.ndarray]:
     """The anatomical angles (ANATOMICAL_ANGLES) of q (n, m) or (m,): (column names, angles
@@ -392,12 +417,9 @@ def anatomical_table(model: Model, q: np.ndarray, /, *, kinematics: Kinematics |
     for a in range(0, qq.shape[0], ISB_BLOCK_FRAMES):
         part = qq[a:a + ISB_BLOCK_FRAMES]
         Rg = segment_anatomical_rotations(model, part, kinematics=kin, frames=frames)
-        rel = {joint: np.swapaxes(Rg[p], -1, -2) @ Rg[d] for joint, (p, d) in _JOINTS.items()}
-        cols = [euler_angles(rel["SC"], "YXZ"), euler_angles(rel["AC"], "YXZ"), euler_angles(rel["ST"], "YXZ"),
-                euler_angles(rel["GH"], "YXY", negative_middle=True), euler_angles(rel["GH"], "XZY"),
-                euler_angles(rel["HT"], "YXY", negative_middle=True)]
+        cols = angles_of_frames(Rg)
         distal = np.stack([part[:, names.index(c)] for c in _DISTAL.values()], axis=-1)
-        out[a:a + ISB_BLOCK_FRAMES] = np.concatenate(cols + [distal], axis=-1)
+        out[a:a + ISB_BLOCK_FRAMES] = np.concatenate([cols[j] for j in _FRAME_ANGLE_SETS] + [distal], axis=-1)
     if unwrap and out.shape[0] > 1:
         out = np.unwrap(out, axis=0)
     return ANATOMICAL_COLUMNS, (out[0] if single else out)

@@ -181,7 +181,8 @@ def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recon
                                   every=determinacy_every) for r in recons}
     held = held_mask(model, protocol)
     angles = {r.method: angle_determinacy(kin, points, r.q_rad, targets.present, protocol.weights, held=held,
-                                          locked=excluded & ~held, every=determinacy_every) for r in recons}
+                                          locked=excluded & ~held, every=determinacy_every,
+                                          residuals_m=r.residuals_m) for r in recons}
     structural = angle_status_of_protocol(model, protocol, kin=kin)
     unmeasurable = coordinates_not_measured_by_protocol(model, protocol, kin=kin)
     lims = {r.method: limit_report(r.q_rad, model.coordinate_ranges_rad, names, exclude=not_solved,

@@ -207,6 +207,8 @@ class AngleDeterminacy:
     held_share: np.ndarray
     status: np.ndarray
     rule: Mapping[str, str]
+    uncertainty_rad: np.ndarray | None = None  # (n, a) standard uncertainty (exubio.trust.angle_uncertainty)
+    near_gimbal_lock: np.ndarray | None = None  # (n, a) bool: first/third angle of a set near its gimbal lock
 
     def fraction(self, status: "AngleStatus") -> dict[str, float]:
         return {n: float((self.status[:, j] == status).mean()) for j, n in enumerate(self.names)}
@@ -239,7 +241,30 @@ class AngleDeterminacy:
             "median_gain_deg_per_mm": {n: (None if med[j] >= 1e9 else round(float(med[j]), 4))
                                        for j, n in enumerate(self.names)},
             "rules": dict(self.rule),
+            **self._uncertainty_dict(),
         }
+
+    def _uncertainty_dict(self) -> dict:
+        if self.uncertainty_rad is None:
+            return {}
+        from exubio.trust.angle_uncertainty import U_BOUND_DEG, UNCERTAINTY_DEFINITION
+
+        u = np.degrees(self.uncertainty_rad)
+        meas = self.status == AngleStatus.MEASURED
+        med = {}
+        for j, n in enumerate(self.names):
+            col = u[meas[:, j], j]
+            col = col[np.isfinite(col)]
+            med[n] = round(float(np.median(col)), 3) if col.size else None
+        gimbal = {} if self.near_gimbal_lock is None else {
+            n: round(float(self.near_gimbal_lock[:, j].mean()), 4) for j, n in enumerate(self.names)
+            if self.near_gimbal_lock[:, j].any()}
+        above = {n: round(float((u[:, j] > U_BOUND_DEG).mean()), 4) for j, n in enumerate(self.names)
+                 if (u[:, j] > U_BOUND_DEG).any()}
+        return {"uncertainty_definition": UNCERTAINTY_DEFINITION,
+                "median_uncertainty_deg_measured_frames": med,
+                "frames_near_gimbal_lock_fraction": gimbal,
+                "frames_uncertainty_above_bound_fraction": above}
 
 
 def _angle_jacobian(table, q: np.ndarray) -> np.ndarray:
@@ -297,12 +322,20 @@ def _covariance(N, M, S, m: int, free: np.ndarray, prior: float | None):
 
 def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present: np.ndarray, weights: np.ndarray, /,
                       *, held: np.ndarray, locked: np.ndarray, every: int = 1,
-                      rules: Mapping[str, str] | None = None) -> AngleDeterminacy:
+                      rules: Mapping[str, str] | None = None, amplitude=None,
+                      noise_mm: float | None = None, residuals_m: np.ndarray | None = None) -> AngleDeterminacy:
     """Measured / modelled / not measured for every anatomical angle (exubio.model.angles.ANATOMICAL_ANGLES)
     in the frames of q (n, m), computed every ``every``-th frame and copied to the frames between.
     held: (m,) bool, coordinates a protocol rule holds; locked: (m,) bool, coordinates of segments
-    no marker observes; rules: the rule's name per held coordinate (default 'hold')."""
-    from exubio.model.angles import anatomical_table
+    no marker observes; rules: the rule's name per held coordinate (default 'hold'). Each angle's
+    standard uncertainty (exubio.trust.angle_uncertainty: ``noise_mm`` of marker noise and the STA
+    ``amplitude`` model, default the shipped one; the model's misfit where ``residuals_m`` (n, k) is
+    given) is computed with it; an angle is not measured
+    where it exceeds the bound or where its sequence is near its gimbal lock."""
+    from exubio.model.angles import anatomical_table, segment_anatomical_rotations
+    from exubio.trust import angle_uncertainty as AU
+    amplitude = amplitude if amplitude is not None else _shipped_amplitude()
+    noise_mm = AU.NOISE_MM if noise_mm is None else float(noise_mm)
 
     model = kin.model
     n, m = q.shape
@@ -315,6 +348,7 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
     qs = q[sel]
     ok = np.isfinite(qs).all(axis=1)
     gain = np.full((len(sel), a), np.inf)
+    unc = np.full((len(sel), a), np.inf)
     share = np.zeros((len(sel), a))
     dep_locked = np.zeros((len(sel), a), dtype=bool)
     free_actual = np.flatnonzero(~held & ~locked)
@@ -332,6 +366,14 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
         g = np.degrees(np.sqrt(np.maximum(var, 0.0))) / 1000.0
         unseen = (np.abs(np.einsum("bam,bmr->bar", D, blind)) > 1e-6).any(axis=2) if blind.shape[-1] else False
         gain[part] = np.where(unseen, np.inf, g)
+        K = AU.sensitivity(kin, points, qf, pres, weights, free_actual)
+        frames_isb = segment_anatomical_rotations(model, qf, kinematics=kin)
+        Sigma = AU.marker_covariance(kin, points, qf, pres, amplitude, noise_mm=noise_mm,
+                                     anatomical={s_: frames_isb[s_] for s_ in ("scapula", "humerus") if s_ in frames_isb},
+                                     residual_m=None if residuals_m is None else residuals_m[sel[part]])
+        DK = D @ K
+        var_u = np.einsum("bai,bij,baj->ba", DK, Sigma, DK)
+        unc[part] = np.where(unseen, np.inf, np.sqrt(np.maximum(var_u, 0.0)))
         dep_locked[part] = (np.abs(D[:, :, locked]) > 1e-6).any(axis=2) if locked.any() else False
         if held.any():
             N, M, S = _marker_information(kin, points, qf, pres, weights, free_released)
@@ -344,10 +386,15 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
             with np.errstate(invalid="ignore", divide="ignore"):
                 share[part] = np.where(var_r > 0, np.clip(explained / var_r, 0.0, 1.0), 0.0)
     idx = np.clip(np.round(np.arange(n) / max(int(every), 1)).astype(int), 0, len(sel) - 1)
-    gain, share, dep_locked = gain[idx], share[idx], dep_locked[idx]
+    gain, share, dep_locked, unc = gain[idx], share[idx], dep_locked[idx], unc[idx]
+    with np.errstate(invalid="ignore"):
+        gimbal = AU.gimbal_mask(table(np.where(np.isfinite(q), q, 0.0))) & np.isfinite(q).all(axis=1)[:, None]
     status = np.full((n, a), AngleStatus.MEASURED, dtype=np.int8)
     status[share > MODELLED_SHARE] = AngleStatus.MODELLED
     status[(gain > UNDETERMINED_DEG_PER_MM) & (share <= MODELLED_SHARE)] = AngleStatus.NOT_MEASURED
+    with np.errstate(invalid="ignore"):
+        status[(np.degrees(unc) > AU.U_BOUND_DEG) & (status == AngleStatus.MEASURED)] = AngleStatus.NOT_MEASURED
+    status[gimbal & (status == AngleStatus.MEASURED)] = AngleStatus.NOT_MEASURED
     status[dep_locked] = AngleStatus.NOT_MEASURED
     status[~np.isfinite(q).all(axis=1)] = AngleStatus.NOT_MEASURED
     names_q = model.coordinate_names
@@ -357,4 +404,16 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
     for j, nm in enumerate(names):
         if (status[:, j] == AngleStatus.MODELLED).any():
             rule_of[nm] = "; ".join(rules.get(h, f"hold: {h} fixed at its reference value") for h in held_names)
-    return AngleDeterminacy(tuple(names), gain, share, status, rule_of)
+    return AngleDeterminacy(tuple(names), gain, share, status, rule_of, unc, gimbal)
+
+
+_AMPLITUDE: list = []
+
+
+def _shipped_amplitude():
+    """The shipped STA amplitude model, read once per process."""
+    if not _AMPLITUDE:
+        from exubio.trust.sta_amplitude import load_sta_amplitude
+
+        _AMPLITUDE.append(load_sta_amplitude())
+    return _AMPLITUDE[0]

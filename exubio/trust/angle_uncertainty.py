@@ -1,0 +1,165 @@
+"""A standard uncertainty (rad) on every anatomical angle in every frame, and the frames where an
+angle's sequence is near its gimbal lock.
+
+The uncertainty is the first-order propagation of the markers' errors through the reconstruction:
+at a pose q the weighted, constrained least-squares step maps marker displacements dm to coordinate
+changes dq = K dm, K = N (A^T W A)^+ A^T W with A = J N (N: the null space of the ellipsoid
+constraints' G; held and locked coordinates left out; exubio.trust.observability), and the angles
+move by D dq (D = d angle / d q). The markers' error covariance has two parts:
+
+* measurement noise, ``NOISE_MM`` per coordinate, independent between markers;
+* the model's misfit, where the reconstruction shows one: a segment whose markers lie farther from
+  their model points than noise and the artefact's non-rigid part explain (the excess mean square
+  residual v per coordinate) may be off by that much as a whole, so it adds a rigid rotation of SD
+  sqrt(v)/rho per axis (rho: the RMS distance of its markers from their centroid) and a translation
+  of SD sqrt(v). A model that cannot follow the bones (a girdle that does not fit the subject, a
+  thorax that moved while assumed still) thus widens the angles it moves, frame by frame;
+* the soft-tissue artefact (``exubio.trust.sta_amplitude``, fitted on bone pins): each segment's
+  markers move together by a rigid rotation about their centroid and a translation (standard
+  deviations per ISB axis, proportional to the motion away from the reference posture), plus
+  independent non-rigid parts. The rigid part is what averaging over a cluster cannot remove: it is
+  why an angle's error under real skin is far larger than its marker residual suggests.
+
+The variance is D K Sigma K^T D^T. It is not the residual of this trial: a trial whose markers fit
+the model well can still carry a large rigid artefact, which no residual shows.
+
+An angle is not ``measured`` in a frame where its uncertainty exceeds ``U_BOUND_DEG`` or where its
+sequence is within ``GIMBAL_MARGIN_DEG`` of its gimbal lock (first and third angle only: the middle
+angle stays defined): ISB GH and HT Y-X'-Y'' at elevations below the margin (the plane of elevation
+and the axial rotation of an arm at the side are not defined), a Cardan sequence with its middle
+angle near +-90 deg.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from exubio.model.kinematics import Kinematics, PointSet
+from exubio.trust.sta_amplitude import STAAmplitude
+
+__all__ = ["NOISE_MM", "U_BOUND_DEG", "GIMBAL_MARGIN_DEG", "marker_covariance", "sensitivity", "gimbal_mask",
+           "UNCERTAINTY_DEFINITION"]
+
+NOISE_MM = 1.0
+"""Marker measurement noise (SD per coordinate, mm) after the low-pass filter: optical systems
+reconstruct a marker to 0.2-1 mm; 1 mm is the conservative end."""
+
+U_BOUND_DEG = 10.0
+"""An angle whose standard uncertainty exceeds this is not measured in that frame: its 95 % band
+(+-2u) would then span more than 40 deg, wider than the differences shoulder studies report between
+groups or tasks (e.g. 5-15 deg of scapular upward rotation between patients and controls)."""
+
+GIMBAL_MARGIN_DEG = 25.0
+"""Within this of a sequence's gimbal lock its first and third angles are not measured. At 25 deg
+the two angles' sensitivity to the segment's orientation is 1/sin(25 deg) = 2.4 times its value
+away from the lock; the ISB GH Y-X'-Y'' plane of elevation and axial rotation errors of 5-7 deg at
+13-21 deg of GH elevation (SIER, issue 33) come from inside this band."""
+
+UNCERTAINTY_DEFINITION = (
+    f"standard uncertainty (1 SD, deg): {NOISE_MM:g} mm marker noise and the soft-tissue artefact model fitted on "
+    "bone pins (rigid cluster rotation and translation plus non-rigid parts per segment, growing with the motion "
+    "from the reference posture; exubio.trust.sta_amplitude), carried through the reconstruction's first-order "
+    f"sensitivity; an angle is not measured where u > {U_BOUND_DEG:g} deg or within {GIMBAL_MARGIN_DEG:g} deg of its "
+    "sequence's gimbal lock")
+
+_SETS = (("SC", "YXZ"), ("AC", "YXZ"), ("ST", "YXZ"), ("GH", "YXY"), ("GH_phadke", "XZY"), ("HT", "YXY"))
+
+
+def gimbal_mask(angles: np.ndarray, /) -> np.ndarray:
+    """(n, 22) bool: the first and third angle of each shoulder set (ANATOMICAL_ANGLES order: the
+    first 18 columns, six sets of three) near its sequence's gimbal lock; distal angles never."""
+    a = np.atleast_2d(angles)
+    out = np.zeros(a.shape, dtype=bool)
+    s = np.sin(np.radians(GIMBAL_MARGIN_DEG))
+    for i, (_, seq) in enumerate(_SETS):
+        mid = a[:, 3 * i + 1]
+        near = np.abs(np.sin(mid)) < s if seq[0] == seq[2] else np.abs(np.cos(mid)) < s
+        out[:, 3 * i] = near
+        out[:, 3 * i + 2] = near
+    return out
+
+
+def sensitivity(kin: Kinematics, points: PointSet, qf: np.ndarray, present: np.ndarray, weights: np.ndarray,
+                free: np.ndarray) -> np.ndarray:
+    """K (b, m, 3k): coordinate change per marker displacement of the weighted, constrained
+    least-squares step at poses qf (b, m); zero rows for coordinates not in ``free``."""
+    b, m = qf.shape
+    w = np.where(present, weights[None, :], 0.0)
+    k = w.shape[1]
+    J = kin.point_jacobian(qf, points)[..., free].reshape(b, 3 * k, len(free))
+    w3 = np.repeat(w, 3, axis=1)
+    G = kin.G(qf)[..., free]
+    _, _, Vt = np.linalg.svd(G)
+    N = np.swapaxes(Vt[:, G.shape[1]:, :], 1, 2)
+    A = J @ N
+    M = np.swapaxes(A, 1, 2) @ (A * w3[..., None])
+    Minv = np.linalg.pinv(M, rcond=1e-12, hermitian=True)
+    Kf = N @ Minv @ (np.swapaxes(A, 1, 2) * w3[:, None, :])
+    K = np.zeros((b, m, 3 * k))
+    K[:, free, :] = Kf
+    return K
+
+
+def _skew(r: np.ndarray) -> np.ndarray:
+    z = np.zeros(r.shape[:-1])
+    return np.stack([np.stack([z, -r[..., 2], r[..., 1]], -1), np.stack([r[..., 2], z, -r[..., 0]], -1),
+                     np.stack([-r[..., 1], r[..., 0], z], -1)], -2)
+
+
+def _rotation_angle(R: np.ndarray) -> np.ndarray:
+    return np.arccos(np.clip((np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0))
+
+
+def marker_covariance(kin: Kinematics, points: PointSet, qf: np.ndarray, present: np.ndarray,
+                      amplitude: STAAmplitude, /, *, noise_mm: float = NOISE_MM,
+                      anatomical: dict[str, np.ndarray] | None = None,
+                      residual_m: np.ndarray | None = None) -> np.ndarray:
+    """Sigma (b, 3k, 3k) m^2: the markers' error covariance at poses qf (module docstring). Missing
+    markers carry no weight in K, so their rows do not matter. ``anatomical``: the ISB frames of the
+    scapula and humerus (segment -> (b, 3, 3)) where the caller has them (their axes are the
+    amplitudes' axes); other segments use their model frames. ``residual_m`` (b, k): the
+    reconstruction's marker residuals, for the misfit term (none without it)."""
+    model = kin.model
+    b = qf.shape[0]
+    k = len(points.segment_index)
+    R, _ = kin.poses(qf)  # (b, s, 3, 3)
+    P = kin.points(qf, points)  # (b, k, 3)
+    sigma = np.zeros((b, 3 * k, 3 * k))
+    idx = np.arange(3 * k)
+    sigma[:, idx, idx] = (noise_mm * 1e-3) ** 2
+    names = [s.name for s in model.segments]
+    hum = names.index("humerus") if "humerus" in names else None
+    theta_hum = _rotation_angle(R[:, hum]) if hum is not None else np.zeros(b)
+    for s_idx in np.unique(points.segment_index):
+        sel = np.flatnonzero(points.segment_index == s_idx)
+        seg = names[s_idx]
+        rot, tra, nonrigid, measured = amplitude.of(seg)
+        theta = theta_hum if (measured or seg == "clavicle") else _rotation_angle(R[:, s_idx])
+        axes = anatomical[seg] if anatomical is not None and seg in anatomical else R[:, s_idx]
+        ok = present[:, sel]
+        cnt = np.maximum(ok.sum(axis=1), 1)
+        c = (np.where(ok[..., None], P[:, sel], 0.0)).sum(axis=1) / cnt[:, None]
+        r = P[:, sel] - c[:, None, :]  # (b, j, 3)
+        B = np.concatenate([-_skew(r), np.broadcast_to(np.eye(3), r.shape + (3,))], axis=-1)  # (b, j, 3, 6)
+        S_rot = axes @ (np.diag(rot ** 2)[None] * 1.0) @ np.swapaxes(axes, -1, -2)
+        S_tra = axes @ np.diag(tra ** 2)[None] @ np.swapaxes(axes, -1, -2)
+        S6 = np.zeros((b, 6, 6))
+        S6[:, :3, :3] = S_rot
+        S6[:, 3:, 3:] = S_tra
+        S6 *= (theta ** 2)[:, None, None]
+        if residual_m is not None:
+            res = np.where(ok, residual_m[:, sel], np.nan)
+            with np.errstate(invalid="ignore"), np.testing.suppress_warnings() as sup:
+                sup.filter(RuntimeWarning)
+                expected = (noise_mm * 1e-3) ** 2 + np.mean(nonrigid ** 2) * theta ** 2
+                v = np.nan_to_num(np.nanmean(res ** 2, axis=1) / 3.0 - expected, nan=0.0)
+            v = np.maximum(v, 0.0)
+            rho2 = np.maximum((np.where(ok[..., None], r, 0.0) ** 2).sum(axis=(1, 2)) / cnt, 1e-4)
+            S6[:, :3, :3] += (v / rho2)[:, None, None] * np.eye(3)
+            S6[:, 3:, 3:] += v[:, None, None] * np.eye(3)
+        C = np.einsum("bixk,bkl,bjyl->bixjy", B, S6, B)  # (b, j, 3, j, 3)
+        S_nr = axes @ np.diag(nonrigid ** 2)[None] @ np.swapaxes(axes, -1, -2) * (theta ** 2)[:, None, None]
+        for a_i, mi in enumerate(sel):
+            C[:, a_i, :, a_i, :] += S_nr
+        rows = (3 * sel[:, None] + np.arange(3)[None, :]).reshape(-1)
+        sigma[:, rows[:, None], rows[None, :]] += C.reshape(b, 3 * len(sel), 3 * len(sel))
+    return sigma

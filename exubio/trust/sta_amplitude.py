@@ -1,0 +1,81 @@
+"""The soft-tissue-artefact amplitude model behind every angle's uncertainty: per segment, the
+standard deviation per unit of motion of its markers' rigid cluster rotation (rad per rad, about the
+segment's ISB axes), of the cluster's translation (m per rad) and of what no rigid motion explains
+(m per rad, per coordinate of each marker). Fitted on bone-referenced trials by
+``exubio.truth.sta_amplitude`` (how, and the driver of the motion, there); the shipped coefficients
+are those of the S2M intracortical-pin trials (``exubio/data/sta_amplitude_s2m.json``, with its
+citation).
+
+Segments without bone data (clavicle, ulna, radius, hand) take the humerus's coefficients, driven by
+their own rotation from the reference posture: an assumption, said in every output's definition.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+from exubio.errors import InputError
+
+__all__ = ["STAAmplitude", "load_sta_amplitude", "SEGMENTS_WITH_DATA", "BORROWED_FROM", "SHIPPED"]
+
+SEGMENTS_WITH_DATA = ("scapula", "humerus")
+BORROWED_FROM = "humerus"
+"""The segment whose coefficients a segment without bone data takes."""
+SHIPPED = "sta_amplitude_s2m.json"
+
+
+@dataclass(frozen=True, eq=False)
+class STAAmplitude:
+    """Per segment (3,) arrays: ``rotation`` rad/rad, ``translation`` m/rad, ``nonrigid`` m/rad."""
+
+    rotation: Mapping[str, np.ndarray]
+    translation: Mapping[str, np.ndarray]
+    nonrigid: Mapping[str, np.ndarray]
+    source: str = ""
+    citation: str = ""
+    extra: Mapping[str, object] = field(default_factory=dict)
+
+    def of(self, segment: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+        """(rotation, translation, nonrigid, from bone data) of ``segment``, borrowed where it has none."""
+        if segment in self.rotation:
+            return (np.asarray(self.rotation[segment]), np.asarray(self.translation[segment]),
+                    np.asarray(self.nonrigid[segment]), True)
+        b = BORROWED_FROM if BORROWED_FROM in self.rotation else next(iter(self.rotation))
+        return np.asarray(self.rotation[b]), np.asarray(self.translation[b]), np.asarray(self.nonrigid[b]), False
+
+    def to_json(self) -> dict:
+        r = lambda d: {k: [round(float(x), 6) for x in np.asarray(v)] for k, v in d.items()}
+        return {"schema": "exubio sta amplitude 1", "source": self.source,
+                "units": {"rotation": "rad per rad of driver (SD per ISB axis X, Y, Z of the segment)",
+                          "translation": "m per rad of driver (SD per axis)",
+                          "nonrigid": "m per rad of driver (SD per coordinate of each marker)"},
+                "driver": "the humerus's rotation angle from its rest orientation (rad)",
+                "rotation": r(self.rotation), "translation": r(self.translation), "nonrigid": r(self.nonrigid)}
+
+
+def load_sta_amplitude(path: str | Path | None = None, /) -> STAAmplitude:
+    """The shipped model (S2M pins) or a lab's JSON written by ``exubio.truth.sta_amplitude``."""
+    if path is None:
+        text = resources.files("exubio.data").joinpath(SHIPPED).read_text()
+        where = f"exubio/data/{SHIPPED}"
+    else:
+        where = str(path)
+        try:
+            text = Path(path).read_text()
+        except OSError as exc:
+            raise InputError(f"{path}: cannot read the STA amplitude model ({exc.strerror})") from None
+    try:
+        data = json.loads(text)
+        out = {}
+        for key in ("rotation", "translation", "nonrigid"):
+            out[key] = {seg: np.asarray(v, dtype=float).reshape(3) for seg, v in data[key].items()}
+    except (ValueError, KeyError, TypeError) as exc:
+        raise InputError(f"{where}: not an STA amplitude model ({type(exc).__name__}: {exc}); expected the JSON "
+                         "that exubio.truth.sta_amplitude.write_sta_amplitude writes") from None
+    return STAAmplitude(out["rotation"], out["translation"], out["nonrigid"], str(data.get("source", "")),
+                        str(data.get("citation", "")))

@@ -1,0 +1,129 @@
+"""A bone-referenced trial reconstructed by PF and LS as a lab would (``exubio.truth.lab_run``), and
+each anatomical angle compared with the bone's: RMSE, maximum error and the coverage of the angle's
+stated uncertainty (the fraction of its measured frames where the truth lies within +-2u).
+
+Only frames where the angle is ``measured`` (exubio.trust.observability) enter the figures, as in
+every verdict; ``measured_fraction`` says how many those are.
+"""
+from __future__ import annotations
+
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from ..model.angles import ANATOMICAL_COLUMNS, anatomical_table, angles_of_frames
+from .lab_run import BoneLabRun
+
+__all__ = ["AngleError", "TruthComparison", "TRUTH_ANGLES", "truth_angles", "compare_bone_trial", "angle_errors"]
+
+TRUTH_SETS = ("ST", "GH", "GH_phadke", "HT")
+TRUTH_ANGLES: tuple[str, ...] = tuple(c for c in ANATOMICAL_COLUMNS if c.startswith(("ST_", "GH_", "HT_")))
+"""The angles bone truth of a scapula and a humerus defines (ST, GH ISB and Phadke, HT)."""
+
+
+@dataclass(frozen=True)
+class AngleError:
+    """One angle's error against bone, over its measured frames (degrees)."""
+
+    rmse_deg: float
+    max_deg: float
+    coverage: float | None
+    measured_fraction: float
+    median_u_deg: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class TruthComparison:
+    """Per method ("pf", "ls") and angle its AngleError; what was assumed; each method's verdict."""
+
+    file: str
+    task: str
+    assumption: str
+    angles: Mapping[str, Mapping[str, AngleError]]
+    verdicts: Mapping[str, str]
+    n_frames: int
+    rate_hz: float
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+    def to_json(self) -> dict:
+        return {"file": self.file, "task": self.task, "assumption": self.assumption, "n_frames": self.n_frames,
+                "rate_hz": self.rate_hz, "verdicts": dict(self.verdicts), "notes": list(self.notes),
+                "angles": {a: {m: {"rmse_deg": e.rmse_deg, "max_deg": e.max_deg, "coverage": e.coverage,
+                                   "measured_fraction": e.measured_fraction, "median_u_deg": e.median_u_deg}
+                               for m, e in per.items()} for a, per in self.angles.items()}}
+
+
+def truth_angles(run: BoneLabRun) -> dict[str, np.ndarray]:
+    """The bone's anatomical angles (rad, (n,) each) by column name."""
+    sets = angles_of_frames(run.truth)
+    out: dict[str, np.ndarray] = {}
+    cols = iter(TRUTH_ANGLES)
+    for key in TRUTH_SETS:
+        ang = np.unwrap(sets[key], axis=0) if sets[key].shape[0] > 1 else sets[key]
+        for j in range(3):
+            out[next(cols)] = ang[:, j]
+    return out
+
+
+def _wrap(d: np.ndarray) -> np.ndarray:
+    return (d + np.pi) % (2 * np.pi) - np.pi
+
+
+def angle_errors(estimate: np.ndarray, truth: np.ndarray, measured: np.ndarray, u: np.ndarray | None) -> AngleError:
+    """RMSE, max, coverage of +-2u over the measured frames where both are finite."""
+    err = np.abs(_wrap(np.asarray(estimate) - np.asarray(truth)))
+    ok = measured & np.isfinite(err)
+    frac = float(ok.mean()) if ok.size else 0.0
+    if not ok.any():
+        return AngleError(float("nan"), float("nan"), None, frac, None)
+    e = err[ok]
+    cov = med_u = None
+    if u is not None:
+        uu = np.asarray(u)[ok]
+        cov = float(np.mean(e <= 2 * uu))
+        med_u = float(np.degrees(np.median(uu)))
+    return AngleError(float(np.degrees(np.sqrt(np.mean(e ** 2)))), float(np.degrees(e.max())), cov, frac, med_u)
+
+
+def _protocol(run: BoneLabRun, model):
+    import yaml
+
+    from ..api import load_protocol
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / f"{run.protocol_mapping['name']}.yaml"
+        path.write_text(yaml.safe_dump(dict(run.protocol_mapping), sort_keys=False))
+        return load_protocol(path, model=model)
+
+
+def compare_bone_trial(run: BoneLabRun, /, *, methods: Sequence[str] = ("pf", "ls")) -> tuple[TruthComparison, dict]:
+    """Reconstruct ``run`` with each method (its verdict as ``exubio reconstruct`` gives it) and
+    compare its angles with the bone's. Returns the comparison and the reconstructions by method."""
+    from ..api import assess, reconstruct
+    from ..model.load import model_from_mapping
+
+    model = model_from_mapping(dict(run.model_mapping), f"{run.trial.path} (subject model)",
+                               name=str(run.model_mapping["name"]))
+    protocol = _protocol(run, model)
+    recs = {m: reconstruct(run.trajectories, model, protocol, method=m) for m in methods}
+    assessment = assess(run.trajectories, list(recs.values()), model, protocol)
+    truth = truth_angles(run)
+    per_angle: dict[str, dict[str, AngleError]] = {a: {} for a in TRUTH_ANGLES}
+    verdicts = {}
+    for m, rec in recs.items():
+        q = assessment.quality[m]
+        verdicts[m] = q.verdict.label if hasattr(q.verdict, "label") else str(q.verdict)
+        names, table = anatomical_table(model, rec.q_rad)
+        det = (assessment.angles or {}).get(m)
+        for a in TRUTH_ANGLES:
+            j = names.index(a)
+            measured = (np.ones(rec.n_frames, bool) if det is None
+                        else det.status[:, det.names.index(a)] == 0)
+            u = None if det is None or det.uncertainty_rad is None else det.uncertainty_rad[:, det.names.index(a)]
+            per_angle[a][m] = angle_errors(table[:, j], truth[a], measured, u)
+    comp = TruthComparison(str(run.trial.path), f"{run.trial.lab} {run.trial.task}", run.assumption.text, per_angle,
+                           verdicts, run.trial.n_frames, run.trajectories.rate_hz)
+    return comp, recs

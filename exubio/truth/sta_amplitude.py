@@ -1,0 +1,140 @@
+"""How large a segment's soft-tissue artefact (STA) is, measured on bone-referenced trials: the
+amplitude model behind every angle's stated uncertainty (``exubio.trust.angle_uncertainty``).
+
+For each bone and frame, the skin markers in the bone's frame are fitted by a rigid motion of their
+rest shape (Kabsch, ``exubio.calibration.cluster``): a rotation of the cluster about its centroid
+(a rotation vector, in the bone's ISB axes), a translation of the centroid, and what no rigid motion
+explains (non-rigid, per marker). The rest shape is the markers' mean over the rest window, where a
+static calibration puts the model points, so the artefact is zero there by construction.
+
+The artefact grows with the motion away from the calibration posture; the driver is the humerus's
+rotation angle from its rest orientation in the lab (theta, rad): the arm's motion drags the skin
+over the scapula and turns the upper arm's skin about the humerus. Per bone and axis the amplitude is
+the RMS ratio (zero intercept: no artefact at rest)
+
+    a = sqrt(sum_t x(t)^2 / sum_t theta(t)^2)
+
+of the rotation vector's component (rad per rad), of the translation's (m per rad), and of the
+non-rigid displacement's per coordinate (m per rad). The STA at a posture is then modelled as a
+zero-mean random rigid motion of each segment's markers with standard deviation a * theta per axis
+plus independent non-rigid displacements; ``exubio.trust.angle_uncertainty`` carries it through the
+reconstruction's first-order sensitivity to each angle.
+
+Coefficients fitted on the S2M pin trials (Cereatti et al. 2017, J Biomech 62:5-13; doi
+10.1016/j.jbiomech.2017.02.004) ship as ``exubio/data/sta_amplitude_s2m.json``; a lab fits its own
+with ``fit_sta_amplitude`` on its bone-referenced trials.
+"""
+from __future__ import annotations
+
+import datetime
+import json
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from ..calibration.cluster import cluster_poses
+from ..errors import InputError
+from ..trust.sta_amplitude import STAAmplitude
+from .lab_run import REST_MAX_DEG, REST_WINDOW_S
+from .sta_format import BoneTrial
+
+__all__ = ["segment_sta", "fit_sta_amplitude", "write_sta_amplitude"]
+
+CITATION = ("Cereatti A, Bonci T, Akbarshahi M, et al. (2017) Standardization proposal of soft tissue artefact "
+            "description for data sharing in human motion measurements. J Biomech 62:5-13, "
+            "doi 10.1016/j.jbiomech.2017.02.004 (ISB STA data-sharing initiative)")
+
+
+def _rotvec(R: np.ndarray) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    out = np.full((R.shape[0], 3), np.nan)
+    ok = np.isfinite(R).all(axis=(1, 2))
+    if ok.any():
+        out[ok] = Rotation.from_matrix(R[ok]).as_rotvec()
+    return out
+
+
+def _rest(trial: BoneTrial, rate_hz: float) -> np.ndarray:
+    hum = trial.segments["humerus"]
+    n = max(1, min(trial.n_frames, int(round(REST_WINDOW_S * rate_hz)) + 1))
+    c = (np.einsum("ij,nij->n", hum.rotation[0], hum.rotation[:n]) - 1.0) / 2.0
+    turned = np.degrees(np.arccos(np.clip(c, -1, 1)))
+    return np.flatnonzero(turned < REST_MAX_DEG)
+
+
+def humerus_driver(trial: BoneTrial, rest: np.ndarray) -> np.ndarray:
+    """theta (n,) rad: the humerus's rotation angle from its mean rest orientation, in the lab."""
+    from scipy.spatial.transform import Rotation
+
+    hum = trial.segments["humerus"]
+    R0 = Rotation.from_matrix(hum.rotation[rest]).mean().as_matrix()
+    c = (np.einsum("ij,nij->n", R0, hum.rotation) - 1.0) / 2.0
+    return np.arccos(np.clip(c, -1.0, 1.0))
+
+
+def segment_sta(trial: BoneTrial, bone: str, rest: np.ndarray) -> dict[str, np.ndarray]:
+    """The rigid/non-rigid split of one bone's skin markers in its frame: ``rotation`` (n, 3) rad
+    (rotation vector, bone axes), ``translation`` (n, 3) m (the centroid's), ``nonrigid`` (n, k, 3) m.
+    The file's gap-filled markers are used; markers NaN at rest are left out."""
+    seg = trial.segments[bone]
+    m = seg.markers_bone
+    shape = np.nanmean(m[rest], axis=0)
+    keep = np.isfinite(shape).all(axis=1)
+    m, shape = m[:, keep], shape[keep]
+    if shape.shape[0] < 3:
+        raise InputError(f"{trial.path}: the {bone} has {shape.shape[0]} markers at rest; 3 are needed for its STA")
+    centroid = shape.mean(axis=0)
+    R, t, _ = cluster_poses(shape - centroid, m)
+    fitted = np.einsum("nab,kb->nka", R, shape - centroid) + t[:, None, :]
+    return {"rotation": _rotvec(R), "translation": t - centroid, "nonrigid": m - fitted}
+
+
+def _rms_ratio(x: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    ok = np.isfinite(x).all(axis=-1) & np.isfinite(theta)
+    d = float(np.sum(theta[ok] ** 2))
+    if d <= 0:
+        return np.zeros(x.shape[-1])
+    return np.sqrt(np.sum(x[ok] ** 2, axis=0) / d)
+
+
+def fit_sta_amplitude(trials: Sequence[tuple[BoneTrial, float]], /, *, source: str = "") -> STAAmplitude:
+    """The amplitude model (module docstring) of bone-referenced ``trials`` ((trial, rate Hz) pairs),
+    pooled over their frames. Bones fitted: those of ``exubio.trust.sta_amplitude.SEGMENTS_WITH_DATA``
+    present in the trials."""
+    pooled: dict[str, dict[str, list]] = {}
+    for trial, rate in trials:
+        rest = _rest(trial, rate)
+        theta = humerus_driver(trial, rest)
+        for bone in ("scapula", "humerus"):
+            if bone not in trial.segments:
+                continue
+            s = segment_sta(trial, bone, rest)
+            p = pooled.setdefault(bone, {"rotation": [], "translation": [], "nonrigid": [], "theta": [], "theta_k": []})
+            p["rotation"].append(s["rotation"])
+            p["translation"].append(s["translation"])
+            k = s["nonrigid"].shape[1]
+            p["nonrigid"].append(s["nonrigid"].reshape(-1, 3))
+            p["theta"].append(theta)
+            p["theta_k"].append(np.repeat(theta, k))
+    if not pooled:
+        raise InputError("fit_sta_amplitude: no trial with a scapula or a humerus")
+    rot, tra, nr = {}, {}, {}
+    for bone, p in pooled.items():
+        th = np.concatenate(p["theta"])
+        rot[bone] = _rms_ratio(np.concatenate(p["rotation"]), th)
+        tra[bone] = _rms_ratio(np.concatenate(p["translation"]), th)
+        nr[bone] = _rms_ratio(np.concatenate(p["nonrigid"]), np.concatenate(p["theta_k"]))
+    files = ", ".join(t.path.name for t, _ in trials)
+    return STAAmplitude(rotation=rot, translation=tra, nonrigid=nr,
+                        source=source or f"fitted on {files} ({datetime.date.today().isoformat()})")
+
+
+def write_sta_amplitude(amplitude: STAAmplitude, path: str | Path, /, *, citation: str = CITATION) -> Path:
+    """The model as JSON (the shipped file's layout)."""
+    path = Path(path)
+    data = amplitude.to_json()
+    data["citation"] = citation
+    path.write_text(json.dumps(data, indent=2) + "\n")
+    return path
