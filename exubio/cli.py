@@ -816,6 +816,9 @@ def build_parser() -> argparse.ArgumentParser:
                        epilog=_epilog("demo"), help="reconstruct the shipped example trial with PF and LS, compare with its truth")
     d.add_argument("--out", default="exubio_demo", help="output folder (default ./exubio_demo)")
     d.set_defaults(func=cmd_demo)
+
+    from exubio.truth.cli_truth import add_parser as add_truth_parser
+    add_truth_parser(sub, common)
     return p
 
 

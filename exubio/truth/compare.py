@@ -14,6 +14,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from ..errors import ReconstructionError
 from ..model.angles import ANATOMICAL_COLUMNS, anatomical_table, angles_of_frames
 from .lab_run import BoneLabRun
 
@@ -49,10 +50,11 @@ class TruthComparison:
     notes: tuple[str, ...] = field(default_factory=tuple)
 
     def to_json(self) -> dict:
+        num = lambda x: None if x is None or not np.isfinite(x) else round(float(x), 4)
         return {"file": self.file, "task": self.task, "assumption": self.assumption, "n_frames": self.n_frames,
                 "rate_hz": self.rate_hz, "verdicts": dict(self.verdicts), "notes": list(self.notes),
-                "angles": {a: {m: {"rmse_deg": e.rmse_deg, "max_deg": e.max_deg, "coverage": e.coverage,
-                                   "measured_fraction": e.measured_fraction, "median_u_deg": e.median_u_deg}
+                "angles": {a: {m: {"rmse_deg": num(e.rmse_deg), "max_deg": num(e.max_deg), "coverage": num(e.coverage),
+                                   "measured_fraction": num(e.measured_fraction), "median_u_deg": num(e.median_u_deg)}
                                for m, e in per.items()} for a, per in self.angles.items()}}
 
 
@@ -108,11 +110,19 @@ def compare_bone_trial(run: BoneLabRun, /, *, methods: Sequence[str] = ("pf", "l
     model = model_from_mapping(dict(run.model_mapping), f"{run.trial.path} (subject model)",
                                name=str(run.model_mapping["name"]))
     protocol = _protocol(run, model)
-    recs = {m: reconstruct(run.trajectories, model, protocol, method=m) for m in methods}
+    recs, failed = {}, {}
+    for m in methods:
+        try:
+            recs[m] = reconstruct(run.trajectories, model, protocol, method=m)
+        except ReconstructionError as exc:  # one method's failure is a finding of the comparison, not its end
+            failed[m] = str(exc)
+    if not recs:
+        raise ReconstructionError(f"{run.trial.path}: every method failed: "
+                                  + "; ".join(f"{m.upper()}: {r}" for m, r in failed.items()))
     assessment = assess(run.trajectories, list(recs.values()), model, protocol)
     truth = truth_angles(run)
     per_angle: dict[str, dict[str, AngleError]] = {a: {} for a in TRUTH_ANGLES}
-    verdicts = {}
+    verdicts = {m: f"failed: {reason}" for m, reason in failed.items()}
     for m, rec in recs.items():
         q = assessment.quality[m]
         verdicts[m] = q.verdict.label if hasattr(q.verdict, "label") else str(q.verdict)
@@ -125,5 +135,6 @@ def compare_bone_trial(run: BoneLabRun, /, *, methods: Sequence[str] = ("pf", "l
             u = None if det is None or det.uncertainty_rad is None else det.uncertainty_rad[:, det.names.index(a)]
             per_angle[a][m] = angle_errors(table[:, j], truth[a], measured, u)
     comp = TruthComparison(str(run.trial.path), f"{run.trial.lab} {run.trial.task}", run.assumption.text, per_angle,
-                           verdicts, run.trial.n_frames, run.trajectories.rate_hz)
+                           {m: verdicts[m] for m in methods if m in verdicts}, run.trial.n_frames,
+                           run.trajectories.rate_hz)
     return comp, recs

@@ -1,0 +1,85 @@
+"""``exubio truth FILE.mat``: a bone-referenced trial reconstructed with PF and LS as a lab would, and
+each angle's error against the bone (RMSE, max, coverage of its stated uncertainty)."""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+from ..errors import InputError
+
+__all__ = ["add_parser", "cmd_truth", "format_table"]
+
+HELP = """\
+The file: a trial in the ISB soft-tissue-artefact data-sharing format (Cereatti et al. 2017, J Biomech
+62:5-13): skin markers in the bone frame, the bone's pose in the lab, anatomical landmarks of the
+scapula and the humerus. What is assumed where the file has no thorax or clavicle marker is printed
+with the results (exubio.truth.lab_run). Figures over the frames where each angle is measured;
+coverage: the fraction of those frames where the bone lies within +-2u of the angle.
+
+  exubio truth dataSample_S2M_armAbd.mat --rate 300 --json abd.json
+"""
+
+
+def add_parser(sub, common) -> None:
+    t = sub.add_parser("truth", parents=[common], formatter_class=argparse.RawDescriptionHelpFormatter, epilog=HELP,
+                       help="reconstruct a bone-referenced trial (ISB STA data-sharing .mat) and compare with bone")
+    t.add_argument("file", help="a .mat trial of the ISB STA data-sharing format")
+    t.add_argument("--rate", type=float, default=None,
+                   help="the motion capture's sampling rate, Hz (the format does not store it)")
+    t.add_argument("--filled", action="store_true",
+                   help="use the file's gap-filled markers (default: the raw ones, gaps left as gaps)")
+    t.add_argument("--json", dest="json_out", help="write the figures as JSON to this path")
+    t.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
+    t.set_defaults(func=cmd_truth)
+
+
+def _fmt(x: float | None, spec: str = ".1f") -> str:
+    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, spec)
+
+
+def format_table(comp) -> str:
+    """The comparison as a text table (degrees)."""
+    lines = [f"{comp.file}: {comp.task}, {comp.n_frames} frames at {comp.rate_hz:g} Hz",
+             f"assumed: {comp.assumption}",
+             "verdicts: " + ", ".join(f"{m.upper()} {v}" for m, v in comp.verdicts.items()),
+             f"{'angle (deg)':32s} {'method':6s} {'RMSE':>6s} {'max':>6s} {'cover':>6s} {'u med':>6s} {'measured':>8s}"]
+    for a, per in comp.angles.items():
+        for m, e in per.items():
+            if m not in comp.verdicts or comp.verdicts[m].startswith("failed"):
+                continue
+            lines.append(f"{a:32s} {m.upper():6s} {_fmt(e.rmse_deg):>6s} {_fmt(e.max_deg):>6s} "
+                         f"{_fmt(e.coverage, '.0%'):>6s} {_fmt(e.median_u_deg):>6s} {e.measured_fraction:>8.0%}")
+    return "\n".join(lines)
+
+
+def cmd_truth(args: argparse.Namespace) -> int:
+    from ..errors import ModelError
+    from ..io.yaml import read_yaml
+    from ..model.load import DEFAULT_MODEL
+    from .compare import compare_bone_trial
+    from .lab_run import setup_lab_run
+    from .sta_format import read_sta_trial
+
+    if args.rate is None:
+        raise InputError(f"{args.file}: the data-sharing format stores no sampling rate; give --rate HZ (the motion "
+                         "capture's rate, from the dataset's documentation)")
+    out = Path(args.json_out) if args.json_out else None
+    if out is not None and out.exists() and not args.overwrite:
+        raise InputError(f"{out}: exists; give --overwrite to replace it")
+    trial = read_sta_trial(args.file)
+    run = setup_lab_run(trial, read_yaml(DEFAULT_MODEL, error=ModelError), rate_hz=float(args.rate),
+                        raw_markers=not args.filled)
+    comp, _ = compare_bone_trial(run)
+    print(format_table(comp))
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = out.with_name(out.name + ".part")
+        tmp.write_text(json.dumps(comp.to_json(), indent=2, allow_nan=False, default=_none) + "\n")
+        tmp.replace(out)
+    return 0
+
+
+def _none(x):
+    return None
