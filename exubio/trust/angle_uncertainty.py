@@ -31,6 +31,8 @@ angle near +-90 deg.
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from exubio.model.kinematics import Kinematics, PointSet
@@ -132,7 +134,7 @@ def marker_covariance(kin: Kinematics, points: PointSet, qf: np.ndarray, present
     for s_idx in np.unique(points.segment_index):
         sel = np.flatnonzero(points.segment_index == s_idx)
         seg = names[s_idx]
-        rot, tra, nonrigid, measured = amplitude.of(seg)
+        C6, nonrigid, measured = amplitude.of(seg)
         theta = theta_hum if (measured or seg == "clavicle") else _rotation_angle(R[:, s_idx])
         axes = anatomical[seg] if anatomical is not None and seg in anatomical else R[:, s_idx]
         ok = present[:, sel]
@@ -140,16 +142,14 @@ def marker_covariance(kin: Kinematics, points: PointSet, qf: np.ndarray, present
         c = (np.where(ok[..., None], P[:, sel], 0.0)).sum(axis=1) / cnt[:, None]
         r = P[:, sel] - c[:, None, :]  # (b, j, 3)
         B = np.concatenate([-_skew(r), np.broadcast_to(np.eye(3), r.shape + (3,))], axis=-1)  # (b, j, 3, 6)
-        S_rot = axes @ (np.diag(rot ** 2)[None] * 1.0) @ np.swapaxes(axes, -1, -2)
-        S_tra = axes @ np.diag(tra ** 2)[None] @ np.swapaxes(axes, -1, -2)
-        S6 = np.zeros((b, 6, 6))
-        S6[:, :3, :3] = S_rot
-        S6[:, 3:, 3:] = S_tra
-        S6 *= (theta ** 2)[:, None, None]
+        T = np.zeros((b, 6, 6))
+        T[:, :3, :3] = axes
+        T[:, 3:, 3:] = axes
+        S6 = T @ C6[None] @ np.swapaxes(T, -1, -2) * (theta ** 2)[:, None, None]
         if residual_m is not None:
             res = np.where(ok, residual_m[:, sel], np.nan)
-            with np.errstate(invalid="ignore"), np.testing.suppress_warnings() as sup:
-                sup.filter(RuntimeWarning)
+            with np.errstate(invalid="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
                 expected = (noise_mm * 1e-3) ** 2 + np.mean(nonrigid ** 2) * theta ** 2
                 v = np.nan_to_num(np.nanmean(res ** 2, axis=1) / 3.0 - expected, nan=0.0)
             v = np.maximum(v, 0.0)

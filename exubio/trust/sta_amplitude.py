@@ -36,17 +36,22 @@ class STAAmplitude:
     rotation: Mapping[str, np.ndarray]
     translation: Mapping[str, np.ndarray]
     nonrigid: Mapping[str, np.ndarray]
+    rigid: Mapping[str, np.ndarray] = field(default_factory=dict)  # (6, 6): rotation + translation second moment
     source: str = ""
     citation: str = ""
     extra: Mapping[str, object] = field(default_factory=dict)
 
-    def of(self, segment: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
-        """(rotation, translation, nonrigid, from bone data) of ``segment``, borrowed where it has none."""
-        if segment in self.rotation:
-            return (np.asarray(self.rotation[segment]), np.asarray(self.translation[segment]),
-                    np.asarray(self.nonrigid[segment]), True)
-        b = BORROWED_FROM if BORROWED_FROM in self.rotation else next(iter(self.rotation))
-        return np.asarray(self.rotation[b]), np.asarray(self.translation[b]), np.asarray(self.nonrigid[b]), False
+    def of(self, segment: str) -> tuple[np.ndarray, np.ndarray, bool]:
+        """(rigid 6 x 6 second moment per rad^2 of driver, nonrigid SD per axis, from bone data) of
+        ``segment``, borrowed where it has none. Without a stored second moment, the per-axis SDs
+        make a diagonal one."""
+        seg = segment if segment in self.rotation else (BORROWED_FROM if BORROWED_FROM in self.rotation
+                                                         else next(iter(self.rotation)))
+        if seg in self.rigid:
+            C = np.asarray(self.rigid[seg], dtype=float)
+        else:
+            C = np.diag(np.r_[np.asarray(self.rotation[seg]) ** 2, np.asarray(self.translation[seg]) ** 2])
+        return C, np.asarray(self.nonrigid[seg]), seg == segment
 
     def to_json(self) -> dict:
         r = lambda d: {k: [round(float(x), 6) for x in np.asarray(v)] for k, v in d.items()}
@@ -55,7 +60,10 @@ class STAAmplitude:
                           "translation": "m per rad of driver (SD per axis)",
                           "nonrigid": "m per rad of driver (SD per coordinate of each marker)"},
                 "driver": "the humerus's rotation angle from its rest orientation (rad)",
-                "rotation": r(self.rotation), "translation": r(self.translation), "nonrigid": r(self.nonrigid)}
+                "rotation": r(self.rotation), "translation": r(self.translation), "nonrigid": r(self.nonrigid),
+                "rigid_second_moment": {k: [[float(f"{x:.6g}") for x in row] for row in np.asarray(v)]
+                                        for k, v in self.rigid.items()},
+                "rigid_second_moment_units": "(rotation vector rad, translation m) x same, per rad^2 of driver"}
 
 
 def load_sta_amplitude(path: str | Path | None = None, /) -> STAAmplitude:
@@ -74,8 +82,9 @@ def load_sta_amplitude(path: str | Path | None = None, /) -> STAAmplitude:
         out = {}
         for key in ("rotation", "translation", "nonrigid"):
             out[key] = {seg: np.asarray(v, dtype=float).reshape(3) for seg, v in data[key].items()}
+        rigid = {seg: np.asarray(v, dtype=float).reshape(6, 6) for seg, v in data.get("rigid_second_moment", {}).items()}
     except (ValueError, KeyError, TypeError) as exc:
         raise InputError(f"{where}: not an STA amplitude model ({type(exc).__name__}: {exc}); expected the JSON "
                          "that exubio.truth.sta_amplitude.write_sta_amplitude writes") from None
-    return STAAmplitude(out["rotation"], out["translation"], out["nonrigid"], str(data.get("source", "")),
+    return STAAmplitude(out["rotation"], out["translation"], out["nonrigid"], rigid, str(data.get("source", "")),
                         str(data.get("citation", "")))

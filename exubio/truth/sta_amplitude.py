@@ -4,7 +4,8 @@ amplitude model behind every angle's stated uncertainty (``exubio.trust.angle_un
 For each bone and frame, the skin markers in the bone's frame are fitted by a rigid motion of their
 rest shape (Kabsch, ``exubio.calibration.cluster``): a rotation of the cluster about its centroid
 (a rotation vector, in the bone's ISB axes), a translation of the centroid, and what no rigid motion
-explains (non-rigid, per marker). The rest shape is the markers' mean over the rest window, where a
+explains (non-rigid, per marker). A left arm's (mirrored) frames are turned into the right arm's
+convention, which exubio's model uses. The rest shape is the markers' mean over the rest window, where a
 static calibration puts the model points, so the artefact is zero there by construction.
 
 The artefact grows with the motion away from the calibration posture; the driver is the humerus's
@@ -15,9 +16,12 @@ the RMS ratio (zero intercept: no artefact at rest)
     a = sqrt(sum_t x(t)^2 / sum_t theta(t)^2)
 
 of the rotation vector's component (rad per rad), of the translation's (m per rad), and of the
-non-rigid displacement's per coordinate (m per rad). The STA at a posture is then modelled as a
-zero-mean random rigid motion of each segment's markers with standard deviation a * theta per axis
-plus independent non-rigid displacements; ``exubio.trust.angle_uncertainty`` carries it through the
+non-rigid displacement's per coordinate (m per rad); and the rigid motion's whole second moment
+C = sum_t x x^T / sum_t theta^2 (6 x 6: rotation and translation together, since the skin that lags
+a rotation also slides: a cluster over the scapula turns about its centroid and moves up at once,
+and only the two together say how the bone's pivot sees it). The STA at a posture is then modelled
+as a zero-mean random rigid motion of each segment's markers with covariance C theta^2 plus
+independent non-rigid displacements; ``exubio.trust.angle_uncertainty`` carries it through the
 reconstruction's first-order sensitivity to each angle.
 
 Coefficients fitted on the S2M pin trials (Cereatti et al. 2017, J Biomech 62:5-13; doi
@@ -88,7 +92,11 @@ def segment_sta(trial: BoneTrial, bone: str, rest: np.ndarray) -> dict[str, np.n
     centroid = shape.mean(axis=0)
     R, t, _ = cluster_poses(shape - centroid, m)
     fitted = np.einsum("nab,kb->nka", R, shape - centroid) + t[:, None, :]
-    return {"rotation": _rotvec(R), "translation": t - centroid, "nonrigid": m - fitted}
+    rot, tra, nonrigid = _rotvec(R), t - centroid, m - fitted
+    if seg.side == "left":  # the format's left frames are mirrored (Z -> -Z): in the right arm's convention
+        M = np.diag([1.0, 1.0, -1.0])  # positions p -> M p, rotation vectors w -> -M w (an axial vector)
+        rot, tra, nonrigid = -rot @ M, tra @ M, nonrigid @ M
+    return {"rotation": rot, "translation": tra, "nonrigid": nonrigid}
 
 
 def _rms_ratio(x: np.ndarray, theta: np.ndarray) -> np.ndarray:
@@ -120,14 +128,17 @@ def fit_sta_amplitude(trials: Sequence[tuple[BoneTrial, float]], /, *, source: s
             p["theta_k"].append(np.repeat(theta, k))
     if not pooled:
         raise InputError("fit_sta_amplitude: no trial with a scapula or a humerus")
-    rot, tra, nr = {}, {}, {}
+    rot, tra, nr, rigid = {}, {}, {}, {}
     for bone, p in pooled.items():
         th = np.concatenate(p["theta"])
         rot[bone] = _rms_ratio(np.concatenate(p["rotation"]), th)
         tra[bone] = _rms_ratio(np.concatenate(p["translation"]), th)
         nr[bone] = _rms_ratio(np.concatenate(p["nonrigid"]), np.concatenate(p["theta_k"]))
+        x = np.concatenate([np.concatenate(p["rotation"]), np.concatenate(p["translation"])], axis=1)
+        ok = np.isfinite(x).all(axis=1) & np.isfinite(th)
+        rigid[bone] = x[ok].T @ x[ok] / max(float(np.sum(th[ok] ** 2)), 1e-300)
     files = ", ".join(t.path.name for t, _ in trials)
-    return STAAmplitude(rotation=rot, translation=tra, nonrigid=nr,
+    return STAAmplitude(rotation=rot, translation=tra, nonrigid=nr, rigid=rigid,
                         source=source or f"fitted on {files} ({datetime.date.today().isoformat()})")
 
 

@@ -169,8 +169,9 @@ def read_sta_trial(path: str | Path, /) -> BoneTrial:
         raise InputError(f"{path}: no such file")
     try:
         import scipy.io
+        from scipy.io.matlab import MatReadError
         data = scipy.io.loadmat(path, squeeze_me=True, struct_as_record=False)
-    except (ValueError, OSError, NotImplementedError, TypeError) as exc:
+    except (ValueError, OSError, NotImplementedError, TypeError, MatReadError) as exc:
         raise InputError(f"{path}: not a readable MATLAB v5 file ({exc}); expected the ISB STA data-sharing format") from None
     variables = [k for k in data if not k.startswith("__")]
     if len(variables) != 1:
