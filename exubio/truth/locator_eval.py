@@ -6,7 +6,8 @@ between their ISB scapula frames; and the summaries (median, max) per posture gr
 A posture is the trial name without its repeat (``flex_90_avant``): a calibration at
 ``flex_45_1`` leaves out ``flex_45_2`` too (the same posture again is no test of carrying the
 correction to another posture). Postures left out by every calibration of the participant are
-``common``: the like-with-like comparison.
+``common`` (for a participant every calibration could run on): the like-with-like comparison.
+A trial whose locator is displaced (``exubio.truth.locator.locator_displaced``) is left out, and said.
 """
 from __future__ import annotations
 
@@ -57,7 +58,7 @@ assert RECOMMENDED.tracked is System.SKIN and RECOMMENDED.elevations == RECOMMEN
 class PostureResult:
     """One held-out trial under one calibration: distance_m (AA, TS, AI) of the corrected from the
     locator's landmarks, orientation_rad between their ISB frames; NaN where the file lacks a
-    landmark. common: no calibration of the participant used this posture."""
+    landmark. common: every calibration ran for the participant and none used this posture."""
 
     participant: str
     method: str
@@ -130,7 +131,7 @@ def evaluate(data: LocatorData, /, *, methods: Sequence[Method] = METHODS, plane
             chosen, absent = calibration_trials(trials, plane=plane, elevations=method.elevations,
                                                 tracked=method.tracked)
             if absent or not chosen:
-                what = ", ".join(absent) if absent else f"any {plane} static"
+                what = ", ".join(absent) if absent else f"{plane} static"
                 notes.append(f"{participant}: {method.name} not run: no {what} with all three landmarks of the "
                              f"locator and the {method.tracked.value}")
                 continue
@@ -138,12 +139,13 @@ def evaluate(data: LocatorData, /, *, methods: Sequence[Method] = METHODS, plane
             runs.append((method, cal, {t.posture.name for t in chosen}))
             calibrated_on.append((participant, method.name, tuple(t.posture.file for t in chosen)))
         used_by_any = set().union(*(used for _, _, used in runs)) if runs else set()
+        all_ran = len(runs) == len(methods)  # else no posture is common: the comparison would not be like with like
         for method, cal, used in runs:
             held = [t for t in trials if t.posture.name not in used]
             if not held:
                 notes.append(f"{participant}: {method.name}: every posture was a calibration posture")
                 continue
-            results += _judge(participant, method, cal, held, used_by_any, side)
+            results += _judge(participant, method, cal, held, used_by_any if all_ran else None, side)
         for t in trials:
             for system in System:
                 missing = [lm for lm, row in zip(LANDMARKS, t.positions_m[system]) if not np.isfinite(row).all()]
@@ -155,7 +157,7 @@ def evaluate(data: LocatorData, /, *, methods: Sequence[Method] = METHODS, plane
     return Evaluation(data.source, plane, side, tuple(methods), tuple(results), tuple(calibrated_on), tuple(notes))
 
 
-def _judge(participant: str, method: Method, cal, held: list[LocatorTrial], used_by_any: set[str],
+def _judge(participant: str, method: Method, cal, held: list[LocatorTrial], used_by_any: set[str] | None,
            side: Side) -> list[PostureResult]:
     tracked = np.stack([t.positions_m[method.tracked] for t in held])
     truth = np.stack([t.positions_m[System.LOCATOR] for t in held])
@@ -163,7 +165,7 @@ def _judge(participant: str, method: Method, cal, held: list[LocatorTrial], used
     dist = np.linalg.norm(corrected - truth, axis=-1)
     ori = orientation_error(corrected, truth, side=side)
     return [PostureResult(participant, method.name, t.posture.file, posture_group(t.posture),
-                          tuple(float(v) for v in dist[i]), float(ori[i]), t.posture.name not in used_by_any)
+                          tuple(float(v) for v in dist[i]), float(ori[i]), used_by_any is not None and t.posture.name not in used_by_any)
             for i, t in enumerate(held)]
 
 
