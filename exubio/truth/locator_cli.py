@@ -5,10 +5,7 @@ over the postures every calibration left out; ``--groups`` adds one row per post
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import os
-import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence
 
@@ -98,6 +95,10 @@ def to_json(evaluation: Evaluation, summaries: Sequence[Summary], /) -> dict[str
 
 
 def _write_json(path: Path, payload: dict[str, Any]) -> None:
+    import json
+    import os
+    import tempfile
+
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
