@@ -329,10 +329,11 @@ def calibrate(trials: Sequence[LocatorTrial], /, *, tracked: System = System.SKI
             merged_nodes.append([nodes[k]])
             merged_offsets.append([offsets[k]])
             merged_names.append(names[k])
-    for arr in (reference,):
+    arrays = (np.array([np.mean(n) for n in merged_nodes]), np.array([np.mean(o, axis=0) for o in merged_offsets]),
+              reference)
+    for arr in arrays:
         arr.setflags(write=False)
-    return Calibration(tracked, frame, side, tuple(merged_names), np.array([np.mean(n) for n in merged_nodes]),
-                       np.array([np.mean(o, axis=0) for o in merged_offsets]), reference)
+    return Calibration(tracked, frame, side, tuple(merged_names), *arrays)
 
 
 def apply_calibration(calibration: Calibration, tracked_m: np.ndarray, /) -> np.ndarray:
