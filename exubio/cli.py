@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Callable, Sequence  # noqa: E402
 import exubio  # noqa: E402
 from exubio.errors import ExubioError, InputError, ModelError, ProtocolError, ReconstructionError  # noqa: E402
 from exubio.run import interrupt  # noqa: E402 - Ctrl-C noted (small: no pipeline)
+from exubio.truth.locator_cli import add_parser as add_locator_parser  # noqa: E402 - small: its work is imported when it runs
 
 if TYPE_CHECKING:  # the CLI imports the pipeline only when a command runs (fast --help)
     from exubio.run.job import TrialJob, TrialResult
@@ -812,6 +813,7 @@ def build_parser() -> argparse.ArgumentParser:
     sm.add_argument("--lsl-config", default="loopback", help="loopback (default), system, or an lsl_api.cfg path")
     sm.set_defaults(func=cmd_stream)
 
+    add_locator_parser(sub, common)  # exubio locator: exubio/truth/locator_cli.py
     d = sub.add_parser("demo", parents=[common], formatter_class=argparse.RawDescriptionHelpFormatter,
                        epilog=_epilog("demo"), help="reconstruct the shipped example trial with PF and LS, compare with its truth")
     d.add_argument("--out", default="exubio_demo", help="output folder (default ./exubio_demo)")

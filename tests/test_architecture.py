@@ -78,6 +78,7 @@ LAYERS = (
     ("exubio.literature",),
     ("exubio.synth",),
     ("exubio.trust",),
+    ("exubio.truth",),  # bone truth: reads bone-referenced data, judges calibrations (exubio.truth.locator)
     tuple(f"exubio.validation.{m}" for m in ("results", "records_runs", "records_comparisons", "codec", "settings",
                                                "checks", "paths")),
     ("exubio.report",),
