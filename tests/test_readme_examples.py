@@ -1,6 +1,6 @@
-"""Every `exubio` example line of the README's bash blocks runs as written from a folder outside the
+"""Every `exubio` example line of the bash blocks of the README and the docs site (docs/*.md) runs as written from a folder outside the
 checkout (the installed console script, shipped protocols and models by name), each in a fresh
-folder holding the files it names: simulated trials under the README's names, the thoracoscapular
+folder holding the files it names: simulated trials under the docs' names, the thoracoscapular
 TRC trial of ../shared/data (skipped without it), and the files an earlier example makes (a
 calibrated subject.yaml, results/trial.pf.npz). The few lines that need more than files are listed
 in NOT_RUN with the reason and where they are tested."""
@@ -39,12 +39,16 @@ sessions:
 """
 
 
+DOCS = ["README.md", *sorted(str(p.relative_to(ROOT)) for p in (ROOT / "docs").glob("*.md"))]
+
+
 def readme_lines() -> list[str]:
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    """The example lines of every bash block of the README and the docs pages, in order."""
+    text = "\n".join((ROOT / doc).read_text(encoding="utf-8") for doc in DOCS)
     lines = []
     for block in re.findall(r"```bash\n(.*?)```", text, re.S):
         lines += [line.split("  #")[0].split(" # ")[0].strip() for line in block.splitlines()]
-    return [line for line in lines if line.startswith("exubio ") or line.startswith("python3 -m venv")]
+    return list(dict.fromkeys(line for line in lines if line.startswith("exubio ") or line.startswith("python3 -m venv")))
 
 
 def _run(line: str, cwd: Path) -> subprocess.CompletedProcess:
@@ -104,13 +108,15 @@ def test_a_readme_example_runs_from_a_folder_outside_the_checkout(line, inputs, 
     assert "Traceback" not in done.stderr
 
 
-@pytest.mark.parametrize("doc", ["README.md", "benchmarks/README.md"])
+@pytest.mark.parametrize("doc", [*DOCS, "benchmarks/README.md"])
 def test_every_file_the_docs_name_is_there(doc):
-    """A module, test or benchmark the documentation points to or runs (`exubio/...py`,
-    `tests/...py`, `python benchmarks/...py`) exists: the README named `exubio/live/...` after the live loop had moved
-    to `exubio/run/live/`."""
+    """A module, test, benchmark, protocol, model source or figure the documentation points to or runs
+    (`exubio/...py`, `tests/...py`, `python benchmarks/...py`, `protocols/examples/...yaml`,
+    `reports/.../...png`) exists: the README named `exubio/live/...` after the live loop had moved to
+    `exubio/run/live/`."""
     text = (ROOT / doc).read_text(encoding="utf-8")
-    named = set(re.findall(r"(?<![\w/.-])((?:exubio|tests|benchmarks)/[\w/]+\.py)\b", text))
+    named = set(re.findall(r"(?<![\w/.-])((?:exubio|tests|benchmarks|models|protocols|reports|docs)/[\w/.-]+\.(?:py|yaml|png|pdf|json|csv|md))\b",
+                           text))
     assert named, doc
     missing = sorted(p for p in named if not (ROOT / p).is_file())
     assert not missing, missing
