@@ -89,6 +89,8 @@ def _checked(page: str, lang: str, body: str, api: bool) -> str | None:
         return "tests/test_api.py" if api and page == "docs/python-api.md" else None
     if lang == "yaml" and "name: lab_15" in body and page == "docs/protocols.md":
         return "tests/test_protocol_guide.py"
+    if lang == "yaml" and "sessions:" in body and page == "docs/studies.md":
+        return "tests/test_readme_examples.py (the exubio study examples run it)"
     if lang == "yaml":  # a shipped file quoted whole (its comments aside): what the file says, the page says
         return "a shipped file" if _shipped_file(body) else None
     if lang == "" and page == "docs/architecture.md":

@@ -29,14 +29,11 @@ NOT_RUN = {
     "exubio stream": "needs a listener on LSL: tests/test_live.py runs stream and live together",
     "exubio live": "needs a stream on LSL: tests/test_live.py",
 }
-STUDY = """schema_version: 1
-name: readme
-methods: [ls]
-report: false
-sessions:
-  - subject: S01
-    trials: [study/*.c3d]
-"""
+
+def study_file() -> str:
+    """The study file of docs/studies.md, which the `exubio study` examples run."""
+    text = (ROOT / "docs" / "studies.md").read_text(encoding="utf-8")
+    return next(b for b in re.findall(r"```yaml\n(.*?)```", text, re.S) if "sessions:" in b)
 
 
 DOCS = ["README.md", *sorted(str(p.relative_to(ROOT)) for p in (ROOT / "docs").glob("*.md"))]
@@ -69,7 +66,7 @@ def inputs(tmp_path_factory) -> Path:
         duration = 0.6 if name == "static" else 2.0  # a short "static": the start of a movement
         write_c3d(path, simulate_trial(model, motion, duration_s=duration, rate_hz=50.0, noise_mm=0.5, seed=seed
                                        ).trajectories)
-    (folder / "study.yaml").write_text(STUDY, encoding="utf-8")
+    (folder / "study.yaml").write_text(study_file(), encoding="utf-8")
     if SHARED_TRC.is_file():
         shutil.copy(SHARED_TRC, folder / "trial.trc")
     return folder
