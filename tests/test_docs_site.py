@@ -135,3 +135,42 @@ def test_the_architecture_block_names_what_is_there():
     assert len(named) >= 15
     missing = [n for n in named if not (ROOT / "exubio" / n.rstrip("/")).exists()]
     assert not missing, missing
+
+
+def inline_commands() -> list[str]:
+    """The `exubio ...` commands written inline in the README's and the pages' prose."""
+    found = []
+    for page in PAGES:
+        text = BLOCK.sub("", (ROOT / page).read_text(encoding="utf-8"))
+        found += re.findall(r"`(exubio [a-z][^`]*)`", text)
+    return sorted(set(found))
+
+
+def test_every_inline_command_is_one_the_cli_takes(capsys):
+    """A command quoted in the prose names a subcommand the CLI has, and every option and choice it
+    is written with is one the CLI takes (a fragment may leave out required arguments; the blocks'
+    commands are run whole by tests/test_readme_examples.py)."""
+    import argparse
+
+    from exubio.cli import build_parser
+
+    parser = build_parser()
+    commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
+    quoted = inline_commands()
+    assert len(quoted) >= 15
+    wrong = []
+    for command in quoted:
+        argv = shlex.split(command)[1:]
+        argv = argv[: next((i for i, a in enumerate(argv) if a in {">", "|", "&&"}), len(argv))]  # the shell's part
+        if argv[0] not in commands:
+            wrong.append((command, "no such command"))
+            continue
+        if len(argv) == 1:
+            continue
+        try:
+            parser.parse_args(argv)
+        except SystemExit as stop:
+            error = capsys.readouterr().err.strip().splitlines()[-1] if stop.code else ""
+            if error and "the following arguments are required" not in error:
+                wrong.append((command, error))
+    assert not wrong, wrong
