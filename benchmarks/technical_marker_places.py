@@ -1,4 +1,4 @@
-"""What a technical marker's written place costs: the README guide's 15-marker protocol ("Write a
+"""What a technical marker's written place costs: the protocol guide's 15-marker protocol (docs/protocols.md) ("Write a
 protocol for your marker set"), a noise-free simulated abduction of its marker set, reconstructed
 by LS with both technical markers (R_UA, R_FA) written exactly, 10 mm and 37 mm off, with the generic
 model and calibrated on the trial's first 5 frames. Prints the RMSE (deg) of the worst measured
@@ -27,15 +27,15 @@ from exubio.model.angles import anatomical_table
 from exubio.model.load import load_model
 from exubio.synth.simulate import Motion, simulate_trial
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+GUIDE = Path(__file__).resolve().parents[1] / "docs" / "protocols.md"
 POINTS = {"STRN": "IJ", "XIPH": "PX", "C7": "C7", "T10": "T10", "R_UA": "ARM", "R_FA": "RADIUS"}
 OFFSETS = {"exact": (0.0, 0.0, 0.0), "10 mm": (6.0, 6.0, 6.0), "37 mm": (18.0, -27.0, 17.0)}
 KEY = ("forearm_pronation", "elbow_flexion", "GH_Y_axial_rotation")
 
 
 def guide_protocol() -> dict:
-    text = README.read_text(encoding="utf-8")
-    section = text[text.index("### Write a protocol for your marker set"):]
+    text = GUIDE.read_text(encoding="utf-8")
+    section = text[text.index("## Write a protocol for your marker set"):]
     return yaml.safe_load(re.search(r"```yaml\n(.*?)```", section, re.S).group(1))
 
 

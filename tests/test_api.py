@@ -1,4 +1,4 @@
-"""The Python API exported from ``exubio``: the README's notebook example runs as written, and the
+"""The Python API exported from ``exubio``: the docs' notebook example (docs/python-api.md) runs as written, and the
 names do what the command line does (same angles as the pipeline, DataFrame in degrees, files
 written atomically and not overwritten)."""
 from __future__ import annotations
@@ -12,13 +12,13 @@ import pytest
 import exubio
 from exubio.cli import main
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+PAGE = Path(__file__).resolve().parents[1] / "docs" / "python-api.md"
 
 
 def _example() -> str:
-    text = README.read_text(encoding="utf-8")
+    text = PAGE.read_text(encoding="utf-8")
     m = re.search(r"<!-- api-example -->\s*```python\n(.*?)```", text, re.S)
-    assert m, "README has no API example block"
+    assert m, f"{PAGE} has no API example block"
     return m.group(1)
 
 
@@ -27,7 +27,7 @@ def test_readme_api_example_runs(tmp_path, monkeypatch, capsys):
     assert main(["-q", "simulate", "--motion", "abduction", "--duration", "4", "--rate", "50", "--noise-mm", "0.5",
                  "--out", "trial.c3d"]) == 0
     scope: dict = {}
-    exec(compile(_example(), "README.md", "exec"), scope)
+    exec(compile(_example(), str(PAGE), "exec"), scope)
     df, rec, paths = scope["df"], scope["rec"], scope["paths"]
     assert isinstance(rec, exubio.Reconstruction) and len(df) == rec.n_frames == 200
     from exubio.model.angles import anatomical_table

@@ -327,7 +327,7 @@ def test_real_trc_whose_num_frames_disagrees_with_its_rows_runs_and_says_so(tmp_
 def test_method_both_writes_ls_when_pf_fails_and_exits_1(tmp_path, c3d, capsys, monkeypatch):
     """With --method both, PF's failure threw LS's result away (nothing was written). Now LS's set is
     written, its summary names PF's failure, the console says PF failed and why, and the exit code
-    is 1 (documented in --help and the README)."""
+    is 1 (documented in --help and docs/outputs.md, "Exit codes")."""
     import exubio.run.pipeline
     from exubio.errors import ReconstructionError
 

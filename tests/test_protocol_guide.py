@@ -1,5 +1,5 @@
-"""The README's "Write a protocol for your marker set" followed step by step for a marker set exubio
-does not ship: its protocol (the README's YAML block) is checked by `exubio protocols`, its
+"""The docs' "Write a protocol for your marker set" (docs/protocols.md) followed step by step for a marker set exubio
+does not ship: its protocol (the page's YAML block) is checked by `exubio protocols`, its
 technical markers' places are read off `exubio model-points` (step 4), a trial of that marker set
 is simulated and reconstructed, and what the guide says of it holds: the measured angles exact
 noise-free, the held girdle angles marked as modelled, technical markers written 30 mm off caught
@@ -22,14 +22,14 @@ from exubio.model.angles import anatomical_table
 from exubio.model.load import load_model
 from exubio.synth.simulate import Motion, simulate_trial
 
-README = Path(__file__).resolve().parents[1] / "README.md"
-HEADING = "### Write a protocol for your marker set"
+PAGE = Path(__file__).resolve().parents[1] / "docs" / "protocols.md"
+HEADING = "## Write a protocol for your marker set"
 
 
 def guide_protocol() -> str:
-    text = README.read_text(encoding="utf-8")
+    text = PAGE.read_text(encoding="utf-8")
     section = text[text.index(HEADING):]
-    section = section[: section.index("\n### ", len(HEADING))]
+    section = section[: section.index("\n## ", len(HEADING))]
     return re.search(r"```yaml\n(.*?)```", section, re.S).group(1)
 
 

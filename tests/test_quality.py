@@ -1,5 +1,5 @@
 """The quality verdict on trials broken on purpose: each defect is named, the verdict is 'check' or
-'fail', and the exit code is 1 exactly when a verdict is 'fail' (README, "Can I trust it?")."""
+'fail', and the exit code is 1 exactly when a verdict is 'fail' (docs/verdict.md)."""
 import dataclasses
 import json
 from pathlib import Path

@@ -1,6 +1,6 @@
-"""Every `exubio` example line of the README's bash blocks runs as written from a folder outside the
+"""Every `exubio` example line of the bash blocks of the README and the docs site (docs/*.md) runs as written from a folder outside the
 checkout (the installed console script, shipped protocols and models by name), each in a fresh
-folder holding the files it names: simulated trials under the README's names, the thoracoscapular
+folder holding the files it names: simulated trials under the docs' names, the thoracoscapular
 TRC trial of ../shared/data (skipped without it), and the files an earlier example makes (a
 calibrated subject.yaml, results/trial.pf.npz). The few lines that need more than files are listed
 in NOT_RUN with the reason and where they are tested."""
@@ -29,22 +29,23 @@ NOT_RUN = {
     "exubio stream": "needs a listener on LSL: tests/test_live.py runs stream and live together",
     "exubio live": "needs a stream on LSL: tests/test_live.py",
 }
-STUDY = """schema_version: 1
-name: readme
-methods: [ls]
-report: false
-sessions:
-  - subject: S01
-    trials: [study/*.c3d]
-"""
+
+def study_file() -> str:
+    """The study file of docs/studies.md, which the `exubio study` examples run."""
+    text = (ROOT / "docs" / "studies.md").read_text(encoding="utf-8")
+    return next(b for b in re.findall(r"```yaml\n(.*?)```", text, re.S) if "sessions:" in b)
+
+
+DOCS = ["README.md", *sorted(str(p.relative_to(ROOT)) for p in (ROOT / "docs").glob("*.md"))]
 
 
 def readme_lines() -> list[str]:
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    """The example lines of every bash block of the README and the docs pages, in order."""
+    text = "\n".join((ROOT / doc).read_text(encoding="utf-8") for doc in DOCS)
     lines = []
     for block in re.findall(r"```bash\n(.*?)```", text, re.S):
         lines += [line.split("  #")[0].split(" # ")[0].strip() for line in block.splitlines()]
-    return [line for line in lines if line.startswith("exubio ") or line.startswith("python3 -m venv")]
+    return list(dict.fromkeys(line for line in lines if line.startswith("exubio ") or line.startswith("python3 -m venv")))
 
 
 def _run(line: str, cwd: Path) -> subprocess.CompletedProcess:
@@ -65,7 +66,7 @@ def inputs(tmp_path_factory) -> Path:
         duration = 0.6 if name == "static" else 2.0  # a short "static": the start of a movement
         write_c3d(path, simulate_trial(model, motion, duration_s=duration, rate_hz=50.0, noise_mm=0.5, seed=seed
                                        ).trajectories)
-    (folder / "study.yaml").write_text(STUDY, encoding="utf-8")
+    (folder / "study.yaml").write_text(study_file(), encoding="utf-8")
     if SHARED_TRC.is_file():
         shutil.copy(SHARED_TRC, folder / "trial.trc")
     return folder
@@ -104,13 +105,15 @@ def test_a_readme_example_runs_from_a_folder_outside_the_checkout(line, inputs, 
     assert "Traceback" not in done.stderr
 
 
-@pytest.mark.parametrize("doc", ["README.md", "benchmarks/README.md"])
+@pytest.mark.parametrize("doc", [*DOCS, "benchmarks/README.md"])
 def test_every_file_the_docs_name_is_there(doc):
-    """A module, test or benchmark the documentation points to or runs (`exubio/...py`,
-    `tests/...py`, `python benchmarks/...py`) exists: the README named `exubio/live/...` after the live loop had moved
-    to `exubio/run/live/`."""
+    """A module, test, benchmark, protocol, model source or figure the documentation points to or runs
+    (`exubio/...py`, `tests/...py`, `python benchmarks/...py`, `protocols/examples/...yaml`,
+    `reports/.../...png`) exists: the README named `exubio/live/...` after the live loop had moved to
+    `exubio/run/live/`."""
     text = (ROOT / doc).read_text(encoding="utf-8")
-    named = set(re.findall(r"(?<![\w/.-])((?:exubio|tests|benchmarks)/[\w/]+\.py)\b", text))
+    named = set(re.findall(r"(?<![\w/.-])((?:exubio|tests|benchmarks|models|protocols|reports|docs)/[\w/.-]+\.(?:py|yaml|png|pdf|json|csv|md))\b",
+                           text))
     assert named, doc
     missing = sorted(p for p in named if not (ROOT / p).is_file())
     assert not missing, missing
