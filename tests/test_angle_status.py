@@ -11,6 +11,7 @@ from exubio.trust.assess import angle_status_of_protocol, not_solved_mask
 from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points
 from exubio.methods.poses import held_mask
+from exubio.trust.angle_uncertainty import U_BOUND_DEG
 from exubio.trust.observability import MODELLED_SHARE, AngleStatus, angle_determinacy
 from exubio.run.inputs import load_model_and_protocol, protocol_for_model
 from exubio.io.resources import shipped_file
@@ -27,6 +28,18 @@ def setup():
     model, protocol = load_model_and_protocol()
     kin = Kinematics(model)
     return model, protocol, kin, tracked_points(kin, protocol), reference_postures(model)
+
+
+def _measured_but_for_the_bound(det, name) -> bool:
+    """The markers determine the angle in every frame: where it is not measured, that is the stated
+    uncertainty bound (u > U_BOUND_DEG) or its sequence's gimbal lock, never the noise gain, a hold
+    or a missing segment (the reference postures reach HT 120 deg, where the bone-pin artefact makes
+    some shoulder angles' uncertainty exceed the bound: tests/test_angle_uncertainty.py)."""
+    j = det.names.index(name)
+    col = det.status[:, j]
+    bounded = (np.degrees(det.uncertainty_rad[:, j]) > U_BOUND_DEG) | det.near_gimbal_lock[:, j]
+    return bool(((col == AngleStatus.MEASURED) | bounded).all() and det.gain_deg_per_mm[:, j].max() < 2.0
+                and (col[~bounded] == AngleStatus.MEASURED).all())
 
 
 def _status(model, protocol, kin, pts, q, present=None):
@@ -48,7 +61,7 @@ def test_two_clavicle_markers_measure_its_direction_not_its_axial_rotation(setup
     assert list(status) == list(ANATOMICAL_COLUMNS)
     assert status["SC_Z_posterior_rotation"] == status["AC_X_upward_rotation"] == "not measured"
     for name in SHOULDER_MEASURED:
-        assert status[name] == "measured", (name, status[name])
+        assert _measured_but_for_the_bound(det, name), (name, status[name])
     j = det.names.index("SC_Z_posterior_rotation")
     assert det.gain_deg_per_mm[:, j].min() > 2.0  # ~2.7 deg per mm: the markers are ~15 mm off its axis
     assert det.gain_deg_per_mm[:, det.names.index("SC_X_elevation")].max() < 0.3
@@ -64,7 +77,7 @@ def test_a_hold_makes_what_it_decides_modelled_and_leaves_the_scapula_measured(s
         assert status[name] == "modelled", (name, status[name])
         assert "sc_posterior_rotation" in det.rule[name]
     for name in SHOULDER_MEASURED:
-        assert status[name] == "measured", (name, status[name])
+        assert _measured_but_for_the_bound(det, name), (name, status[name])
         assert det.held_share[:, det.names.index(name)].max() < 0.1 < MODELLED_SHARE
 
 
@@ -80,6 +93,7 @@ def test_a_segment_without_markers_is_not_measured(setup):
     for name in ("wrist_flexion", "wrist_radial_deviation"):
         col = det.status[:, det.names.index(name)]
         assert (col[:half] == AngleStatus.NOT_MEASURED).all() and (col[half:] == AngleStatus.MEASURED).all()
+        assert np.isinf(det.uncertainty_rad[:half, det.names.index(name)]).all()
     assert det.trial_status()["elbow_flexion"] == "measured"
 
 
@@ -105,4 +119,9 @@ def test_a_protocol_without_clavicle_markers_models_its_hold():
     status = angle_status_of_protocol(model, protocol)
     assert status["SC_Z_posterior_rotation"] == "modelled"
     for name in ("ST_Y_internal_rotation", "ST_X_upward_rotation", "ST_Z_posterior_tilt", "HT_X_elevation"):
-        assert status[name] == "measured", (name, status[name])
+        assert status[name] in ("measured", "partly not measured"), (name, status[name])
+    kin = Kinematics(model)
+    q = reference_postures(model)
+    det = _status(model, protocol, kin, tracked_points(kin, protocol), q)
+    for name in ("ST_Y_internal_rotation", "ST_X_upward_rotation", "ST_Z_posterior_tilt", "HT_X_elevation"):
+        assert _measured_but_for_the_bound(det, name), name

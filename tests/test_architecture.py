@@ -78,11 +78,11 @@ LAYERS = (
     ("exubio.literature",),
     ("exubio.synth",),
     ("exubio.trust",),
-    ("exubio.truth",),  # bone truth: reads bone-referenced data, judges calibrations (exubio.truth.locator)
     tuple(f"exubio.validation.{m}" for m in ("results", "records_runs", "records_comparisons", "codec", "settings",
                                                "checks", "paths")),
     ("exubio.report",),
     ("exubio.run",),
+    ("exubio.truth",),  # bone truth: reads bone-referenced data, runs a lab's reconstruction of it, judges calibrations
     ("exubio.validation",),
     ("exubio.api", "exubio.cli"),
     ("exubio",),  # the package's face: its lazy names come from the API

@@ -91,7 +91,9 @@ def test_the_guide_protocol_for_a_set_exubio_does_not_ship_measures_what_it_says
     err, summ = _errors_deg(out, truth)
     status = summ["anatomical_angles"]["status"]
     measured = [n for n, s in status.items() if s == "measured"]
-    assert {"ST_X_upward_rotation", "GH_X_elevation", "forearm_pronation", "HT_X_elevation"} <= set(measured)
+    assert {"GH_X_elevation", "forearm_pronation", "HT_X_elevation"} <= set(measured)
+    # measured up to the elevations where the bone-pin artefact's uncertainty passes the bound (HT ~100 deg)
+    assert status["ST_X_upward_rotation"] in ("measured", "partly not measured")
     assert max(err[n] for n in measured) < 0.1, {n: err[n] for n in measured}  # step 4: "within 0.05 deg"
     # step 5: the held clavicle rotation and the AC angles are modelled, not measured (and not exact)
     assert status["SC_Z_posterior_rotation"] == "modelled" and status["AC_X_upward_rotation"] == "modelled"

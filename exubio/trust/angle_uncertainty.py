@@ -135,7 +135,12 @@ def marker_covariance(kin: Kinematics, points: PointSet, qf: np.ndarray, present
         sel = np.flatnonzero(points.segment_index == s_idx)
         seg = names[s_idx]
         C6, nonrigid, measured = amplitude.of(seg)
-        theta = theta_hum if (measured or seg == "clavicle") else _rotation_angle(R[:, s_idx])
+        if measured or seg == "clavicle":
+            theta = theta_hum
+        else:  # no bone data: the humerus's coefficients, driven by the segment's own joint (its rotation from its parent)
+            parent = model.segments[s_idx].parent
+            Rp = R[:, names.index(parent)] if parent in names else np.eye(3)
+            theta = _rotation_angle(np.swapaxes(Rp, -1, -2) @ R[:, s_idx])
         axes = anatomical[seg] if anatomical is not None and seg in anatomical else R[:, s_idx]
         ok = present[:, sel]
         cnt = np.maximum(ok.sum(axis=1), 1)

@@ -38,8 +38,8 @@ def drop_missing_markers(traj: Trajectories, protocol: Protocol, model: Model, /
         return protocol, ()
     reduced = dataclasses.replace(protocol, markers=tuple(
         dataclasses.replace(m, optional=True) if m.name in missing else m for m in protocol.markers))
-    full = angle_status_of_protocol(model, protocol)
-    left = angle_status_of_protocol(model, reduced)
+    full = angle_status_of_protocol(model, protocol, bounded=False)  # what the markers see: the bound would
+    left = angle_status_of_protocol(model, reduced, bounded=False)   # move with any marker's weight
     lost = [n for n, s in full.items() if s == "measured" and left.get(n) != "measured"]
     if lost:
         unused = [lab for lab in traj.labels if lab not in {n for m in protocol.markers for n in (m.name, *m.aliases)}]

@@ -323,7 +323,8 @@ def _covariance(N, M, S, m: int, free: np.ndarray, prior: float | None):
 def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present: np.ndarray, weights: np.ndarray, /,
                       *, held: np.ndarray, locked: np.ndarray, every: int = 1,
                       rules: Mapping[str, str] | None = None, amplitude=None,
-                      noise_mm: float | None = None, residuals_m: np.ndarray | None = None) -> AngleDeterminacy:
+                      noise_mm: float | None = None, residuals_m: np.ndarray | None = None,
+                      bounded: bool = True) -> AngleDeterminacy:
     """Measured / modelled / not measured for every anatomical angle (exubio.model.angles.ANATOMICAL_ANGLES)
     in the frames of q (n, m), computed every ``every``-th frame and copied to the frames between.
     held: (m,) bool, coordinates a protocol rule holds; locked: (m,) bool, coordinates of segments
@@ -331,7 +332,9 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
     standard uncertainty (exubio.trust.angle_uncertainty: ``noise_mm`` of marker noise and the STA
     ``amplitude`` model, default the shipped one; the model's misfit where ``residuals_m`` (n, k) is
     given) is computed with it; an angle is not measured
-    where it exceeds the bound or where its sequence is near its gimbal lock."""
+    where it exceeds the bound or where its sequence is near its gimbal lock. ``bounded=False``: the
+    markers' determinacy alone (what a marker set can see, e.g. whether dropping a marker loses an
+    angle), no uncertainty computed."""
     from exubio.model.angles import anatomical_table, segment_anatomical_rotations
     from exubio.trust import angle_uncertainty as AU
     amplitude = amplitude if amplitude is not None else _shipped_amplitude()
@@ -366,14 +369,15 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
         g = np.degrees(np.sqrt(np.maximum(var, 0.0))) / 1000.0
         unseen = (np.abs(np.einsum("bam,bmr->bar", D, blind)) > 1e-6).any(axis=2) if blind.shape[-1] else False
         gain[part] = np.where(unseen, np.inf, g)
-        K = AU.sensitivity(kin, points, qf, pres, weights, free_actual)
-        frames_isb = segment_anatomical_rotations(model, qf, kinematics=kin)
-        Sigma = AU.marker_covariance(kin, points, qf, pres, amplitude, noise_mm=noise_mm,
-                                     anatomical={s_: frames_isb[s_] for s_ in ("scapula", "humerus") if s_ in frames_isb},
-                                     residual_m=None if residuals_m is None else residuals_m[sel[part]])
-        DK = D @ K
-        var_u = np.einsum("bai,bij,baj->ba", DK, Sigma, DK)
-        unc[part] = np.where(unseen, np.inf, np.sqrt(np.maximum(var_u, 0.0)))
+        if bounded:
+            K = AU.sensitivity(kin, points, qf, pres, weights, free_actual)
+            frames_isb = segment_anatomical_rotations(model, qf, kinematics=kin)
+            Sigma = AU.marker_covariance(kin, points, qf, pres, amplitude, noise_mm=noise_mm,
+                                         anatomical={s_: frames_isb[s_] for s_ in ("scapula", "humerus") if s_ in frames_isb},
+                                         residual_m=None if residuals_m is None else residuals_m[sel[part]])
+            DK = D @ K
+            var_u = np.einsum("bai,bij,baj->ba", DK, Sigma, DK)
+            unc[part] = np.where(unseen, np.inf, np.sqrt(np.maximum(var_u, 0.0)))
         dep_locked[part] = (np.abs(D[:, :, locked]) > 1e-6).any(axis=2) if locked.any() else False
         if held.any():
             N, M, S = _marker_information(kin, points, qf, pres, weights, free_released)
@@ -388,12 +392,14 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
     idx = np.clip(np.round(np.arange(n) / max(int(every), 1)).astype(int), 0, len(sel) - 1)
     gain, share, dep_locked, unc = gain[idx], share[idx], dep_locked[idx], unc[idx]
     with np.errstate(invalid="ignore"):
-        gimbal = AU.gimbal_mask(table(np.where(np.isfinite(q), q, 0.0))) & np.isfinite(q).all(axis=1)[:, None]
+        gimbal = (AU.gimbal_mask(table(np.where(np.isfinite(q), q, 0.0))) & np.isfinite(q).all(axis=1)[:, None]
+                  if bounded else np.zeros((n, a), dtype=bool))
     status = np.full((n, a), AngleStatus.MEASURED, dtype=np.int8)
     status[share > MODELLED_SHARE] = AngleStatus.MODELLED
     status[(gain > UNDETERMINED_DEG_PER_MM) & (share <= MODELLED_SHARE)] = AngleStatus.NOT_MEASURED
-    with np.errstate(invalid="ignore"):
-        status[(np.degrees(unc) > AU.U_BOUND_DEG) & (status == AngleStatus.MEASURED)] = AngleStatus.NOT_MEASURED
+    if bounded:
+        with np.errstate(invalid="ignore"):
+            status[(np.degrees(unc) > AU.U_BOUND_DEG) & (status == AngleStatus.MEASURED)] = AngleStatus.NOT_MEASURED
     status[gimbal & (status == AngleStatus.MEASURED)] = AngleStatus.NOT_MEASURED
     status[dep_locked] = AngleStatus.NOT_MEASURED
     status[~np.isfinite(q).all(axis=1)] = AngleStatus.NOT_MEASURED
@@ -404,7 +410,8 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
     for j, nm in enumerate(names):
         if (status[:, j] == AngleStatus.MODELLED).any():
             rule_of[nm] = "; ".join(rules.get(h, f"hold: {h} fixed at its reference value") for h in held_names)
-    return AngleDeterminacy(tuple(names), gain, share, status, rule_of, unc, gimbal)
+    return AngleDeterminacy(tuple(names), gain, share, status, rule_of, unc if bounded else None,
+                            gimbal if bounded else None)
 
 
 _AMPLITUDE: list = []

@@ -6,8 +6,9 @@ segment's ISB axes), of the cluster's translation (m per rad) and of what no rig
 are those of the S2M intracortical-pin trials (``exubio/data/sta_amplitude_s2m.json``, with its
 citation).
 
-Segments without bone data (clavicle, ulna, radius, hand) take the humerus's coefficients, driven by
-their own rotation from the reference posture: an assumption, said in every output's definition.
+Segments without bone data take the humerus's coefficients: the clavicle driven like the scapula by
+the humerus's rotation, the ulna, radius and hand by their own joint's rotation (from their parent
+segment): an assumption, said in every output's definition.
 """
 from __future__ import annotations
 

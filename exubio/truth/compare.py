@@ -93,33 +93,36 @@ def angle_errors(estimate: np.ndarray, truth: np.ndarray, measured: np.ndarray, 
 def _protocol(run: BoneLabRun, model):
     import yaml
 
-    from ..api import load_protocol
+    from ..run.inputs import protocol_for_model
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / f"{run.protocol_mapping['name']}.yaml"
         path.write_text(yaml.safe_dump(dict(run.protocol_mapping), sort_keys=False))
-        return load_protocol(path, model=model)
+        return protocol_for_model(model, path)
 
 
 def compare_bone_trial(run: BoneLabRun, /, *, methods: Sequence[str] = ("pf", "ls")) -> tuple[TruthComparison, dict]:
     """Reconstruct ``run`` with each method (its verdict as ``exubio reconstruct`` gives it) and
     compare its angles with the bone's. Returns the comparison and the reconstructions by method."""
-    from ..api import assess, reconstruct
     from ..model.load import model_from_mapping
+    from ..run.inputs import Session, generic_of
+    from ..run.pipeline import assess_inputs, load_inputs, reconstruct
 
     model = model_from_mapping(dict(run.model_mapping), f"{run.trial.path} (subject model)",
                                name=str(run.model_mapping["name"]))
     protocol = _protocol(run, model)
+    session = Session(model, protocol, *generic_of(model, protocol))
+    inputs = load_inputs(run.trajectories, session)
     recs, failed = {}, {}
     for m in methods:
         try:
-            recs[m] = reconstruct(run.trajectories, model, protocol, method=m)
+            recs[m] = reconstruct(inputs.model, inputs.protocol, inputs.targets, method=m)
         except ReconstructionError as exc:  # one method's failure is a finding of the comparison, not its end
             failed[m] = str(exc)
     if not recs:
         raise ReconstructionError(f"{run.trial.path}: every method failed: "
                                   + "; ".join(f"{m.upper()}: {r}" for m, r in failed.items()))
-    assessment = assess(run.trajectories, list(recs.values()), model, protocol)
+    assessment = assess_inputs(inputs, list(recs.values()))
     truth = truth_angles(run)
     per_angle: dict[str, dict[str, AngleError]] = {a: {} for a in TRUTH_ANGLES}
     verdicts = {m: f"failed: {reason}" for m, reason in failed.items()}

@@ -249,8 +249,9 @@ def setup_lab_run(trial: BoneTrial, generic_model: Mapping[str, Any], /, *, rate
             lab = assumption.to_thorax(np.einsum("nij,kj->nki", seg.rotation, fixed) + seg.origin[:, None, :])
         for j, m in enumerate(seg.marker_names):
             label = prefix + m
-            pos = np.nanmean(at_rest[:, j], axis=0)
-            if not np.isfinite(pos).all() or np.isnan(lab[:, j]).all():
+            seen = np.isfinite(at_rest[:, j]).all(axis=1)
+            pos = at_rest[seen, j].mean(axis=0) if seen.any() else np.full(3, np.nan)
+            if not seen.any() or np.isnan(lab[:, j]).all():
                 continue  # a marker the file removed (never filled): not a marker of this trial
             model_markers.setdefault(bone, {})[label] = pos
             labels.append(label)

@@ -84,8 +84,9 @@ def segment_sta(trial: BoneTrial, bone: str, rest: np.ndarray) -> dict[str, np.n
     The file's gap-filled markers are used; markers NaN at rest are left out."""
     seg = trial.segments[bone]
     m = seg.markers_bone
-    shape = np.nanmean(m[rest], axis=0)
-    keep = np.isfinite(shape).all(axis=1)
+    seen = np.isfinite(m[rest]).all(axis=2)  # (rest, k)
+    keep = seen.any(axis=0)
+    shape = np.array([m[rest][seen[:, j], j].mean(axis=0) if keep[j] else np.full(3, np.nan) for j in range(m.shape[1])])
     m, shape = m[:, keep], shape[keep]
     if shape.shape[0] < 3:
         raise InputError(f"{trial.path}: the {bone} has {shape.shape[0]} markers at rest; 3 are needed for its STA")
