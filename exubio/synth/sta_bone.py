@@ -211,7 +211,8 @@ class SegmentSta:
     """One segment's fitted artefact: ``drivers``; ``rigid_coef`` (f, 6): features -> rotation
     vector (rad) and centroid translation (m) in the bone frame (right-arm convention);
     ``nonrigid_sd_m`` the RMS per coordinate of the non-rigid rest; ``nonrigid_coef`` (k, f, 3):
-    each data marker's non-rigid rest regressed on the features (m per feature unit)."""
+    each data marker's non-rigid rest regressed on the features (m per feature unit; a marker of the
+    same name in several trials pooled)."""
 
     drivers: tuple[str, ...]
     rigid_coef: np.ndarray
@@ -339,15 +340,19 @@ def fit_segment(data: Sequence[SegmentData], drivers: Sequence[str], *, ridge: f
     if ok.sum() < 10 * X.shape[1]:
         raise InputError(f"{ok.sum()} usable frames cannot fit {X.shape[1]} features per rigid parameter")
     B = _ridge(X[ok], Y[ok], ridge)
-    nr_coef, sq, cnt = [], 0.0, 0
+    sq, cnt = 0.0, 0
+    pooled: dict[str, tuple[list, list]] = {}  # a marker's frames over every trial it is in, by name
     for d in data:
         good = np.isfinite(d.nonrigid).all(axis=(1, 2)) & np.isfinite(d.X).all(axis=1)
         e = d.nonrigid[good]
         sq += float(np.sum(e * e))
         cnt += e.size
-        for k in range(e.shape[1]):
-            nr_coef.append(_ridge(d.X[good], e[:, k, :], ridge))
+        for k, name in enumerate(d.marker_names):
+            xs, es = pooled.setdefault(name, ([], []))
+            xs.append(d.X[good])
+            es.append(e[:, k, :])
     sd = float(np.sqrt(sq / max(cnt, 1)))
+    nr_coef = [_ridge(np.concatenate(xs), np.concatenate(es), ridge) for xs, es in pooled.values()]
     fit = {"tasks": [d.task for d in data], "frames": int(ok.sum()), "ridge": ridge,
            "rms_rotation_deg": round(float(np.degrees(np.sqrt(np.mean(np.sum(Y[ok, :3] ** 2, axis=1))))), 3),
            "rms_translation_mm": round(float(1e3 * np.sqrt(np.mean(np.sum(Y[ok, 3:] ** 2, axis=1)))), 3)}
