@@ -110,8 +110,11 @@ def rigid_split(markers: np.ndarray, n_reference: int, /) -> RigidSplit:
         raise InputError(f"markers must be (n_frames, n_markers >= 3, 3), got shape {markers.shape}")
     if not 1 <= n_reference <= markers.shape[0]:
         raise InputError(f"the reference window ({n_reference} frames) must lie within the {markers.shape[0]} frames")
-    ref = np.nanmean(markers[:n_reference], axis=0)
-    if not np.isfinite(ref).all():
+    window = markers[:n_reference]
+    seen = np.isfinite(window).all(axis=2).any(axis=0)
+    ref = np.full((markers.shape[1], 3), np.nan)
+    ref[seen] = np.nanmean(window[:, seen], axis=0)
+    if not seen.all():
         bad = int(np.where(~np.isfinite(ref).all(axis=1))[0][0])
         raise InputError(f"marker {bad} is missing throughout the reference window (first {n_reference} frames)")
     n = markers.shape[0]
