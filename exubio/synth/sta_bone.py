@@ -383,7 +383,7 @@ def fit_sta_model(paths: Sequence[str | Path], /, *, rate_hz: float,
     segs = {s: fit_segment([segment_data(t, s, d, rate_hz=rate_hz) for t in trials], d, ridge=ridges.get(s, RIDGE))
             for s, d in drivers.items()}
     meta = {
-        "name": name or "bone STA model",
+        "name": name or "bone STA model: " + ", ".join(f"{t.lab} {t.task}".strip() for t in trials),
         "fitted": _dt.date.today().isoformat(),
         "data": [f"{Path(t.path).name} ({t.lab} {t.task}, {t.side} arm, {t.n_frames} frames)" for t in trials],
         "sampling_rate_hz": rate_hz, "calibration_window_s": CALIBRATION_S,
