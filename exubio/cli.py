@@ -108,7 +108,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         perturbation.apply(model)  # bad segment or point names: exit 2 before any work
     out.parent.mkdir(parents=True, exist_ok=True)
     trial = simulate_trial(model, Motion.parse(args.motion), duration_s=args.duration, rate_hz=args.rate,
-                           noise_mm=args.noise_mm, sta_mm=args.sta_mm, seed=args.seed, perturbation=perturbation)
+                           noise_mm=args.noise_mm, sta_mm=args.sta_mm, seed=args.seed, perturbation=perturbation,
+                           sta_model=args.sta)
+    if trial.sta_model != "per-marker":
+        print(f"soft-tissue artefact: {trial.sta_model}")
     c3d, truth = write_simulated_trial(trial, out)
     if perturbation is not None:
         print(f"generated with the model perturbed by {' '.join(perturbation.words()) or 'nothing'} (in {truth.name}'s header)")
@@ -639,6 +642,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--rate", type=float, default=100.0, help="sampling rate, Hz (default 100)")
     s.add_argument("--noise-mm", type=float, default=0.0, help="Gaussian measurement noise SD, mm")
     s.add_argument("--sta-mm", type=float, default=0.0, help="soft-tissue artefact amplitude, mm")
+    s.add_argument("--sta", default="per-marker", metavar="MODEL",
+                   help="soft-tissue artefact model: per-marker (default: each marker its own random artefact of "
+                        "--sta-mm), bone (fitted on bone pins, S2M: exubio/data/sta_bone_s2m.json) or a model JSON of "
+                        "'exubio sta-fit': the scapula and humerus markers move as a cluster over the bone as the model "
+                        "predicts from the simulated angles, plus its non-rigid rest; the clavicle, forearm and hand "
+                        "markers keep the per-marker artefact of --sta-mm (the model has no data for them), the thorax none")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--model", help="model YAML (default: the generic model)")
     s.add_argument("--perturb", nargs="+", metavar="KEY=VALUE",
@@ -814,6 +823,9 @@ def build_parser() -> argparse.ArgumentParser:
     sm.set_defaults(func=cmd_stream)
 
     add_locator_parser(sub, common)  # exubio locator: exubio/truth/locator_cli.py
+    from exubio.synth.sta_fit_cli import add_parser as _add_sta_fit
+    _add_sta_fit(sub, common)
+
     d = sub.add_parser("demo", parents=[common], formatter_class=argparse.RawDescriptionHelpFormatter,
                        epilog=_epilog("demo"), help="reconstruct the shipped example trial with PF and LS, compare with its truth")
     d.add_argument("--out", default="exubio_demo", help="output folder (default ./exubio_demo)")

@@ -63,7 +63,9 @@ motion-dependent and smooth, zero in the first frame, and |f_k| reaches exactly 
 trial), and A_s = sta_mm × (humerus 1.0, scapula 0.6, clavicle 0.3, ulna/radius/hand 0.25). Each
 humerus marker's artefact therefore peaks at exactly ``sta_mm`` (the paper's artefact reached
 ~20 mm on its GH marker). A marker whose driving coordinates do not move gets no artefact
-(in SIER: forearm and hand). Thorax markers get no artefact.
+(in SIER: forearm and hand). Thorax markers get no artefact. With ``sta_model`` (a bone STA model
+fitted on bone-pin data, exubio.synth.sta_bone / sta_sim) the scapula and humerus markers instead move
+as that model predicts from the simulated angles; the other segments keep the per-marker artefact.
 
 Noise (``noise_mm``): independent Gaussian, SD ``noise_mm`` per coordinate and sample, on every
 marker (thorax markers included). STA and noise use independent seeded streams
@@ -196,6 +198,7 @@ class SimulatedTrial:
     marker_segments: tuple[str, ...] = ()
     perturbation: ModelPerturbation | None = None  # the model was perturbed by this before generating
     model: Model | None = None  # the model the trial was generated with (perturbed, if so)
+    sta_model: str = "per-marker"  # the STA model: "per-marker", or a bone model's line (exubio.synth.sta_sim)
 
 
 # --------------------------------------------------------------------------------------------
@@ -572,10 +575,16 @@ def simulate_trial(
     marker_names: Sequence[str] | None = None,
     lab_transform: bool = True,
     perturbation: ModelPerturbation | None = None,
+    sta_model=None,
 ) -> SimulatedTrial:
     """Simulate a trial of ``motion`` on ``model`` (see the module docstring); with
     ``perturbation``, on ``perturbation.apply(model)`` (exubio.synth.perturb: a model mismatch for a
-    reconstruction with ``model``; the truth is the perturbed model's coordinates)."""
+    reconstruction with ``model``; the truth is the perturbed model's coordinates). ``sta_model``:
+    None or "per-marker" (the artefact above), or a bone STA model (a shipped name such as "bone",
+    a JSON path, a BoneStaModel; exubio.synth.sta_sim) for the scapula and humerus markers."""
+    from exubio.synth.sta_sim import resolve_sta_model
+
+    bone = resolve_sta_model(sta_model)
     motion = Motion.parse(motion)
     if perturbation is not None:
         model = perturbation.apply(model)
@@ -601,6 +610,13 @@ def simulate_trial(
 
     sta_ss, noise_ss = np.random.SeedSequence(seed).spawn(2)
     sta = _sta(kin, q, fr.R, points, segs, sta_mm * 1e-3, np.random.default_rng(sta_ss))
+    sta_label = "per-marker"
+    if bone is not None:
+        from exubio.synth.sta_sim import apply_bone_sta, describe
+
+        sta, replaced, _ = apply_bone_sta(model, kin, q, fr.R, pos, segs, bone, sta,
+                                          np.random.default_rng(sta_ss.spawn(1)[0]))
+        sta_label = describe(bone, replaced, sta_mm)
     if lab_transform:
         rot, origin = _lab_transform()
     else:
@@ -622,10 +638,12 @@ def simulate_trial(
                 f"Ludewig et al. 2009 scapulohumeral rhythm")
     desc = (f"{what}; {n} frames at {rate_hz:g} Hz; noise SD {noise_mm:g} mm; STA {sta_mm:g} mm (humerus peak); "
             f"seed {seed}; {'lab' if lab_transform else 'thorax'} frame; model {model.name}")
+    if bone is not None:
+        desc += f"; STA: {sta_label}"
     return SimulatedTrial(trajectories=traj, time_s=t, q_true=q, qd_true=qd, qdd_true=qdd,
                           coordinate_names=model.coordinate_names, sta_m=sta, noise_m=noise, description=desc,
                           motion=motion, lab_rotation=rot, lab_origin_m=origin, marker_segments=segs,
-                          perturbation=perturbation, model=model)
+                          perturbation=perturbation, model=model, sta_model=sta_label)
 
 
 def write_simulated_trial(trial: SimulatedTrial, path_c3d, /) -> tuple[Path, Path]:
@@ -641,6 +659,8 @@ def write_simulated_trial(trial: SimulatedTrial, path_c3d, /) -> tuple[Path, Pat
     csv_path = stem.with_name(stem.name + ".truth.csv")
     write_c3d(c3d_path, trial.trajectories, units="mm")
     head = trial.perturbation.header_lines() if trial.perturbation is not None else ()
+    if trial.sta_model != "per-marker":
+        head = (*head, f"soft-tissue artefact: {trial.sta_model}")
     write_angles_csv(csv_path, trial.time_s, trial.coordinate_names, trial.q_true, comments=head)
     return c3d_path, csv_path
 
