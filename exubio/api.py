@@ -172,8 +172,9 @@ def angle_status(reconstruction: Reconstruction, model: Model | None = None, pro
 def to_dataframe(reconstruction: Reconstruction, /, *, model: Model | None = None,
                  protocol: Protocol | None = None) -> "pandas.DataFrame":
     """The reconstruction's anatomical angles (exubio.model.angles.ANATOMICAL_ANGLES) as a pandas
-    DataFrame indexed by time (s): ``<angle>_deg`` in degrees and ``<angle>_status`` (measured,
-    modelled, not measured: a categorical column), as in the CSV; ``df.attrs`` holds the method,
+    DataFrame indexed by time (s): ``<angle>_deg`` in degrees, ``<angle>_u_deg`` its standard
+    uncertainty (exubio.trust.angle_uncertainty) and ``<angle>_status`` (measured, modelled, not
+    measured: a categorical column), as in the CSV; ``df.attrs`` holds the method,
     units and each angle's definition. The model coordinates stay in the reconstruction."""
     import pandas as pd
 
@@ -183,9 +184,14 @@ def to_dataframe(reconstruction: Reconstruction, /, *, model: Model | None = Non
     r = reconstruction
     model = model if model is not None else load_model()
     names, ang = anatomical_table(model, r.q_rad)
-    status = angle_status(r, model, protocol).status
+    det = angle_status(r, model, protocol)
+    status = det.status
     labels = pd.Categorical.from_codes(np.zeros(0, dtype=int), categories=[s.label for s in AngleStatus])
-    data = {f"{n}_deg": np.degrees(ang[:, i]) for i, n in enumerate(names)}
+    data = {}
+    for i, n in enumerate(names):
+        data[f"{n}_deg"] = np.degrees(ang[:, i])
+        if det.uncertainty_rad is not None:
+            data[f"{n}_u_deg"] = np.degrees(det.uncertainty_rad[:, i])
     data.update({f"{n}_status": pd.Categorical.from_codes(status[:, i].astype(int), categories=labels.categories)
                  for i, n in enumerate(names)})
     df = pd.DataFrame(data, index=pd.Index(r.time_s, name="time_s"))
@@ -234,6 +240,7 @@ def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str
     meta = {"written_by": "exubio.write_results", "method": reconstruction.method,
             "units": {"angles_in_files": "deg", "positions_in_npz": "m", "time": "s"}}
     summ = reconstruction_summary(reconstruction, det, source=stem)
-    angles = AngleOutputs(names, values, det.status, angle_header(det, stem, reconstruction.method, protocol.side))
+    angles = AngleOutputs(names, values, det.status, angle_header(det, stem, reconstruction.method, protocol.side),
+                          uncertainty_rad=det.uncertainty_rad)
     return write_outputs(reconstruction, out_dir, full, metadata=meta, summary_data=summ, angles=angles,
                          overwrite=overwrite)

@@ -538,21 +538,34 @@ def _write_table(path: Path, head: str, time: np.ndarray, q_rad: np.ndarray, sep
     return atomic_write(path, writer)
 
 
+UNCERTAINTY_SUFFIX = "_u_deg"
+"""The column of an angle's standard uncertainty, beside ``<angle>_deg`` in the angles CSV."""
+
+
 def write_angles_csv(
     path: str | os.PathLike, time_s: np.ndarray, coordinate_names: Sequence[str], q_rad: np.ndarray, /, *,
-    comments: Sequence[str] = (),
+    comments: Sequence[str] = (), uncertainty_rad: np.ndarray | None = None,
 ) -> Path:
     """Plain CSV: optional ``# comment`` lines (e.g. the Euler sequences of ISB angles), the header
     ``time_s,<coordinate names as in the model>``, then one row per frame, time in seconds and
-    angles in DEGREES, ``%.6f``. NaN is written ``nan``."""
+    angles in DEGREES, ``%.6f``. NaN is written ``nan``. ``uncertainty_rad`` (n, a): each angle's
+    standard uncertainty, written in degrees in a column ``<angle>_u_deg`` right after the angle's
+    (``<name>_deg``; ``inf`` where the angle is not measured at all)."""
     path = Path(path)
     time, names, q = _check_angles(path, time_s, coordinate_names, q_rad)
     head = "".join(f"# {c}\n" for c in comments)
+    if uncertainty_rad is not None:
+        u = np.asarray(uncertainty_rad, dtype=float)
+        if u.shape != q.shape:
+            raise InputError(f"{path}: uncertainty has shape {u.shape}, the angles {q.shape}")
+        names = tuple(c for n in names for c in (n, n.removesuffix("_deg") + UNCERTAINTY_SUFFIX))
+        q = np.stack([q, u], axis=2).reshape(q.shape[0], -1)
     return _write_table(path, head + ",".join(("time_s",) + names) + "\n", time, q, ",")
 
 
-def read_angles_csv(path: str | os.PathLike, /) -> tuple[np.ndarray, tuple[str, ...], np.ndarray]:
-    """Read a file of ``write_angles_csv``: (time_s, coordinate names, q in radians)."""
+def read_angles_csv(path: str | os.PathLike, /, *, uncertainty: bool = False):
+    """Read a file of ``write_angles_csv``: (time_s, coordinate names, q in radians), the uncertainty
+    columns left out; with ``uncertainty``, also their values (n, a) rad, NaN where the file has none."""
     path = Path(path)
     lines = _read_lines(path)
     skip = next((i for i, line in enumerate(lines) if not line.startswith("#")), len(lines))
@@ -564,7 +577,18 @@ def read_angles_csv(path: str | os.PathLike, /) -> tuple[np.ndarray, tuple[str, 
     rows = [_parse_row(path, skip + i + 2, line.split(","), len(header)) for i, line in enumerate(lines[1:])
             if line.strip()]
     table = np.array(rows, dtype=float).reshape(len(rows), len(header))
-    return table[:, 0].copy(), names, np.radians(table[:, 1:])
+    is_u = np.array([n.endswith(UNCERTAINTY_SUFFIX) for n in names], dtype=bool)
+    angles = tuple(n for n, u in zip(names, is_u) if not u)
+    values = np.radians(table[:, 1:][:, ~is_u])
+    if not uncertainty:
+        return table[:, 0].copy(), angles, values
+    u_of = {n.removesuffix(UNCERTAINTY_SUFFIX): j for j, n in enumerate(names) if is_u[j]}
+    u = np.full(values.shape, np.nan)
+    for k, n in enumerate(angles):
+        j = u_of.get(n.removesuffix("_deg"))
+        if j is not None:
+            u[:, k] = np.radians(table[:, 1 + j])
+    return table[:, 0].copy(), angles, values, u
 
 
 def write_mot(

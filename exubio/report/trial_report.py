@@ -52,6 +52,7 @@ class Angles:
     names: tuple[str, ...]
     values_rad: np.ndarray
     status: np.ndarray
+    uncertainty_rad: np.ndarray | None = None  # (n, a) standard uncertainty, where the result carries it
 
     def measured(self, j: int) -> np.ndarray:
         return self.status[:, j] == 0
@@ -64,8 +65,9 @@ def read_angles(npz_path: Path) -> Angles | None:
         status = read_npz_arrays(npz_path, ("angle_status",))["angle_status"]
     except InputError:
         return None
-    t, names, values = read_angles_csv(csv)
-    return Angles(t, tuple(n.removesuffix("_deg") for n in names), values, status)
+    t, names, values, u = read_angles_csv(csv, uncertainty=True)
+    return Angles(t, tuple(n.removesuffix("_deg") for n in names), values, status,
+                  None if np.isnan(u).all() else u)
 
 
 def _figure(size=(11.69, 8.27)) -> Figure:
@@ -371,10 +373,16 @@ def _key_angles(fig: Figure, recons: Sequence[Reconstruction], angles: dict[str,
             deg = -deg  # raw ISB sign: elevation and upward rotation are negative; drawn as positive
             label += " (-raw)"
         ax.plot(a.time_s, np.where(ok, deg, np.nan), color=colour, lw=1.4, label=label)
+        if a.uncertainty_rad is not None:  # the +-2u band (about 95 %) where the angle is measured
+            band = 2.0 * np.degrees(a.uncertainty_rad[:, j])
+            ax.fill_between(a.time_s, np.where(ok, deg - band, np.nan), np.where(ok, deg + band, np.nan),
+                            color=colour, alpha=0.15, lw=0)
         if (~ok).any():
             ax.plot(a.time_s, np.where(ok, np.nan, deg), color="silver", lw=1.4)
     if any((~a.measured(a.names.index(n))).any() for n, _ in KEY_ANGLES if n in a.names):
         ax.plot([], [], color="silver", lw=1.4, label="not a measurement")
+    if a.uncertainty_rad is not None:
+        ax.fill_between([], [], [], color="grey", alpha=0.15, lw=0, label="+-2u (standard uncertainty)")
     ax.set_xlabel("time (s)", fontsize=7)
     ax.set_ylabel("deg", fontsize=7)
     ax.tick_params(labelsize=6.5)

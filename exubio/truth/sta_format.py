@@ -48,7 +48,7 @@ class BoneSegment:
     note: str = ""
     markers_bone_raw: np.ndarray | None = None
     """``mrk_raw`` where the file gives it: the markers before the file's gap filling (NaN in gaps),
-    on the same ``marker_names`` (a marker only in the raw set is added to both, NaN in ``mrk``)."""
+    on the same ``marker_names`` (a marker only in the raw set, which the file removed, is left out)."""
 
     @property
     def n_frames(self) -> int:
@@ -134,7 +134,7 @@ def _segment(path: Path, key: str, raw: Any) -> BoneSegment:
         raise InputError(f"{path}: {key}.gta has {origin.shape[0]} frames, {key}.gRa {n}")
     mrk = raw.mrk
     mrk_raw = raw.mrk_raw if "mrk_raw" in names else None
-    marker_names = tuple(dict.fromkeys(_fields(mrk) + (_fields(mrk_raw) if mrk_raw is not None else [])))
+    marker_names = tuple(_fields(mrk))  # a marker the file removed from mrk (long gaps) is left out of both
     if not marker_names:
         raise InputError(f"{path}: {key}.mrk holds no marker")
 
