@@ -9,8 +9,9 @@ move by D dq (D = d angle / d q). The markers' error covariance has two parts:
 
 * measurement noise, ``NOISE_MM`` per coordinate, independent between markers;
 * the model's misfit, where the reconstruction shows one: a segment whose markers lie farther from
-  their model points than noise and the artefact's non-rigid part explain (the excess mean square
-  residual v per coordinate) may be off by that much as a whole, so it adds a rigid rotation of SD
+  their model points than noise and the artefact explain (the excess v of its mean square residual
+  per coordinate over what those leave after the least-squares step, ``expected_residual_ms``) may
+  be off by that much as a whole, so it adds a rigid rotation of SD
   sqrt(v)/rho per axis (rho: the RMS distance of its markers from their centroid) and a translation
   of SD sqrt(v). A model that cannot follow the bones (a girdle that does not fit the subject, a
   thorax that moved while assumed still) thus widens the angles it moves, frame by frame;
@@ -39,7 +40,7 @@ from exubio.model.kinematics import Kinematics, PointSet
 from exubio.trust.sta_amplitude import STAAmplitude
 
 __all__ = ["NOISE_MM", "U_BOUND_DEG", "GIMBAL_MARGIN_DEG", "marker_covariance", "sensitivity", "gimbal_mask",
-           "UNCERTAINTY_DEFINITION"]
+           "expected_residual_ms", "UNCERTAINTY_DEFINITION"]
 
 NOISE_MM = 1.0
 """Marker measurement noise (SD per coordinate, mm) after the low-pass filter: optical systems
@@ -81,9 +82,11 @@ def gimbal_mask(angles: np.ndarray, /) -> np.ndarray:
 
 
 def sensitivity(kin: Kinematics, points: PointSet, qf: np.ndarray, present: np.ndarray, weights: np.ndarray,
-                free: np.ndarray) -> np.ndarray:
+                free: np.ndarray, *, with_jacobian: bool = False):
     """K (b, m, 3k): coordinate change per marker displacement of the weighted, constrained
-    least-squares step at poses qf (b, m); zero rows for coordinates not in ``free``."""
+    least-squares step at poses qf (b, m); zero rows for coordinates not in ``free``. With
+    ``with_jacobian``: (K, J) with J (b, 3k, m) the markers' Jacobian (zero columns for the others),
+    so J K is the step's hat matrix."""
     b, m = qf.shape
     w = np.where(present, weights[None, :], 0.0)
     k = w.shape[1]
@@ -98,6 +101,10 @@ def sensitivity(kin: Kinematics, points: PointSet, qf: np.ndarray, present: np.n
     Kf = N @ Minv @ (np.swapaxes(A, 1, 2) * w3[:, None, :])
     K = np.zeros((b, m, 3 * k))
     K[:, free, :] = Kf
+    if with_jacobian:
+        Jf = np.zeros((b, 3 * k, m))
+        Jf[:, :, free] = J
+        return K, Jf
     return K
 
 
@@ -114,20 +121,24 @@ def _rotation_angle(R: np.ndarray) -> np.ndarray:
 def marker_covariance(kin: Kinematics, points: PointSet, qf: np.ndarray, present: np.ndarray,
                       amplitude: STAAmplitude, /, *, noise_mm: float = NOISE_MM,
                       anatomical: dict[str, np.ndarray] | None = None,
-                      residual_m: np.ndarray | None = None) -> np.ndarray:
+                      residual_m: np.ndarray | None = None, expected_ms: np.ndarray | None = None) -> np.ndarray:
     """Sigma (b, 3k, 3k) m^2: the markers' error covariance at poses qf (module docstring). Missing
     markers carry no weight in K, so their rows do not matter. ``anatomical``: the ISB frames of the
     scapula and humerus (segment -> (b, 3, 3)) where the caller has them (their axes are the
-    amplitudes' axes); other segments use their model frames. ``residual_m`` (b, k): the
-    reconstruction's marker residuals, for the misfit term (none without it)."""
+    amplitudes' axes); other segments use their model frames. With ``residual_m`` (b, k, the
+    reconstruction's marker residuals) and ``expected_ms`` (b, k, the mean square residual per
+    coordinate that noise and the artefact leave: ``expected_residual_ms``), the misfit term alone
+    (module docstring); else the noise and the artefact."""
     model = kin.model
     b = qf.shape[0]
     k = len(points.segment_index)
     R, _ = kin.poses(qf)  # (b, s, 3, 3)
     P = kin.points(qf, points)  # (b, k, 3)
+    misfit_only = expected_ms is not None and residual_m is not None
     sigma = np.zeros((b, 3 * k, 3 * k))
     idx = np.arange(3 * k)
-    sigma[:, idx, idx] = (noise_mm * 1e-3) ** 2
+    if not misfit_only:
+        sigma[:, idx, idx] = (noise_mm * 1e-3) ** 2
     names = [s.name for s in model.segments]
     hum = names.index("humerus") if "humerus" in names else None
     theta_hum = _rotation_angle(R[:, hum]) if hum is not None else np.zeros(b)
@@ -151,20 +162,33 @@ def marker_covariance(kin: Kinematics, points: PointSet, qf: np.ndarray, present
         T[:, :3, :3] = axes
         T[:, 3:, 3:] = axes
         S6 = T @ C6[None] @ np.swapaxes(T, -1, -2) * (theta ** 2)[:, None, None]
-        if residual_m is not None:
+        if misfit_only:
             res = np.where(ok, residual_m[:, sel], np.nan)
             with np.errstate(invalid="ignore"), warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
-                expected = (noise_mm * 1e-3) ** 2 + np.mean(nonrigid ** 2) * theta ** 2
-                v = np.nan_to_num(np.nanmean(res ** 2, axis=1) / 3.0 - expected, nan=0.0)
+                exp = np.nanmean(np.where(ok, expected_ms[:, sel], np.nan), axis=1)
+                v = np.nan_to_num(np.nanmean(res ** 2, axis=1) / 3.0 - exp, nan=0.0)
             v = np.maximum(v, 0.0)
             rho2 = np.maximum((np.where(ok[..., None], r, 0.0) ** 2).sum(axis=(1, 2)) / cnt, 1e-4)
-            S6[:, :3, :3] += (v / rho2)[:, None, None] * np.eye(3)
-            S6[:, 3:, 3:] += v[:, None, None] * np.eye(3)
+            S6 = np.zeros((b, 6, 6))
+            S6[:, :3, :3] = (v / rho2)[:, None, None] * np.eye(3)
+            S6[:, 3:, 3:] = v[:, None, None] * np.eye(3)
         C = np.einsum("bixk,bkl,bjyl->bixjy", B, S6, B)  # (b, j, 3, j, 3)
-        S_nr = axes @ np.diag(nonrigid ** 2)[None] @ np.swapaxes(axes, -1, -2) * (theta ** 2)[:, None, None]
-        for a_i, mi in enumerate(sel):
-            C[:, a_i, :, a_i, :] += S_nr
+        if not misfit_only:
+            S_nr = axes @ np.diag(nonrigid ** 2)[None] @ np.swapaxes(axes, -1, -2) * (theta ** 2)[:, None, None]
+            for a_i in range(len(sel)):
+                C[:, a_i, :, a_i, :] += S_nr
         rows = (3 * sel[:, None] + np.arange(3)[None, :]).reshape(-1)
         sigma[:, rows[:, None], rows[None, :]] += C.reshape(b, 3 * len(sel), 3 * len(sel))
     return sigma
+
+
+def expected_residual_ms(J: np.ndarray, K: np.ndarray, sigma: np.ndarray, /) -> np.ndarray:
+    """(b, k): the mean square residual per coordinate of each marker that marker errors of
+    covariance ``sigma`` (b, 3k, 3k) leave after the least-squares step (hat matrix J K): the part of
+    the artefact and noise the model cannot follow, which a residual shows without any misfit."""
+    b, n3, _ = sigma.shape
+    I_H = np.eye(n3)[None] - J @ K
+    R = I_H @ sigma @ np.swapaxes(I_H, -1, -2)
+    d = np.einsum("bii->bi", R).reshape(b, n3 // 3, 3)
+    return d.sum(axis=2) / 3.0

@@ -370,11 +370,14 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
         unseen = (np.abs(np.einsum("bam,bmr->bar", D, blind)) > 1e-6).any(axis=2) if blind.shape[-1] else False
         gain[part] = np.where(unseen, np.inf, g)
         if bounded:
-            K = AU.sensitivity(kin, points, qf, pres, weights, free_actual)
+            K, Jm = AU.sensitivity(kin, points, qf, pres, weights, free_actual, with_jacobian=True)
             frames_isb = segment_anatomical_rotations(model, qf, kinematics=kin)
-            Sigma = AU.marker_covariance(kin, points, qf, pres, amplitude, noise_mm=noise_mm,
-                                         anatomical={s_: frames_isb[s_] for s_ in ("scapula", "humerus") if s_ in frames_isb},
-                                         residual_m=None if residuals_m is None else residuals_m[sel[part]])
+            anat = {s_: frames_isb[s_] for s_ in ("scapula", "humerus") if s_ in frames_isb}
+            Sigma = AU.marker_covariance(kin, points, qf, pres, amplitude, noise_mm=noise_mm, anatomical=anat)
+            if residuals_m is not None:
+                Sigma = Sigma + AU.marker_covariance(
+                    kin, points, qf, pres, amplitude, noise_mm=noise_mm, anatomical=anat,
+                    residual_m=residuals_m[sel[part]], expected_ms=AU.expected_residual_ms(Jm, K, Sigma))
             DK = D @ K
             var_u = np.einsum("bai,bij,baj->ba", DK, Sigma, DK)
             unc[part] = np.where(unseen, np.inf, np.sqrt(np.maximum(var_u, 0.0)))
