@@ -331,7 +331,8 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
         if calibration.reused:
             print(f"calibration reused (same static, protocol, model and options): {calibration.model_file}")
         for f in calibration.labels:
-            print(f"static trial {args.static}: {f.severity}: {f.kind} ({', '.join(f.markers)}): {f.evidence}")
+            fix = f"; to fix: --static-relabel {','.join(f'{a}={b}' for a, b in f.relabel.items())}" if f.relabel else ""
+            print(f"static trial {args.static}: {f.severity}: {f.kind} ({', '.join(f.markers)}): {f.evidence}{fix}")
     from exubio.run.job import TrialJob, run_job
 
     methods = _methods(args.method)
