@@ -37,7 +37,7 @@ SCHEMA_VERSION = 1
 THORAX_SEGMENT = "thorax"  # the fixed segment: its markers only build the thorax frame
 
 _TOP_KEYS = ("schema_version", "name", "description", "thorax_frame", "filter", "defaults", "markers", "hold",
-             "relabel", "extends", "side")
+             "relabel", "extends", "side", "other_arm")
 _FRAME_KEYS = ("ij", "px", "c7", "t8")
 _MIDPOINT_FRAME_KEYS = ("ij", "ij_c7_midpoint", "px_t8_midpoint")
 _FILTER_KEYS = ("cutoff_hz", "order")
@@ -117,7 +117,13 @@ def load_protocol(
             f"{src_markers}: 'markers' must be a non-empty mapping of marker name -> settings, got {_kind(raw_markers)}"
         )
 
+    other_arm = data.get("other_arm")
+    if other_arm is not None and (not isinstance(other_arm, str) or not other_arm.strip()):
+        raise ProtocolError(f"{src_of('other_arm')}: other_arm must name the protocol file of the other arm, got "
+                            f"{_kind(other_arm)}")
+
     tracked: list[MarkerSpec] = []
+    thorax_aliases: dict[str, tuple[str, ...]] = {}  # a thorax marker's name -> its aliases
     label_owner: dict[str, str] = {}  # every name and alias -> the marker it belongs to
     for mname, spec in raw_markers.items():
         if not isinstance(mname, str) or not mname:
@@ -136,6 +142,8 @@ def load_protocol(
             label_owner[label] = mname
         if marker.segment == THORAX_SEGMENT:
             log.debug("%s: marker '%s' is on the thorax: not tracked", src_markers, mname)
+            if marker.aliases:
+                thorax_aliases[mname] = marker.aliases
             continue
         tracked.append(marker)
 
@@ -187,6 +195,8 @@ def load_protocol(
         source=src,
         relabel=relabel,
         side=side,
+        thorax_aliases=MappingProxyType(thorax_aliases),
+        other_arm=other_arm.strip() if other_arm else None,
     )
 
 
@@ -439,6 +449,9 @@ def _parse_marker(
             raise ProtocolError(f"{src}: {where}.landmark_offset_mm accepts a distance from the marker's landmark; "
                                 f"give its landmark too")
         offset = _number(offset, f"{where}.landmark_offset_mm", src, minimum=0.0, strict=True)
+        if offset < METRES_BELOW_MM:
+            raise ProtocolError(f"{src}: {where}.landmark_offset_mm is {offset:g}: that looks like metres (below "
+                                f"{METRES_BELOW_MM:g} mm); write millimetres, e.g. {offset * 1000.0:g}")
     cluster = spec.get("cluster")
     if cluster is not None and (not isinstance(cluster, str) or not cluster):
         raise ProtocolError(f"{src}: {where}.cluster must be a name shared by the markers of one rigid cluster, "
@@ -507,6 +520,11 @@ def _model_point(
     return value
 
 
+METRES_BELOW_MM = 1.0
+"""A ``_mm`` value whose largest component is above 0 and below this looks like metres: no marker
+sits within a millimetre of its segment's joint centre, nor is a landmark offset that small."""
+
+
 def _local_position(raw: Any, where: str, src: str) -> np.ndarray:
     ok = isinstance(raw, list) and len(raw) == 3 and all(finite_float(v) is not None for v in raw)
     if not ok:
@@ -514,7 +532,12 @@ def _local_position(raw: Any, where: str, src: str) -> np.ndarray:
             f"{src}: {where}.local_position_mm must be a list of 3 numbers [x, y, z] in mm, finite, got "
             f"{repr(raw) if isinstance(raw, list) else _kind(raw)}"
         )
-    return np.array(raw, dtype=float) / 1000.0
+    value = np.array(raw, dtype=float)
+    if 0.0 < np.abs(value).max() < METRES_BELOW_MM:
+        raise ProtocolError(
+            f"{src}: {where}.local_position_mm is {raw}: that looks like metres (every value below {METRES_BELOW_MM:g} "
+            f"mm); write millimetres, e.g. {[round(float(v) * 1000.0, 1) for v in value]}")
+    return value / 1000.0
 
 
 def _number(value: Any, where: str, src: str, *, minimum: float, strict: bool) -> float:

@@ -56,6 +56,7 @@ def near_labels(missing, traj: Trajectories, protocol: Protocol, /) -> dict[str,
     alias (difflib), with the fix to type: {'SCAP_Cor': ('CAP_Cor', '--relabel CAP_Cor=SCAP_Cor, or ...')}."""
     used = {n for m in protocol.markers for n in (m.name, *m.aliases)}
     used |= {getattr(protocol.thorax_frame, k) for k in protocol.thorax_frame.keys}
+    used |= {a for names in (getattr(protocol, "thorax_aliases", None) or {}).values() for a in names}
     relabel = dict(getattr(protocol, "relabel", None) or {})
     unused = [lab for lab in traj.labels if relabel.get(lab, lab) not in used]
     out = {}
