@@ -26,6 +26,7 @@ __all__ = [
     "SCHEMA_VERSION",
     "THORAX_SEGMENT",
     "check_keys",
+    "find_other_arm",
     "load_protocol",
     "read_protocol_mapping",
     "read_yaml",
@@ -210,6 +211,17 @@ def shipped_protocols() -> list[str]:
     return shipped_names("exubio.protocols", "protocols", "upper_limb_21.yaml")
 
 
+def find_other_arm(path: str | os.PathLike[str], /) -> Path:
+    """The protocol file a protocol's ``other_arm`` names: next to it, else a shipped one of that name;
+    ProtocolError naming the file when it has no other_arm, or the one named is not found."""
+    src = resolve_protocol(path)
+    ref = read_protocol_mapping(src).get("other_arm")
+    if not isinstance(ref, str) or not ref.strip():
+        raise ProtocolError(f"{src}: no other_arm key; --both-arms needs it (other_arm: <the other arm's protocol "
+                            f"file>), or give --protocol twice, one per arm")
+    return _find_base(ref, Path(src), "other_arm")
+
+
 def read_protocol_mapping(path: str | os.PathLike[str], /) -> dict[str, Any]:
     """The top-level mapping of a protocol file with its ``extends`` chain merged in (what
     load_protocol validates): for code that needs the file's own words, such as the ``point:``
@@ -245,12 +257,12 @@ def _read_extended(path: Path, seen: tuple[Path, ...]) -> tuple[dict[str, Any], 
     return merged, {**origin, **own}
 
 
-def _find_base(ref: Any, path: Path) -> Path:
+def _find_base(ref: Any, path: Path, key: str = "extends") -> Path:
     """The file an ``extends:`` names: relative to the extending file's folder, else a shipped
     protocol of that name (with or without .yaml)."""
     src = str(path)
     if not isinstance(ref, str) or not ref.strip():
-        raise ProtocolError(f"{src}: extends must be the name of a protocol file, got {_kind(ref)}")
+        raise ProtocolError(f"{src}: {key} must be the name of a protocol file, got {_kind(ref)}")
     ref = ref.strip()
     local = path.parent / ref
     if local.is_file():
@@ -262,7 +274,7 @@ def _find_base(ref: Any, path: Path) -> Path:
             return candidate
     shipped = sorted(p.name for p in shipped_dir.glob("*.yaml"))
     raise ProtocolError(
-        f"{src}: extends: '{ref}' not found; looked for {local} and among the shipped protocols {shipped}"
+        f"{src}: {key}: '{ref}' not found; looked for {local} and among the shipped protocols {shipped}"
     )
 
 

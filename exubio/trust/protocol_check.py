@@ -107,7 +107,7 @@ def _unmarked_segments(model: Model, protocol: Protocol) -> list[ProtocolFinding
             out.append(ProtocolFinding(
                 "warning", "markers", f"segment '{seg.name}' has no marker (no markers.*.segment: {seg.name}), while "
                 f"{', '.join(below)} below it have {sum(count[s] for s in below)}: its orientation is seen only "
-                f"through theirs, so its joint angles are measured only as far as the status below says; add a "
+                f"through theirs, so its joint angles are measured only as far as the status above says; add a "
                 f"marker on '{seg.name}' (exubio model-points --segment {seg.name} lists its points)"))
     return out
 
@@ -226,7 +226,10 @@ def _why(model: Model, protocol: Protocol, status: Mapping[str, str]) -> dict[st
             out[name] = f"no marker on {' or '.join(bare)}: seen only through the segments below it"
         else:
             segs = " and ".join(s for s in (pair or ()) if s != "thorax")
-            out[name] = (f"the markers on {segs} do not determine it (noise gain above 2 deg per mm, in "
-                         f"{'some' if st.startswith('partly') else 'every'} reference posture): markers on a line, or "
-                         f"too few off the segment's axis")
+            out[name] = (f"the markers on {segs} do not determine it in some reference postures (noise gain above "
+                         f"2 deg per mm): near the arm hanging, where the angle's sequence is in gimbal lock or a "
+                         f"straight elbow hides the humerus's axial rotation, or markers close to the segment's axis"
+                         if st.startswith("partly") else
+                         f"the markers on {segs} do not determine it in any reference posture (noise gain above 2 deg "
+                         f"per mm): markers on a line, or too few off the segment's axis")
     return out
