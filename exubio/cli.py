@@ -468,6 +468,9 @@ def cmd_protocols(args: argparse.Namespace) -> int:
     from exubio.model.load import load_model
     from exubio.protocol.load import read_protocol_mapping, resolve_protocol, shipped_protocols
 
+    if (args.trial or args.static) and not args.name:
+        raise InputError("exubio protocols --trial/--static: give the protocol to check too (exubio protocols FILE "
+                         "--trial TRIAL)")
     if not args.name:
         print("shipped protocols (use by name: --protocol NAME, from any folder):")
         for name in shipped_protocols():
@@ -476,9 +479,6 @@ def cmd_protocols(args: argparse.Namespace) -> int:
             print(f"  {name:22s} {len(prot.markers)} markers; {first}")
         print("list one's markers: exubio protocols NAME")
         return EXIT_OK
-    if (args.trial or args.static) and not args.name:
-        raise InputError("exubio protocols --trial/--static: give the protocol to check too (exubio protocols FILE "
-                         "--trial TRIAL)")
     model = load_model()
     prot = protocol_for_model(model, args.name)
     print(f"{prot.name} ({resolve_protocol(args.name)}): thorax frame from "

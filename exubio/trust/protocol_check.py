@@ -198,9 +198,10 @@ def _declared_on_landmarks(model: Model, protocol: Protocol, static: Trajectorie
     if not far:
         return []
     what = ", ".join(f"{m.name} {d:.0f} mm from {m.landmark}" for d, m in far)
+    keys = ", ".join(f"markers.{m.name}.point" for _, m in far)
     return [ProtocolFinding(
-        "warning", ", ".join(f"markers.{m.name}.point" for _, m in far),
-        f"declared on their landmark (point: = landmark:), but {static.source} puts them elsewhere: {what} (the "
+        "warning", keys,
+        f"{keys}: declared on their landmark (point: = landmark:), but {static.source} puts them elsewhere: {what} (the "
         f"calibrated static's place against the declared one). A skin marker sits off the bone: declare where it "
         f"is, the landmark plus its offset (local_position_mm, keep landmark: and give landmark_offset_mm); for "
         f"the girdle see docs/troubleshooting-protocols.md")]
