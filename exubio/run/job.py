@@ -135,8 +135,7 @@ def _run_job(job: TrialJob, progress_factory: Callable[[str, int], Callable[[int
         gprot = calibration_protocol(trajectories, session)  # a marker the trial lacks: left out, or refused
         static = prepare_targets(trajectories, gprot)  # the calibration's and the trial's
         calibration = calibrate_session(trajectories, session, job.out_dir, stem, spec=StaticSpec(frames=job.static_frames),
-                                        overwrite=job.overwrite, reference=False, targets=static,
-                                        protocol=gprot)
+                                        overwrite=job.overwrite, reference=False, targets=static)
         if job.final_dir is not None:
             calibration = calibration.moved_to(Path(job.final_dir) / calibration.model_file.name)
         calibrated = Calibrated(str(calibration.model_file), calibration.report)

@@ -114,14 +114,22 @@ def calibration_protocol(static: Trajectories, session: Session, /):
     return protocol
 
 
+def _without_absent(protocol: Protocol, targets: MarkerTargets, /) -> Protocol:
+    """``protocol`` with the markers ``targets`` (prepared with it or calibration_protocol's) never has
+    made optional: the protocol they were prepared with."""
+    absent = {n for j, n in enumerate(targets.marker_names) if not targets.present[:, j].any()}
+    return dataclasses.replace(protocol, markers=tuple(dataclasses.replace(m, optional=True) if m.name in absent else m
+                                                       for m in protocol.markers))
+
+
 def calibrate_session(static: str | Path | Trajectories, session: Session, out_dir: str | Path, stem: str, /, *,
                       spec: StaticSpec = StaticSpec(), overwrite: bool = False, reference: bool = True,
-                      targets: MarkerTargets | None = None, protocol: Protocol | None = None) -> SessionCalibration:
+                      targets: MarkerTargets | None = None) -> SessionCalibration:
     """Calibrate the session's generic model to ``static`` (a static trial, or frames of the trial
     itself), write ``out_dir/<stem>.model.yaml``, check the static's labels and (with ``reference``:
     a static trial apart from the task trials) keep its pair distances, which the session's trials
-    are checked against. ``targets``: the static already prepared with the generic protocol, or
-    with ``protocol`` (calibration_protocol: the generic one without a marker the static lacks)."""
+    are checked against. ``targets``: the static already prepared with the generic protocol, or with
+    calibration_protocol's (the generic one with a marker the static lacks made optional)."""
     from exubio.calibration import parse_frames
     from exubio.model.load import as_written, save_model
     from exubio.trust.labels import check_trial, pair_distances
@@ -131,7 +139,8 @@ def calibrate_session(static: str | Path | Trajectories, session: Session, out_d
     key = calibration_key(source, session, spec)
     reused = None if overwrite else reusable_calibration(model_file, key)
     gmodel = session.generic_model
-    gprot = protocol if protocol is not None else calibration_protocol(source, session)
+    gprot = calibration_protocol(source, session) if targets is None else _without_absent(session.generic_protocol,
+                                                                                            targets)
     targets = targets if targets is not None else prepare_targets(source, gprot)  # prepared once
     if reused is not None:
         model, report = reused
