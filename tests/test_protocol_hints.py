@@ -84,3 +84,13 @@ def test_a_swap_in_the_static_and_the_trial_gets_one_fix_for_both(tmp_path, tria
     assert main(["-q", "reconstruct", str(path), "--static", str(static), "--static-frames", "0:10", "--method", "ls",
                  "--no-report", "--out", str(out2), *fix]) == 0
     assert not [r for r in _reasons(out2 / "trial.ls.summary.json", "label") if "swap" in r["message"]]
+
+
+def test_a_swap_when_calibrating_on_the_trials_own_frames_gets_only_relabel(tmp_path, trial):
+    """No separate static: the fix is --relabel alone (it is applied before the calibration)."""
+    path = write_c3d(tmp_path / "trial.c3d", _renamed(trial, {"ULNA": "RADIUS", "RADIUS": "ULNA"}))
+    out = tmp_path / "out"
+    main(["-q", "reconstruct", str(path), "--static-frames", "0:10", "--method", "ls", "--no-report", "--out", str(out)])
+    swaps = [r for r in _reasons(out / "trial.ls.summary.json", "label") if "swap" in r["message"]]
+    assert len(swaps) == 1 and "to fix: --relabel" in swaps[0]["message"]
+    assert "--static-relabel" not in swaps[0]["message"]
