@@ -59,7 +59,8 @@ EXAMPLES = {
              "  exubio study study.yaml --out results/ --jobs 2",
     "view": "exubio view results/trial.pf.npz --out trial.html",
     "demo": "exubio demo   (writes ./exubio_demo/)",
-    "protocols": "exubio protocols   (the shipped ones)\n  exubio protocols upper_limb_21   (its markers)",
+    "protocols": "exubio protocols   (the shipped ones)\n  exubio protocols upper_limb_21   (its markers, what it measures)\n"
+                 "  exubio protocols my.yaml --static static.c3d   (checked against your static)",
     "model-points": "exubio model-points --segment humerus\n"
                     "  exubio model-points subject.yaml   (a calibrated model)",
 }
@@ -112,6 +113,12 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                            sta_model=args.sta)
     if trial.sta_model != "per-marker":
         print(f"soft-tissue artefact: {trial.sta_model}")
+    if args.protocol:
+        from exubio.run.inputs import protocol_for_model
+        from exubio.synth.protocol_markers import with_protocol_markers
+
+        trial = with_protocol_markers(trial, [protocol_for_model(model, p) for p in args.protocol],
+                                      noise_mm=args.noise_mm, seed=args.seed)
     c3d, truth = write_simulated_trial(trial, out)
     if perturbation is not None:
         print(f"generated with the model perturbed by {' '.join(perturbation.words()) or 'nothing'} (in {truth.name}'s header)")
@@ -259,10 +266,22 @@ def _run_trial(job: TrialJob) -> tuple[str, TrialResult | None, int, str]:
 
 def cmd_reconstruct(args: argparse.Namespace) -> int:
     protocols = args.protocol or [None]
+    if args.both_arms:
+        protocols = _both_arms(protocols)
     if len(protocols) > 1:
         return _reconstruct_arms(args, protocols)
     args = argparse.Namespace(**{**vars(args), "protocol": protocols[0]})
     return _reconstruct_one_protocol(args)
+
+
+def _both_arms(protocols: list[str | None]) -> list[str]:
+    """--both-arms: the protocol given and the one its ``other_arm`` names (next to it, else shipped)."""
+    from exubio.protocol.load import find_other_arm
+
+    if len(protocols) != 1 or protocols[0] is None:
+        raise InputError("--both-arms: give one --protocol (its other_arm key names the other arm's protocol), e.g. "
+                         "--protocol plug_in_gait_upper --both-arms")
+    return [protocols[0], str(find_other_arm(protocols[0]))]
 
 
 def _reconstruct_arms(args: argparse.Namespace, protocols: list[str]) -> int:
@@ -335,7 +354,8 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
         if calibration.reused:
             print(f"calibration reused (same static, protocol, model and options): {calibration.model_file}")
         for f in calibration.labels:
-            print(f"static trial {args.static}: {f.severity}: {f.kind} ({', '.join(f.markers)}): {f.evidence}")
+            fix = f"; to fix: --static-relabel {','.join(f'{a}={b}' for a, b in f.relabel.items())}" if f.relabel else ""
+            print(f"static trial {args.static}: {f.severity}: {f.kind} ({', '.join(f.markers)}): {f.evidence}{fix}")
     from exubio.run.job import TrialJob, run_job
 
     methods = _methods(args.method)
@@ -452,6 +472,9 @@ def cmd_protocols(args: argparse.Namespace) -> int:
     from exubio.model.load import load_model
     from exubio.protocol.load import read_protocol_mapping, resolve_protocol, shipped_protocols
 
+    if (args.trial or args.static) and not args.name:
+        raise InputError("exubio protocols --trial/--static: give the protocol to check too (exubio protocols FILE "
+                         "--trial TRIAL)")
     if not args.name:
         print("shipped protocols (use by name: --protocol NAME, from any folder):")
         for name in shipped_protocols():
@@ -460,7 +483,8 @@ def cmd_protocols(args: argparse.Namespace) -> int:
             print(f"  {name:22s} {len(prot.markers)} markers; {first}")
         print("list one's markers: exubio protocols NAME")
         return EXIT_OK
-    prot = protocol_for_model(load_model(), args.name)
+    model = load_model()
+    prot = protocol_for_model(model, args.name)
     print(f"{prot.name} ({resolve_protocol(args.name)}): thorax frame from "
           + (", ".join(f"{k}={getattr(prot.thorax_frame, k)}" for k in prot.thorax_frame.keys) or "identity"))
     if prot.held_coordinates:
@@ -470,6 +494,30 @@ def cmd_protocols(args: argparse.Namespace) -> int:
                                        else "", "optional" if m.optional else "", f"aliases {list(m.aliases)}" if m.aliases
                                        else "") if x)
         print(f"  {m.name:12s} {m.segment:9s} {extra}")
+    return _print_protocol_check(model, prot, args)
+
+
+def _print_protocol_check(model, prot, args: argparse.Namespace) -> int:
+    """What the protocol can measure, per angle, and its mistakes (exubio.trust.protocol_check):
+    exit 2 on an error, 0 with warnings."""
+    from exubio.io.trial import read_trial
+    from exubio.trust.protocol_check import check_protocol
+
+    trial = read_trial(args.trial) if args.trial else None
+    static = read_trial(args.static) if args.static else None
+    check = check_protocol(model, prot, trial=trial, static=static)
+    print("what it can measure, before any trial (over elevations of 10-120 deg in three planes):")
+    for name, st in check.status.items():
+        why = check.why.get(name)
+        print(f"  {name:30s} {st}" + (f": {why}" if why else ""))
+    for f in check.findings:
+        print(f"{f.level}: {f.message}", file=sys.stderr if f.level == "error" else sys.stdout)
+    if check.errors:
+        print(f"exubio: {len(check.errors)} error(s) in {prot.source or prot.name}: fix the key(s) named above",
+              file=sys.stderr)
+        return EXIT_BAD_INPUT
+    print(f"checked: {len(check.findings)} warning(s)" if check.findings else "checked: no mistake found"
+          + ("" if (args.trial or args.static) else " (give --trial or --static to check it against your data too)"))
     return EXIT_OK
 
 
@@ -654,6 +702,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="generate with the model perturbed (mm in the thorax frame; a model mismatch for a reconstruction "
                         "with the unperturbed model): ellipsoid_centre_mm=DX,DY,DZ ellipsoid_radii_scale=S|SX,SY,SZ "
                         "length.SEGMENT=S joint.SEGMENT=DX,DY,DZ marker.POINT=DX,DY,DZ; written into the truth file's header")
+    s.add_argument("--protocol", action="append", help="write this protocol's markers instead of the default set "
+                   "(at its positions, under its labels; side: left mirrors the simulated arm); give it twice, one "
+                   "per arm, for a trial of both arms (noise-free or --noise-mm; no --sta-mm)")
     s.add_argument("--out", required=True, help="PATH.c3d; PATH.truth.csv is written beside it")
     s.set_defaults(func=cmd_simulate)
 
@@ -666,6 +717,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--protocol", action="append",
                    help="protocol YAML (default: protocols/upper_limb_21.yaml); give it twice, one per arm (side: right "
                         "and side: left), to reconstruct both arms of the trial into --out/right and --out/left")
+    r.add_argument("--both-arms", action="store_true", help="both arms of the trial with one --protocol: it and the "
+                   "protocol its other_arm key names (the shipped plug_in_gait_upper and isb_landmarks have one), into "
+                   "--out/right and --out/left")
     r.add_argument("--model", help="model YAML (default: models/upper_extremity.yaml)")
     r.add_argument("--method", choices=["pf", "ls", "both"], default="pf",
                    help="pf: potential field on Exudyn; ls: constrained least squares per frame; both: the "
@@ -758,7 +812,12 @@ def build_parser() -> argparse.ArgumentParser:
     pr = sub.add_parser("protocols", parents=[common], formatter_class=argparse.RawDescriptionHelpFormatter,
                         help="list the shipped protocols (by name, usable from any folder) and, with a name, the "
                         "markers of one", epilog=_epilog("protocols", PRINT_EXIT_CODES))
-    pr.add_argument("name", nargs="?", help="a shipped protocol's name or a protocol file: list its markers")
+    pr.add_argument("name", nargs="?", help="a shipped protocol's name or a protocol file: list its markers, say what "
+                    "it can measure (per angle, and why not) and check it")
+    pr.add_argument("--trial", help="check the protocol against this trial too: its labels (relabel keys, missing "
+                    "markers with their near labels) and the arm's side")
+    pr.add_argument("--static", help="check it against this static trial too: as --trial, and the markers declared on "
+                    "a landmark that the calibrated static puts elsewhere (with the distances)")
     pr.set_defaults(func=cmd_protocols)
 
     mp = sub.add_parser("model-points", parents=[common], help="the model's points per segment in the segment frames "

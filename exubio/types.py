@@ -311,6 +311,8 @@ class Protocol:
     held_coordinates: tuple[str, ...] = ()  # not observable with this marker set: held at 0
     relabel: Mapping[str, str] = field(default_factory=dict)  # trial label -> label it is read as
     side: Literal["right", "left"] = "right"  # left: markers mirrored onto the (right-arm) model
+    thorax_aliases: Mapping[str, tuple[str, ...]] = field(default_factory=dict)  # thorax_frame label -> other labels
+    other_arm: str | None = None  # the protocol file of the other arm of this marker set (--both-arms)
 
     @property
     def marker_names(self) -> tuple[str, ...]:

@@ -258,6 +258,7 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
         if not present[j] and not m.optional:
             raise InputError(f"{src}: marker '{m.name}' has no sample in the calibration frames "
                              f"{window.start}:{window.stop}; choose other frames")
+    _refuse_mostly_missing(targets, protocol, idx, src)
     if present.sum() < 5:
         raise InputError(f"{src}: only {int(present.sum())} protocol markers in the calibration frames; need at least 5")
 
@@ -467,3 +468,25 @@ def _calibration_residuals(kin: Kinematics, protocol: Protocol, targets: MarkerT
     d = np.linalg.norm(kin.points(q, pts) - tgt, axis=2) * 1000.0
     return np.sqrt(_nanmean(d * d, axis=0))
 
+
+
+MOSTLY_MISSING_SHARE = 0.5
+"""A marker with a sample in fewer than this share of the calibration frames is refused as missing:
+its static place would rest on a few samples (a static whose marker had 3 samples in 272 frames
+gave a calibration residual of "nan")."""
+
+
+def _refuse_mostly_missing(targets: MarkerTargets, protocol: Protocol, idx: Sequence[int], src: str, /) -> None:
+    """InputError naming a non-optional marker that the calibration frames mostly lack, with the
+    frames of the whole trial where it is there."""
+    have = targets.present[list(idx)].sum(axis=0)
+    for j, m in enumerate(protocol.markers):
+        if m.optional or have[j] >= MOSTLY_MISSING_SHARE * len(idx):
+            continue
+        where = np.flatnonzero(targets.present[:, j])
+        shown = ", ".join(str(int(f)) for f in where[:5]) + (", ..." if where.size > 5 else "")
+        raise InputError(
+            f"{src}: marker '{m.name}' is missing: it has a sample in {int(have[j])} of the {len(idx)} calibration "
+            f"frames {idx[0]}:{idx[-1] + 1} ({where.size} of the trial's {targets.n_frames} frames: {shown}); a "
+            f"static place cannot rest on so few samples. Check its label in the static (a typo, a marker labelled "
+            f"only in a few frames), or calibrate on frames where it is present (--static-frames A:B)")

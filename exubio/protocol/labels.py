@@ -4,6 +4,7 @@ trial (``--relabel A=B,...``) parsed and applied."""
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import logging
 from dataclasses import dataclass
 from typing import Mapping, Sequence
@@ -14,6 +15,7 @@ from exubio.types import Protocol, Trajectories
 __all__ = ["LabelMatch", "parse_relabel", "relabel_trajectories", "resolve_labels"]
 
 log = logging.getLogger(__name__)
+_WARNED: set[tuple[str, str]] = set()  # (trial, relabel key) said to match no label
 
 
 @dataclass(frozen=True)
@@ -75,16 +77,25 @@ def resolve_labels(protocol: Protocol, labels: Sequence[str], /, *, source: str 
     thorax: dict[str, int] = {}
     frame = protocol.thorax_frame
     if not frame.is_identity:
+        aliases = getattr(protocol, "thorax_aliases", None) or {}
         for key in frame.keys:
             lab = getattr(frame, key)
-            if lab not in index:
-                missing.append(f"'{lab}' (thorax_frame.{key})")
+            found = next((a for a in (lab, *aliases.get(lab, ())) if a in index), None)
+            if found is None:
+                also = f", aliases {list(aliases[lab])}" if aliases.get(lab) else ""
+                missing.append(f"'{lab}' (thorax_frame.{key}{also})")
             else:
-                thorax[key] = index[lab]
+                thorax[key] = index[found]
     if missing:
+        taken = {labels[c] for c in (*owner, *thorax.values())}
+        wanted = [w.split("'")[1] for w in missing]
+        near = {w: difflib.get_close_matches(w, [lab for lab in labels if lab not in taken], n=1, cutoff=0.6)
+                for w in wanted}
+        hint = "; ".join(f"'{n[0]}' for {w}? (--relabel {n[0]}={w})" for w, n in near.items() if n)
         raise InputError(
             f"{where}: protocol '{protocol.name}' needs marker(s) {', '.join(missing)}, not in the trial; "
-            f"the trial has {list(trial_labels)}"
+            + (f"the trial has {hint}; " if hint else "")
+            + f"the trial has {list(trial_labels)}"
             + (f" (read as {list(labels)} after the protocol's relabel)" if labels != trial_labels else "")
         )
     used = set(owner) | set(thorax.values())
@@ -136,6 +147,12 @@ def _relabelled(protocol: Protocol, labels: tuple[str, ...], where: str) -> tupl
     relabel = getattr(protocol, "relabel", None) or {}
     if not relabel:
         return labels
+    for key in relabel:
+        if key not in labels and (where, key) not in _WARNED:
+            _WARNED.add((where, key))  # said once per trial, however often its labels are matched
+            near = difflib.get_close_matches(key, list(labels), n=3, cutoff=0.5)
+            log.warning("%s: relabel.%s of %s matches no label of the trial%s", where, key,
+                        protocol.source or protocol.name, f" (near: {near})" if near else "")
     out = tuple(relabel.get(lab, lab) for lab in labels)
     if len(set(out)) != len(out):
         seen: dict[str, str] = {}

@@ -26,6 +26,7 @@ __all__ = [
     "SCHEMA_VERSION",
     "THORAX_SEGMENT",
     "check_keys",
+    "find_other_arm",
     "load_protocol",
     "read_protocol_mapping",
     "read_yaml",
@@ -37,7 +38,7 @@ SCHEMA_VERSION = 1
 THORAX_SEGMENT = "thorax"  # the fixed segment: its markers only build the thorax frame
 
 _TOP_KEYS = ("schema_version", "name", "description", "thorax_frame", "filter", "defaults", "markers", "hold",
-             "relabel", "extends", "side")
+             "relabel", "extends", "side", "other_arm")
 _FRAME_KEYS = ("ij", "px", "c7", "t8")
 _MIDPOINT_FRAME_KEYS = ("ij", "ij_c7_midpoint", "px_t8_midpoint")
 _FILTER_KEYS = ("cutoff_hz", "order")
@@ -117,7 +118,13 @@ def load_protocol(
             f"{src_markers}: 'markers' must be a non-empty mapping of marker name -> settings, got {_kind(raw_markers)}"
         )
 
+    other_arm = data.get("other_arm")
+    if other_arm is not None and (not isinstance(other_arm, str) or not other_arm.strip()):
+        raise ProtocolError(f"{src_of('other_arm')}: other_arm must name the protocol file of the other arm, got "
+                            f"{_kind(other_arm)}")
+
     tracked: list[MarkerSpec] = []
+    thorax_aliases: dict[str, tuple[str, ...]] = {}  # a thorax marker's name -> its aliases
     label_owner: dict[str, str] = {}  # every name and alias -> the marker it belongs to
     for mname, spec in raw_markers.items():
         if not isinstance(mname, str) or not mname:
@@ -136,6 +143,8 @@ def load_protocol(
             label_owner[label] = mname
         if marker.segment == THORAX_SEGMENT:
             log.debug("%s: marker '%s' is on the thorax: not tracked", src_markers, mname)
+            if marker.aliases:
+                thorax_aliases[mname] = marker.aliases
             continue
         tracked.append(marker)
 
@@ -187,6 +196,8 @@ def load_protocol(
         source=src,
         relabel=relabel,
         side=side,
+        thorax_aliases=MappingProxyType(thorax_aliases),
+        other_arm=other_arm.strip() if other_arm else None,
     )
 
 
@@ -198,6 +209,17 @@ def resolve_protocol(value: str | os.PathLike[str], /) -> Path:
 def shipped_protocols() -> list[str]:
     """The names of the shipped protocols."""
     return shipped_names("exubio.protocols", "protocols", "upper_limb_21.yaml")
+
+
+def find_other_arm(path: str | os.PathLike[str], /) -> Path:
+    """The protocol file a protocol's ``other_arm`` names: next to it, else a shipped one of that name;
+    ProtocolError naming the file when it has no other_arm, or the one named is not found."""
+    src = resolve_protocol(path)
+    ref = read_protocol_mapping(src).get("other_arm")
+    if not isinstance(ref, str) or not ref.strip():
+        raise ProtocolError(f"{src}: no other_arm key; --both-arms needs it (other_arm: <the other arm's protocol "
+                            f"file>), or give --protocol twice, one per arm")
+    return _find_base(ref, Path(src), "other_arm")
 
 
 def read_protocol_mapping(path: str | os.PathLike[str], /) -> dict[str, Any]:
@@ -235,12 +257,12 @@ def _read_extended(path: Path, seen: tuple[Path, ...]) -> tuple[dict[str, Any], 
     return merged, {**origin, **own}
 
 
-def _find_base(ref: Any, path: Path) -> Path:
+def _find_base(ref: Any, path: Path, key: str = "extends") -> Path:
     """The file an ``extends:`` names: relative to the extending file's folder, else a shipped
     protocol of that name (with or without .yaml)."""
     src = str(path)
     if not isinstance(ref, str) or not ref.strip():
-        raise ProtocolError(f"{src}: extends must be the name of a protocol file, got {_kind(ref)}")
+        raise ProtocolError(f"{src}: {key} must be the name of a protocol file, got {_kind(ref)}")
     ref = ref.strip()
     local = path.parent / ref
     if local.is_file():
@@ -252,7 +274,7 @@ def _find_base(ref: Any, path: Path) -> Path:
             return candidate
     shipped = sorted(p.name for p in shipped_dir.glob("*.yaml"))
     raise ProtocolError(
-        f"{src}: extends: '{ref}' not found; looked for {local} and among the shipped protocols {shipped}"
+        f"{src}: {key}: '{ref}' not found; looked for {local} and among the shipped protocols {shipped}"
     )
 
 
@@ -439,6 +461,9 @@ def _parse_marker(
             raise ProtocolError(f"{src}: {where}.landmark_offset_mm accepts a distance from the marker's landmark; "
                                 f"give its landmark too")
         offset = _number(offset, f"{where}.landmark_offset_mm", src, minimum=0.0, strict=True)
+        if offset < METRES_BELOW_MM:
+            raise ProtocolError(f"{src}: {where}.landmark_offset_mm is {offset:g}: that looks like metres (below "
+                                f"{METRES_BELOW_MM:g} mm); write millimetres, e.g. {offset * 1000.0:g}")
     cluster = spec.get("cluster")
     if cluster is not None and (not isinstance(cluster, str) or not cluster):
         raise ProtocolError(f"{src}: {where}.cluster must be a name shared by the markers of one rigid cluster, "
@@ -507,6 +532,11 @@ def _model_point(
     return value
 
 
+METRES_BELOW_MM = 1.0
+"""A ``_mm`` value whose largest component is above 0 and below this looks like metres: no marker
+sits within a millimetre of its segment's joint centre, nor is a landmark offset that small."""
+
+
 def _local_position(raw: Any, where: str, src: str) -> np.ndarray:
     ok = isinstance(raw, list) and len(raw) == 3 and all(finite_float(v) is not None for v in raw)
     if not ok:
@@ -514,7 +544,12 @@ def _local_position(raw: Any, where: str, src: str) -> np.ndarray:
             f"{src}: {where}.local_position_mm must be a list of 3 numbers [x, y, z] in mm, finite, got "
             f"{repr(raw) if isinstance(raw, list) else _kind(raw)}"
         )
-    return np.array(raw, dtype=float) / 1000.0
+    value = np.array(raw, dtype=float)
+    if 0.0 < np.abs(value).max() < METRES_BELOW_MM:
+        raise ProtocolError(
+            f"{src}: {where}.local_position_mm is {raw}: that looks like metres (every value below {METRES_BELOW_MM:g} "
+            f"mm); write millimetres, e.g. {[round(float(v) * 1000.0, 1) for v in value]}")
+    return value / 1000.0
 
 
 def _number(value: Any, where: str, src: str, *, minimum: float, strict: bool) -> float:

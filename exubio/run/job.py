@@ -129,16 +129,17 @@ def _run_job(job: TrialJob, progress_factory: Callable[[str, int], Callable[[int
     if job.relabel:
         trajectories = relabel_trajectories(read_trial(job.trial), job.relabel)
     if job.static_frames:
-        from exubio.run.session import StaticSpec, calibrate_session
+        from exubio.run.session import StaticSpec, calibrate_session, calibration_protocol
 
         trajectories = trajectories if trajectories is not None else read_trial(job.trial)
-        static = prepare_targets(trajectories, session.generic_protocol)  # the calibration's and the trial's
+        gprot = calibration_protocol(trajectories, session)  # a marker the trial lacks: left out, or refused
+        static = prepare_targets(trajectories, gprot)  # the calibration's and the trial's
         calibration = calibrate_session(trajectories, session, job.out_dir, stem, spec=StaticSpec(frames=job.static_frames),
                                         overwrite=job.overwrite, reference=False, targets=static)
         if job.final_dir is not None:
             calibration = calibration.moved_to(Path(job.final_dir) / calibration.model_file.name)
         calibrated = Calibrated(str(calibration.model_file), calibration.report)
-        prepared = Prepared(preparation_key(session.generic_protocol), static)
+        prepared = Prepared(preparation_key(gprot), static)
     if calibration is not None:
         session = calibration.session
     settings = RunSettings(method_options=dict(job.options), overwrite=job.overwrite, repair_labels=job.repair_labels,

@@ -332,7 +332,7 @@ def assess_inputs(inputs: TrialInputs, recons: list[Reconstruction], calibration
         session = tuple(placed_anew(static_consistency(reference, trial_pd, inputs.protocol)))
     return assess_trial(inputs.model, inputs.protocol, inputs.targets, recons, label_findings=findings,
                         calibration=None if calibration is None else calibration.report,
-                        static_labels=() if calibration is None else calibration.labels, session=session,
+                        static_labels=() if calibration is None or calibration.reference is None else calibration.labels, session=session,
                         dropped=inputs.dropped, partial_swaps=inputs.partial_swaps, repaired=inputs.repaired,
                         static_name=getattr(reference, "source", "") or "")
 

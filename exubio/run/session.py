@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -17,7 +18,9 @@ from exubio.io import results
 from exubio.io.trial import read_trial
 from exubio.prep.targets import prepare_targets
 from exubio.run.inputs import Session, load_session
-from exubio.types import MarkerTargets, Trajectories
+from exubio.types import MarkerTargets, Protocol, Trajectories
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -97,13 +100,36 @@ def calibrate_file(static: str | Path | Trajectories, /, *, session: Session | N
     return calibrated.model, calibrated.protocol, report
 
 
+def calibration_protocol(static: Trajectories, session: Session, /):
+    """The generic protocol a static (or a trial's own frames) is calibrated with: a marker it lacks
+    left out (optional) where the others still measure every angle, with a warning that names it and
+    the near label the static has (exubio.trust.missing_markers); else the InputError saying so. The
+    session's own protocol keeps the marker: a trial that lacks it too gets the check naming it."""
+    from exubio.trust.missing_markers import drop_missing_markers
+
+    protocol, dropped = drop_missing_markers(static, session.generic_protocol, session.generic_model)
+    for what in dropped:
+        log.warning("%s: marker %s missing: calibrated without it (the other markers still measure every angle)",
+                    static.source or "static", what)
+    return protocol
+
+
+def _without_absent(protocol: Protocol, targets: MarkerTargets, /) -> Protocol:
+    """``protocol`` with the markers ``targets`` (prepared with it or calibration_protocol's) never has
+    made optional: the protocol they were prepared with."""
+    absent = {n for j, n in enumerate(targets.marker_names) if not targets.present[:, j].any()}
+    return dataclasses.replace(protocol, markers=tuple(dataclasses.replace(m, optional=True) if m.name in absent else m
+                                                       for m in protocol.markers))
+
+
 def calibrate_session(static: str | Path | Trajectories, session: Session, out_dir: str | Path, stem: str, /, *,
                       spec: StaticSpec = StaticSpec(), overwrite: bool = False, reference: bool = True,
                       targets: MarkerTargets | None = None) -> SessionCalibration:
     """Calibrate the session's generic model to ``static`` (a static trial, or frames of the trial
     itself), write ``out_dir/<stem>.model.yaml``, check the static's labels and (with ``reference``:
     a static trial apart from the task trials) keep its pair distances, which the session's trials
-    are checked against. ``targets``: the static already prepared with the generic protocol."""
+    are checked against. ``targets``: the static already prepared with the generic protocol, or with
+    calibration_protocol's (the generic one with a marker the static lacks made optional)."""
     from exubio.calibration import parse_frames
     from exubio.model.load import as_written, save_model
     from exubio.trust.labels import check_trial, pair_distances
@@ -112,13 +138,15 @@ def calibrate_session(static: str | Path | Trajectories, session: Session, out_d
     model_file = Path(out_dir) / f"{stem}.model.yaml"
     key = calibration_key(source, session, spec)
     reused = None if overwrite else reusable_calibration(model_file, key)
-    gmodel, gprot = session.generic_model, session.generic_protocol
+    gmodel = session.generic_model
+    gprot = calibration_protocol(source, session) if targets is None else _without_absent(session.generic_protocol,
+                                                                                            targets)
     targets = targets if targets is not None else prepare_targets(source, gprot)  # prepared once
     if reused is not None:
         model, report = reused
     else:
         results.prepare_output_dir(out_dir, [model_file.name], overwrite=overwrite)
-        model, report = calibrate(source, session, spec, targets=targets)
+        model, report = calibrate(source, dataclasses.replace(session, generic_protocol=gprot), spec, targets=targets)
         written = {**report.to_dict(), **({"inputs_sha256": key} if key else {})}
         save_model(model, model_file, calibration=written)
         model = as_written(model, calibration=written, source=model_file)

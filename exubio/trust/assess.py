@@ -196,8 +196,9 @@ def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recon
     if "pf" in by and "ls" in by:
         agreement = agreement_on_measured(model, by["pf"], angles["pf"], by["ls"], angles["ls"])
     off = Q.off_segment_markers(model, protocol) if calibration is not None else {}
+    repeated = [f for f in static_labels if _same_finding(f, label_findings)]
     static_labels = [f for f in static_labels if not _same_finding(f, label_findings)]
-    common = (Q.label_reasons(label_findings) + Q.label_reasons(static_labels, prefix="static trial: ")
+    common = (Q.label_reasons(label_findings, in_static=repeated) + Q.label_reasons(static_labels, prefix="static trial: ")
               + Q.calibration_reasons(calibration, scale_bounds=SCALE_BOUNDS, off_segment=off, not_measured=unmeasurable,
                                       accepted_offsets_mm={m.name: m.landmark_offset_mm for m in protocol.markers
                                                            if m.landmark_offset_mm is not None})

@@ -10,7 +10,7 @@ import difflib
 from exubio.errors import InputError
 from exubio.types import Model, Protocol, Trajectories
 
-__all__ = ["drop_missing_markers"]
+__all__ = ["drop_missing_markers", "near_labels"]
 
 
 def _present(protocol: Protocol, traj: Trajectories) -> dict[str, bool]:
@@ -27,7 +27,8 @@ def _present(protocol: Protocol, traj: Trajectories) -> dict[str, bool]:
 
 
 def drop_missing_markers(traj: Trajectories, protocol: Protocol, model: Model, /) -> tuple[Protocol, tuple[str, ...]]:
-    """(the protocol with the trial's missing non-optional markers made optional, their names);
+    """(the protocol with the trial's missing non-optional markers made optional, their names, each
+    with the near label the trial has where it has one: ``SCAP_Cor (the trial has 'CAP_Cor' ...)``);
     InputError naming the file, the markers, a near label the trial has and the angles that would
     no longer be measured, when dropping them costs a measured angle."""
     from exubio.trust.assess import angle_status_of_protocol
@@ -42,13 +43,29 @@ def drop_missing_markers(traj: Trajectories, protocol: Protocol, model: Model, /
     left = angle_status_of_protocol(model, reduced, bounded=False)   # move with any marker's weight
     lost = [n for n, s in full.items() if s == "measured" and left.get(n) != "measured"]
     if lost:
-        unused = [lab for lab in traj.labels if lab not in {n for m in protocol.markers for n in (m.name, *m.aliases)}]
-        hints = []
-        for name in missing:
-            near = difflib.get_close_matches(name, unused, n=1, cutoff=0.6)
-            if near:
-                hints.append(f"'{near[0]}' for {name}? (protocol: aliases: [{near[0]}], or --relabel {near[0]}={name})")
+        hints = [f"'{near}' for {name}? ({fix})" for name, (near, fix) in near_labels(missing, traj, protocol).items()]
         raise InputError(f"{traj.source or 'trial'}: marker(s) {list(missing)} of protocol {protocol.name} missing; "
                          f"without them the markers would no longer measure {', '.join(lost)}"
                          + (f"; the trial has {', '.join(hints)}" if hints else f"; the trial has {list(traj.labels)}"))
-    return reduced, missing
+    near = near_labels(missing, traj, protocol)
+    return reduced, tuple(f"{n} (the trial has '{near[n][0]}': {near[n][1]})" if n in near else n for n in missing)
+
+
+def near_labels(missing, traj: Trajectories, protocol: Protocol, /) -> dict[str, tuple[str, str]]:
+    """Per missing marker, a label of the trial that no marker uses and that is near its name or an
+    alias (difflib), with the fix to type: {'SCAP_Cor': ('CAP_Cor', '--relabel CAP_Cor=SCAP_Cor, or ...')}."""
+    used = {n for m in protocol.markers for n in (m.name, *m.aliases)}
+    used |= {getattr(protocol.thorax_frame, k) for k in protocol.thorax_frame.keys}
+    used |= {a for names in (getattr(protocol, "thorax_aliases", None) or {}).values() for a in names}
+    relabel = dict(getattr(protocol, "relabel", None) or {})
+    unused = [lab for lab in traj.labels if relabel.get(lab, lab) not in used]
+    out = {}
+    for name in missing:
+        m = next((m for m in protocol.markers if m.name == name), None)
+        for candidate in (name, *(m.aliases if m is not None else ())):
+            near = difflib.get_close_matches(candidate, unused, n=1, cutoff=0.6)
+            if near:
+                out[name] = (near[0], f"--relabel {near[0]}={name}, or in the protocol markers.{name}.aliases: "
+                                      f"[{near[0]}]")
+                break
+    return out

@@ -310,7 +310,11 @@ def finding_field(f: Any, key: str, default: Any = None) -> Any:
     return f.get(key, default) if isinstance(f, Mapping) else getattr(f, key, default)
 
 
-def label_reasons(findings: Iterable[Any], *, prefix: str = "") -> list[Reason]:
+def label_reasons(findings: Iterable[Any], *, prefix: str = "", in_static: Iterable[Any] = ()) -> list[Reason]:
+    """A reason per label finding, with the relabel that fixes it; ``in_static``: the same findings
+    on the session's static trial: a swap seen in both gets one fix for both (--relabel and
+    --static-relabel together: fixing the trial alone against a swapped static makes it worse)."""
+    statics = list(in_static)
     out = []
     for f in findings:
         get = partial(finding_field, f)
@@ -318,7 +322,15 @@ def label_reasons(findings: Iterable[Any], *, prefix: str = "") -> list[Reason]:
                "note": "note"}.get(get("severity"), "check")
         relabel = get("relabel") or {}
         fix = ""
-        if relabel:
+        same = next((g for g in statics if finding_field(g, "kind") == get("kind")
+                     and set(finding_field(g, "markers", ())) == set(get("markers"))), None)
+        static_relabel = (finding_field(same, "relabel") or {}) if same is not None else {}
+        if relabel and static_relabel:
+            words = lambda r: ",".join(f"{a}={b}" for a, b in r.items())  # noqa: E731
+            fix = (f"; seen in the static trial too: to fix both: --relabel {words(relabel)} --static-relabel "
+                   f"{words(static_relabel)} (every trial of the session: relabel: "
+                   f"{{{', '.join(f'{a}: {b}' for a, b in relabel.items())}}} in the protocol)")
+        elif relabel:
             option = "--static-relabel" if prefix.startswith("static") else "--relabel"
             fix = f"; to fix: {option} {','.join(f'{a}={b}' for a, b in relabel.items())}"
         out.append(Reason("label", lvl, f"{prefix}{get('kind')} ({', '.join(get('markers'))}): {get('evidence')}{fix}"))
