@@ -92,7 +92,9 @@ def _checked(page: str, lang: str, body: str, api: bool) -> str | None:
     if lang == "yaml" and "sessions:" in body and page == "docs/studies.md":
         return "tests/test_readme_examples.py (the exubio study examples run it)"
     if lang == "yaml":  # a shipped file quoted whole (its comments aside): what the file says, the page says
-        return "a shipped file" if _shipped_file(body) else None
+        if _shipped_file(body):
+            return "a shipped file"
+        return "lines of a shipped file" if _shipped_lines(body) else None
     if lang == "" and page == "docs/architecture.md":
         return "test_the_architecture_block_names_what_is_there"
     return None
@@ -103,6 +105,18 @@ def _shipped_file(body: str) -> Path | None:
         kept = [line for line in path.read_text(encoding="utf-8").splitlines() if line and not line.startswith("#")]
         quoted = [re.split(r"\s+#", line)[0].rstrip() for line in body.splitlines() if line.strip()]
         if kept == quoted:
+            return path
+    return None
+
+
+def _shipped_lines(body: str) -> Path | None:
+    """A shipped protocol that holds every quoted line (its spacing and comments aside): a part of
+    a file quoted, e.g. three markers of protocols/examples/guide_21_skin.yaml."""
+    norm = lambda line: re.sub(r"\s+", " ", re.split(r"\s+#", line)[0]).strip()
+    quoted = [norm(line) for line in body.splitlines() if line.strip()]
+    for path in sorted((ROOT / "protocols").rglob("*.yaml")):
+        kept = {norm(line) for line in path.read_text(encoding="utf-8").splitlines() if line.strip()}
+        if quoted and all(q in kept for q in quoted):
             return path
     return None
 

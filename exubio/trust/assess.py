@@ -110,13 +110,12 @@ def reference_postures_of(model: Model, /) -> np.ndarray:
     return q
 
 
-def angle_status_of_protocol(model: Model, protocol: Protocol, /, *, kin: Kinematics | None = None,
-                             bounded: bool = True) -> dict[str, str]:
-    """What the protocol's markers can do for each anatomical angle, known before any trial: its
-    status over the reference postures (exubio.synth.simulate.reference_postures: elevation in three
-    planes, HT 10-120 deg) with every non-optional marker present: 'measured' (in every posture),
-    'modelled', 'not measured', or 'partly ...' (in some postures). ``bounded=False``: what the markers
-    determine alone, without the uncertainty bound and the gimbal margin (observability.angle_determinacy)."""
+def angle_determinacy_of_protocol(model: Model, protocol: Protocol, /, *, kin: Kinematics | None = None,
+                                  bounded: bool = True) -> tuple[AngleDeterminacy, np.ndarray]:
+    """(the AngleDeterminacy over the reference postures with every non-optional marker present,
+    those postures' humerothoracic elevation (rad)): what angle_status_of_protocol summarises."""
+    from exubio.model.angles import humerothoracic_elevation
+
     kin = kin or Kinematics(model)
     q = reference_postures_of(model)
     present = np.tile([not m.optional for m in protocol.markers], (q.shape[0], 1))
@@ -124,7 +123,17 @@ def angle_status_of_protocol(model: Model, protocol: Protocol, /, *, kin: Kinema
     locked = not_solved_mask(model, protocol, kin) & ~held
     det = angle_determinacy(kin, tracked_points(kin, protocol), q, present, protocol.weights, held=held, locked=locked,
                             bounded=bounded)
-    return det.trial_status()
+    return det, humerothoracic_elevation(model, q, kinematics=kin)
+
+
+def angle_status_of_protocol(model: Model, protocol: Protocol, /, *, kin: Kinematics | None = None,
+                             bounded: bool = True) -> dict[str, str]:
+    """What the protocol's markers can do for each anatomical angle, known before any trial: its
+    status over the reference postures (exubio.synth.simulate.reference_postures: elevation in three
+    planes, HT 10-120 deg) with every non-optional marker present: 'measured' (in every posture),
+    'modelled', 'not measured', or 'partly ...' (in some postures). ``bounded=False``: what the markers
+    determine alone, without the uncertainty bound and the gimbal margin (observability.angle_determinacy)."""
+    return angle_determinacy_of_protocol(model, protocol, kin=kin, bounded=bounded)[0].trial_status()
 
 
 def coordinates_not_measured_by_protocol(model: Model, protocol: Protocol, /, *,

@@ -227,6 +227,25 @@ class AngleDeterminacy:
             out[n] = worst.label if (col != AngleStatus.MEASURED).all() else f"partly {worst.label}"
         return out
 
+    def causes(self) -> dict[str, dict[str, np.ndarray]]:
+        """Per angle, the frames (bool, (n,)) where it is not measured for each cause: "markers" (the
+        markers do not determine it: noise gain above the threshold, or a segment no marker
+        observes), "gimbal" (its sequence near its gimbal lock), "uncertainty" (its standard
+        uncertainty above the bound); each frame counted under the first cause that applies."""
+        from exubio.trust.angle_uncertainty import U_BOUND_DEG
+
+        out = {}
+        nm = self.status == AngleStatus.NOT_MEASURED
+        with np.errstate(invalid="ignore"):
+            markers = nm & ~(self.gain_deg_per_mm <= UNDETERMINED_DEG_PER_MM)
+            gimbal = (nm & ~markers & self.near_gimbal_lock) if self.near_gimbal_lock is not None else np.zeros_like(nm)
+            unc = (nm & ~markers & ~gimbal & (np.degrees(self.uncertainty_rad) > U_BOUND_DEG)
+                   if self.uncertainty_rad is not None else np.zeros_like(nm))
+        markers = markers | (nm & ~gimbal & ~unc & ~markers)  # a locked segment: no marker sees it
+        for j, n in enumerate(self.names):
+            out[n] = {"markers": markers[:, j], "gimbal": gimbal[:, j], "uncertainty": unc[:, j]}
+        return out
+
     def to_dict(self) -> dict:
         with np.errstate(all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)

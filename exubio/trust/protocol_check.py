@@ -71,15 +71,16 @@ def check_protocol(model: Model, protocol: Protocol, /, *, trial: Trajectories |
                    static: Trajectories | None = None) -> ProtocolCheck:
     """Check ``protocol`` (loaded against ``model``) before any trial; with ``trial`` or ``static``
     also against its labels and marker positions (module docstring)."""
-    from exubio.trust.assess import angle_status_of_protocol
+    from exubio.trust.assess import angle_determinacy_of_protocol
 
-    status = angle_status_of_protocol(model, protocol)
+    det, ht = angle_determinacy_of_protocol(model, protocol)
+    status = det.trial_status()
     findings = _unmarked_segments(model, protocol) + _relabel_values(protocol)
     for traj in (t for t in (trial, static) if t is not None):
         findings += _against_trial(model, protocol, traj)
     if static is not None and not any(f.level == "error" for f in findings):
         findings += _declared_on_landmarks(model, protocol, static)
-    return ProtocolCheck(status, _why(model, protocol, status), tuple(findings))
+    return ProtocolCheck(status, _why(model, protocol, status, det.causes(), ht), tuple(findings))
 
 
 def _marked(model: Model, protocol: Protocol) -> dict[str, int]:
@@ -207,8 +208,26 @@ def _declared_on_landmarks(model: Model, protocol: Protocol, static: Trajectorie
         f"the girdle see docs/troubleshooting-protocols.md")]
 
 
-def _why(model: Model, protocol: Protocol, status: Mapping[str, str]) -> dict[str, str]:
-    """Per angle not measured or modelled: the reason, from the segments' markers and the holds."""
+def _bound_reasons(name: str, causes: Mapping[str, np.ndarray], ht: np.ndarray) -> list[str]:
+    from exubio.trust.angle_uncertainty import GIMBAL_MARGIN_DEG, U_BOUND_DEG
+
+    out = []
+    n = ht.size
+    for cause, text in (("gimbal", f"within {GIMBAL_MARGIN_DEG:g} deg of its sequence's gimbal lock"),
+                        ("uncertainty", f"its standard uncertainty under the bone-pin soft-tissue artefact above "
+                                        f"{U_BOUND_DEG:g} deg")):
+        frames = causes[cause]
+        if frames.any():
+            h = np.degrees(ht[frames])
+            out.append(f"{text} in {int(frames.sum())} of {n} reference postures (HT {h.min():.0f}-{h.max():.0f} deg)")
+    return out
+
+
+def _why(model: Model, protocol: Protocol, status: Mapping[str, str],
+         causes: Mapping[str, Mapping[str, np.ndarray]] | None = None, ht: np.ndarray | None = None) -> dict[str, str]:
+    """Per angle not measured or modelled: the reason, from the segments' markers, the holds, and
+    (``causes``, ``ht``: AngleDeterminacy.causes over the reference postures and their HT elevation)
+    the gimbal margin and the uncertainty bound."""
     count = _marked(model, protocol)
     seen = {s.name: count[s.name] > 0 or any(count[b] for b in _below(model, s.name)) for s in model.segments}
     seen["thorax"] = True
@@ -225,12 +244,15 @@ def _why(model: Model, protocol: Protocol, status: Mapping[str, str]) -> dict[st
             out[name] = f"no marker on {' or '.join(blind)} or below it"
         elif bare:
             out[name] = f"no marker on {' or '.join(bare)}: seen only through the segments below it"
+        elif causes is not None and ht is not None and not causes[name]["markers"].any():
+            out[name] = "; ".join(_bound_reasons(name, causes[name], ht)) or "not determined"
         else:
             segs = " and ".join(s for s in (pair or ()) if s != "thorax")
+            bound = "; ".join(_bound_reasons(name, causes[name], ht)) if causes is not None and ht is not None else ""
             out[name] = (f"the markers on {segs} do not determine it in some reference postures (noise gain above "
                          f"2 deg per mm): near the arm hanging, where the angle's sequence is in gimbal lock or a "
                          f"straight elbow hides the humerus's axial rotation, or markers close to the segment's axis"
                          if st.startswith("partly") else
                          f"the markers on {segs} do not determine it in any reference posture (noise gain above 2 deg "
-                         f"per mm): markers on a line, or too few off the segment's axis")
+                         f"per mm): markers on a line, or too few off the segment's axis") + (f"; {bound}" if bound else "")
     return out
