@@ -25,6 +25,9 @@ class PairDistances:
     spread_m:  (k, k) standard deviation over those frames.
     n_frames:  (k, k) number of those frames.
     source:    the trial (or model) they come from.
+    step_m:    (k, k) the largest change of the distance from one sample where both are present to
+               the next (across a gap too): a label that jumps to another marker changes it at once,
+               skin motion and noise a little at a time. None where not computed.
     """
 
     names: tuple[str, ...]
@@ -32,6 +35,7 @@ class PairDistances:
     spread_m: np.ndarray
     n_frames: np.ndarray
     source: str = ""
+    step_m: np.ndarray | None = None
 
     def get(self, a: str, b: str) -> float:
         """Median distance (m) of markers a and b; NaN if either is unknown or never seen."""
@@ -68,6 +72,7 @@ def pair_distances(positions_m: np.ndarray, names: Sequence[str], /, *, source: 
     med = np.full((k, k), np.nan)
     sd = np.full((k, k), np.nan)
     cnt = np.zeros((k, k), dtype=int)
+    step = np.full((k, k), np.nan)
     # each pair once (|A-B| and |B-A| are the same numbers, (a - b)^2 = (b - a)^2 exactly), all
     # pairs in one array: the median and SD of every column are those of the pair's own series
     iu_all, ju_all = np.triu_indices(k, 1)
@@ -88,9 +93,27 @@ def pair_distances(positions_m: np.ndarray, names: Sequence[str], /, *, source: 
             v = np.std(dm, axis=0) if clean else np.nanstd(dm, axis=0)
             med[iu[seen], ju[seen]] = med[ju[seen], iu[seen]] = m
             sd[iu[seen], ju[seen]] = sd[ju[seen], iu[seen]] = v
+            st = _largest_step(dm)
+            step[iu[seen], ju[seen]] = step[ju[seen], iu[seen]] = st
     np.fill_diagonal(med, 0.0)
     np.fill_diagonal(sd, 0.0)
-    return PairDistances(names=names, median_m=med, spread_m=sd, n_frames=cnt, source=source)
+    np.fill_diagonal(step, 0.0)
+    return PairDistances(names=names, median_m=med, spread_m=sd, n_frames=cnt, source=source, step_m=step)
+
+
+def _largest_step(d: np.ndarray) -> np.ndarray:
+    """(p,): per column of d (n, p), the largest |change| from one finite sample to the next finite
+    one (a gap between them bridged)."""
+    n, p = d.shape
+    finite = np.isfinite(d)
+    if finite.all():
+        return np.abs(np.diff(d, axis=0)).max(axis=0) if n > 1 else np.zeros(p)
+    last = np.maximum.accumulate(np.where(finite, np.arange(n)[:, None], -1), axis=0)
+    before = np.vstack([np.full((1, p), -1), last[:-1]])  # the last finite sample strictly before
+    valid = finite & (before >= 0)
+    prev = d[np.clip(before, 0, None), np.arange(p)[None, :]]
+    out = np.where(valid, np.abs(d - prev), 0.0).max(axis=0) if n else np.zeros(p)
+    return out
 
 
 def model_pair_distances(model: Model, protocol: Protocol, /) -> PairDistances:

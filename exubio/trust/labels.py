@@ -138,6 +138,14 @@ the kinova_martin trials, which sits on the radial styloid and so turns with pro
 that sits on a marker of another segment for 5 % of the frames or more, the distance jumping by
 100 mm or more, gives at least 100 sqrt(0.05 x 0.95) = 22 mm."""
 
+RIGID_STEP_MIN_M = 0.025
+"""... and only where the distance also changes by more than 25 mm from one sample to the next: a
+label that sits on another marker for part of the trial changes a rigid distance by Delta at once,
+and SD > 20 mm needs Delta > 40 mm (SD = Delta sqrt(f (1 - f)) <= Delta / 2); skin that slides
+changes it a little at a time (the paper's SIER with 20 mm of independent artefact per marker: SD
+21-23 mm between the epicondyles, largest step 12 mm at 100 Hz with 1.5 mm noise), so a spread
+without a step is the artefact, not a label."""
+
 # -- the verdict
 OTHER_SUBJECT_MIN_MARKERS = 3
 """The reference belongs to another subject when the rigid distances that disagree with it (once
@@ -393,6 +401,9 @@ def check_trial(
 
     sd = spread[exp.rigid[:, 0], exp.rigid[:, 1]] if len(exp.rigid) else np.zeros(0)
     jumpy = np.isfinite(sd) & (sd > RIGID_SPREAD_MAX_M)
+    if pd.step_m is not None and len(exp.rigid):
+        steps = pd.step_m[np.ix_(perm, perm)][exp.rigid[:, 0], exp.rigid[:, 1]]
+        jumpy &= ~(steps <= RIGID_STEP_MIN_M)  # NaN (not computed): the spread alone decides
     if jumpy.any():
         pairs = exp.rigid[jumpy]
         for m in _cover(pairs):
