@@ -24,7 +24,8 @@ move by D dq (D = d angle / d q). The markers' error covariance has two parts:
 The variance is D K Sigma K^T D^T. It is not the residual of this trial: a trial whose markers fit
 the model well can still carry a large rigid artefact, which no residual shows.
 
-An angle is not ``measured`` in a frame where its uncertainty exceeds ``U_BOUND_DEG`` or where its
+An angle is not ``measured`` in a frame where its uncertainty exceeds ``U_BOUND_DEG`` (the ST, GH and HT
+angles, whose segments the artefact model was measured on: ``BOUND_SETS``) or where its
 sequence is within ``GIMBAL_MARGIN_DEG`` of its gimbal lock (first and third angle only: the middle
 angle stays defined): ISB GH and HT Y-X'-Y'' at elevations below the margin (the plane of elevation
 and the axial rotation of an arm at the side are not defined), a Cardan sequence with its middle
@@ -39,7 +40,7 @@ import numpy as np
 from exubio.model.kinematics import Kinematics, PointSet
 from exubio.trust.sta_amplitude import STAAmplitude
 
-__all__ = ["NOISE_MM", "U_BOUND_DEG", "GIMBAL_MARGIN_DEG", "marker_covariance", "sensitivity", "gimbal_mask",
+__all__ = ["BOUND_SETS", "bound_applies", "NOISE_MM", "U_BOUND_DEG", "GIMBAL_MARGIN_DEG", "marker_covariance", "sensitivity", "gimbal_mask",
            "expected_residual_ms", "UNCERTAINTY_DEFINITION"]
 
 NOISE_MM = 1.0
@@ -61,8 +62,19 @@ UNCERTAINTY_DEFINITION = (
     f"standard uncertainty (1 SD, deg): {NOISE_MM:g} mm marker noise and the soft-tissue artefact model fitted on "
     "bone pins (rigid cluster rotation and translation plus non-rigid parts per segment, growing with the motion "
     "from the reference posture; exubio.trust.sta_amplitude), carried through the reconstruction's first-order "
-    f"sensitivity; an angle is not measured where u > {U_BOUND_DEG:g} deg or within {GIMBAL_MARGIN_DEG:g} deg of its "
-    "sequence's gimbal lock")
+    f"sensitivity; an ST, GH or HT angle is not measured where u > {U_BOUND_DEG:g} deg, any angle within "
+    f"{GIMBAL_MARGIN_DEG:g} deg of its sequence's gimbal lock (SC, AC and distal angles: u from coefficients borrowed "
+    "from the humerus, no bone data)")
+
+BOUND_SETS = ("ST_", "GH_", "HT_")
+"""The angles the bound judges: those between segments the bone-pin artefact model was measured on
+(thorax, scapula, humerus). The SC, AC, elbow, forearm and wrist angles carry an uncertainty made
+with borrowed coefficients (exubio.trust.sta_amplitude) and are not set 'not measured' by it."""
+
+
+def bound_applies(angle: str) -> bool:
+    return angle.startswith(BOUND_SETS)
+
 
 _SETS = (("SC", "YXZ"), ("AC", "YXZ"), ("ST", "YXZ"), ("GH", "YXY"), ("GH_phadke", "XZY"), ("HT", "YXY"))
 

@@ -15,7 +15,7 @@ from exubio.trust.evaluate import per_frame_residuals_mm, residual_statistics
 from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points, unobserved_segments
 from exubio.methods.poses import held_mask
-from exubio.trust.mismatch import MismatchAssessment, assess_mismatch, mismatch_reasons
+from exubio.trust.mismatch import MismatchAssessment, assess_mismatch, mismatch_reasons, unseen_mismatch_reasons
 from exubio.trust.observability import UNDETERMINED_TRIAL_FRACTION, AngleDeterminacy, AngleStatus, Determinacy, angle_determinacy, determinacy
 from exubio.model.ranges import limit_report
 from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Reconstruction
@@ -108,6 +108,14 @@ def reference_postures_of(model: Model, /) -> np.ndarray:
             _POSTURES.pop(next(iter(_POSTURES)))
         _POSTURES[key] = q
     return q
+
+
+def _scapula_calibrated(calibration: Any) -> bool:
+    """The session's calibration fitted the thorax ellipsoid on a scapula trial (or several statics)."""
+    if calibration is None:
+        return False
+    sc = (getattr(calibration, "functional", None) or {}).get("scapula") or {}
+    return bool(sc.get("used")) or len(getattr(calibration, "ellipsoid_poses_mm", ()) or ()) > 1
 
 
 def angle_determinacy_of_protocol(model: Model, protocol: Protocol, /, *, kin: Kinematics | None = None,
@@ -223,7 +231,8 @@ def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recon
         reasons += Q.residual_reasons(residual_statistics(r), per_frame_residuals_mm(r)[0])
         reasons += Q.limit_reasons([lim.to_dict() for lim in lims[r.method]], r.n_frames, not_measured=unmeasurable)
         reasons += Q.angle_reasons(angles[r.method].trial_status(), structural,
-                                   angles[r.method].fraction(AngleStatus.MEASURED), UNDETERMINED_TRIAL_FRACTION)
+                                   angles[r.method].fraction(AngleStatus.MEASURED), UNDETERMINED_TRIAL_FRACTION,
+                                   causes=angles[r.method].causes())
         status = np.asarray(r.status)
         frames = {"not_converged": int((status == FrameStatus.NOT_CONVERGED).sum()),
                   "too_few_markers": int((status == FrameStatus.TOO_FEW_MARKERS).sum())}
@@ -232,7 +241,8 @@ def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recon
         dt = float(np.median(np.diff(r.time_s))) if r.n_frames > 1 else 1.0
         reasons += Q.gap_reasons(r.gaps, r.n_frames, 1.0 / dt)
         reasons += Q.agreement_reasons(agreement, ())
-        reasons += mismatch_reasons(mismatch[r.method])
+        reasons += mismatch_reasons(mismatch[r.method], calibrated=calibration is not None)
+        reasons += unseen_mismatch_reasons(protocol, scapula_calibrated=_scapula_calibrated(calibration))
         quality[r.method] = Q.Quality.of(reasons)
     return TrialAssessment(dets, lims, quality, agreement, tuple(label_findings), not_solved, angles, structural,
                            mismatch)

@@ -36,7 +36,8 @@ import numpy as np
 from exubio.model.kinematics import Kinematics, PointSet
 
 __all__ = ["MismatchAssessment", "MismatchFinding", "SegmentEvidence", "assess_mismatch", "mismatch_findings",
-           "mismatch_reasons", "rigid_fit", "segment_evidence", "surface_distance_m"]
+           "mismatch_reasons", "rigid_fit", "segment_evidence", "surface_distance_m", "unseen_mismatch_reasons",
+           "UNSEEN_MISMATCH"]
 
 MIN_RIGID_MARKERS = 3
 
@@ -279,12 +280,49 @@ def assess_mismatch(kin: Kinematics, points: PointSet, q: np.ndarray, measured_m
     return MismatchAssessment(ev, mismatch_findings(ev, skip_segments=[kin.model.segments[i].name for i in skipped]))
 
 
-def mismatch_reasons(assessment: MismatchAssessment | None, /) -> list:
-    """The verdict's reasons (exubio.trust.quality.Reason, code "model_mismatch", level check)."""
+def _advice(finding: "MismatchFinding", calibrated: bool) -> str:
+    """What a lab can do about a finding: which segment, which marker, which calibration."""
+    if "ellipsoid" in finding.evidence:
+        return ("what to do: fit the thorax ellipsoid to this subject, on a movement of the arm through its range "
+                "(`--scapula-trial TRIAL`: the scapula's own markers over the motion) or at least on a static of "
+                "this session (`--static STATIC`)" + ("; the calibration given did not fit it: add a scapula trial"
+                                                       if calibrated else ""))
+    marker = finding.evidence.split("; ")[0]
+    worst = marker.split(" mm)")[0].split("; ")[-1].split(" ")[0] if "; " in marker else ""
+    if calibrated:
+        return (f"what to do: the calibration registered the markers where its static had them, so the static and "
+                f"this trial disagree: check that {worst or 'the markers'} stayed where they were (re-placed, "
+                f"fallen, another session's static?) and calibrate with a static of this trial's session")
+    return (f"what to do: calibrate with a static of this session (`--static STATIC`: it scales the segments and "
+            f"registers every marker where it sits), and check {worst or 'the named markers'} against the protocol "
+            f"(`exubio protocols PROTOCOL --static STATIC` names markers declared elsewhere than they are)")
+
+
+def mismatch_reasons(assessment: MismatchAssessment | None, /, *, calibrated: bool = False) -> list:
+    """The verdict's reasons (exubio.trust.quality.Reason, code "model_mismatch", level check), each
+    with what a lab can do (``calibrated``: the model came from a static of the session)."""
     from exubio.trust.quality import Reason
 
     if assessment is None:
         return []
     return [Reason("model_mismatch", "check", f"model mismatch on the {f.segment}: {f.evidence}; in simulations "
-                   f"this much costs more than 5 deg on a measured angle")
+                   f"this much costs more than 5 deg on a measured angle; {_advice(f, calibrated)}")
             for f in assessment.findings]
+
+
+UNSEEN_MISMATCH = (
+    "not seen by any check, and possible in any trial: a thorax ellipsoid that sits too high or is stretched "
+    "vertically for this subject leaves the residuals and the contact points as they are while the GH angles in "
+    "ISB's Y-X'-Y'' move by up to 10 deg (benchmarks/README.md, Model mismatch); the skin over the scapula "
+    "sliding as a whole leaves small residuals too (that part is in each angle's uncertainty, <angle>_u_deg). "
+    "A scapula trial (`--scapula-trial`) fits the ellipsoid to the subject; read GH in Phadke's sequence")
+
+
+def unseen_mismatch_reasons(protocol, /, *, scapula_calibrated: bool = False) -> list:
+    """A note, in every trial whose markers measure the scapula, of the mismatch no check can see
+    (UNSEEN_MISMATCH); none when the ellipsoid was fitted on a scapula trial of the session."""
+    from exubio.trust.quality import Reason
+
+    if scapula_calibrated or not any(m.segment == "scapula" for m in protocol.markers):
+        return []
+    return [Reason("unseen_mismatch", "note", UNSEEN_MISMATCH)]

@@ -420,8 +420,10 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
     status[share > MODELLED_SHARE] = AngleStatus.MODELLED
     status[(gain > UNDETERMINED_DEG_PER_MM) & (share <= MODELLED_SHARE)] = AngleStatus.NOT_MEASURED
     if bounded:
+        judged = np.array([AU.bound_applies(nm) for nm in names], dtype=bool)
         with np.errstate(invalid="ignore"):
-            status[(np.degrees(unc) > AU.U_BOUND_DEG) & (status == AngleStatus.MEASURED)] = AngleStatus.NOT_MEASURED
+            status[(np.degrees(unc) > AU.U_BOUND_DEG) & (status == AngleStatus.MEASURED) & judged[None, :]] = \
+                AngleStatus.NOT_MEASURED
     status[gimbal & (status == AngleStatus.MEASURED)] = AngleStatus.NOT_MEASURED
     status[dep_locked] = AngleStatus.NOT_MEASURED
     status[~np.isfinite(q).all(axis=1)] = AngleStatus.NOT_MEASURED

@@ -238,8 +238,30 @@ def session_reasons(shifts: Sequence[Any], static_name: str) -> list[Reason]:
                    f"static, or check the session's file list")]
 
 
+def _cause_text(causes: Mapping[str, Any] | None, name: str) -> tuple[str, str]:
+    """(why, main cause) of an angle's not-measured frames (AngleDeterminacy.causes)."""
+    if not causes or name not in causes:
+        return "", "markers"
+    from exubio.trust.angle_uncertainty import GIMBAL_MARGIN_DEG, U_BOUND_DEG
+
+    c = causes[name]
+    n = {k: int(np.asarray(v).sum()) for k, v in c.items()}
+    main = max(n, key=n.get) if any(n.values()) else "markers"
+    parts = []
+    if n.get("gimbal"):
+        parts.append(f"within {GIMBAL_MARGIN_DEG:g} deg of its sequence's gimbal lock in {n['gimbal']} frames (the angle is "
+                     "not defined there" + ("; read GH in Phadke's sequence)" if name.startswith("GH_") else ")"))
+    if n.get("uncertainty"):
+        parts.append(f"its standard uncertainty above {U_BOUND_DEG:g} deg in {n['uncertainty']} frames (the bone-pin "
+                     "artefact at high elevation, or the model's misfit where residuals are large: a static of this "
+                     "session and a scapula trial reduce the misfit)")
+    if n.get("markers"):
+        parts.append(f"not determined by the markers present in {n['markers']} frames")
+    return "; ".join(parts), main
+
+
 def angle_reasons(status: Mapping[str, str], structural: Mapping[str, str], measured_fraction: Mapping[str, float],
-                  undetermined_trial_fraction: float) -> list[Reason]:
+                  undetermined_trial_fraction: float, causes: Mapping[str, Any] | None = None) -> list[Reason]:
     """The anatomical angles the trial does not measure. What the marker set cannot measure in any
     posture (``structural``, known before the trial) is one note, said once; an angle the set
     measures but this trial does not (gaps, postures) is a check when it is not measured in more
@@ -259,10 +281,12 @@ def angle_reasons(status: Mapping[str, str], structural: Mapping[str, str], meas
         if known in ("not measured", "modelled") or s == "measured":
             continue
         frac = 1.0 - float(measured_fraction.get(name, 0.0))
-        lvl = "check" if frac > undetermined_trial_fraction and not known.startswith("partly") else "note"
+        why, main = _cause_text(causes, name)
+        lvl = ("check" if frac > undetermined_trial_fraction and not known.startswith("partly") and main != "gimbal"
+               else "note")
         out.append(Reason("angle_not_measured", lvl, f"{name}: not measured in {100 * frac:.0f} % of the frames "
                           f"(this marker set measures it{' in some postures' if known.startswith('partly') else ''}; "
-                          f"the frames are marked)"))
+                          f"the frames are marked)" + (f": {why}" if why else "")))
     return out
 
 
