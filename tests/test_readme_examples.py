@@ -21,6 +21,7 @@ from exubio.synth.simulate import simulate_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED_TRC = ROOT.parent / "shared" / "data" / "trc" / "tsm_rmr_ABD01.trc"
+SHARED_MAT = ROOT.parent / "shared" / "data" / "truth" / "sta_opendata" / "dataSample_S2M_armAbd.mat"
 NOT_RUN = {
     "python3 -m venv": "the set-up commands: CI runs them (.ci/run)",
     "both_arms.c3d": "needs the lab's two per-arm protocols: tests/test_arms.py builds and runs them",
@@ -69,6 +70,8 @@ def inputs(tmp_path_factory) -> Path:
     (folder / "study.yaml").write_text(study_file(), encoding="utf-8")
     if SHARED_TRC.is_file():
         shutil.copy(SHARED_TRC, folder / "trial.trc")
+    if SHARED_MAT.is_file():
+        shutil.copy(SHARED_MAT, folder / SHARED_MAT.name)
     return folder
 
 
@@ -93,6 +96,8 @@ def test_a_readme_example_runs_from_a_folder_outside_the_checkout(line, inputs, 
         pytest.skip(skip)
     if "trial.trc" in line and not (inputs / "trial.trc").is_file():
         pytest.skip(f"{SHARED_TRC} is absent")
+    if SHARED_MAT.name in line and not (inputs / SHARED_MAT.name).is_file():
+        pytest.skip(f"{SHARED_MAT} is absent")
     work = tmp_path / "lab"
     shutil.copytree(inputs, work)
     assert not str(work.resolve()).startswith(str(ROOT))
