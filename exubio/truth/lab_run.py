@@ -163,7 +163,7 @@ def _frame_series(segment: str, points: Mapping[str, np.ndarray], path) -> np.nd
     for i in range(n):
         p = {k: v[i] for k, v in points.items()}
         if all(np.isfinite(v).all() for v in p.values()):
-            out[i] = isb_frame(segment, p, fail=lambda msg: InputError(f"{path}: frame {i}: the {segment}'s ISB frame: {msg}"))
+            out[i] = isb_frame(segment, p, fail=lambda msg, i=i: InputError(f"{path}: frame {i}: the {segment}'s ISB frame: {msg}"))
     return out
 
 
