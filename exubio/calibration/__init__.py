@@ -3,8 +3,8 @@ functional movement trial). A pure step: arrays and a Model in, a Model and a Ca
 out; no file is read or written here (``exubio.run.pipeline`` does that).
 
 Modules, one job each: ``window`` (which frames hold the static pose), ``scaling`` (segment scale
-factors), ``posefit`` (the static pose and the scales of the scaled generic model), ``landmarks``
-(ISB anatomical frames from landmarks), ``cluster`` (the poses of marker clusters),
+factors), ``posefit`` (the static pose and the scales of the scaled generic model), ``cluster`` (the poses
+of marker clusters),
 ``functional`` (SCoRE joint centres, SARA axes), ``ellipsoid`` (the thorax ellipsoid through the
 scapula contact points), ``scapula_motion`` (the ellipsoid through the scapula postures of a
 movement trial), ``registration`` (marker <-> model point), ``report`` (the typed result) and

@@ -157,19 +157,6 @@ def coordinates_not_measured_by_protocol(model: Model, protocol: Protocol, /, *,
     return tuple(det.trial_undetermined())
 
 
-def agreement_on_determined(a: Reconstruction, da: Determinacy, b: Reconstruction, db: Determinacy,
-                            not_solved: np.ndarray) -> dict[str, float]:
-    d = np.degrees(a.q_rad - b.q_rad)
-    ok = ~da.undetermined & ~db.undetermined
-    out = {}
-    for j, n in enumerate(a.coordinate_names):
-        if not_solved[j]:
-            continue
-        sel = ok[:, j] & np.isfinite(d[:, j])
-        out[n] = float(np.sqrt(np.mean(d[sel, j] ** 2))) if sel.any() else float("nan")
-    return out
-
-
 DETERMINACY_PERIOD_S = 0.05
 """The noise gains are computed every this many seconds (and copied to the frames between): a
 posture changes by a few degrees at most in 50 ms, the gains by less, and it makes the checks

@@ -189,25 +189,6 @@ def limit_reasons(limits: Sequence[Mapping[str, Any]], n_frames: int, *, not_mea
     return out
 
 
-def determinacy_reasons(det: Mapping[str, Any]) -> list[Reason]:
-    out = []
-    for name in det.get("undetermined_for_trial", []):
-        frac = det.get("frames_undetermined_fraction", {}).get(name, 1.0)
-        out.append(Reason("undetermined", "check", f"{name}: the markers do not determine it in {100 * frac:.0f} % of "
-                          f"the frames (noise gain above {det.get('threshold_deg_per_mm')} deg/mm); hold it in the "
-                          f"protocol or do not read it as a measurement"))
-    gimbal = det.get("frames_near_gimbal_lock_fraction", {})
-    if gimbal:
-        names = ", ".join(f"{n} {100 * f:.0f} %" for n, f in gimbal.items())
-        out.append(Reason("gimbal_lock", "note", f"near the gimbal lock of their rotation sequence, not separable "
-                          f"there (frames marked undetermined): {names}"))
-    for name, frac in det.get("frames_undetermined_fraction", {}).items():
-        if name not in det.get("undetermined_for_trial", []) and name not in gimbal and frac > 0:
-            out.append(Reason("undetermined_frames", "note", f"{name}: undetermined in {100 * frac:.0f} % of the frames "
-                              f"(marked)"))
-    return out
-
-
 def partial_swap_reasons(swaps: Sequence[Any], repaired: bool) -> list[Reason]:
     """Labels exchanged in part of the trial: a fail while they stand (every angle of those frames
     rests on the wrong markers), a check once repaired (the frames were exchanged back)."""

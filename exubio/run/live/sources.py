@@ -20,8 +20,8 @@ from __future__ import annotations
 
 import threading
 import time
-from dataclasses import dataclass, field
-from typing import Protocol as TypingProtocol, Sequence
+from dataclasses import dataclass
+from typing import Protocol as TypingProtocol
 
 import numpy as np
 
@@ -176,29 +176,3 @@ class ReplaySource:
 
     def close(self) -> None:
         self._next = len(self._plan)
-
-
-@dataclass
-class ListSource:
-    """Samples given in advance (tests): ``samples`` (timestamp_s, positions (n_labels, 3) m), then
-    the end."""
-
-    info: StreamInfo
-    samples: Sequence[tuple[float, np.ndarray]] = field(default_factory=list)
-    _i: int = 0
-
-    def open(self, timeout_s: float = 0.0) -> StreamInfo:  # noqa: ARG002
-        return self.info
-
-    def pull(self, timeout_s: float) -> list[tuple[float, np.ndarray]] | None:  # noqa: ARG002
-        if self._i >= len(self.samples):
-            return None
-        out = list(self.samples[self._i:self._i + 64])
-        self._i += len(out)
-        return out
-
-    def wake(self) -> None:
-        pass
-
-    def close(self) -> None:
-        self._i = len(self.samples)
