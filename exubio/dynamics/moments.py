@@ -29,7 +29,7 @@ from exubio.dynamics.newton_euler import girdle_split, inverse_dynamics
 from exubio.model.kinematics import Kinematics
 from exubio.types import Model
 
-__all__ = ["JOINTS", "AXIS_MOMENTS", "Moments", "joint_moments"]
+__all__ = ["JOINTS", "AXIS_MOMENTS", "Moments", "joint_moments", "moments_summary", "reconstruction_moments"]
 
 JOINTS: dict[str, tuple[str, str]] = {"GH": ("humerus", "humerus"), "elbow": ("ulna", "ulna"),
                                       "forearm": ("radius", "ulna"), "wrist": ("hand", "hand")}
@@ -104,3 +104,33 @@ def joint_moments(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, 
     t = np.arange(q.shape[0], dtype=float) if time_s is None else np.asarray(time_s, dtype=float)
     return Moments(time_s=t, columns=tuple(cols), values=np.column_stack(vals), body_mass_kg=mass,
                    hand_load_kg=float(hand_load_kg), inertia_source=str(dyn.metadata.get("inertia_source", INERTIA_SOURCE)))
+
+
+def reconstruction_moments(model: Model, recon, /, *, hand_load_kg: float = 0.0) -> Moments:
+    """The moment table of a Reconstruction (its q, q', q'': PF's integrated ones, LS's from its
+    smoothed marker derivatives), with what its q'' rests on in ``info``: the method and, for PF,
+    the inertia scale of the segments the springs drove (never the inverse dynamics' inertia)."""
+    moments = joint_moments(model, recon.q_rad, recon.qd_rad_s, recon.qdd_rad_s2, time_s=recon.time_s,
+                            hand_load_kg=hand_load_kg)
+    info: dict = {"method": recon.method}
+    options = dict((recon.info or {}).get("options") or {})
+    if "inertia_scale" in options:
+        info["pf_inertia_scale"] = options["inertia_scale"]
+        fallback = (recon.info or {}).get("fallback")
+        if fallback:
+            info["pf_inertia_scale"] = fallback.get("options", {}).get("inertia_scale", options["inertia_scale"])
+            info["pf_fallback"] = "PF's first run stopped; its q'' comes from the fallback run with inertia x "
+            info["pf_fallback"] += f"{info['pf_inertia_scale']:g}"
+    return Moments(time_s=moments.time_s, columns=moments.columns, values=moments.values,
+                   body_mass_kg=moments.body_mass_kg, hand_load_kg=moments.hand_load_kg,
+                   inertia_source=moments.inertia_source, info=info)
+
+
+def moments_summary(moments: Moments, /) -> dict:
+    """summary.json's "moments": peaks of the joint moments (N m) and contact forces (N), body
+    mass, hand load, inertia source and where q'' came from."""
+    peaks = moments.peaks()
+    keep = {c: round(v, 4) for c, v in peaks.items()
+            if c.endswith("_moment_Nm") or c.endswith("_contact_normal_N")}
+    return {"peak_abs": keep, "body_mass_kg": moments.body_mass_kg, "hand_load_kg": moments.hand_load_kg,
+            "inertia_source": moments.inertia_source, **moments.info}
