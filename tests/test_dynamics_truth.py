@@ -123,5 +123,11 @@ def test_reconstruct_writes_moments_in_its_result_set(tmp_path, model):
     # without --body-mass: no moments; a load without a mass: one clear error, exit 2
     assert main(["reconstruct", str(c3d), "--method", "ls", "--out", str(tmp_path / "plain"), "--no-report", "-q"]) == 0
     assert not list((tmp_path / "plain").glob("*.moments.csv"))
+    # asking for moments where a set without them exists: not kept silently as if complete
+    assert main(["reconstruct", str(c3d), "--method", "ls", "--body-mass", str(MASS), "--out", str(tmp_path / "plain"),
+                 "--no-report", "-q"]) == 2
+    assert main(["reconstruct", str(c3d), "--method", "ls", "--body-mass", str(MASS), "--out", str(tmp_path / "plain"),
+                 "--no-report", "-q", "--overwrite"]) == 0
+    assert (tmp_path / "plain" / "slow.ls.moments.csv").is_file()
     assert main(["reconstruct", str(c3d), "--method", "ls", "--hand-load-kg", "2", "--out", str(tmp_path / "bad"),
                  "--no-report", "-q"]) == 2

@@ -207,6 +207,16 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
     return {kind: placed[name] for kind, name in names.items()}
 
 
+def _moments_key(key: str | None, body_mass_kg: float, hand_load_kg: float | None) -> str | None:
+    """A run's fingerprint (exubio.run.resume.run_key) that also holds the joint moments' body mass
+    and hand load when it writes them, so an earlier set without them (or with others) is not kept."""
+    if key is None or hand_load_kg is None:
+        return key
+    import hashlib
+
+    return hashlib.sha256(repr((key, "moments", float(body_mass_kg), float(hand_load_kg))).encode()).hexdigest()
+
+
 def _moments_comments(moments: Any) -> tuple[str, ...]:
     info = moments.info
     line = f"q, q', q'' of the {str(info.get('method', '')).upper()} reconstruction"
@@ -262,8 +272,9 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
     results.writable_folder(out_dir)
     session = session if session is not None else load_session()
     labels = trajectories.labels if trajectories is not None else ()
-    keys = {s: run_key(trial_path, session.model, session.protocol, m.value, labels=labels,
-                       options=settings.method_options.get(m.value), repair_labels=settings.repair_labels)
+    keys = {s: _moments_key(run_key(trial_path, session.model, session.protocol, m.value, labels=labels,
+                                    options=settings.method_options.get(m.value), repair_labels=settings.repair_labels),
+                            session.model.body_mass_kg, settings.hand_load_kg)
             for m, s in zip(methods, stems)}
     with ExitStack() as parts:  # the locks, and the streamed model points' part files, go whatever happens
         parts.enter_context(results.claim(out_dir, stems))  # no other run writes these results meanwhile
