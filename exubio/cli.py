@@ -103,14 +103,15 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         raise InputError(f"--out {out}: expected a path ending in .c3d")
     from exubio.synth.perturb import ModelPerturbation
 
-    model = load_model(args.model) if args.model else load_model()
+    model = (load_model(args.model, body_mass_kg=args.body_mass) if args.model
+             else load_model(body_mass_kg=args.body_mass))
     perturbation = ModelPerturbation.parse(args.perturb) if args.perturb else None
     if perturbation is not None:
         perturbation.apply(model)  # bad segment or point names: exit 2 before any work
     out.parent.mkdir(parents=True, exist_ok=True)
     trial = simulate_trial(model, Motion.parse(args.motion), duration_s=args.duration, rate_hz=args.rate,
                            noise_mm=args.noise_mm, sta_mm=args.sta_mm, seed=args.seed, perturbation=perturbation,
-                           sta_model=args.sta)
+                           sta_model=args.sta, cycle_s=args.cycle_s)
     if trial.sta_model != "per-marker":
         print(f"soft-tissue artefact: {trial.sta_model}")
     if args.protocol:
@@ -125,7 +126,22 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     print(f"wrote {c3d} ({trial.trajectories.n_markers} markers, {trial.trajectories.n_frames} frames, "
           f"{args.rate:g} Hz, noise {args.noise_mm:g} mm, soft-tissue artefact {args.sta_mm:g} mm)")
     print(f"wrote {truth} (true joint angles, deg)")
+    if args.body_mass is not None:
+        from exubio.synth.truth_moments import write_truth_moments
+
+        moments = write_truth_moments(trial, out, hand_load_kg=args.hand_load_kg)
+        print(f"wrote {moments} (true joint moments, N m: {args.body_mass:g} kg, {args.hand_load_kg:g} kg in the hand)")
     return EXIT_OK
+
+
+def _hand_load(args: argparse.Namespace) -> float | None:
+    """The hand load of the joint moments (None: no moments): they are written with --body-mass."""
+    load = getattr(args, "hand_load_kg", None)
+    if load is not None and args.body_mass is None:
+        raise InputError("--hand-load-kg: the joint moments need the subject's --body-mass (kg) too")
+    if load is not None and not (load >= 0 and load != float("inf")):
+        raise InputError(f"--hand-load-kg must be a number >= 0 (kg), got {load}")
+    return None if args.body_mass is None else float(load or 0.0)
 
 
 def _print_summary(method: str, paths: dict, summ: dict) -> None:
@@ -362,7 +378,8 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
     jobs = [TrialJob(t, args.out, methods=tuple(methods), session=session, overwrite=args.overwrite,
                      options={"pf": {"gravity": args.gravity}} if "pf" in methods else {},
                      calibration=calibration, static_frames=None if args.static else args.static_frames,
-                     report=not args.no_report, relabel=relabel, repair_labels=args.repair_labels) for t in args.trials]
+                     report=not args.no_report, relabel=relabel, repair_labels=args.repair_labels,
+                     hand_load_kg=_hand_load(args)) for t in args.trials]
     if len(jobs) == 1 and not args.scheduler:  # errors propagate to main(): one message, one exit code
         result = run_job(jobs[0], progress_factory=_progress_factory(not args.quiet))
         _print_trial(result, args.quiet)
@@ -697,6 +714,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "predicts from the simulated angles, plus its non-rigid rest; the clavicle, forearm and hand "
                         "markers keep the per-marker artefact of --sta-mm (the model has no data for them), the thorax none")
     s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--cycle-s", type=float, default=5.0, help="period of the elevation cycles, s (default 5: a slow "
+                   "raise; 0.6: a fast one, peak angular accelerations of thousands of deg/s^2)")
+    s.add_argument("--body-mass", type=float, help="body mass, kg: also write PATH.truth_moments.csv, the motion's "
+                   "exact joint moments (Dumas et al. 2007 inertia)")
+    s.add_argument("--hand-load-kg", type=float, default=0.0, help="mass held in the hand, kg (with --body-mass)")
     s.add_argument("--model", help="model YAML (default: the generic model)")
     s.add_argument("--perturb", nargs="+", metavar="KEY=VALUE",
                    help="generate with the model perturbed (mm in the thorax frame; a model mismatch for a reconstruction "
@@ -725,7 +747,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="pf: potential field on Exudyn; ls: constrained least squares per frame; both: the "
                         "two, compared; if one fails, the other's result is still written, the failure is "
                         "reported with its reason and the exit code is 1 (default: pf)")
-    r.add_argument("--body-mass", type=float, help="body mass, kg (scales segment inertia)")
+    r.add_argument("--body-mass", type=float, help="body mass, kg (scales segment inertia); also writes the joint "
+                   "moments, <stem>.<method>.moments.csv (inverse dynamics, Dumas et al. 2007 inertia; docs: moments)")
+    r.add_argument("--hand-load-kg", type=float, help="mass held in the hand, kg, for the joint moments (needs --body-mass)")
     r.add_argument("--out", required=True, help="output folder")
     r.add_argument("--overwrite", action="store_true", help="replace earlier results in --out")
     r.add_argument("--no-report", action="store_true", help="skip the per-trial PDF/PNG report")

@@ -70,6 +70,7 @@ LAYERS = (
     ("exubio.errors", "exubio.types"),
     ("exubio.io", "exubio.truth.sta_format"),  # the reader of bone-referenced trials is an io module
     ("exubio.model",),
+    ("exubio.dynamics",),  # inverse dynamics: numpy on the model's kinematics, no solver, no Exudyn
     ("exubio.protocol",),
     ("exubio.prep", "exubio.export"),
     ("exubio.backend",),

@@ -85,6 +85,7 @@ class RunSettings:
     chunk_frames: int | None = None
     repair_labels: bool = False
     progress_factory: Callable[[str, int], Callable[[int], None]] | None = None  # per method: a progress callback
+    hand_load_kg: float | None = None  # joint moments (exubio.dynamics) with this mass in the hand; None: none
 
 
 def load_inputs(trial: str | Path | Trajectories, session: Session | None = None, /, *, repair_labels: bool = False,
@@ -163,6 +164,7 @@ class AngleOutputs:
     comments: tuple[str, ...] = ()
     undetermined: np.ndarray | None = None  # (n, m) per model coordinate: not determined by the markers
     uncertainty_rad: np.ndarray | None = None  # (n, a) standard uncertainty (exubio.trust.angle_uncertainty)
+    moments: Any = None  # the joint moments of the same frames (exubio.dynamics.moments.Moments) or None: <stem>.moments.csv
 
 
 def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
@@ -174,9 +176,13 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
     the angles' status per frame) and .summary.json into out_dir as one result set, complete or
     absent (exubio.io.results.ResultSet: written in a hidden staging folder, renamed into place,
     summary.json last; without ``overwrite`` no existing file is ever replaced); ``streamed``:
-    arrays the reconstruction left on disk (exubio.io.streamed), copied into the .npz."""
+    arrays the reconstruction left on disk (exubio.io.streamed), copied into the .npz; with
+    ``angles.moments`` (exubio.dynamics.moments.Moments) also <stem>.moments.csv, in the same set."""
+    moments = angles.moments
     out = Path(out_dir)
     names = {"csv": f"{stem}.csv", "mot": f"{stem}.mot", "npz": f"{stem}.npz", "summary": f"{stem}.summary.json"}
+    if moments is not None:
+        names = {"moments": f"{stem}.moments.csv", **names}
     notes = [f"exubio_{line.split(':', 1)[0].replace(' ', '_')}={line.split(':', 1)[1].strip()}"
              for line in angles.comments if line.startswith("status ")]
     if summary_data.get("quality"):
@@ -192,9 +198,32 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
                                  comments=angles.comments, uncertainty_rad=angles.uncertainty_rad)
         results.write_mot(staged["mot"], recon.time_s, angles.names, angles.values_rad, name=stem, notes=notes)
         results.write_npz(staged["npz"], recon, metadata=metadata, extra_arrays=extra, streamed=streamed)
+        if moments is not None:
+            from exubio.dynamics.moments_file import write_moments_csv
+
+            write_moments_csv(staged["moments"], moments, comments=_moments_comments(moments))
         results.write_json(staged["summary"], summary_data)
         placed = result_set.commit(last=names["summary"])
     return {kind: placed[name] for kind, name in names.items()}
+
+
+def _moments_key(key: str | None, body_mass_kg: float, hand_load_kg: float | None) -> str | None:
+    """A run's fingerprint (exubio.run.resume.run_key) that also holds the joint moments' body mass
+    and hand load when it writes them, so an earlier set without them (or with others) is not kept."""
+    if key is None or hand_load_kg is None:
+        return key
+    import hashlib
+
+    return hashlib.sha256(repr((key, "moments", float(body_mass_kg), float(hand_load_kg))).encode()).hexdigest()
+
+
+def _moments_comments(moments: Any) -> tuple[str, ...]:
+    info = moments.info
+    line = f"q, q', q'' of the {str(info.get('method', '')).upper()} reconstruction"
+    if "pf_inertia_scale" in info:
+        line += (f" (PF integrated its equations of motion with the segments' inertia x {info['pf_inertia_scale']:g}; "
+                 "the moments use the real inertia above)")
+    return (line,) + ((info["pf_fallback"],) if "pf_fallback" in info else ())
 
 
 def run_metadata(inputs: TrialInputs, trial_path: str | Path, method: Method) -> dict[str, Any]:
@@ -243,8 +272,9 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
     results.writable_folder(out_dir)
     session = session if session is not None else load_session()
     labels = trajectories.labels if trajectories is not None else ()
-    keys = {s: run_key(trial_path, session.model, session.protocol, m.value, labels=labels,
-                       options=settings.method_options.get(m.value), repair_labels=settings.repair_labels)
+    keys = {s: _moments_key(run_key(trial_path, session.model, session.protocol, m.value, labels=labels,
+                                    options=settings.method_options.get(m.value), repair_labels=settings.repair_labels),
+                            session.model.body_mass_kg, settings.hand_load_kg)
             for m, s in zip(methods, stems)}
     with ExitStack() as parts:  # the locks, and the streamed model points' part files, go whatever happens
         parts.enter_context(results.claim(out_dir, stems))  # no other run writes these results meanwhile
@@ -303,7 +333,8 @@ class _Run:
                 continue
             notes = RunNotes(self.calibration, failures=failures, inputs_sha256=self.keys.get(stem))
             out += write_assessed(inputs, self.trial_path, out_dir, [(method, stem, recon, sink.model_points)],
-                                  assessment, notes=notes, overwrite=self.settings.overwrite)
+                                  assessment, notes=notes, overwrite=self.settings.overwrite,
+                                  hand_load_kg=self.settings.hand_load_kg)
         if failures:
             raise PartialReconstructionError(
                 "; ".join(f"{m.upper()} failed: {reason}" for m, reason in failures.items())
@@ -338,13 +369,15 @@ def assess_inputs(inputs: TrialInputs, recons: list[Reconstruction], calibration
 
 
 def write_assessed(inputs: TrialInputs, trial_path: str | Path, out_dir: str | Path, done: list[tuple], assessment: Any,
-                   /, *, notes: Any = None, overwrite: bool = True
+                   /, *, notes: Any = None, overwrite: bool = True, hand_load_kg: float | None = None
                    ) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
     """Write every method's result set (write_outputs: the anatomical angles with their status, the
     assessment's verdict in summary.json, made by exubio.run.summary_file); ``done``: per method
     (Method, stem, reconstruction, its streamed model points (exubio.io.streamed) or None when the
     reconstruction holds them); ``notes``: the run's calibration, live figures and failed methods
-    (exubio.run.summary_file.RunNotes). Returns (reconstruction, paths, summary) per method."""
+    (exubio.run.summary_file.RunNotes); ``hand_load_kg`` not None: the joint moments too
+    (exubio.dynamics, <stem>.moments.csv and summary.json's "moments"). Returns (reconstruction,
+    paths, summary) per method."""
     from exubio.model.angles import anatomical_table
 
     out = []
@@ -354,11 +387,17 @@ def write_assessed(inputs: TrialInputs, trial_path: str | Path, out_dir: str | P
         recon = dataclasses.replace(recon, quality=quality)  # the verdict travels typed, as the file gives it
         summ = trial_summary(recon, assessment, inputs, source=str(trial_path), stem=stem, notes=notes or RunNotes(),
                              quality=quality)
+        moments = None
+        if hand_load_kg is not None:
+            from exubio.dynamics.moments import moments_summary, reconstruction_moments
+
+            moments = reconstruction_moments(inputs.model, recon, hand_load_kg=hand_load_kg)
+            summ["moments"] = moments_summary(moments)
         names, values = anatomical_table(inputs.model, recon.q_rad)
         det = assessment.angles[recon.method]
         angles = AngleOutputs(names, values, det.status,
                               angle_header(det, Path(trial_path).name, method.value, inputs.protocol.side),
-                              assessment.determinacy[recon.method].undetermined, det.uncertainty_rad)
+                              assessment.determinacy[recon.method].undetermined, det.uncertainty_rad, moments)
         paths = write_outputs(recon, out_dir, stem, metadata=meta, summary_data=summ, angles=angles,
                               streamed=None if model_points is None else {"model_points_m": model_points},
                               overwrite=overwrite)

@@ -455,14 +455,14 @@ def _lab_transform() -> tuple[np.ndarray, np.ndarray]:
     return yaw @ base, LAB_ORIGIN_M.copy()
 
 
-def _true_motion(kin: Kinematics, motion: Motion, t: np.ndarray):
+def _true_motion(kin: Kinematics, motion: Motion, t: np.ndarray, cycle_s: float = CYCLE_S):
     model = kin.model
     names = model.coordinate_names
     ix = {c: names.index(c) for c in names}
     n, m = t.size, len(names)
     q, qd, qdd = np.zeros((n, m)), np.zeros((n, m)), np.zeros((n, m))
     free = np.array([ix[c] for c in _FREE])
-    w = 2.0 * np.pi / CYCLE_S
+    w = 2.0 * np.pi / cycle_s  # every moving coordinate's rate scales with it (a fast cycle: a fast motion)
     plane = PLANE_OF[motion.value]
     splines = _sc_in_isb_frame(kin, _rhythm_splines(plane))
     fit_spline, f0_spline, f1_spline, _ = _girdle_calibration(kin, splines, free)
@@ -576,12 +576,15 @@ def simulate_trial(
     lab_transform: bool = True,
     perturbation: ModelPerturbation | None = None,
     sta_model=None,
+    cycle_s: float = CYCLE_S,
 ) -> SimulatedTrial:
     """Simulate a trial of ``motion`` on ``model`` (see the module docstring); with
     ``perturbation``, on ``perturbation.apply(model)`` (exubio.synth.perturb: a model mismatch for a
     reconstruction with ``model``; the truth is the perturbed model's coordinates). ``sta_model``:
     None or "per-marker" (the artefact above), or a bone STA model (a shipped name such as "bone",
-    a JSON path, a BoneStaModel; exubio.synth.sta_sim) for the scapula and humerus markers."""
+    a JSON path, a BoneStaModel; exubio.synth.sta_sim) for the scapula and humerus markers.
+    ``cycle_s``: the period of the elevation cycles (default CYCLE_S, a slow raise; 0.6 s makes a
+    fast one, peak angular accelerations of thousands of deg/s^2)."""
     from exubio.synth.sta_sim import resolve_sta_model
 
     bone = resolve_sta_model(sta_model)
@@ -592,6 +595,8 @@ def simulate_trial(
         raise InputError(f"duration must be > 0 s, got {duration_s}")
     if not (np.isfinite(rate_hz) and rate_hz > 0):
         raise InputError(f"sampling rate must be > 0 Hz, got {rate_hz}")
+    if not (np.isfinite(cycle_s) and cycle_s > 0):
+        raise InputError(f"--cycle-s must be > 0 s, got {cycle_s}")
     if not (noise_mm >= 0 and sta_mm >= 0):
         raise InputError(f"noise_mm and sta_mm must be >= 0, got {noise_mm} and {sta_mm}")
     names = tuple(DEFAULT_MARKERS if marker_names is None else marker_names)
@@ -604,7 +609,7 @@ def simulate_trial(
     points, segs = _marker_points(kin, names)
     t = np.arange(n) / rate_hz
 
-    q, qd, qdd = _true_motion(kin, motion, t)
+    q, qd, qdd = _true_motion(kin, motion, t, cycle_s)
     fr = kin.frames(q)
     pos = kin.points(q, points, frames=fr)
 
@@ -633,7 +638,7 @@ def simulate_trial(
                 f"{SIER_FREQUENCY_HZ:g} Hz, HT elevation {SIER_ELEVATION_DEG:g} deg, elbow {SIER_ELBOW_DEG:g} deg")
     else:
         plane = "coronal" if motion is Motion.ABDUCTION else "sagittal"
-        what = (f"simulated {motion.value}: {duration_s / CYCLE_S:g} cycle(s) of {CYCLE_S:g} s, HT elevation "
+        what = (f"simulated {motion.value}: {duration_s / cycle_s:g} cycle(s) of {cycle_s:g} s, HT elevation "
                 f"{ELEVATION_RANGE_DEG[0]:g}-{ELEVATION_RANGE_DEG[1]:g} deg in the {plane} plane, "
                 f"Ludewig et al. 2009 scapulohumeral rhythm")
     desc = (f"{what}; {n} frames at {rate_hz:g} Hz; noise SD {noise_mm:g} mm; STA {sta_mm:g} mm (humerus peak); "
