@@ -11,7 +11,8 @@ The Python face (exubio.api), data first::
     exubio.write_results(rec, "out", "trial", model=model)
 
 Functions: ``read_trial``, ``load_model``, ``load_protocol``, ``calibrate``, ``reconstruct``,
-``assess``, ``angles``, ``angle_status``, ``to_dataframe``, ``write_results``, ``simulate``. Types:
+``assess``, ``angles``, ``angle_status``, ``to_dataframe``, ``write_results``, ``simulate``,
+``rhythm``. Types:
 ``Trajectories``, ``Model``, ``Protocol``, ``Reconstruction``; the errors (``ExubioError`` and its
 kinds). Loaded on first use, so ``import exubio`` stays light; ``dir(exubio)`` and IDEs see them all
 (``__dir__`` and the stub ``__init__.pyi``)."""
@@ -22,7 +23,7 @@ __version__ = "0.1.0"
 from exubio.errors import ExubioError, InputError, ModelError, ProtocolError, ReconstructionError
 
 _API = ("read_trial", "load_model", "load_protocol", "calibrate", "reconstruct", "assess", "angles", "angle_status",
-        "to_dataframe", "write_results", "simulate")
+        "to_dataframe", "write_results", "simulate", "rhythm")
 _TYPES = ("Trajectories", "Model", "Protocol", "Reconstruction")
 
 __all__ = [

@@ -3,7 +3,9 @@ Page 1 opens with the counts and each method's verdicts over the study; then one
 (subject, session, trial, status, verdicts, frames, residuals, PF-LS agreement, wall time and a
 failure's reason), every name and reason written in full, wrapped inside its column, the rows
 shaded by their worst verdict and paginated to fit (a row is never split across pages); a footer
-with the page number on every page. Reads the table only (no solver)."""
+with the page number on every page. Then the rhythm pages of the trials that raise the arm (per
+method and plane: the group, then each subject; exubio.report.rhythm_page). Reads the table and
+the trials' result files only (no solver)."""
 from __future__ import annotations
 
 import json
@@ -206,9 +208,23 @@ def study_pages(data: dict) -> list[Figure]:
     return figs
 
 
+def rhythm_pages(study_dir: Path, data: dict) -> list[Figure]:
+    """The study's rhythm pages (exubio.report.rhythm_page) from its trials' result files; none
+    when no trial raises the arm."""
+    from exubio.errors import InputError
+    from exubio.report.rhythm_page import study_rhythm_pages
+    from exubio.scapulohumeral.files import study_rhythm
+
+    try:
+        groups = study_rhythm(study_dir)
+    except InputError:
+        return []
+    return study_rhythm_pages(groups, data.get("study", ""))
+
+
 def build_study_report(study_json: str | Path, pdf_path: str | Path, /) -> Path:
     data = json.loads(Path(study_json).read_text(encoding="utf-8"))
-    figs = study_pages(data)
+    figs = study_pages(data) + rhythm_pages(Path(study_json).parent, data)
 
     def write(tmp: Path) -> None:
         with PdfPages(tmp) as pdf:
