@@ -5,6 +5,7 @@ from exubio.api import assess as assess
 from exubio.api import calibrate as calibrate
 from exubio.api import load_model as load_model
 from exubio.api import load_protocol as load_protocol
+from exubio.api import load_study as load_study
 from exubio.api import read_trial as read_trial
 from exubio.api import reconstruct as reconstruct
 from exubio.api import rhythm as rhythm

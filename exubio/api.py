@@ -35,7 +35,7 @@ if TYPE_CHECKING:  # pandas is imported when a DataFrame is asked for
     from exubio.trust.assess import TrialAssessment
 
 __all__ = ["read_trial", "load_model", "load_protocol", "calibrate", "reconstruct", "assess", "angles", "angle_status",
-           "to_dataframe", "write_results", "simulate", "rhythm"]
+           "to_dataframe", "write_results", "simulate", "rhythm", "load_study"]
 
 
 def read_trial(path: str | Path, /) -> Trajectories:
@@ -297,3 +297,12 @@ def rhythm(source: "Reconstruction | str | Path", model: Model | None = None, pr
                           "corridor_studies": sorted({s for v in ref.studies.values() for s, _, _ in v}),
                           "corridor_left_out": ref.excluded})
     return out
+
+
+def load_study(folder: str | Path, /) -> "pandas.DataFrame":
+    """The angles of a study that ``exubio study`` ran into ``folder``: its ``angles.parquet``, one
+    row per trial, method, frame and angle (subject, session, trial, task, method, time_s, angle,
+    value_deg, u_deg, status, verdict; exubio.run.study_table), text columns categorical."""
+    from exubio.run.study_table import read_study_table
+
+    return read_study_table(folder)

@@ -12,7 +12,8 @@ and renamed into place when complete, so a result set appears whole or not at al
 killed run are removed by the next run, which skips the trials that are complete (resume).
 
 ``OUT/study.csv`` and ``OUT/study.json``: one row per trial (verdict per method, frames, mean
-residual, PF-LS agreement, wall time, or the error); ``OUT/study.report.pdf``: the same table.
+residual, PF-LS agreement, wall time, or the error); ``study.report.pdf``: the same table and the rhythm
+pages; ``angles.parquet`` and ``angles.csv.gz``: every angle in one table (exubio.run.study_table).
 
 Execution: a local process pool (``jobs``), or Dask (``scheduler``: ``"local:N"`` starts a local
 cluster of N workers, ``"tcp://HOST:PORT"`` uses a running scheduler). Workers are long-lived
@@ -38,7 +39,7 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
 from exubio.io.resources import shipped_beside
 from exubio.io.yaml import read_yaml
 from exubio.errors import ExubioError, InputError
-from exubio.run import interrupt
+from exubio.run import interrupt, study_table
 from exubio.run.executors import run_all
 
 if TYPE_CHECKING:
@@ -50,11 +51,10 @@ __all__ = ["StudySpec", "SessionSpec", "TrialTask", "TrialOutcome", "load_study"
            "STUDY_COLUMNS"]
 
 DONE_FILE = "DONE.json"
-
 _TMP_PREFIX = ".tmp-"
 _STUDY_KEYS = {"schema_version", "name", "methods", "report", "sessions"}
 _SESSION_KEYS = {"subject", "session", "protocol", "model", "static", "functional", "scapula_trial", "static_frames",
-                 "trials", "methods", "relabel", "static_relabel", "trial_relabel"}
+                 "trials", "methods", "relabel", "static_relabel", "trial_relabel", "tasks"}
 STUDY_COLUMNS = ("subject", "session", "trial", "status", "pf_verdict", "ls_verdict", "frames", "pf_residual_mm",
                  "ls_residual_mm", "pf_ls_max_rmse_deg", "wall_s", "folder", "error")
 
@@ -74,6 +74,7 @@ class SessionSpec:
     relabel: Mapping[str, str] = field(default_factory=dict)  # every trial and the static
     static_relabel: Mapping[str, str] | None = None  # the static only (None: relabel)
     trial_relabel: Mapping[str, Mapping[str, str]] = field(default_factory=dict)  # trial file name -> its own
+    tasks: Mapping[str, str] = field(default_factory=dict)  # trial file name -> its task (default: its stem)
 
     def relabel_of(self, trial: Path) -> dict[str, str]:
         return dict(self.trial_relabel.get(trial.name, self.relabel))
@@ -239,7 +240,7 @@ def load_study(path: str | Path, /) -> StudySpec:
             trial_relabel[str(name)] = _relabel_map(mapping, f"{where}.trial_relabel.{name}") or {}
         sessions.append(SessionSpec(
             subject=subject, session=session, trials=tuple(trials), relabel=relabel, static_relabel=static_relabel,
-            trial_relabel=trial_relabel,
+            trial_relabel=trial_relabel, tasks=study_table.tasks_key(s.get("tasks"), names, f"{where}.tasks"),
             protocol=_path(shipped_beside(s.get("protocol"), base, "exubio.protocols", "protocols", "upper_limb_21.yaml"),
                            base, f"{where}.protocol"),
             model=_path(shipped_beside(s.get("model"), base, "exubio.models", "models", "upper_extremity.yaml"),
@@ -490,6 +491,7 @@ def run_study(spec: StudySpec, out_dir: str | Path, /, *, jobs: int = 1, schedul
                 _remove_after_dask(out)
             raise
     write_table(out, spec, outcomes)
+    study_table.write_study_table(out, study_table.table_trials(spec, outcomes))
     if spec.report:
         from exubio.report.study_report import build_study_report
 

@@ -20,6 +20,7 @@ sessions:
     static_relabel: {MET2: MET5, MET5: MET2}     # optional: the static only (replaces relabel for it)
     trial_relabel:                  # optional: per trial file name, for that trial only (replaces relabel for it)
       task_03.c3d: {EPI_lat: EPI_med, EPI_med: EPI_lat}
+    tasks: {task_03.c3d: drinking}  # optional: per trial file name, its task in angles.parquet (default: the file's stem)
   - subject: S02                    # a session without a static trial
     static_frames: "0:50"           # optional: each trial calibrated on these frames of its own (0-based, end excluded)
     trials: ["S02/*.trc"]
