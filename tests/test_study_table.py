@@ -34,7 +34,7 @@ def study(tmp_path_factory):
     _trial(tmp / "b" / "abd.c3d", "abduction", 3)
     spec = {"schema_version": 1, "name": "t", "report": False, "methods": ["ls"], "sessions": [
         {"subject": "S01", "trials": ["a/*.c3d"], "tasks": {"flx.c3d": "flexion"}},
-        {"subject": "S02", "trials": ["b/*.c3d"]}]}
+        {"subject": "S02", "trials": ["b/*.c3d"], "static_frames": "10:40"}]}  # a moving window: a check
     (tmp / "study.yaml").write_text(yaml.safe_dump(spec), encoding="utf-8")
     out = tmp / "out"
     assert main(["-q", "study", str(tmp / "study.yaml"), "--out", str(out)]) in (0, 1)
@@ -93,3 +93,48 @@ def test_the_gzipped_csv_holds_the_same_rows(study):
 def test_load_study_names_a_folder_without_the_table(tmp_path):
     with pytest.raises(exubio.InputError, match="angles.parquet"):
         exubio.load_study(tmp_path)
+
+
+def test_study_csv_and_report_give_every_check_and_fail_reason(study):
+    """study.csv's reasons: every check and fail reason of each trial's summary.json, and nothing of
+    an ok trial; the study report writes them in the row."""
+    import csv
+
+    from exubio.report.calibration_page import short_paths
+    from exubio.report.study_report import study_pages
+
+    rows = list(csv.DictReader((study / "study.csv").open(encoding="utf-8")))
+    assert "reasons" in rows[0]
+    checked = 0
+    for row in rows:
+        summary = json.loads((Path(row["folder"]) / f"{Path(row['trial']).stem}.ls.summary.json").read_text(
+            encoding="utf-8"))
+        want = [r["message"] for r in summary["quality"]["reasons"] if r["level"] in ("check", "fail")]
+        assert all(f"LS {level}: {m}" in row["reasons"] for m, level in
+                   ((r["message"], r["level"]) for r in summary["quality"]["reasons"] if r["level"] in ("check", "fail")))
+        assert "LS note:" not in row["reasons"]  # notes are not reasons to read before using the angles
+        if row["ls_verdict"] == "ok":
+            assert row["reasons"] == ""
+        else:
+            assert want and row["reasons"]
+            checked += 1
+    assert checked  # S02's calibration window moves: a check
+    data = json.loads((study / "study.json").read_text(encoding="utf-8"))
+    text = " ".join(t.get_text() for f in study_pages(data) for t in f.texts).replace("\n", "")
+    for row in data["trials"]:
+        if row["reasons"]:
+            first = short_paths(row["reasons"].split(": ", 1)[1])[:25]  # the report writes files by their names
+            assert first.replace(" ", "") in text.replace(" ", ""), first
+
+
+def test_default_session_names_count_per_subject(tmp_path):
+    from exubio.run.study import load_study
+
+    for f in ("a.c3d", "b.c3d", "c.c3d"):
+        (tmp_path / f).write_bytes(b"")
+    spec = {"schema_version": 1, "sessions": [{"subject": "S01", "trials": ["a.c3d"]},
+                                              {"subject": "S02", "trials": ["b.c3d"]},
+                                              {"subject": "S01", "trials": ["c.c3d"]}]}
+    (tmp_path / "s.yaml").write_text(yaml.safe_dump(spec), encoding="utf-8")
+    got = [(s.subject, s.session) for s in load_study(tmp_path / "s.yaml").sessions]
+    assert got == [("S01", "s1"), ("S02", "s1"), ("S01", "s2")]

@@ -1,7 +1,7 @@
 """The report of a study: ``study.report.pdf`` from ``study.json`` (written by exubio.run.study).
 Page 1 opens with the counts and each method's verdicts over the study; then one row per trial
-(subject, session, trial, status, verdicts, frames, residuals, PF-LS agreement, wall time and a
-failure's reason), every name and reason written in full, wrapped inside its column, the rows
+(subject, session, trial, status, verdicts, frames, residuals, PF-LS agreement, wall time, a
+failure's reason and the reasons of every check and fail verdict), every name and reason written in full, wrapped inside its column, the rows
 shaded by their worst verdict and paginated to fit (a row is never split across pages); a footer
 with the page number on every page. Then the rhythm pages of the trials that raise the arm (per
 method and plane: the group, then each subject; exubio.report.rhythm_page). Reads the table and
@@ -47,7 +47,7 @@ _COLUMNS = (_Column("subject", "subject", 14), _Column("session", "session", 14)
             _Column("status", "status", 9), _Column("PF", "pf_verdict", 6), _Column("LS", "ls_verdict", 6),
             _Column("frames", "frames", 8, "d"), _Column("PF res mm", "pf_residual_mm", 11, ".2f"),
             _Column("LS res mm", "ls_residual_mm", 11, ".2f"), _Column("PF-LS deg", "pf_ls_max_rmse_deg", 11, ".2f"),
-            _Column("wall s", "wall_s", 8, ".1f"), _Column("reason (a failed trial)", "error", 0))
+            _Column("wall s", "wall_s", 8, ".1f"), _Column("why: a failure, every check and fail reason", "error", 0))
 
 
 def _char_width() -> float:
@@ -84,6 +84,8 @@ def _wrap(text: str, width: int) -> list[str]:
 
 def _cell(row: dict, col: _Column) -> str:
     v = row.get(col.key)
+    if col.key == "error":  # a failure's reason, then the reasons of every check and fail verdict
+        v = "; ".join(x for x in (row.get("error"), row.get("reasons")) if x)
     if v is None or v == "":
         return ""
     if col.spec:

@@ -9,7 +9,7 @@ methods: [pf, ls]                   # optional (default [pf, ls]); a session may
 report: true                        # optional: the per-trial PDF/PNG report (default true)
 sessions:
   - subject: S01
-    session: day1                   # optional (default: s1, s2, ... in order)
+    session: day1                   # optional (default: s1, s2, ... in order, per subject)
     protocol: upper_limb_21         # optional: a shipped protocol by name, or a YAML file (default upper_limb_21)
     model: upper_extremity          # optional: a shipped model by name, or a YAML file (default: the generic model)
     static: S01/static.c3d          # optional: calibrate the session's model on this static trial first
