@@ -12,7 +12,7 @@ The Python face (exubio.api), data first::
 
 Functions: ``read_trial``, ``load_model``, ``load_protocol``, ``calibrate``, ``reconstruct``,
 ``assess``, ``angles``, ``angle_status``, ``to_dataframe``, ``write_results``, ``simulate``,
-``moments`` (the joint moments, inverse dynamics). Types:
+``moments`` (the joint moments, inverse dynamics), ``rhythm``, ``load_study``. Types:
 ``Trajectories``, ``Model``, ``Protocol``, ``Reconstruction``; the errors (``ExubioError`` and its
 kinds). Loaded on first use, so ``import exubio`` stays light; ``dir(exubio)`` and IDEs see them all
 (``__dir__`` and the stub ``__init__.pyi``)."""
@@ -23,7 +23,7 @@ __version__ = "0.1.0"
 from exubio.errors import ExubioError, InputError, ModelError, ProtocolError, ReconstructionError
 
 _API = ("read_trial", "load_model", "load_protocol", "calibrate", "reconstruct", "assess", "angles", "angle_status",
-        "to_dataframe", "write_results", "simulate", "moments")
+        "to_dataframe", "write_results", "simulate", "moments", "rhythm", "load_study")
 _TYPES = ("Trajectories", "Model", "Protocol", "Reconstruction")
 
 __all__ = [

@@ -6,8 +6,10 @@ from exubio.api import calibrate as calibrate
 from exubio.api import load_model as load_model
 from exubio.api import load_protocol as load_protocol
 from exubio.api import moments as moments
+from exubio.api import load_study as load_study
 from exubio.api import read_trial as read_trial
 from exubio.api import reconstruct as reconstruct
+from exubio.api import rhythm as rhythm
 from exubio.api import simulate as simulate
 from exubio.api import to_dataframe as to_dataframe
 from exubio.api import write_results as write_results

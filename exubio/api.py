@@ -35,7 +35,7 @@ if TYPE_CHECKING:  # pandas is imported when a DataFrame is asked for
     from exubio.trust.assess import TrialAssessment
 
 __all__ = ["read_trial", "load_model", "load_protocol", "calibrate", "reconstruct", "assess", "angles", "angle_status",
-           "to_dataframe", "write_results", "simulate"]
+           "to_dataframe", "write_results", "simulate", "rhythm", "load_study"]
 
 
 def read_trial(path: str | Path, /) -> Trajectories:
@@ -264,3 +264,65 @@ def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str
                           uncertainty_rad=det.uncertainty_rad)
     return write_outputs(reconstruction, out_dir, full, metadata=meta, summary_data=summ, angles=angles,
                          overwrite=overwrite)
+
+
+def rhythm(source: "Reconstruction | str | Path", model: Model | None = None, protocol: Protocol | None = None, /, *,
+           method: str | None = None) -> "pandas.DataFrame":
+    """The scapulohumeral rhythm (exubio.scapulohumeral): ST, SC and GH angles against HT elevation,
+    raising and lowering apart, with the in vivo corridor in the same frames for the plane of the
+    raising, as a long DataFrame (the table behind the report's rhythm page).
+
+    ``source``: a Reconstruction (with the model and protocol it was made with), a result file of
+    ``exubio reconstruct`` (``<trial>.<method>.npz`` or ``.csv``): one row per frame of a cycle and
+    angle (time_s, phase, cycle, ht_elevation_deg, angle, value_deg, u_deg, measured,
+    corridor_lo_deg, corridor_hi_deg); or the output folder of ``exubio study`` (``method``: only
+    that method's trials): one row per method, plane, level (group, subject), subject, phase, HT
+    grid point and angle (mean_deg, sd_deg, n, corridor). ``df.attrs``: the plane, how it was found,
+    the studies in the corridor and those left out with the reason. Raw ISB signs, degrees."""
+    import pandas as pd
+
+    from exubio.errors import InputError
+    from exubio.scapulohumeral import files, reference, table
+
+    categorical = ("phase", "angle", "method", "plane", "level", "subject")
+    if isinstance(source, Reconstruction):
+        model = model if model is not None else load_model()
+        df = to_dataframe(source, model=model, protocol=protocol)
+        names = [c.removesuffix("_deg") for c in df.columns if c.endswith("_deg") and not c.endswith("_u_deg")]
+        vals = np.column_stack([df[f"{n}_deg"].to_numpy() for n in names])
+        u = np.column_stack([df[f"{n}_u_deg"].to_numpy() if f"{n}_u_deg" in df else np.full(len(df), np.nan)
+                             for n in names])
+        ok = np.column_stack([(df[f"{n}_status"] == "measured").to_numpy() for n in names])
+        r = table.trial_rhythm(df.index.to_numpy(), names, vals, u, ok)
+        plane, deg, why = reference.trial_plane(r)
+        ref = reference.reference(model, plane, plane_deg=deg, why=why)
+        cols = files.trial_columns(r, ref)
+    else:
+        path = Path(source)
+        if path.is_dir():
+            groups = files.study_rhythm(path, method=method)
+            cols = files.study_columns(groups)
+            ref = groups[0].reference if groups else None
+        elif path.suffix in (".npz", ".csv") and path.is_file():
+            npz = path.with_suffix(".npz")
+            r = files.read_trial_rhythm(npz)
+            ref, _ = files.trial_reference(npz, r)
+            cols = files.trial_columns(r, ref)
+        else:
+            raise InputError(f"{path}: expected a result of exubio reconstruct (<trial>.<method>.npz or .csv) or the "
+                             f"output folder of exubio study (with study.json)")
+    out = pd.DataFrame({c: (pd.Categorical(v) if c in categorical else v) for c, v in cols.items()})
+    if ref is not None:
+        out.attrs.update({"plane": ref.plane, "plane_how": ref.why, "units": "deg", "signs": "isb",
+                          "corridor_studies": sorted({s for v in ref.studies.values() for s, _, _ in v}),
+                          "corridor_left_out": ref.excluded})
+    return out
+
+
+def load_study(folder: str | Path, /) -> "pandas.DataFrame":
+    """The angles of a study that ``exubio study`` ran into ``folder``: its ``angles.parquet``, one
+    row per trial, method, frame and angle (subject, session, trial, task, method, time_s, angle,
+    value_deg, u_deg, status, verdict; exubio.run.study_table), text columns categorical."""
+    from exubio.run.study_table import read_study_table
+
+    return read_study_table(folder)

@@ -15,6 +15,7 @@ from typing import Any, Literal, Mapping
 import numpy as np
 
 from exubio.errors import InputError, ModelError
+from exubio.short_repr import short_repr
 
 # The read-only mappings inside Model and Protocol pickle as what they show, so that loaded objects
 # travel to pool and Dask workers (a session's model and protocol are parsed once, not per trial).
@@ -43,6 +44,7 @@ class Trajectories:
                  data rows contradict, ...), one sentence each naming the field; they go into the
                  result's summary.json (``input_findings``) and its verdict reasons.
     """
+    __repr__ = short_repr  # arrays as their shape: a notebook prints the object in a few lines
 
     labels: tuple[str, ...]
     positions_m: np.ndarray
@@ -185,6 +187,7 @@ class Ellipsoid:
 class Model:
     """A kinematic tree of segments (thorax fixed first, parents before children) with the
     scapulothoracic ellipsoid constraint."""
+    __repr__ = short_repr  # arrays as their shape: a notebook prints the object in a few lines
 
     name: str
     segments: tuple[Segment, ...]
@@ -299,6 +302,7 @@ class Protocol:
     cut-offs applied are in ``MarkerTargets.cutoff_hz``); None: no filter.
     filter_order: order of the Butterworth design (run forward and backward).
     """
+    __repr__ = short_repr  # arrays as their shape: a notebook prints the object in a few lines
 
     name: str
     markers: tuple[MarkerSpec, ...]
@@ -349,6 +353,7 @@ class MarkerTargets:
     cutoff_hz:    marker name -> low-pass cut-off actually applied (Hz), in protocol order; only
                   markers of which at least one run of samples was filtered (empty: unfiltered).
     """
+    __repr__ = short_repr  # arrays as their shape: a notebook prints the object in a few lines
 
     time_s: np.ndarray
     marker_names: tuple[str, ...]
@@ -463,6 +468,7 @@ class Reconstruction:
     resumed_from:   the summary.json it was read back from when a re-run kept an earlier run's
                     complete result set of the same inputs (exubio.run.resume), else None.
     """
+    __repr__ = short_repr  # arrays as their shape: a notebook prints the object in a few lines
 
     method: str
     time_s: np.ndarray

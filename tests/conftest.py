@@ -34,9 +34,10 @@ EXUDYN = {"test_angle_status.py", "test_api.py", "test_api_files.py", "test_sess
           "test_calibrate.py", "test_cli.py", "test_exudyn_system.py", "test_hold.py", "test_live.py", "test_ls.py",
           "test_mismatch.py", "test_pf.py", "test_quality.py", "test_rates.py", "test_real_data.py", "test_report.py",
           "test_run_once.py", "test_streaming.py", "test_study.py", "test_thorax_check.py", "test_trial_report.py",
-          "test_viewer.py", "test_same_outputs.py", "test_resume.py", "test_dynamics_truth.py"}
+          "test_viewer.py", "test_same_outputs.py", "test_resume.py", "test_dynamics_truth.py", "test_study_table.py"}
 SLOW = {"test_marker_sets.py", "test_atomic_results.py", "test_session_folder.py", "test_cli.py", "test_labels.py", "test_permutation.py", "test_real_data.py",
-        "test_session_check.py", "test_study.py", "test_viewer.py", "test_same_outputs.py", "test_resume.py"}
+        "test_session_check.py", "test_study.py", "test_viewer.py", "test_same_outputs.py", "test_resume.py",
+        "test_study_table.py"}
 
 
 def _blocking(config) -> bool:

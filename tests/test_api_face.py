@@ -13,7 +13,7 @@ from exubio.io.resources import shipped_file
 
 EXAMPLE = shipped_file("exubio.data", "example_abduction.c3d", "exubio/data")
 FACE = {"read_trial", "load_model", "load_protocol", "calibrate", "reconstruct", "assess", "angles", "angle_status",
-        "to_dataframe", "write_results", "simulate", "Trajectories", "Model", "Protocol", "Reconstruction"}
+        "to_dataframe", "write_results", "simulate", "rhythm", "load_study", "Trajectories", "Model", "Protocol", "Reconstruction"}
 
 
 def test_dir_and_help_show_the_face():

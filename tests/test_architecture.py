@@ -17,11 +17,11 @@ OWNERS = {
     "matplotlib": {"report/trial_report.py", "report/study_report.py", "report/validation_report.py",
                    "report/validation_common.py", "report/validation_tables.py", "report/validation_summary.py",
                    "report/validation_paper_figures.py", "report/validation_exubio_figures.py",
-                   "report/calibration_page.py"},
+                   "report/calibration_page.py", "report/rhythm_page.py"},
     "plotly": {"report/viewer.py", "report/viewer_page.py", "report/viewer_scene.py", "report/viewer_results.py"},
     "distributed": {"run/executors.py"},
     "dask": {"run/executors.py"},
-    "pandas": {"api.py"},
+    "pandas": {"api.py", "run/study_table.py"},  # the study's angles table (Parquet, CSV) is a DataFrame
     "pylsl": {"run/live/transport.py"},
 }
 VALIDATION_STUDY = tuple(f"exubio.validation.{m}" for m in ("run", "trials", "determinacy", "sensitivity", "residuals",
@@ -67,7 +67,7 @@ def test_what_draws_results_never_imports_a_solver(module):
 # decides: the validation study's typed records sit below the report that draws them, the study
 # itself above the run layer it drives).
 LAYERS = (
-    ("exubio.errors", "exubio.types"),
+    ("exubio.errors", "exubio.types", "exubio.short_repr"),
     ("exubio.io", "exubio.truth.sta_format"),  # the reader of bone-referenced trials is an io module
     ("exubio.model",),
     ("exubio.dynamics",),  # inverse dynamics: numpy on the model's kinematics, no solver, no Exudyn
@@ -79,6 +79,7 @@ LAYERS = (
     ("exubio.literature",),
     ("exubio.synth",),
     ("exubio.trust",),
+    ("exubio.scapulohumeral",),  # the scapulohumeral rhythm from result files (below the report that draws it)
     tuple(f"exubio.validation.{m}" for m in ("results", "records_runs", "records_comparisons", "codec", "settings",
                                                "checks", "paths")),
     ("exubio.report",),

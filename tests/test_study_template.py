@@ -18,7 +18,7 @@ def test_the_template_is_a_study_file_exubio_reads(tmp_path, capsys, monkeypatch
         (tmp_path / f).write_bytes(b"")
     spec = load_study(tmp_path / "study.yaml")
     s1, s2 = spec.sessions
-    assert (s1.subject, s1.session, s2.subject, s2.session) == ("S01", "day1", "S02", "s2")
+    assert (s1.subject, s1.session, s2.subject, s2.session) == ("S01", "day1", "S02", "s1")  # counted per subject
     assert s1.protocol.name == "upper_limb_21.yaml" and s1.protocol.is_file()  # shipped, found by name
     assert s1.model.name == "upper_extremity.yaml" and s1.model.is_file()
     assert [t.name for t in s1.trials] == ["task_01.c3d", "task_03.c3d"] and s1.static.name == "static.c3d"

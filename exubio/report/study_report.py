@@ -1,9 +1,11 @@
 """The report of a study: ``study.report.pdf`` from ``study.json`` (written by exubio.run.study).
 Page 1 opens with the counts and each method's verdicts over the study; then one row per trial
-(subject, session, trial, status, verdicts, frames, residuals, PF-LS agreement, wall time and a
-failure's reason), every name and reason written in full, wrapped inside its column, the rows
+(subject, session, trial, status, verdicts, frames, residuals, PF-LS agreement, wall time, a
+failure's reason and the reasons of every check and fail verdict), every name and reason written in full, wrapped inside its column, the rows
 shaded by their worst verdict and paginated to fit (a row is never split across pages); a footer
-with the page number on every page. Reads the table only (no solver)."""
+with the page number on every page. Then the rhythm pages of the trials that raise the arm (per
+method and plane: the group, then each subject; exubio.report.rhythm_page). Reads the table and
+the trials' result files only (no solver)."""
 from __future__ import annotations
 
 import json
@@ -45,7 +47,7 @@ _COLUMNS = (_Column("subject", "subject", 14), _Column("session", "session", 14)
             _Column("status", "status", 9), _Column("PF", "pf_verdict", 6), _Column("LS", "ls_verdict", 6),
             _Column("frames", "frames", 8, "d"), _Column("PF res mm", "pf_residual_mm", 11, ".2f"),
             _Column("LS res mm", "ls_residual_mm", 11, ".2f"), _Column("PF-LS deg", "pf_ls_max_rmse_deg", 11, ".2f"),
-            _Column("wall s", "wall_s", 8, ".1f"), _Column("reason (a failed trial)", "error", 0))
+            _Column("wall s", "wall_s", 8, ".1f"), _Column("why: a failure, every check and fail reason", "error", 0))
 
 
 def _char_width() -> float:
@@ -82,6 +84,8 @@ def _wrap(text: str, width: int) -> list[str]:
 
 def _cell(row: dict, col: _Column) -> str:
     v = row.get(col.key)
+    if col.key == "error":  # a failure's reason, then the reasons of every check and fail verdict
+        v = "; ".join(x for x in (row.get("error"), row.get("reasons")) if x)
     if v is None or v == "":
         return ""
     if col.spec:
@@ -206,9 +210,23 @@ def study_pages(data: dict) -> list[Figure]:
     return figs
 
 
+def rhythm_pages(study_dir: Path, data: dict) -> list[Figure]:
+    """The study's rhythm pages (exubio.report.rhythm_page) from its trials' result files; none
+    when no trial raises the arm."""
+    from exubio.errors import InputError
+    from exubio.report.rhythm_page import study_rhythm_pages
+    from exubio.scapulohumeral.files import study_rhythm
+
+    try:
+        groups = study_rhythm(study_dir)
+    except InputError:
+        return []
+    return study_rhythm_pages(groups, data.get("study", ""))
+
+
 def build_study_report(study_json: str | Path, pdf_path: str | Path, /) -> Path:
     data = json.loads(Path(study_json).read_text(encoding="utf-8"))
-    figs = study_pages(data)
+    figs = study_pages(data) + rhythm_pages(Path(study_json).parent, data)
 
     def write(tmp: Path) -> None:
         with PdfPages(tmp) as pdf:

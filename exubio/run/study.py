@@ -12,7 +12,8 @@ and renamed into place when complete, so a result set appears whole or not at al
 killed run are removed by the next run, which skips the trials that are complete (resume).
 
 ``OUT/study.csv`` and ``OUT/study.json``: one row per trial (verdict per method, frames, mean
-residual, PF-LS agreement, wall time, or the error); ``OUT/study.report.pdf``: the same table.
+residual, PF-LS agreement, wall time, or the error); ``study.report.pdf``: the same table and the rhythm
+pages; ``angles.parquet`` and ``angles.csv.gz``: every angle in one table (exubio.run.study_table).
 
 Execution: a local process pool (``jobs``), or Dask (``scheduler``: ``"local:N"`` starts a local
 cluster of N workers, ``"tcp://HOST:PORT"`` uses a running scheduler). Workers are long-lived
@@ -27,7 +28,6 @@ import io
 import json
 import logging
 import os
-import re
 import shutil
 import time
 import traceback
@@ -38,8 +38,9 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
 from exubio.io.resources import shipped_beside
 from exubio.io.yaml import read_yaml
 from exubio.errors import ExubioError, InputError
-from exubio.run import interrupt
+from exubio.run import interrupt, study_table
 from exubio.run.executors import run_all
+from exubio.run.study_leftovers import _TMP_PREFIX, _remove_after_dask, clean_leftovers
 
 if TYPE_CHECKING:
     from exubio.run.job import TrialResult
@@ -50,13 +51,11 @@ __all__ = ["StudySpec", "SessionSpec", "TrialTask", "TrialOutcome", "load_study"
            "STUDY_COLUMNS"]
 
 DONE_FILE = "DONE.json"
-
-_TMP_PREFIX = ".tmp-"
 _STUDY_KEYS = {"schema_version", "name", "methods", "report", "sessions"}
 _SESSION_KEYS = {"subject", "session", "protocol", "model", "static", "functional", "scapula_trial", "static_frames",
-                 "trials", "methods", "relabel", "static_relabel", "trial_relabel"}
+                 "trials", "methods", "relabel", "static_relabel", "trial_relabel", "tasks"}
 STUDY_COLUMNS = ("subject", "session", "trial", "status", "pf_verdict", "ls_verdict", "frames", "pf_residual_mm",
-                 "ls_residual_mm", "pf_ls_max_rmse_deg", "wall_s", "folder", "error")
+                 "ls_residual_mm", "pf_ls_max_rmse_deg", "wall_s", "folder", "error", "reasons")
 
 
 @dataclass(frozen=True)
@@ -74,6 +73,7 @@ class SessionSpec:
     relabel: Mapping[str, str] = field(default_factory=dict)  # every trial and the static
     static_relabel: Mapping[str, str] | None = None  # the static only (None: relabel)
     trial_relabel: Mapping[str, Mapping[str, str]] = field(default_factory=dict)  # trial file name -> its own
+    tasks: Mapping[str, str] = field(default_factory=dict)  # trial file name -> its task (default: its stem)
 
     def relabel_of(self, trial: Path) -> dict[str, str]:
         return dict(self.trial_relabel.get(trial.name, self.relabel))
@@ -113,6 +113,7 @@ class TrialOutcome:
     pf_ls_max_rmse_deg: float | None = None
     wall_s: float | None = None
     error: str = ""
+    reasons: str = ""  # every check and fail reason of every method's verdict ("PF check: ...; LS fail: ...")
 
     def row(self) -> dict[str, Any]:
         return {"subject": self.subject, "session": self.session, "trial": Path(self.trial).name,
@@ -120,7 +121,7 @@ class TrialOutcome:
                 "ls_verdict": self.verdicts.get("ls", ""), "frames": self.frames,
                 "pf_residual_mm": self.residual_mm.get("pf"), "ls_residual_mm": self.residual_mm.get("ls"),
                 "pf_ls_max_rmse_deg": self.pf_ls_max_rmse_deg, "wall_s": self.wall_s, "folder": self.folder,
-                "error": self.error}
+                "error": self.error, "reasons": self.reasons}
 
 
 # --------------------------------------------------------------------------------------------
@@ -177,7 +178,7 @@ def load_study(path: str | Path, /) -> StudySpec:
     if not isinstance(raw, list) or not raw:
         raise InputError(f"{src}: sessions: expected a non-empty list of sessions")
     base = path.parent
-    sessions, seen = [], set()
+    sessions, seen, subjects = [], set(), []
     for k, s in enumerate(raw):
         where = f"{src}: sessions[{k}]"
         if not isinstance(s, dict):
@@ -188,7 +189,8 @@ def load_study(path: str | Path, /) -> StudySpec:
         subject = s.get("subject")
         if not isinstance(subject, str) or not subject or "/" in subject or subject.startswith("."):
             raise InputError(f"{where}.subject: expected a name (no '/', not starting with '.'), got {subject!r}")
-        session = str(s.get("session", f"s{k + 1}"))
+        session = str(s.get("session", f"s{sum(x == subject for x in subjects) + 1}"))  # counted per subject
+        subjects.append(subject)
         if "/" in session or session.startswith(".") or not session:
             raise InputError(f"{where}.session: expected a name (no '/', not starting with '.'), got {session!r}")
         if (subject, session) in seen:
@@ -239,7 +241,7 @@ def load_study(path: str | Path, /) -> StudySpec:
             trial_relabel[str(name)] = _relabel_map(mapping, f"{where}.trial_relabel.{name}") or {}
         sessions.append(SessionSpec(
             subject=subject, session=session, trials=tuple(trials), relabel=relabel, static_relabel=static_relabel,
-            trial_relabel=trial_relabel,
+            trial_relabel=trial_relabel, tasks=study_table.tasks_key(s.get("tasks"), names, f"{where}.tasks"),
             protocol=_path(shipped_beside(s.get("protocol"), base, "exubio.protocols", "protocols", "upper_limb_21.yaml"),
                            base, f"{where}.protocol"),
             model=_path(shipped_beside(s.get("model"), base, "exubio.models", "models", "upper_extremity.yaml"),
@@ -294,11 +296,18 @@ def _fill(out: TrialOutcome, result: TrialResult) -> None:
     out.verdicts = result.verdicts
     if result.failed:  # one method failed, the other's result is written
         out.error = "; ".join(f"{m.upper()} failed: {reason}" for m, reason in result.failed.items())
+    out.reasons = verdict_reasons({m.method: m.summary for m in result.methods})
     for m in result.methods:
         out.frames = m.summary.get("n_frames", out.frames)
         out.residual_mm[m.method] = (m.summary.get("residual_mm") or {}).get("mean")
     agree = result.agreement_deg or {}
     out.pf_ls_max_rmse_deg = max(agree.values()) if agree else None
+
+
+def verdict_reasons(summaries: Mapping[str, Mapping[str, Any]]) -> str:
+    """Every check and fail reason of each method's verdict (its summary.json's quality), one string."""
+    return "; ".join(f"{m.upper()} {r.get('level')}: {r.get('message')}" for m, s in summaries.items()
+                     for r in (s.get("quality") or {}).get("reasons") or [] if r.get("level") in ("check", "fail"))
 
 
 def _write_done(folder: Path, out: TrialOutcome, result: TrialResult) -> None:
@@ -312,42 +321,6 @@ def _write_done(folder: Path, out: TrialOutcome, result: TrialResult) -> None:
 # --------------------------------------------------------------------------------------------
 # The study
 # --------------------------------------------------------------------------------------------
-_TMP_PID = re.compile(rf"^{re.escape(_TMP_PREFIX)}(?:calibration-(?P<cpid>\d+)|.+-(?P<pid>\d+)-\d+)$")
-"""A study's temporary folders: .tmp-<trial>-<pid>-<ns> (a trial), .tmp-calibration-<pid> (a session's calibration)."""
-
-
-def clean_leftovers(out_dir: Path, /) -> list[Path]:
-    """Remove the temporary folders and files of killed runs: those whose process (the pid in their
-    name) no longer runs; a running study's (another one into the same folder) are left alone."""
-    from exubio.io.results import _TEMP_NAME, _process_runs
-
-    removed = []
-    for p in sorted(out_dir.rglob(f"{_TMP_PREFIX}*")):
-        m = _TMP_PID.match(p.name)
-        if p.is_dir() and not (m and _process_runs(int(m["pid"] or m["cpid"]))):
-            shutil.rmtree(p, ignore_errors=True)
-            removed.append(p)
-    for p in sorted(out_dir.rglob(".*.tmp*")):  # a file a killed writer left (atomic_write)
-        m = _TEMP_NAME.match(p.name)
-        if p.is_file() and not (m and _process_runs(int(m["pid"]))):
-            p.unlink(missing_ok=True)
-            removed.append(p)
-    return removed
-
-
-def _remove_after_dask(out_dir: Path, /, *, wait_s: float = 1.0) -> None:
-    """clean_leftovers once the workers named in the leftovers have ended (at most ``wait_s``)."""
-    deadline = time.monotonic() + wait_s
-    from exubio.io.results import _process_runs
-
-    while time.monotonic() < deadline:
-        pids = {int(m["pid"] or m["cpid"]) for p in out_dir.rglob(f"{_TMP_PREFIX}*") if (m := _TMP_PID.match(p.name))}
-        if not any(pid != os.getpid() and _process_runs(pid) for pid in pids):
-            break
-        time.sleep(0.05)
-    clean_leftovers(out_dir)
-
-
 def _calibrate_session(s: SessionSpec, folder: Path) -> tuple[Any, Any, str]:
     """(session, calibration, error) of a session: its model and protocol loaded once and, with a
     static trial, calibrated (exubio.run.session.SessionCalibration, its model file in
@@ -400,7 +373,7 @@ def plan(spec: StudySpec, out_dir: Path) -> tuple[list[TrialTask], list[TrialOut
                 o = TrialOutcome(s.subject, s.session, str(t), str(trial_dirs[t]), "skipped (complete)",
                                  verdicts={m: done.get(f"{m}_verdict") for m in ("pf", "ls") if done.get(f"{m}_verdict")},
                                  frames=done.get("frames"), wall_s=done.get("wall_s"),
-                                 pf_ls_max_rmse_deg=done.get("pf_ls_max_rmse_deg"),
+                                 pf_ls_max_rmse_deg=done.get("pf_ls_max_rmse_deg"), reasons=done.get("reasons") or "",
                                  residual_mm={m: done.get(f"{m}_residual_mm") for m in ("pf", "ls")
                                               if done.get(f"{m}_residual_mm") is not None})
                 skipped.append(o)
@@ -490,6 +463,7 @@ def run_study(spec: StudySpec, out_dir: str | Path, /, *, jobs: int = 1, schedul
                 _remove_after_dask(out)
             raise
     write_table(out, spec, outcomes)
+    study_table.write_study_table(out, study_table.table_trials(spec, outcomes))
     if spec.report:
         from exubio.report.study_report import build_study_report
 

@@ -9,7 +9,7 @@ methods: [pf, ls]                   # optional (default [pf, ls]); a session may
 report: true                        # optional: the per-trial PDF/PNG report (default true)
 sessions:
   - subject: S01
-    session: day1                   # optional (default: s1, s2, ... in order)
+    session: day1                   # optional (default: s1, s2, ... in order, per subject)
     protocol: upper_limb_21         # optional: a shipped protocol by name, or a YAML file (default upper_limb_21)
     model: upper_extremity          # optional: a shipped model by name, or a YAML file (default: the generic model)
     static: S01/static.c3d          # optional: calibrate the session's model on this static trial first
@@ -20,6 +20,7 @@ sessions:
     static_relabel: {MET2: MET5, MET5: MET2}     # optional: the static only (replaces relabel for it)
     trial_relabel:                  # optional: per trial file name, for that trial only (replaces relabel for it)
       task_03.c3d: {EPI_lat: EPI_med, EPI_med: EPI_lat}
+    tasks: {task_03.c3d: drinking}  # optional: per trial file name, its task in angles.parquet (default: the file's stem)
   - subject: S02                    # a session without a static trial
     static_frames: "0:50"           # optional: each trial calibrated on these frames of its own (0-based, end excluded)
     trials: ["S02/*.trc"]

@@ -1,0 +1,194 @@
+"""The rhythm pages: ST, SC and GH angles against HT elevation, raising and lowering apart.
+
+A trial's page (exubio.report.trial_report): every cycle's frames, the +-2u band where the angle is
+measured, grey where it is not a measurement, the in vivo corridor (exubio.scapulohumeral.reference) and
+each study's curve in the same frames. A study's pages (exubio.report.study_report): per method
+and plane, the group (each subject's mean thin, the group's mean +- SD over the subjects' means)
+and one page per subject (its trials thin, their mean ± SD). Draws from exubio.scapulohumeral (no solver).
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
+
+from exubio.model.angles import ANATOMICAL_ANGLES
+from exubio.scapulohumeral.files import StudyRhythm
+from exubio.scapulohumeral.reference import Reference
+from exubio.scapulohumeral.table import HT_GRID_DEG, PHASES, RHYTHM_ANGLES, Average, TrialRhythm
+
+__all__ = ["trial_rhythm_page", "study_rhythm_pages", "angle_label"]
+
+_PHASE_STYLE = {1: ("tab:blue", "-"), 2: ("tab:orange", (0, (5, 2)))}
+_CORRIDOR = "0.55"
+_MEANING = {n: m for n, _, m in ANATOMICAL_ANGLES}
+
+
+def angle_label(name: str, labels: dict | None = None) -> str:
+    """The angle's name in the figure with its sign (``labels`` overrides, e.g. clinical signs)."""
+    if labels and name in labels:
+        return labels[name]
+    title = dict(RHYTHM_ANGLES)[name]
+    return f"{title} (deg)\n{_MEANING.get(name, '')}"
+
+
+def _figure() -> tuple[Figure, np.ndarray]:
+    fig = Figure(figsize=(11.69, 8.27))
+    FigureCanvasAgg(fig)
+    axes = np.asarray(fig.subplots(2, 4, sharex=True)).ravel()
+    fig.subplots_adjust(left=0.06, right=0.985, top=0.86, bottom=0.2, hspace=0.28, wspace=0.33)
+    return fig, axes
+
+
+def _corridor(ax, ref: Reference | None, name: str) -> None:
+    if ref is None or name not in ref.lo:
+        return
+    lo, hi = ref.lo[name], ref.hi[name]
+    ax.fill_between(ref.ht_grid_deg, lo, hi, color=_CORRIDOR, alpha=0.28, lw=0, zorder=0)
+    for _, ht, deg in ref.studies.get(name, []):
+        ax.plot(ht, deg, color=_CORRIDOR, lw=0.8, ls=":", zorder=0)
+
+
+def _axes_style(ax, name: str, labels: dict | None, bottom: bool) -> None:
+    ax.set_title(angle_label(name, labels).split("\n")[0], fontsize=8)
+    ax.set_ylabel(angle_label(name, labels).split("\n")[1] if "\n" in angle_label(name, labels) else "deg",
+                  fontsize=6.5)
+    ax.tick_params(labelsize=6.5)
+    ax.grid(alpha=0.3)
+    ax.set_xlim(0, 180)
+    if bottom:
+        ax.set_xlabel("HT elevation (deg)", fontsize=7)
+
+
+def _legend(fig: Figure, ref: Reference | None, extra: Sequence = ()) -> None:
+    handles = [Line2D([], [], color=_PHASE_STYLE[1][0], ls=_PHASE_STYLE[1][1], label="raising"),
+               Line2D([], [], color=_PHASE_STYLE[2][0], ls=_PHASE_STYLE[2][1], label="lowering"), *extra]
+    if ref is not None and ref.lo:
+        handles += [Patch(color=_CORRIDOR, alpha=0.28, label="in vivo corridor (>= 2 studies)"),
+                    Line2D([], [], color=_CORRIDOR, ls=":", label="each study's mean")]
+    fig.legend(handles=handles, loc="upper right", ncol=len(handles), fontsize=7, frameon=False,
+               bbox_to_anchor=(0.985, 0.915))
+
+
+def _notes(ref: Reference | None, lines: Sequence[str]) -> str:
+    out = list(lines)
+    if ref is not None:
+        out.append(f"corridor: {ref.why}")
+        if ref.lo:
+            studies = sorted({s for v in ref.studies.values() for s, _, _ in v})
+            out.append("studies in the corridor (converted to these frames and sequences on the model's bones, "
+                       "exubio.literature.corridor): " + ", ".join(studies)
+                       + f"; left out: {sum(len(v) for v in ref.excluded.values())} study curves (each with its reason: df.attrs of exubio.rhythm)")
+    return "\n".join(out)
+
+
+def trial_rhythm_page(r: TrialRhythm, ref: Reference | None, title: str, /, *, model_note: str = "",
+                      method: str = "") -> Figure:
+    """The trial's rhythm page (module docstring)."""
+    fig, axes = _figure()
+    has_u = np.isfinite(r.u_deg).any()
+    for k, (ax, name) in enumerate(zip(axes, r.names)):
+        _corridor(ax, ref, name)
+        for c in np.unique(r.cycle[r.cycle >= 0]):
+            sel = r.cycle == c
+            p = int(r.phase[sel][0])
+            colour, ls = _PHASE_STYLE[p]
+            ht, y, ok = r.ht_deg[sel], r.values_deg[sel, k], r.measured[sel, k]
+            ax.plot(ht, np.where(ok, np.nan, y), color="silver", lw=1.0, ls=ls)
+            ax.plot(ht, np.where(ok, y, np.nan), color=colour, lw=1.3, ls=ls)
+            if has_u:
+                band = 2.0 * r.u_deg[sel, k]
+                ax.fill_between(ht, np.where(ok, y - band, np.nan), np.where(ok, y + band, np.nan), color=colour,
+                                alpha=0.15, lw=0)
+        _axes_style(ax, name, r.labels, k >= 4)
+    extra = [Line2D([], [], color="silver", label="not a measurement")]
+    if has_u:
+        extra.append(Patch(color="grey", alpha=0.15, label="±2u (standard uncertainty)"))
+    _legend(fig, ref, extra)
+    n_cycles = {PHASES[p - 1]: len(np.unique(r.cycle[r.phase == p])) for p in (1, 2)}
+    fig.suptitle(f"{title}\nscapulohumeral rhythm{f' ({method.upper()})' if method else ''}: "
+                 f"{n_cycles['raising']} raising and {n_cycles['lowering']} lowering cycle(s); "
+                 f"{'ISB' if r.signs == 'isb' else 'clinical'} signs (stated under each title)", fontsize=9)
+    fig.text(0.06, 0.015, _notes(ref, [
+        "x: HT elevation, the angle between the humerus and the thorax's vertical axis. Frames: raising or lowering faster "
+        "than 5 deg/s over at least 20 deg (exubio.scapulohumeral.table); ST and SC Y-X'-Z'', GH X-Z'-Y'' (Phadke) in ISB frames.",
+        *([f"corridor bones: {model_note}"] if model_note else [])]), fontsize=6.5, va="bottom", wrap=True)
+    return fig
+
+
+def _average_curves(ax, a: Average, k: int, *, thick: bool, band: bool) -> None:
+    for p in (1, 2):
+        colour, ls = _PHASE_STYLE[p]
+        m, sd = a.mean_deg[p - 1, :, k], a.sd_deg[p - 1, :, k]
+        ax.plot(HT_GRID_DEG, m, color=colour, ls=ls, lw=2.0 if thick else 0.7, alpha=1.0 if thick else 0.55)
+        if band:
+            ax.fill_between(HT_GRID_DEG, m - sd, m + sd, color=colour, alpha=0.18, lw=0)
+
+
+def _study_page(g: StudyRhythm, title: str, main: Average, thin: Sequence[Average | np.ndarray], what: str,
+                labels: dict | None) -> Figure:
+    fig, axes = _figure()
+    for k, (ax, name) in enumerate(zip(axes, (a for a, _ in RHYTHM_ANGLES))):
+        _corridor(ax, g.reference, name)
+        for t in thin:
+            if isinstance(t, Average):
+                _average_curves(ax, t, k, thick=False, band=False)
+            else:
+                for p in (1, 2):
+                    ax.plot(HT_GRID_DEG, t[p - 1, :, k], color=_PHASE_STYLE[p][0], ls=_PHASE_STYLE[p][1], lw=0.7,
+                            alpha=0.55)
+        _average_curves(ax, main, k, thick=True, band=True)
+        _axes_style(ax, name, labels, k >= 4)
+    _legend(fig, g.reference, [Patch(color="grey", alpha=0.18, label="mean ± SD")])
+    fig.suptitle(f"{title}\n{what}", fontsize=9)
+    n = int(main.n.max(initial=0))
+    fig.text(0.06, 0.015, _notes(g.reference, [
+        f"resampled on HT elevation every {HT_GRID_DEG[1] - HT_GRID_DEG[0]:.0f} deg (exubio.scapulohumeral.table): a trial is the "
+        f"mean of its cycles, measured frames only (a value not measured is never bridged); at most {n} curve(s) per point.",
+        "thick: the mean, band: +- SD (ddof 1, where two or more curves); thin: the curves averaged."]),
+        fontsize=6.5, va="bottom", wrap=True)
+    return fig
+
+
+def study_rhythm_pages(groups: Sequence[StudyRhythm], study: str, /, *, labels: dict | None = None) -> list[Figure]:
+    """The group page and one page per subject of every method and plane (module docstring)."""
+    figs = []
+    for g in groups:
+        head = f"exubio study: {study} — {g.method.upper()}, arm raised in the {g.plane} plane"
+        figs.append(_study_page(g, head, g.group, list(g.subjects.values()),
+                                f"group scapulohumeral rhythm: {len(g.subjects)} subjects, {len(g.trials)} trials; mean ± "
+                                f"SD over the subjects' means (each subject counts once)", labels))
+        for s, a in g.subjects.items():
+            mine = [rs.values_deg for st, rs in g.trials if st.subject == s]
+            figs.append(_study_page(g, head, a, mine, f"subject {s}: {len(mine)} trial(s); mean +- SD over its trials",
+                                    labels))
+    if groups and groups[0].left_out:
+        fig = Figure(figsize=(11.69, 8.27))
+        FigureCanvasAgg(fig)
+        fig.text(0.04, 0.95, "trials without a rhythm (left out of the rhythm pages)", fontsize=11, weight="bold",
+                 va="top")
+        fig.text(0.04, 0.9, "\n".join(f"{t.subject}/{t.session}/{t.trial} ({t.method.upper()}): {why}"
+                                      for t, why in groups[0].left_out[:60]), fontsize=7, va="top", family="monospace",
+                 wrap=True)
+        figs.append(fig)
+    return figs
+
+
+def trial_rhythm_figure(npz_path, title: str, method: str) -> Figure | None:
+    """The rhythm page of one method's result, or None when it has no shoulder angles with a
+    status or no raising or lowering of the arm (no rhythm to draw)."""
+    from exubio.errors import InputError
+    from exubio.scapulohumeral.files import read_trial_rhythm, trial_reference
+
+    try:
+        r = read_trial_rhythm(npz_path)
+    except InputError:
+        return None
+    if not (r.phase > 0).any():
+        return None
+    ref, which = trial_reference(npz_path, r)
+    return trial_rhythm_page(r, ref, title, model_note=which, method=method)

@@ -1,0 +1,193 @@
+"""The rhythm read from result files: a trial's ``<trial>.<method>.csv`` (angles, uncertainty) and
+``.npz`` (each angle's status per frame, the model file), a study's ``study.json`` and its trial
+folders. Reads files only: the reports draw from here without a solver."""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from exubio.errors import InputError
+from exubio.io.results import read_angles_csv, read_npz_arrays, read_npz_metadata
+from exubio.scapulohumeral.reference import Reference, reference, trial_plane
+from exubio.scapulohumeral.table import (HT_GRID_DEG, PHASES, RHYTHM_ANGLES, Average, Resampled, TrialRhythm, average, resample,
+                                 trial_rhythm)
+from exubio.types import Model
+
+__all__ = ["read_trial_rhythm", "trial_model", "trial_reference", "StudyTrial", "StudyRhythm", "study_trials",
+           "study_rhythm", "trial_columns", "study_columns"]
+
+
+def read_trial_rhythm(npz_path: str | Path, /) -> TrialRhythm:
+    """A trial's rhythm from its ``.npz`` and the ``.csv`` beside it (InputError naming the file
+    when the result has no angle status or no shoulder angles)."""
+    npz_path = Path(npz_path)
+    csv = Path(str(npz_path)[: -len(".npz")] + ".csv")
+    status = read_npz_arrays(npz_path, ("angle_status",))["angle_status"]
+    t, names, values, u = read_angles_csv(csv, uncertainty=True)
+    names = tuple(n.removesuffix("_deg") for n in names)
+    if status.shape != values.shape:
+        raise InputError(f"{npz_path}: angle_status has shape {status.shape}, the angles of {csv.name} {values.shape}")
+    try:
+        return trial_rhythm(t, names, np.degrees(values), np.degrees(u), status == 0)
+    except KeyError as exc:
+        raise InputError(f"{csv}: {exc.args[0]}") from None
+
+
+def trial_model(npz_path: str | Path, /) -> tuple[Model, str]:
+    """(model, which) the trial was reconstructed with (its metadata's model file), else the
+    generic model (said in ``which``)."""
+    from exubio.model.load import load_model
+
+    meta = read_npz_metadata(npz_path)
+    path = meta.get("model")
+    if path and Path(str(path)).is_file():
+        try:
+            return load_model(path), f"the trial's model {Path(str(path)).name}"
+        except Exception as exc:  # noqa: BLE001 - the corridor falls back to the generic bones, said
+            return load_model(), f"the generic model ({Path(str(path)).name} unreadable: {exc})"
+    return load_model(), "the generic model (the trial's model file is not there)"
+
+
+def trial_reference(npz_path: str | Path, r: TrialRhythm, /) -> tuple[Reference, str]:
+    model, which = trial_model(npz_path)
+    plane, deg, why = trial_plane(r)
+    return reference(model, plane, plane_deg=deg, why=why), which
+
+
+@dataclass(frozen=True)
+class StudyTrial:
+    subject: str
+    session: str
+    trial: str
+    method: str
+    npz: Path
+    verdict: str
+
+
+def study_trials(study_dir: str | Path, /, *, method: str | None = None) -> list[StudyTrial]:
+    """The study's trials with a result of ``method`` (None: each trial's every method), in study
+    order, from its ``study.json`` (InputError naming it when absent or unreadable)."""
+    study_dir = Path(study_dir)
+    path = study_dir / "study.json"
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{path}: expected the study.json of `exubio study` ({exc})") from None
+    out = []
+    for row in data.get("trials", []):
+        folder = Path(row.get("folder", ""))
+        if not folder.is_absolute():
+            folder = study_dir / folder
+        stem = Path(row["trial"]).stem
+        for m in (method,) if method else ("pf", "ls"):
+            npz = folder / f"{stem}.{m}.npz"
+            if npz.is_file():
+                out.append(StudyTrial(row["subject"], row["session"], stem, m, npz, row.get(f"{m}_verdict") or ""))
+    return out
+
+
+@dataclass
+class StudyRhythm:
+    """The rhythm of a study's trials of one method and one plane: each trial resampled, each
+    subject's mean and SD over its trials, the group's over the subjects' means, the corridor on
+    the generic model, and the trials left out with the reason."""
+
+    method: str
+    plane: str
+    trials: list[tuple[StudyTrial, Resampled]] = field(default_factory=list)
+    subjects: dict[str, Average] = field(default_factory=dict)
+    group: Average | None = None
+    reference: Reference | None = None
+    left_out: list[tuple[StudyTrial, str]] = field(default_factory=list)
+
+
+def study_rhythm(study_dir: str | Path, /, *, method: str | None = None) -> list[StudyRhythm]:
+    """One StudyRhythm per method and plane that has trials (trials raising in no studied plane,
+    or without a raising, are in ``left_out`` of the first)."""
+    from exubio.model.load import load_model
+
+    trials = study_trials(study_dir, method=method)
+    groups: dict[tuple[str, str], StudyRhythm] = {}
+    left: list[tuple[StudyTrial, str]] = []
+    planes: dict[str, float] = {}
+    for st in trials:
+        try:
+            r = read_trial_rhythm(st.npz)
+        except InputError as exc:
+            left.append((st, str(exc)))
+            continue
+        plane, deg, why = trial_plane(r)
+        if plane is None:
+            left.append((st, why))
+            continue
+        g = groups.setdefault((st.method, plane), StudyRhythm(st.method, plane))
+        planes.setdefault(plane, deg)
+        g.trials.append((st, resample(r)))
+    model = load_model() if groups else None
+    for (_m, plane), g in groups.items():
+        subjects: dict[str, list[np.ndarray]] = {}
+        for st, rs in g.trials:
+            subjects.setdefault(st.subject, []).append(rs.values_deg)
+        g.subjects = {s: average(c) for s, c in subjects.items()}
+        g.group = average([a.mean_deg for a in g.subjects.values()])
+        g.reference = reference(model, plane, plane_deg=planes[plane],
+                                why=f"{plane} plane (the trials' raising); corridor on the generic model's bones")
+    out = list(groups.values())
+    if out:
+        out[0].left_out = left
+    elif left:
+        raise InputError(f"{study_dir}: no trial of the study has a rhythm: " + "; ".join(
+            f"{t.subject}/{t.session}/{t.trial} ({t.method}): {why}" for t, why in left[:5]))
+    return out
+
+
+def trial_columns(r: TrialRhythm, ref: Reference, /) -> dict[str, np.ndarray]:
+    """The table behind a trial's rhythm page, long: one row per frame of a cycle and rhythm angle
+    (time_s, phase, cycle, ht_elevation_deg, angle, value_deg, u_deg, measured, corridor_lo_deg,
+    corridor_hi_deg: the corridor at the frame's HT elevation, NaN where there is none)."""
+    rows = np.flatnonzero(r.phase > 0)
+    cols: dict[str, list] = {c: [] for c in ("time_s", "phase", "cycle", "ht_elevation_deg", "angle", "value_deg",
+                                             "u_deg", "measured", "corridor_lo_deg", "corridor_hi_deg")}
+    for i, name in enumerate(r.names):
+        lo, hi = ref.at(name, r.ht_deg[rows])
+        cols["time_s"].append(r.time_s[rows])
+        cols["phase"].append(np.where(r.phase[rows] == 1, "raising", "lowering"))
+        cols["cycle"].append(r.cycle[rows])
+        cols["ht_elevation_deg"].append(r.ht_deg[rows])
+        cols["angle"].append(np.full(rows.size, name, dtype=object))
+        cols["value_deg"].append(r.values_deg[rows, i])
+        cols["u_deg"].append(r.u_deg[rows, i])
+        cols["measured"].append(r.measured[rows, i])
+        cols["corridor_lo_deg"].append(lo)
+        cols["corridor_hi_deg"].append(hi)
+    return {c: np.concatenate(v) if v else np.zeros(0) for c, v in cols.items()}
+
+
+def study_columns(groups: list[StudyRhythm], /) -> dict[str, np.ndarray]:
+    """The table behind a study's rhythm pages, long: one row per method, plane, level ("group" or
+    "subject"), subject ("" for the group), phase, HT elevation grid point and angle with a value
+    (mean_deg, sd_deg, n: subjects for the group, trials for a subject; corridor_lo_deg, corridor_hi_deg)."""
+    cols: dict[str, list] = {c: [] for c in ("method", "plane", "level", "subject", "phase", "ht_elevation_deg", "angle",
+                                             "mean_deg", "sd_deg", "n", "corridor_lo_deg", "corridor_hi_deg")}
+    names = [a for a, _ in RHYTHM_ANGLES]
+    for g in groups:
+        levels = [("group", "", g.group)] + [("subject", s, a) for s, a in g.subjects.items()]
+        for level, subject, a in levels:
+            for p, phase in enumerate(PHASES):
+                for i, name in enumerate(names):
+                    ok = a.n[p, :, i] > 0
+                    m = int(ok.sum())
+                    lo, hi = g.reference.at(name, HT_GRID_DEG[ok])
+                    for c, v in (("method", g.method), ("plane", g.plane), ("level", level), ("subject", subject),
+                                 ("phase", phase), ("angle", name)):
+                        cols[c].append(np.full(m, v, dtype=object))
+                    cols["ht_elevation_deg"].append(HT_GRID_DEG[ok])
+                    cols["mean_deg"].append(a.mean_deg[p, ok, i])
+                    cols["sd_deg"].append(a.sd_deg[p, ok, i])
+                    cols["n"].append(a.n[p, ok, i])
+                    cols["corridor_lo_deg"].append(lo)
+                    cols["corridor_hi_deg"].append(hi)
+    return {c: np.concatenate(v) if v else np.zeros(0) for c, v in cols.items()}
