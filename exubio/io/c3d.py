@@ -54,6 +54,7 @@ from exubio.io.c3d_raw import check_raw_header, declared_frame_count, declared_p
 from exubio.io.c3d_raw import parameter_records
 from exubio.io.c3d_raw import raw_header as _raw_header
 from exubio.io.c3d_raw import raw_parameters as _raw_parameters  # noqa: F401 (the tests patch files through it)
+from exubio.io.labels import keep_one_per_label
 from exubio.io.limits import rate_problem
 from exubio.io.results import atomic_write
 from exubio.types import Trajectories
@@ -311,53 +312,26 @@ def _select_markers(path: Path, raw_labels: list[str], positions: np.ndarray, fi
                     ) -> tuple[list[int], list[str], list[str]]:
     """Columns to keep, their stripped labels, and the original labels dropped: unlabelled ``*N``
     markers; empty labels (a finding each: no protocol can name them); points whose label another
-    carries after prefix stripping (a finding each: the point with the most samples of ``positions``
-    is kept, the first of equals). No point left is refused."""
-    n_samples = np.isfinite(positions).all(axis=2).sum(axis=0)
-    by_label: dict[str, list[int]] = {}
-    dropped: list[int] = []
+    carries after prefix stripping (exubio.io.labels: the one with the most samples is kept, a
+    finding names it). No point left is refused."""
+    labels: list[str | None] = []
     for i, raw in enumerate(raw_labels):
         label = strip_prefix(raw)
         if not label:
-            findings.append(f"{path.name}: POINT:LABELS: point {i + 1} has an empty label ({raw!r}, "
-                            f"{int(n_samples[i])} samples); not read, as no protocol can name it")
-            dropped.append(i)
-        elif _UNLABELLED.match(label):
-            dropped.append(i)
-        else:
-            by_label.setdefault(label, []).append(i)
-    kept = {}
-    for label, columns in by_label.items():
-        best = max(columns, key=lambda c: (int(n_samples[c]), -c))
-        kept[best] = label
-        if len(columns) > 1:
-            told = ", ".join(f"point {c + 1} ({raw_labels[c]!r}, {int(n_samples[c])} samples)" for c in columns)
-            why = ("the first of equal sample counts" if sum(n_samples[c] == n_samples[best] for c in columns) > 1
-                   else "the one with the most samples")
-            findings.append(f"{path.name}: POINT:LABELS: {len(columns)} points are labelled '{label}': {told}; kept "
-                            f"point {best + 1}, {why}{_duplicate_difference(positions, best, columns)}")
-            dropped += [c for c in columns if c != best]
-    keep = sorted(kept)
-    ignored = [raw_labels[c] for c in sorted(dropped)]  # in the file's order
+            n = int(np.isfinite(positions[:, i]).all(axis=1).sum())
+            findings.append(f"{path.name}: POINT:LABELS: point {i + 1} has an empty label ({raw!r}, {n} samples); "
+                            f"not read, as no protocol can name it")
+        labels.append(label if label and not _UNLABELLED.match(label) else None)
+    keep = keep_one_per_label(labels, positions, raw=raw_labels, field="POINT:LABELS", name=path.name,
+                              findings=findings, column="point")
+    ignored = [raw for i, raw in enumerate(raw_labels) if i not in set(keep)]  # in the file's order
     if not keep:
         raise InputError(f"{path}: none of its {len(raw_labels)} points has a label a protocol can name (POINT:LABELS: "
                          f"{', '.join(repr(r) for r in raw_labels[:8])}{', ...' if len(raw_labels) > 8 else ''}); "
                          f"label the markers in the capture software and export again")
     if ignored:
         logger.info("%s: ignoring %d marker(s): %s", path, len(ignored), ignored)
-    return keep, [kept[c] for c in keep], ignored
-
-
-def _duplicate_difference(positions: np.ndarray, best: int, columns: list[int]) -> str:
-    """How far the dropped points of a label lie from the kept one, where both have samples."""
-    gaps = [np.linalg.norm(positions[:, c] - positions[:, best], axis=1) for c in columns if c != best]
-    gaps = np.concatenate([g[np.isfinite(g)] for g in gaps])
-    if not gaps.size:
-        return " (no frame where both have a sample)"
-    if gaps.max() == 0:
-        return " (the same positions wherever both have a sample)"
-    far = "; different markers under one label" if gaps.max() > 5e-3 else ""
-    return f" (the others lie up to {gaps.max() * 1e3:.1f} mm from it where both have a sample{far})"
+    return keep, [labels[c] for c in keep], ignored
 
 
 def strip_prefix(label: str) -> str:
