@@ -244,15 +244,17 @@ def test_num_markers_below_the_labels_and_rows_is_read_from_them_with_a_finding(
     assert finding in caplog.text
 
 
-def test_duplicate_label_keeps_the_marker_with_most_samples_and_says_so(tmp_path):
-    rows = [[1, 2, 3, np.nan, np.nan, np.nan, 7, 8, 9], [1, 2, 3, 40, 50, 60, 7, 8, 9]]
+def test_duplicate_label_keeps_the_first_marker_with_samples_and_says_so(tmp_path):
+    rows = [[np.nan, np.nan, np.nan, np.nan, np.nan, np.nan, 7, 8, 9, 1, 2, 3],
+            [np.nan, np.nan, np.nan, 40, 50, 60, 7, 8, 9, 1, 2, 3]]
     path = tmp_path / "dup.trc"
-    path.write_text(_header_and_rows(["A", "B", "A"], 3, rows).replace("nan", ""), encoding="utf-8")
+    path.write_text(_header_and_rows(["A", "B", "A", "A"], 4, rows).replace("nan", ""), encoding="utf-8")
     traj = read_trc(path)
-    assert traj.labels == ("A", "B") and traj.ignored_labels == ("A",)
-    np.testing.assert_allclose(traj.marker("A"), [[1e-3, 2e-3, 3e-3]] * 2)  # column 1, not column 3 (6 mm away)
+    assert traj.labels == ("B", "A") and traj.ignored_labels == ("A", "A")
+    np.testing.assert_allclose(traj.marker("A"), [[7e-3, 8e-3, 9e-3]] * 2)  # marker 3: marker 1 has no sample
     (finding,) = traj.input_findings
-    assert "2 markers are labelled 'A'" in finding and "kept marker 1" in finding and "10.4 mm" in finding
+    assert "3 markers are labelled 'A'" in finding and "kept marker 3, the first with samples" in finding
+    assert "10.4 mm" in finding  # marker 4 lies 10.4 mm from marker 3
 
 
 def test_empty_label_in_its_place_is_left_out_with_a_finding(tmp_path):

@@ -9,7 +9,7 @@ writers store is never taken as a position.
 Every file ezc3d reads is read; what exubio reads around is an input finding naming the field
 (logged, and in ``Trajectories.input_findings``, which the results carry): a point with an empty
 label (not read: no protocol can name it), a label two points carry after prefix stripping (the
-one with the most samples is kept, named), a POINT:UNITS that spells metres another way ("mete",
+first with samples is kept, named), a POINT:UNITS that spells metres another way ("mete",
 "meters"), and what exubio.io.c3d_raw reads around in the raw bytes (a vendor's parameter names,
 a parameter section longer than it declares, a POINT:RATE of 0 under a header rate). What is
 refused names the file, the field and why: a file with no 3-D point (analog channels only, or no
@@ -312,8 +312,8 @@ def _select_markers(path: Path, raw_labels: list[str], positions: np.ndarray, fi
                     ) -> tuple[list[int], list[str], list[str]]:
     """Columns to keep, their stripped labels, and the original labels dropped: unlabelled ``*N``
     markers; empty labels (a finding each: no protocol can name them); points whose label another
-    carries after prefix stripping (exubio.io.labels: the one with the most samples is kept, a
-    finding names it). No point left is refused."""
+    carries after prefix stripping (exubio.io.labels: the first with samples is kept, a finding
+    names it). No point left is refused."""
     labels: list[str | None] = []
     for i, raw in enumerate(raw_labels):
         label = strip_prefix(raw)

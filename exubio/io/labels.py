@@ -1,7 +1,8 @@
 """Marker labels as the trial readers (exubio.io.c3d, exubio.io.trc) read them: one column per
-label. A label that two or more columns carry keeps one column, the one with the most samples (the
-first of equals), and the reader says so in an input finding naming every column, the one kept,
-and how far the others lie from it (different markers under one label, or a copy)."""
+label. A label that two or more columns carry keeps one column, the first that has samples (so a
+file holding two marker sets under the same labels, as BTS writes them, keeps one set, not a mix
+chosen by sample counts), and the reader says so in an input finding naming every column, the one
+kept, and how far the others lie from it (different markers under one label, or a copy)."""
 from __future__ import annotations
 
 import numpy as np
@@ -15,7 +16,7 @@ DIFFERENT_MARKERS_M = 5e-3
 def keep_one_per_label(labels: list[str | None], positions: np.ndarray, *, raw: list[str], field: str, name: str,
                        findings: list[str], column: str = "column") -> list[int]:
     """The columns to keep, in file order, of ``labels`` (None: a column not to read) over
-    ``positions`` (n_frames, n_columns, 3): one per label. ``raw``: the labels as written (said in
+    ``positions`` (n_frames, n_columns, 3): one per label, the first with samples. ``raw``: the labels as written (said in
     the findings), ``field``: where the file holds them ("POINT:LABELS", "line 4"), ``name``: the
     file's name, ``column``: what the file calls a column ("point"); a finding per repeated label is
     appended to ``findings``."""
@@ -26,12 +27,11 @@ def keep_one_per_label(labels: list[str | None], positions: np.ndarray, *, raw: 
             by_label.setdefault(label, []).append(i)
     keep = []
     for label, columns in by_label.items():
-        best = max(columns, key=lambda c: (int(n_samples[c]), -c))
+        best = next((c for c in columns if n_samples[c]), columns[0])
         keep.append(best)
         if len(columns) > 1:
             told = ", ".join(f"{column} {c + 1} ({raw[c]!r}, {int(n_samples[c])} samples)" for c in columns)
-            why = ("the first of equal sample counts" if sum(n_samples[c] == n_samples[best] for c in columns) > 1
-                   else "the one with the most samples")
+            why = "the first" if best == columns[0] else "the first with samples"
             findings.append(f"{name}: {field}: {len(columns)} {column}s are labelled '{label}': {told}; kept {column} "
                             f"{best + 1}, {why}{_difference(positions, best, columns)}")
     return sorted(keep)
