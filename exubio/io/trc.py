@@ -14,7 +14,11 @@ Reading converts to metres and takes the sample times from the Time column, whic
 increasing and on the DataRate of line 3 (row i at the first time + i / DataRate, within half a
 sample); anything else is refused naming the line. A NumFrames that disagrees with the data rows is
 read from the rows, as OpenSim does (published files are off by a row or more), with a warning
-naming the header value that also goes into the result (``Trajectories.input_findings``). A DataRate
+naming the header value that also goes into the result (``Trajectories.input_findings``). So is a
+NumMarkers that disagrees with line 4's labels when the rows hold as many markers as there are labels
+(a Motion Analysis Cortex file lists 34 labels under NumMarkers=28); labels and rows that disagree are
+refused. A label on two or more markers keeps the first with samples, and a label left empty in its
+place is not read, each with a finding (exubio.io.labels). A DataRate
 above exubio.io.limits.MAX_RATE_HZ is refused (the work after reading grows with it). Writing prints
 positions with a resolution of 1e-9 m whatever the unit (mm: 6 decimals) and times with 10
 significant digits; missing samples become empty cells.
