@@ -34,6 +34,7 @@ from exubio.io.limits import rate_problem
 HEADER_CLIPPED = 0xFFFF  # a 16-bit header frame number: long trials store the real count elsewhere
 INTEL, DEC, MIPS = 84, 85, 86  # processor type byte of the parameter section
 _TYPE_BYTES = {-1: 1, 1: 1, 2: 2, 4: 4}  # C3D parameter types: char, byte, int16, float
+MAX_SECTION_BLOCKS = 2048  # 1 MB: what is read of a parameter section whatever its header says (255 blocks declarable)
 _STANDARD_NAME = re.compile(r"^[A-Z0-9_]+$")
 _BAD = "not a readable C3D file (the header contradicts the file: "
 
@@ -131,6 +132,7 @@ def parameter_records(path: Path, byte_order: str, param_block: int, size: int, 
     first = (param_block - 1) * 512
     declared_end = first + (section_blocks(path, first) or 1) * 512
     end_of_section = max((data_start - 1) * 512, declared_end) if data_start > param_block else size
+    end_of_section = min(end_of_section, first + MAX_SECTION_BLOCKS * 512)
     with open(path, "rb") as fh:
         fh.seek(first)
         section = fh.read(max(min(end_of_section, size) - first, 0))
