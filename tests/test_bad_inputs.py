@@ -321,6 +321,20 @@ def test_c3d_parameter_turned_into_a_group_by_one_byte_refused(tmp_path, c3d, ca
     refused(capsys, reconstruct(bad, out), out, "hostile.c3d", "parameter section")
 
 
+def test_c3d_char_parameter_without_dimensions_refused(tmp_path, c3d, capsys):
+    """One byte (a scalar's type made char, -1) crashed ezc3d with a segmentation fault: it reads a
+    char parameter's first dimension, which a scalar has not (found by mutating the section's bytes)."""
+    from exubio.io import c3d_raw
+
+    byte_order, _, header = c3d_raw.raw_header(c3d)
+    _, params = c3d_raw.parameter_records(c3d, byte_order, header[0], c3d.stat().st_size)
+    scalar = next(p for p in params if p.dims == () and p.kind != -1)
+    bad = _patched(c3d, ((header[0] - 1) * 512 + scalar.start - 2, bytes([255])))  # type, n_dims = 0, data
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(bad, out), out, "hostile.c3d",
+            f"parameter {scalar.group}:{scalar.name} is of type char with no dimension")
+
+
 @pytest.mark.parametrize("value", [-5.0, 0.0, 2.5])
 def test_c3d_point_long_frames_not_a_count_refused(tmp_path, value):
     n = 70_000

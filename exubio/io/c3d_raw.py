@@ -14,8 +14,8 @@ Read around, with a note:
 
 Refused, naming the field: the SGI/MIPS processor format (byte 4 of the parameter section is 86;
 ezc3d reads only Intel and DEC files), a parameter block or data start past the end of the file,
-a record of unknown type, more than 7 dimensions or data running into the data block or past the
-file, an offset to the next record inside the record, a group id defined twice, a parameter of no
+a record of unknown type, more than 7 dimensions, type char with no dimension or data running into
+the data block or past the file, an offset to the next record inside the record, a group id defined twice, a parameter of no
 group, a name with control or non-ASCII characters, a POINT:RATE that is not a finite number (ezc3d
 crashes on a NaN there).
 """
@@ -176,6 +176,8 @@ def parameter_records(path: Path, byte_order: str, param_block: int, size: int, 
             if kind not in _TYPE_BYTES or n_dims > 7:
                 refuse(f"parameter {full} has type {kind} and {n_dims} dimensions; expected a type of -1, 1, 2 or 4 "
                        f"and at most 7")
+            if kind == -1 and n_dims == 0:  # ezc3d indexes its first dimension: a segmentation fault (fuzzed)
+                refuse(f"parameter {full} is of type char with no dimension; expected at least one (its length)")
             start = here + 4 + n_dims
             n_bytes = _TYPE_BYTES[kind] * int(np.prod(dims, dtype=np.int64))
             if start + n_bytes + 1 > len(section):
