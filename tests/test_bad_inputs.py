@@ -335,6 +335,35 @@ def test_c3d_char_parameter_without_dimensions_refused(tmp_path, c3d, capsys):
             f"parameter {scalar.group}:{scalar.name} is of type char with no dimension")
 
 
+def _moved_to_point(c3d: Path, name: str, *, out: str) -> Path:
+    """A copy of ``c3d`` whose ANALOG:``name`` record says it belongs to the POINT group (its group
+    id byte), so that POINT holds ``name`` twice and ezc3d keeps this one, the last."""
+    from exubio.io import c3d_raw
+
+    byte_order, _, header = c3d_raw.raw_header(c3d)
+    section, params = c3d_raw.parameter_records(c3d, byte_order, header[0], c3d.stat().st_size)
+    (moved,) = [p for p in params if (p.group, p.name) == ("ANALOG", name)]
+    record = moved.start - len(moved.dims) - 4 - len(name) - 2  # chars, id, name, offset (2), type, n dims, dims
+    point_id = next(section[p.start - len(p.dims) - 4 - len(p.name) - 1] for p in params if p.group == "POINT")
+    return _patched(c3d, ((header[0] - 1) * 512 + record + 1, bytes([point_id])), name=out)
+
+
+def test_c3d_point_scale_without_a_value_refused(tmp_path, c3d, capsys):
+    """ANALOG:SCALE (no value) moved into the POINT group by one byte: ezc3d kept it as POINT:SCALE and
+    read its first value, which it has not: a segmentation fault (found by mutating the section)."""
+    bad = _moved_to_point(c3d, "SCALE", out="hostile.c3d")
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(bad, out), out, "hostile.c3d", "parameter POINT:SCALE holds no value")
+
+
+def test_c3d_parameter_defined_twice_read_as_ezc3d_reads_it_with_a_finding(c3d, trajectories):
+    bad = _moved_to_point(c3d, "UNITS", out="twice.c3d")  # POINT:UNITS, then an empty one
+    got = read_c3d(bad)
+    np.testing.assert_allclose(got.positions_m, read_c3d(c3d).positions_m, atol=1e-9)
+    assert any("POINT:UNITS defined twice or more; read the last definition" in f for f in got.input_findings)
+    assert any("POINT:UNITS is absent; read as millimetres" in f for f in got.input_findings)
+
+
 @pytest.mark.parametrize("value", [-5.0, 0.0, 2.5])
 def test_c3d_point_long_frames_not_a_count_refused(tmp_path, value):
     n = 70_000

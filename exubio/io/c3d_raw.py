@@ -9,20 +9,25 @@ Read around, with a note:
   "Uncropped Measurement Length", BTS: "PELVIS WIDTH"): ezc3d reads names by their length;
 - parameters running past the section length that byte 3 of the parameter section declares (Peak
   Performance, PhoeniX): ezc3d reads the records where they are, to the terminating record;
+- a parameter defined twice in its group: the last definition, as ezc3d reads it;
 - a POINT:RATE of 0, negative or above exubio.io.limits.MAX_RATE_HZ under a usable header rate
   (word 11-12): the header's rate is used.
 
 Refused, naming the field: the SGI/MIPS processor format (byte 4 of the parameter section is 86;
 ezc3d reads only Intel and DEC files), a parameter block or data start past the end of the file,
 a record of unknown type, more than 7 dimensions, type char with no dimension or data running into
-the data block or past the file, an offset to the next record inside the record, a group id defined twice, a parameter of no
-group, a name with control or non-ASCII characters, a POINT:RATE that is not a finite number (ezc3d
-crashes on a NaN there).
+the data block or past the file, an offset to the next record inside the record, a group id
+defined twice, a parameter of no group, a name with control or non-ASCII characters, a POINT:USED,
+SCALE, RATE, DATA_START or FRAMES (ANALOG:USED, RATE, GEN_SCALE; ROTATION:...) with no value, a
+POINT:RATE that is not a finite number. ezc3d crashes on each of the last three (a segmentation
+fault: it reads those parameters' first value or dimension unchecked; found by mutating the bytes
+of parameter sections, benchmarks/c3d_mutations.py).
 """
 from __future__ import annotations
 
 import re
 import struct
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,6 +39,8 @@ from exubio.io.limits import rate_problem
 HEADER_CLIPPED = 0xFFFF  # a 16-bit header frame number: long trials store the real count elsewhere
 INTEL, DEC, MIPS = 84, 85, 86  # processor type byte of the parameter section
 _TYPE_BYTES = {-1: 1, 1: 1, 2: 2, 4: 4}  # C3D parameter types: char, byte, int16, float
+_INDEXED = {"POINT": ("USED", "SCALE", "RATE", "DATA_START", "FRAMES"), "ANALOG": ("USED", "RATE", "GEN_SCALE"),
+            "ROTATION": ("USED", "RATE", "RATIO", "DATA_START")}  # ezc3d reads their first value unchecked
 MAX_SECTION_BLOCKS = 2048  # 1 MB: what is read of a parameter section whatever its header says (255 blocks declarable)
 _STANDARD_NAME = re.compile(r"^[A-Z0-9_]+$")
 _BAD = "not a readable C3D file (the header contradicts the file: "
@@ -199,6 +206,12 @@ def parameter_records(path: Path, byte_order: str, param_block: int, size: int, 
     for ident, name, _, _, _ in raw:
         if ident not in groups:
             refuse(f"parameter {name} belongs to group {ident}, which no group record defines")
+    last = {(groups[g], name): dims for g, name, _, dims, _ in raw}  # ezc3d keeps a repeated one's last
+    for (group, name), dims in last.items():
+        if name in _INDEXED.get(group, ()) and int(np.prod(dims, dtype=np.int64)) == 0:
+            refuse(f"parameter {group}:{name} holds no value (dimensions {list(dims)}); expected a number")
+    counts = Counter(f"{groups[g]}:{name}" for g, name, *_ in raw)
+    repeated = sorted(name for name, n in counts.items() if n > 1)
     if long_descriptions:
         raise InputError(
             f"{path}: not a readable C3D file (parameter section: the description of {long_descriptions[0]}"
@@ -209,6 +222,9 @@ def parameter_records(path: Path, byte_order: str, param_block: int, size: int, 
         if odd_names:
             notes.append(f"{path.name}: parameter section: {len(odd_names)} name(s) outside the C3D naming rule "
                          f"(letters, digits and '_'): {', '.join(repr(n) for n in odd_names)}; read as written")
+        if repeated:
+            notes.append(f"{path.name}: parameter section: {', '.join(repeated)} defined twice or more; read the "
+                         f"last definition, as ezc3d does")
         if reached > declared:
             notes.append(f"{path.name}: parameter section: byte 3 of its first block declares {section[2]} block(s) "
                          f"({declared} bytes) but its records run to byte {reached}; read them where they are, as "
