@@ -541,3 +541,73 @@ def test_a_lock_is_taken_over_from_a_killed_run_and_from_a_reused_pid_never_from
     with pytest.raises(InputError, match=r"another exubio run \(process 1\)"):
         with claim(tmp_path, ["t.ls"]):
             pass
+
+
+def test_an_empty_lock_left_by_a_run_killed_while_taking_it_is_taken_over_said_once(tmp_path, caplog):
+    """SIGKILL between creating the lock and writing the pid in it left an empty lock, and every next
+    run was refused with "another exubio run is writing this result" though none was."""
+    from exubio.io.results import EMPTY_LOCK_GRACE_S, claim
+
+    lock = tmp_path / ".t.ls.lock"
+    lock.write_text("")
+    old = time.time() - EMPTY_LOCK_GRACE_S - 1
+    os.utime(lock, (old, old))
+    with caplog.at_level("WARNING", logger="exubio.io.results"):
+        with claim(tmp_path, ["t.ls"]):
+            assert lock.read_text().split()[0] == str(os.getpid())
+    said = [r.getMessage() for r in caplog.records if ".t.ls.lock" in r.getMessage()]
+    assert len(said) == 1 and "empty for" in said[0] and "killed" in said[0], said
+    assert not lock.exists()
+    lock.write_text("")  # an empty lock being written this instant: waited for, then (still empty) taken over
+    t0 = time.monotonic()
+    with claim(tmp_path, ["t.ls"]):
+        assert time.monotonic() - t0 >= EMPTY_LOCK_GRACE_S * 0.9
+
+
+def test_a_lock_of_a_gone_process_is_taken_over_said_once(tmp_path, caplog):
+    from exubio.io.results import claim
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    lock = tmp_path / ".t.ls.lock"
+    lock.write_text(dead.stdout.strip())
+    with caplog.at_level("WARNING", logger="exubio.io.results"):
+        with claim(tmp_path, ["t.ls"]):
+            pass
+    said = [r.getMessage() for r in caplog.records if ".t.ls.lock" in r.getMessage()]
+    assert len(said) == 1 and f"process {dead.stdout.strip()}, which no longer runs" in said[0], said
+
+
+def test_a_study_killed_by_sigkill_leaves_no_worker_and_its_resume_no_tmp_folder(tmp_path):
+    """SIGKILL of `exubio study --jobs 2` left its two workers running their trials into the folder
+    (then waiting forever, measured 12 min); the resume that completed the study found their
+    `.tmp-*` folders in use and kept them. Now the workers end with the run (SIGTERM on the parent's
+    death: they remove their temporary folders) and the resume removes what is left."""
+    import yaml
+
+    for k in range(4):
+        _trial(tmp_path / "d" / f"t{k}.c3d", 10.0, seed=k)
+    study = tmp_path / "study.yaml"
+    study.write_text(yaml.safe_dump({"schema_version": 1, "name": "t", "report": False, "sessions": [
+        {"subject": "S01", "trials": ["d/*.c3d"], "methods": ["ls"]}]}), encoding="utf-8")
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "exubio.cli", "-q", "study", str(study), "--jobs", "2", "--out", str(out)]
+    p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    folder = out / "S01" / "s1"
+    deadline = time.monotonic() + TIMEOUT
+    while time.monotonic() < deadline and not (folder.is_dir() and list(folder.glob(".tmp-t*"))):
+        time.sleep(0.05)
+    workers = {int(d.name.split("-")[-2]) for d in folder.glob(".tmp-t*")}
+    assert workers and p.poll() is None, "no trial started"
+    p.kill()
+    p.wait(timeout=60)
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and any(exubio.io.results._process_runs(w) for w in workers):
+        time.sleep(0.1)
+    outlived = [w for w in workers if exubio.io.results._process_runs(w)]
+    for w in outlived:  # this test's own workers: not left running when it fails
+        os.kill(w, signal.SIGKILL)
+    assert not outlived, "a worker outlived the killed study"
+    resume = subprocess.run(cmd, capture_output=True, text=True, encoding="utf-8", timeout=TIMEOUT * 3)
+    assert resume.returncode == 0, resume.stderr
+    assert sorted(p.name for p in out.rglob(".tmp-*")) == []
+    assert all((folder / f"t{k}" / "DONE.json").is_file() for k in range(4))

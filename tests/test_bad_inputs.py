@@ -321,6 +321,49 @@ def test_c3d_parameter_turned_into_a_group_by_one_byte_refused(tmp_path, c3d, ca
     refused(capsys, reconstruct(bad, out), out, "hostile.c3d", "parameter section")
 
 
+def test_c3d_char_parameter_without_dimensions_refused(tmp_path, c3d, capsys):
+    """One byte (a scalar's type made char, -1) crashed ezc3d with a segmentation fault: it reads a
+    char parameter's first dimension, which a scalar has not (found by mutating the section's bytes)."""
+    from exubio.io import c3d_raw
+
+    byte_order, _, header = c3d_raw.raw_header(c3d)
+    _, params = c3d_raw.parameter_records(c3d, byte_order, header[0], c3d.stat().st_size)
+    scalar = next(p for p in params if p.dims == () and p.kind != -1)
+    bad = _patched(c3d, ((header[0] - 1) * 512 + scalar.start - 2, bytes([255])))  # type, n_dims = 0, data
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(bad, out), out, "hostile.c3d",
+            f"parameter {scalar.group}:{scalar.name} is of type char with no dimension")
+
+
+def _moved_to_point(c3d: Path, name: str, *, out: str) -> Path:
+    """A copy of ``c3d`` whose ANALOG:``name`` record says it belongs to the POINT group (its group
+    id byte), so that POINT holds ``name`` twice and ezc3d keeps this one, the last."""
+    from exubio.io import c3d_raw
+
+    byte_order, _, header = c3d_raw.raw_header(c3d)
+    section, params = c3d_raw.parameter_records(c3d, byte_order, header[0], c3d.stat().st_size)
+    (moved,) = [p for p in params if (p.group, p.name) == ("ANALOG", name)]
+    record = moved.start - len(moved.dims) - 4 - len(name) - 2  # chars, id, name, offset (2), type, n dims, dims
+    point_id = next(section[p.start - len(p.dims) - 4 - len(p.name) - 1] for p in params if p.group == "POINT")
+    return _patched(c3d, ((header[0] - 1) * 512 + record + 1, bytes([point_id])), name=out)
+
+
+def test_c3d_point_scale_without_a_value_refused(tmp_path, c3d, capsys):
+    """ANALOG:SCALE (no value) moved into the POINT group by one byte: ezc3d kept it as POINT:SCALE and
+    read its first value, which it has not: a segmentation fault (found by mutating the section)."""
+    bad = _moved_to_point(c3d, "SCALE", out="hostile.c3d")
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(bad, out), out, "hostile.c3d", "parameter POINT:SCALE holds no value")
+
+
+def test_c3d_parameter_defined_twice_read_as_ezc3d_reads_it_with_a_finding(c3d, trajectories):
+    bad = _moved_to_point(c3d, "UNITS", out="twice.c3d")  # POINT:UNITS, then an empty one
+    got = read_c3d(bad)
+    np.testing.assert_allclose(got.positions_m, read_c3d(c3d).positions_m, atol=1e-9)
+    assert any("POINT:UNITS defined twice or more; read the last definition" in f for f in got.input_findings)
+    assert any("POINT:UNITS is absent; read as millimetres" in f for f in got.input_findings)
+
+
 @pytest.mark.parametrize("value", [-5.0, 0.0, 2.5])
 def test_c3d_point_long_frames_not_a_count_refused(tmp_path, value):
     n = 70_000
@@ -456,3 +499,74 @@ def test_the_same_trial_twice_refused_before_anything_is_written(tmp_path, c3d, 
     out = tmp_path / "out"
     argv = ["reconstruct", str(c3d), again, "--method", "ls", "--no-report", "--out", str(out)]
     refused(capsys, argv, out, "trial.c3d", "the same trial is given twice")
+
+
+# --------------------------------------------------------------- corpus defects (issue 35 item 5)
+def _model_with(tmp_path: Path, edit) -> Path:
+    data = yaml.safe_load(Path(DEFAULT_MODEL).read_text(encoding="utf-8"))
+    edit(data)
+    bad = tmp_path / "bad_model.yaml"
+    bad.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    return bad
+
+
+def _rename_coordinate(segment: str, k: int, name: str):
+    return lambda d: _segment(d, segment)["joint"]["coordinates"][k].update(name=name)
+
+
+@pytest.mark.parametrize("segment, k, where", [("scapula", 0, "segments[2].joint.coordinates[0].name"),
+                                               ("clavicle", 1, "segments[1].joint.coordinates[1].name")])
+def test_model_with_a_coordinate_named_twice_refused_naming_both_places(tmp_path, c3d, capsys, segment, k, where):
+    """It was a traceback (exit 1) once the run built its tables."""
+    bad = _model_with(tmp_path, _rename_coordinate(segment, k, "sc_protraction"))
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(c3d, out, "--model", str(bad)), out, "bad_model.yaml", where,
+            "coordinate 'sc_protraction' is named twice", "segments[1].joint.coordinates[0].name")
+
+
+def test_model_side_middle_refused_naming_the_key_and_the_allowed_values(tmp_path, c3d, capsys):
+    bad = _model_with(tmp_path, lambda d: d.update(side="middle"))
+    out = tmp_path / "out"
+    refused(capsys, reconstruct(c3d, out, "--model", str(bad)), out, "bad_model.yaml", "side: expected 'right' or "
+            "'left'", "'middle'")
+    assert load_model(_model_with(tmp_path, lambda d: d.update(side="left"))).metadata["side"] == "left"
+
+
+def test_numbers_written_with_an_exponent_are_numbers_in_a_model_and_a_protocol(tmp_path):
+    """PyYAML (YAML 1.1) reads `2e3` as text, which was refused as "not a number"."""
+    from exubio.protocol.load import load_protocol
+
+    text = Path(DEFAULT_MODEL).read_text(encoding="utf-8")
+    written = yaml.safe_load(text)
+    written["body_mass_kg"] = "MASS"
+    model_file = tmp_path / "model.yaml"
+    model_file.write_text(yaml.safe_dump(written, sort_keys=False).replace("MASS", "7.5e1"), encoding="utf-8")
+    model = load_model(model_file)
+    assert model.body_mass_kg == 75.0
+    assert load_model(DEFAULT_MODEL).body_mass_kg == 75.0  # the same model as the generic one
+    protocol_text = Path(DEFAULT_PROTOCOL).read_text(encoding="utf-8")
+    assert "stiffness_n_per_m: 1500," in protocol_text
+    protocol_file = tmp_path / "protocol.yaml"
+    protocol_file.write_text(protocol_text.replace("stiffness_n_per_m: 1500,", "stiffness_n_per_m: 2e3,"),
+                             encoding="utf-8")
+    kwargs = dict(segments=[s.name for s in model.segments], model_points={s.name: s.points for s in model.segments})
+    assert load_protocol(protocol_file, **kwargs).default_stiffness_n_per_m == 2000.0
+    assert load_protocol(DEFAULT_PROTOCOL, **kwargs).default_stiffness_n_per_m == 1500.0
+    quoted = tmp_path / "quoted.yaml"  # text stays text: a quoted "2e3" is still refused
+    quoted.write_text(protocol_text.replace("stiffness_n_per_m: 1500,", "stiffness_n_per_m: '2e3',"), encoding="utf-8")
+    with pytest.raises(Exception, match=r"quoted\.yaml: .*stiffness_n_per_m"):
+        load_protocol(quoted, **kwargs)
+
+
+def test_c3d_point_rate_0_read_at_the_header_rate_with_a_finding(c3d, trajectories):
+    """POINT:RATE 0 was refused although the header (word 11-12) holds the 50 Hz the trial has."""
+    bad = _patched(c3d, (_point_rate_offset(c3d), struct.pack("<f", 0.0)))
+    got = read_c3d(bad)
+    assert got.rate_hz == 50.0 and got.n_frames == trajectories.n_frames
+    np.testing.assert_allclose(got.time_s, np.arange(got.n_frames) / 50.0)
+    (finding,) = got.input_findings
+    assert "POINT:RATE is 0 Hz (not > 0); read at the header's rate (word 11-12), 50 Hz" in finding
+    both = _patched(c3d, (20, struct.pack("<f", 0.0)), (_point_rate_offset(c3d), struct.pack("<f", 0.0)),
+                    name="both.c3d")
+    with pytest.raises(InputError, match=r"both\.c3d: POINT:RATE is 0 Hz \(not > 0\)"):
+        read_c3d(both)

@@ -218,3 +218,47 @@ def test_write_refusals_keep_the_existing_file(tmp_path):
     assert path.read_bytes() == b"old content"
     with pytest.raises(InputError, match="does not exist"):
         write_c3d(tmp_path / "missing" / "x.c3d", make_trajectories(["A"]))
+
+
+# ------------------------------------------------------------------------- vendors' oddities
+def test_a_parameter_named_with_spaces_is_read_with_a_finding(tmp_path):
+    """Qualisys QTM writes PROCESSING parameters named with spaces (BTS: SUBJECT:PELVIS WIDTH); ezc3d
+    reads them, and exubio refused the whole file."""
+    traj = make_trajectories(["A", "B"])
+    path = write_custom(tmp_path / "qtm.c3d", traj, edit=lambda c: c.add_parameter(
+        "PROCESSING", "Uncropped Measurement Length", np.array([12.5])))
+    got = read_c3d(path)
+    np.testing.assert_allclose(got.positions_m, traj.positions_m, atol=TOL_M)
+    (finding,) = got.input_findings
+    assert "qtm.c3d" in finding and "'PROCESSING:UNCROPPED MEASUREMENT LENGTH'" in finding and "naming rule" in finding
+
+
+def test_parameters_past_the_declared_section_length_are_read_with_a_finding(tmp_path):
+    """Peak Performance and PhoeniX files declare a parameter section shorter than their records
+    (byte 3 of the section); ezc3d reads the records where they are."""
+    traj = make_trajectories(["A", "B"])
+    path = write_c3d(tmp_path / "peak.c3d", traj)
+    data = bytearray(path.read_bytes())
+    first = (data[0] - 1) * 512
+    assert data[first + 2] >= 2
+    data[first + 2] = 1
+    path.write_bytes(bytes(data))
+    got = read_c3d(path)
+    np.testing.assert_allclose(got.positions_m, traj.positions_m, atol=TOL_M)
+    (finding,) = got.input_findings
+    assert "declares 1 block(s) (512 bytes) but its records run to byte" in finding
+
+
+def test_sgi_mips_processor_format_refused_as_such(tmp_path):
+    path = write_c3d(tmp_path / "sgi.c3d", make_trajectories(["A"]))
+    data = bytearray(path.read_bytes())
+    data[(data[0] - 1) * 512 + 3] = 86
+    path.write_bytes(bytes(data))
+    with pytest.raises(InputError, match=r"sgi\.c3d: processor format SGI/MIPS .* is not supported"):
+        read_c3d(path)
+
+
+def test_a_file_whose_points_are_all_unlabelled_is_refused(tmp_path):
+    path = write_custom(tmp_path / "unlabelled.c3d", make_trajectories(["*1", "*2"]))
+    with pytest.raises(InputError, match=r"unlabelled\.c3d: none of its 2 points has a label a protocol can name"):
+        read_c3d(path)

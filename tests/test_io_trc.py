@@ -149,7 +149,8 @@ def test_missing_file(tmp_path):
         (dict(rate="0"), r"line 3: expected DataRate > 0"),
         (dict(rate="1e9"), r"line 3: DataRate is 1e\+09 Hz \(above 100000 Hz"),
         (dict(rows=""), r"no data rows after line 5"),
-        (dict(header=HEADER.replace("\tB\t\t", "")), r"line 4: 1 marker labels, but line 3 says NumMarkers=2"),
+        (dict(header=HEADER.replace("\tB\t\t", "\tB\t\t\tC\t\t")),
+         r"line 4: 3 marker labels, but line 3 says NumMarkers=2 and the first data row has 8 columns \(2 markers\)"),
         (dict(header=HEADER.replace("Frame#", "Frame")), r"line 4: expected 'Frame#"),
         (dict(rows=ROWS + "4\t1.25\t1\t2\t3\t4\t5\n"), r"line 10: 7 columns, expected 8"),
         (dict(rows=ROWS + "4\t1.25\t1\t2\t3\t4\t5\t6\t7\n"), r"line 10: 9 columns, expected 8"),
@@ -215,3 +216,60 @@ def test_read_trial_missing_file(tmp_path):
         read_trial(tmp_path / "gone.trc")
     with pytest.raises(InputError, match=r"gone\.c3d: file not found"):
         read_trial(tmp_path / "gone.c3d")
+
+
+# ------------------------------------------------------------------------- header against rows, labels
+def _header_and_rows(labels, n_declared, rows):
+    return ("PathFileType\t4\t(X/Y/Z)\tsmall.trc\n"
+            "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\tOrigDataStartFrame\tOrigNumFrames\n"
+            f"4\t4\t{len(rows)}\t{n_declared}\tmm\t4\t1\t{len(rows)}\n"
+            "Frame#\tTime" + "".join(f"\t{label}\t\t" for label in labels) + "\n"
+            "\t" + "".join(f"\tX{i}\tY{i}\tZ{i}" for i in range(1, len(labels) + 1)) + "\n\n"
+            + "".join(f"{i + 1}\t{i / 4}\t" + "\t".join(f"{v:g}" for v in row) + "\n" for i, row in enumerate(rows)))
+
+
+def test_num_markers_below_the_labels_and_rows_is_read_from_them_with_a_finding(tmp_path, caplog):
+    """A Motion Analysis Cortex TRC listing 34 labels under NumMarkers=28: the labels of line 4 and
+    the rows' columns agree, so they are read, and the header's count is named."""
+    labels = [f"M{k}" for k in range(34)]
+    rows = np.arange(3 * 34 * 3, dtype=float).reshape(3, 34 * 3)
+    path = tmp_path / "cortex.trc"
+    path.write_text(_header_and_rows(labels, 28, rows), encoding="utf-8")
+    with caplog.at_level("WARNING", logger="exubio.io.trc"):
+        traj = read_trc(path)
+    assert traj.labels == tuple(labels) and traj.n_frames == 3
+    np.testing.assert_allclose(traj.positions_m.reshape(3, -1), rows * 1e-3)
+    (finding,) = traj.input_findings
+    assert "NumMarkers is 28" in finding and "34 marker labels" in finding and "cortex.trc" in finding
+    assert finding in caplog.text
+
+
+def test_duplicate_label_keeps_the_first_marker_with_samples_and_says_so(tmp_path):
+    rows = [[np.nan, np.nan, np.nan, np.nan, np.nan, np.nan, 7, 8, 9, 1, 2, 3],
+            [np.nan, np.nan, np.nan, 40, 50, 60, 7, 8, 9, 1, 2, 3]]
+    path = tmp_path / "dup.trc"
+    path.write_text(_header_and_rows(["A", "B", "A", "A"], 4, rows).replace("nan", ""), encoding="utf-8")
+    traj = read_trc(path)
+    assert traj.labels == ("B", "A") and traj.ignored_labels == ("A", "A")
+    np.testing.assert_allclose(traj.marker("A"), [[7e-3, 8e-3, 9e-3]] * 2)  # marker 3: marker 1 has no sample
+    (finding,) = traj.input_findings
+    assert "3 markers are labelled 'A'" in finding and "kept marker 3, the first with samples" in finding
+    assert "10.4 mm" in finding  # marker 4 lies 10.4 mm from marker 3
+
+
+def test_empty_label_in_its_place_is_left_out_with_a_finding(tmp_path):
+    rows = [[1, 2, 3, 4, 5, 6], [1, 2, 3, 4, 5, 6]]
+    path = tmp_path / "empty.trc"
+    path.write_text(_header_and_rows(["A", ""], 2, rows), encoding="utf-8")
+    traj = read_trc(path)
+    assert traj.labels == ("A",)
+    (finding,) = traj.input_findings
+    assert "marker 2 (columns 6-8) has an empty label (2 samples)" in finding
+
+
+def test_no_label_at_all_is_refused(tmp_path):
+    path = tmp_path / "none.trc"
+    path.write_text(_header_and_rows(["", ""], 2, [[1, 2, 3, 4, 5, 6]]).replace(
+        "Frame#\tTime\t\t\t\t\t\t", "Frame#\tTime\t"), encoding="utf-8")
+    with pytest.raises(InputError, match=r"none\.trc: line 4: none of its 2 markers has a label"):
+        read_trc(path)

@@ -6,6 +6,17 @@ unlabelled markers (``*12``). Missing samples: a C3D marks them with a negative 
 residual is negative or whose coordinates contain NaN, so the (0, 0, 0) placeholder that other
 writers store is never taken as a position.
 
+Every file ezc3d reads is read; what exubio reads around is an input finding naming the field
+(logged, and in ``Trajectories.input_findings``, which the results carry): a point with an empty
+label (not read: no protocol can name it), a label two points carry after prefix stripping (the
+first with samples is kept, named), a POINT:UNITS that spells metres another way ("mete",
+"meters"), and what exubio.io.c3d_raw reads around in the raw bytes (a vendor's parameter names,
+a parameter section longer than it declares, a POINT:RATE of 0 under a header rate). What is
+refused names the file, the field and why: a file with no 3-D point (analog channels only, or no
+parameters to describe its points), no point with a label, and what ezc3d refuses, said in the
+file's terms where it is known (ANALOG:OFFSET stored as floats, POINT:LABELS missing for
+POINT:USED points).
+
 ezc3d silently stops at the end of a truncated file (it returns the frames it could read and
 rewrites the header to match), so the frame count declared in the raw 512-byte header is checked
 against what was read.
@@ -16,14 +27,11 @@ TRIAL:ACTUAL_START_FIELD/ACTUAL_END_FIELD or a POINT:FRAMES above 65535 give mor
 none of these over a data block that holds more frames, it is refused (the count is unknown).
 Writing such a trial stores POINT:LONG_FRAMES and the TRIAL fields, where readers look.
 
-A header that contradicts itself is never read silently. Checked on the raw bytes before ezc3d
-sees the file (ezc3d crashes or allocates what the header asks): a parameter block or data start
-past the end of the file is refused, and so is a rate (header or POINT:RATE) that is not finite, not
-> 0 or above exubio.io.limits.MAX_RATE_HZ (the work after reading grows with it). A header whose
-last frame is before its first, or whose 65535 (the 16-bit "see POINT:LONG_FRAMES") stands over a
-data block of fewer frames and no count elsewhere, is read as the data block holds, with a warning
-naming the field (logged, and in ``Trajectories.input_findings``, which the results carry); a
-POINT:LONG_FRAMES that is not a whole number >= 1 is refused.
+A header that contradicts itself is never read silently: it is checked on the raw bytes before
+ezc3d sees the file (exubio.io.c3d_raw; ezc3d crashes or allocates what the header asks). A header
+whose last frame is before its first, or whose 65535 (the 16-bit "see POINT:LONG_FRAMES") stands
+over a data block of fewer frames and no count elsewhere, is read as the data block holds, with a
+warning naming the field; a POINT:LONG_FRAMES that is not a whole number >= 1 is refused.
 
 Writing stores 32-bit floats (C3D "float" format): a position of magnitude x metres comes back
 within about 6e-8 * x (well under 1e-6 m for any lab volume).
@@ -40,6 +48,13 @@ from typing import Any
 import numpy as np
 
 from exubio.errors import InputError
+from exubio.io.c3d_raw import DEC as _DEC
+from exubio.io.c3d_raw import HEADER_CLIPPED as _HEADER_CLIPPED
+from exubio.io.c3d_raw import check_raw_header, declared_frame_count, declared_point_count, header_count_findings
+from exubio.io.c3d_raw import parameter_records
+from exubio.io.c3d_raw import raw_header as _raw_header
+from exubio.io.c3d_raw import raw_parameters as _raw_parameters  # noqa: F401 (the tests patch files through it)
+from exubio.io.labels import keep_one_per_label
 from exubio.io.limits import rate_problem
 from exubio.io.results import atomic_write
 from exubio.types import Trajectories
@@ -48,8 +63,8 @@ logger = logging.getLogger(__name__)
 
 METRES_PER_UNIT = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
 _UNLABELLED = re.compile(r"^\*\d+$")
-_HEADER_CLIPPED = 0xFFFF  # a 16-bit header frame number: long trials store the real count elsewhere
-_DEC, _MIPS = 85, 86  # processor type byte of the parameter section (84: Intel)
+_UNIT_SPELLINGS = {"mete": "m", "meter": "m", "meters": "m", "metre": "m", "metres": "m", "millimeters": "mm",
+                   "millimetres": "mm", "centimeters": "cm", "centimetres": "cm"}  # Peak Performance: "mete"
 
 
 # --------------------------------------------------------------------------------------------
@@ -58,28 +73,30 @@ _DEC, _MIPS = 85, 86  # processor type byte of the parameter section (84: Intel)
 def read_c3d(path: str | os.PathLike, /) -> Trajectories:
     """Marker trajectories of a C3D file, in metres (see the module docstring)."""
     path = Path(path)
-    _check_raw_header(path)
+    raw = check_raw_header(path)
     c3d = _open(path)
     points = c3d["data"]["points"]  # (4, n_markers, n_frames), file units
     residuals = c3d["data"]["meta_points"]["residuals"]
+    if points.shape[1] == 0:
+        raise InputError(_no_point_reason(path, c3d))
     n_long = _long_frame_count(path, c3d)
-    findings = []
+    findings = list(raw.notes)
     if n_long is None:
         _check_not_truncated(path, points.shape[2])
-        findings += _header_count_findings(path, points.shape[2])
+        findings += header_count_findings(path, points.shape[2])
     else:  # more frames than the 16-bit header, and so ezc3d, counts
         points, residuals = _read_point_block(path, c3d, n_long)
     params = c3d["parameters"]["POINT"]
     header_rate = c3d["header"]["points"]["frame_rate"]
     del c3d  # ezc3d's per-sample C++ objects: gone before the arrays below are made
     _release_freed_heap()
-    for finding in findings:
-        logger.warning("%s", finding)
-    unit = _units(path, params)
-    rate = _rate(path, params, header_rate)
+    unit = _units(path, params, findings)
+    rate = raw.rate_hz if raw.rate_hz is not None else _rate(path, params, header_rate)
     raw_labels = _labels(path, params, points.shape[1])
     positions = _positions(points, residuals) * METRES_PER_UNIT[unit.split()[0]]
-    keep, labels, ignored = _select_markers(path, raw_labels)
+    keep, labels, ignored = _select_markers(path, raw_labels, positions, findings)
+    for finding in findings:
+        logger.warning("%s", finding)
     n_frames = positions.shape[0]
     return Trajectories(
         labels=tuple(labels),
@@ -103,7 +120,44 @@ def _open(path: Path) -> Any:
     try:
         return ezc3d.c3d(str(path))
     except Exception as exc:  # ezc3d raises OSError/RuntimeError/ValueError from C++
-        raise InputError(f"{path}: not a readable C3D file ({type(exc).__name__}: {exc})") from exc
+        raise InputError(f"{path}: not a readable C3D file ({_ezc3d_refusal(path, exc)})") from exc
+
+
+def _ezc3d_refusal(path: Path, exc: Exception) -> str:
+    """Why ezc3d refused the file, in the file's terms where the cause is known."""
+    message = str(exc)
+    if path.stat().st_size == 0:
+        return "the file is empty (0 bytes)"
+    if "OFFSET parameter is not an INT" in message:
+        return ("ANALOG:OFFSET is stored as floating-point numbers, where the C3D standard and ezc3d, the C3D "
+                "reader exubio uses, want integers; export the trial again, or with its analog channels left out")
+    if "format is not standard" in message:
+        byte_order, _, header = _raw_header(path)
+        section, params = parameter_records(path, byte_order, header[0], path.stat().st_size)
+        found = {(p.group, p.name): p for p in params}
+        used, labels = found.get(("POINT", "USED")), found.get(("POINT", "LABELS"))
+        if used is not None and used.kind == 2:
+            n_used = struct.unpack(byte_order + "h", section[used.start:used.start + 2])[0]
+            n_labels = (labels.dims[1] if len(labels.dims) > 1 else int(bool(labels.dims))) if labels else 0
+            if n_labels < n_used:
+                return (f"POINT:USED says {n_used} points but POINT:LABELS holds {n_labels} label(s); ezc3d, the C3D "
+                        f"reader exubio uses, refuses points without labels, and no protocol could name them")
+        return (f"ezc3d, the C3D reader exubio uses, finds its parameter section not standard ({message.split('.')[0]}"
+                f"); exubio's own check of that section found nothing to name")
+    return f"{type(exc).__name__}: {message}"
+
+
+def _no_point_reason(path: Path, c3d: Any) -> str:
+    """Why a file ezc3d read holds no 3-D point, and why nothing can be done."""
+    declared = declared_point_count(path) or 0
+    if declared:
+        return (f"{path}: no 3-D point can be read: the header (word 2) declares {declared} points, but the file has "
+                f"no POINT parameters to describe them (POINT:USED, POINT:LABELS, POINT:SCALE: the parameter section "
+                f"is empty or has no POINT group); without labels no marker can be named, so nothing can be read; "
+                f"export the trial again with its parameters")
+    n_analog = c3d["data"]["analogs"].shape[1]
+    return (f"{path}: no 3-D point: POINT:USED is 0 (analog channels only: {n_analog}); exubio reads marker "
+            f"trajectories, so there is nothing to read")
 
 
 def _release_freed_heap() -> None:
@@ -121,154 +175,13 @@ def _release_freed_heap() -> None:
         pass
 
 
-def _check_raw_header(path: Path) -> None:
-    """Refuse, before ezc3d reads it, a file whose header points past its end or whose rate is
-    unusable (see the module docstring); ezc3d itself gives an error for a header shorter than 512 bytes."""
-    if not path.is_file():
-        return  # _open says why
-    size = path.stat().st_size
-    byte_order, processor, header = _raw_header(path)
-    if len(header) < 512:
-        return
-    bad = "not a readable C3D file (the header contradicts the file: "
-    param_block = header[0]
-    if param_block < 1 or (param_block - 1) * 512 + 4 > size:
-        raise InputError(f"{path}: {bad}its first byte puts the parameter block at 512-byte block {param_block}, "
-                         f"byte {(max(param_block, 1) - 1) * 512}, but the file has {size} bytes)")
-    data_start = struct.unpack(byte_order + "H", header[16:18])[0]
-    if data_start < 1 or (data_start - 1) * 512 >= size:
-        raise InputError(f"{path}: {bad}its word 9 puts the data at 512-byte block {data_start}, byte "
-                         f"{(max(data_start, 1) - 1) * 512}, but the file has {size} bytes)")
-    if processor == _DEC:
-        return  # VAX floats: ezc3d converts them; the rate is checked after reading (_rate)
-    point_rate = _raw_point_rate(path, byte_order, param_block, size)
-    if point_rate is not None and rate_problem(point_rate):  # ezc3d crashes on a NaN there
-        raise InputError(f"{path}: POINT:RATE is {rate_problem(point_rate)}; expected the marker sampling rate in Hz")
-
-
-_TYPE_BYTES = {-1: 1, 1: 1, 2: 2, 4: 4}  # C3D parameter types: char, byte, int16, float
-
-
-def _raw_point_rate(path: Path, byte_order: str, param_block: int, size: int) -> float | None:
-    """POINT:RATE read from the raw parameter section (a float, the first value), None when absent:
-    ezc3d crashes on a NaN there, so it is looked at before ezc3d. On the way every parameter's
-    declared size is checked against the section (``_raw_parameters``)."""
-    section, params = _raw_parameters(path, byte_order, param_block, size)
-    for group, name, kind, start in params:
-        if group == "POINT" and name == "RATE" and kind == 4 and start + 4 <= len(section):
-            return float(struct.unpack(byte_order + "f", section[start:start + 4])[0])
-    return None
-
-
-def _raw_parameters(path: Path, byte_order: str, param_block: int, size: int
-                    ) -> tuple[bytes, list[tuple[str, str, int, int]]]:
-    """The raw parameter section and its parameters (group, name, type, offset of the data). A
-    section that contradicts itself is refused: a parameter whose type is unknown or whose
-    dimensions declare more data than the section holds, a record whose offset to the next record
-    lies inside it or past the section, a group id defined twice, a parameter of a group no record
-    defines, a name that is no name. ezc3d reads past its buffers on such sections (segmentation
-    faults, measured: a 255 x 255 POINT:LABELS, a parameter turned into a group by one byte)."""
-    with open(path, "rb") as fh:
-        fh.seek((param_block - 1) * 512)
-        section = fh.read(min(size - (param_block - 1) * 512, 512 * 255))
-    if len(section) < 4:
-        return section, []
-    section = section[: max(section[2], 1) * 512]  # byte 3: the section's length in 512-byte blocks
-    groups: dict[int, str] = {}
-    raw: list[tuple[int, str, int, int, list[int], int]] = []  # group id, name, type, n dims, dims, data start
-    bad = "not a readable C3D file (the header contradicts the file: parameter section"
-
-    def refuse(what: str) -> None:
-        raise InputError(f"{path}: {bad}: {what})")
-
-    pos = 4
-    while pos + 2 <= len(section):
-        n_chars, ident = struct.unpack("bb", section[pos:pos + 2])
-        if n_chars == 0:
-            break
-        name = section[pos + 2:pos + 2 + abs(n_chars)].decode("latin-1").upper()
-        here = pos + 2 + abs(n_chars)
-        if here + 3 > len(section):
-            break
-        if ident == 0 or not name.isprintable() or " " in name or not name.isascii():
-            refuse(f"a record at byte {pos} is named {name!r} in group 0 or with characters that are not a name")
-        step = struct.unpack(byte_order + "h", section[here:here + 2])[0]
-        if ident < 0:
-            if -ident in groups:
-                refuse(f"group id {-ident} is defined twice ({groups[-ident]} and {name})")
-            groups[-ident] = name
-            end = here + 3 + section[here + 2]  # its description
-        else:
-            kind, n_dims = struct.unpack("bB", section[here + 2:here + 4])
-            dims = list(section[here + 4:here + 4 + n_dims])
-            name = f"{groups.get(ident, f'group {ident}')}:{name}"
-            if kind not in _TYPE_BYTES or n_dims > 7:
-                refuse(f"parameter {name} has type {kind} and {n_dims} dimensions; expected a type of -1, 1, 2 or 4 "
-                       f"and at most 7")
-            start = here + 4 + n_dims
-            n_bytes = _TYPE_BYTES[kind] * int(np.prod(dims, dtype=np.int64))
-            if start + n_bytes + 1 > len(section):
-                refuse(f"parameter {name} declares dimensions {dims}, {n_bytes} bytes, past the end of the "
-                       f"{len(section)}-byte section")
-            end = start + n_bytes + 1 + section[start + n_bytes]  # its description
-            raw.append((ident, name, kind, n_dims, dims, start))
-        if end > len(section) or (step > 0 and here + step < end) or here + step > len(section):
-            refuse(f"the record {name} at byte {pos} ends at byte {end} but its offset to the next record is {step} "
-                   f"(from byte {here}) in a {len(section)}-byte section")
-        if step <= 0:
-            break
-        pos = here + step
-    for ident, name, _, _, _, _ in raw:
-        if ident not in groups:
-            refuse(f"parameter {name} belongs to group {ident}, which no group record defines")
-    return section, [(groups[g], name.split(":")[-1], kind, start) for g, name, kind, _, _, start in raw]
-
-
-def _header_count_findings(path: Path, n_read: int) -> list[str]:
-    """Warnings for a header frame count the data block contradicts, read as the data hold: a last
-    frame before the first; a last frame of 65535 over fewer frames and no count elsewhere."""
-    byte_order, _, header = _raw_header(path)
-    if len(header) < 10:
-        return []
-    first, last = struct.unpack(byte_order + "2H", header[6:10])
-    if last < first:
-        return [f"{path.name}: the header's last frame (word 5) is {last}, before its first frame (word 4) "
-                f"{first}; read the {n_read} frames the data block holds"]
-    if last == _HEADER_CLIPPED and n_read < last - first + 1:
-        return [f"{path.name}: the header's last frame (word 5) is 65535 (more frames than 16 bits count, "
-                f"see POINT:LONG_FRAMES) but there is no POINT:LONG_FRAMES and the data block holds "
-                f"{n_read} frames; read those {n_read}"]
-    return []
-
-
 def _check_not_truncated(path: Path, n_read: int) -> None:
-    declared = _declared_frame_count(path)
+    declared = declared_frame_count(path)
     if declared is not None and n_read < declared:
         raise InputError(
             f"{path}: not a readable C3D file (truncated: the header declares {declared} frames, "
             f"only {n_read} could be read)"
         )
-
-
-def _raw_header(path: Path) -> tuple[str, int, bytes]:
-    """(struct byte order, processor type byte, the raw 512-byte header) of a C3D file."""
-    with open(path, "rb") as fh:
-        header = fh.read(512)
-        fh.seek(max(header[0] - 1, 0) * 512 + 3 if header else 0)
-        processor = fh.read(1)
-    kind = processor[0] if processor else 0
-    return (">" if kind == _MIPS else "<"), kind, header  # MIPS big-endian; Intel, DEC little
-
-
-def _declared_frame_count(path: Path) -> int | None:
-    """Frames declared by the raw header (last - first + 1), None when it cannot say."""
-    byte_order, _, header = _raw_header(path)
-    if len(header) < 10:
-        return None
-    first, last = struct.unpack(byte_order + "2H", header[6:10])
-    if last == _HEADER_CLIPPED or last < first:
-        return None
-    return last - first + 1
 
 
 def _long_frame_count(path: Path, c3d: Any) -> int | None:
@@ -338,12 +251,17 @@ def _read_point_block(path: Path, c3d: Any, n_frames: int) -> tuple[np.ndarray, 
     return xyzr.transpose(2, 1, 0), xyzr[..., 3].T[None]
 
 
-def _units(path: Path, params: dict) -> str:
+def _units(path: Path, params: dict, findings: list[str]) -> str:
+    """POINT:UNITS as mm, cm or m; absent: millimetres, and a spelling of one of them ("mete",
+    "meters"): that unit, each with a finding; anything else is refused."""
     values = [str(v).strip() for v in _value(params, "UNITS")]
     unit = values[0] if values and values[0] else ""
     if not unit:
-        logger.warning("%s: POINT:UNITS absent, assuming millimetres", path)
+        findings.append(f"{path.name}: POINT:UNITS is absent; read as millimetres (the C3D default)")
         return "mm (assumed)"
+    if unit.lower() in _UNIT_SPELLINGS:
+        findings.append(f"{path.name}: POINT:UNITS is '{unit}'; read as '{_UNIT_SPELLINGS[unit.lower()]}'")
+        return _UNIT_SPELLINGS[unit.lower()]
     if unit.lower() not in METRES_PER_UNIT:
         raise InputError(
             f"{path}: POINT:UNITS is '{unit}', expected one of {sorted(METRES_PER_UNIT)}"
@@ -390,26 +308,30 @@ def _positions(points: np.ndarray, residuals: np.ndarray) -> np.ndarray:
     return xyz
 
 
-def _select_markers(path: Path, raw_labels: list[str]) -> tuple[list[int], list[str], list[str]]:
-    """Columns to keep, their stripped labels, and the original labels dropped (unlabelled
-    ``*N`` markers, empty labels, duplicates after prefix stripping: the first one is kept)."""
-    keep: list[int] = []
-    labels: list[str] = []
-    ignored: list[str] = []
+def _select_markers(path: Path, raw_labels: list[str], positions: np.ndarray, findings: list[str]
+                    ) -> tuple[list[int], list[str], list[str]]:
+    """Columns to keep, their stripped labels, and the original labels dropped: unlabelled ``*N``
+    markers; empty labels (a finding each: no protocol can name them); points whose label another
+    carries after prefix stripping (exubio.io.labels: the first with samples is kept, a finding
+    names it). No point left is refused."""
+    labels: list[str | None] = []
     for i, raw in enumerate(raw_labels):
         label = strip_prefix(raw)
-        if not label or _UNLABELLED.match(label):
-            ignored.append(raw)
-        elif label in labels:
-            logger.warning("%s: marker '%s' duplicates '%s' after prefix stripping; keeping the first",
-                           path, raw, raw_labels[keep[labels.index(label)]])
-            ignored.append(raw)
-        else:
-            keep.append(i)
-            labels.append(label)
+        if not label:
+            n = int(np.isfinite(positions[:, i]).all(axis=1).sum())
+            findings.append(f"{path.name}: POINT:LABELS: point {i + 1} has an empty label ({raw!r}, {n} samples); "
+                            f"not read, as no protocol can name it")
+        labels.append(label if label and not _UNLABELLED.match(label) else None)
+    keep = keep_one_per_label(labels, positions, raw=raw_labels, field="POINT:LABELS", name=path.name,
+                              findings=findings, column="point")
+    ignored = [raw for i, raw in enumerate(raw_labels) if i not in set(keep)]  # in the file's order
+    if not keep:
+        raise InputError(f"{path}: none of its {len(raw_labels)} points has a label a protocol can name (POINT:LABELS: "
+                         f"{', '.join(repr(r) for r in raw_labels[:8])}{', ...' if len(raw_labels) > 8 else ''}); "
+                         f"label the markers in the capture software and export again")
     if ignored:
         logger.info("%s: ignoring %d marker(s): %s", path, len(ignored), ignored)
-    return keep, labels, ignored
+    return keep, [labels[c] for c in keep], ignored
 
 
 def strip_prefix(label: str) -> str:

@@ -273,21 +273,35 @@ def claim(folder: str | os.PathLike, stems: Sequence[str], /) -> Iterator[None]:
             done_with(lock)
 
 
+EMPTY_LOCK_GRACE_S = 2.0
+"""An empty lock file younger than this (s) is being written (its creator writes its pid right after
+creating it); older, it was left by a run killed between the two (SIGKILL) and is taken over."""
+
+
 def _lock(path: Path, stem: str) -> Path:
     import time
 
-    for attempt in range(5):
+    deadline = time.monotonic() + 2 * EMPTY_LOCK_GRACE_S + 1.0
+    while time.monotonic() < deadline:
         try:
             fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
         except FileExistsError:
             pid, started = _lock_owner(path)
-            if pid is None and attempt < 4:  # its creator is writing its pid this instant
-                time.sleep(0.02)
-                continue
-            if pid and _process_runs(pid) and started in (None, _start_time(pid)):  # not a reused pid
+            if pid is None:  # empty: its creator is writing its pid this instant, or was killed doing so
+                age = _age_s(path)
+                if age is not None and age < EMPTY_LOCK_GRACE_S:
+                    time.sleep(0.02)
+                    continue
+                if age is not None:
+                    logger.warning("%s: took over the lock %s, empty for %.0f s: left by a run killed while it "
+                                   "took the lock", path.parent / stem, path.name, age)
+            elif pid and _process_runs(pid) and started in (None, _start_time(pid)):  # not a reused pid
                 raise InputError(f"{path.parent / stem}: another exubio run (process {pid}) is writing this result "
                                  f"in {path.parent}; wait for it to end or choose another output folder") from None
-            _remove_quietly(path)  # its run was killed
+            elif pid:
+                logger.warning("%s: took over the lock %s of process %d, which no longer runs (its run was killed)",
+                               path.parent / stem, path.name, pid)
+            _remove_quietly(path)
             continue
         except OSError as exc:
             raise InputError(f"{path.parent}: cannot write ({exc.strerror or exc})") from None
@@ -301,8 +315,18 @@ def _lock(path: Path, stem: str) -> Path:
         finally:
             os.close(fd)
         return path
-    raise InputError(f"{path.parent / stem}: another exubio run is writing this result in {path.parent}; wait for it "
-                     f"to end or choose another output folder")
+    raise InputError(f"{path.parent / stem}: another exubio run keeps taking the lock {path.name} of this result in "
+                     f"{path.parent}; wait for it to end or choose another output folder")
+
+
+def _age_s(path: Path) -> float | None:
+    """Seconds since ``path`` was last written, None when it is gone."""
+    import time
+
+    try:
+        return max(time.time() - path.stat().st_mtime, 0.0)
+    except OSError:
+        return None
 
 
 def _lock_owner(path: Path) -> tuple[int | None, int | None]:

@@ -14,7 +14,11 @@ Reading converts to metres and takes the sample times from the Time column, whic
 increasing and on the DataRate of line 3 (row i at the first time + i / DataRate, within half a
 sample); anything else is refused naming the line. A NumFrames that disagrees with the data rows is
 read from the rows, as OpenSim does (published files are off by a row or more), with a warning
-naming the header value that also goes into the result (``Trajectories.input_findings``). A DataRate
+naming the header value that also goes into the result (``Trajectories.input_findings``). So is a
+NumMarkers that disagrees with line 4's labels when the rows hold as many markers as there are labels
+(a Motion Analysis Cortex file lists 34 labels under NumMarkers=28); labels and rows that disagree are
+refused. A label on two or more markers keeps the first with samples, and a label left empty in its
+place is not read, each with a finding (exubio.io.labels). A DataRate
 above exubio.io.limits.MAX_RATE_HZ is refused (the work after reading grows with it). Writing prints
 positions with a resolution of 1e-9 m whatever the unit (mm: 6 decimals) and times with 10
 significant digits; missing samples become empty cells.
@@ -29,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from exubio.errors import InputError
+from exubio.io.labels import keep_one_per_label
 from exubio.io.limits import rate_problem
 from exubio.io.results import atomic_write
 from exubio.types import Trajectories
@@ -50,10 +55,11 @@ def read_trc(path: str | os.PathLike, /) -> Trajectories:
     path = Path(path)
     lines = _read_lines(path)
     header = _header(path, lines)
-    unit, rate, n_frames, n_markers = _header_values(path, header)
-    labels = _marker_labels(path, lines[3], n_markers)
+    unit, rate, n_frames, n_declared = _header_values(path, header)
+    findings: list[str] = []
+    raw_labels = _marker_labels(path, lines, n_declared, findings)
+    n_markers = len(raw_labels)
     time, coords, line_nos = _data(path, lines, n_markers)
-    findings = []
     if time.shape[0] != n_frames:
         findings.append(f"{path.name}: line 3: NumFrames is {n_frames} but the file has {time.shape[0]} data rows; "
                         f"read the {time.shape[0]} rows (as OpenSim does)")
@@ -61,9 +67,22 @@ def read_trc(path: str | os.PathLike, /) -> Trajectories:
     if time.shape[0] == 0:
         raise InputError(f"{path}: no data rows after line {_FIRST_DATA_LINE - 1}; expected at least one frame")
     _check_rate(path, time, line_nos, rate)
+    positions = coords.reshape(-1, n_markers, 3) * METRES_PER_UNIT[unit]
+    before = len(findings)
+    for i in (i for i, label in enumerate(raw_labels) if not label):
+        findings.append(f"{path.name}: line 4: marker {i + 1} (columns {3 + 3 * i}-{5 + 3 * i}) has an empty label "
+                        f"({int(np.isfinite(positions[:, i]).all(axis=1).sum())} samples); not read, as no protocol "
+                        f"can name it")
+    keep = keep_one_per_label([label or None for label in raw_labels], positions, raw=list(raw_labels),
+                              field="line 4", name=path.name, findings=findings, column="marker")
+    for finding in findings[before:]:
+        logger.warning("%s", finding)
+    if not keep:
+        raise InputError(f"{path}: line 4: none of its {n_markers} markers has a label; expected one per marker")
     return Trajectories(
-        labels=tuple(labels),
-        positions_m=coords.reshape(-1, n_markers, 3) * METRES_PER_UNIT[unit],
+        labels=tuple(raw_labels[i] for i in keep),
+        positions_m=positions[:, keep],
+        ignored_labels=tuple(raw_labels[i] for i in range(n_markers) if i not in set(keep)),
         rate_hz=rate,
         time_s=time,
         source=str(path),
@@ -123,14 +142,29 @@ def _header_values(path: Path, header: dict[str, str]) -> tuple[str, float, int,
     return unit.lower(), rate, n_frames, n_markers
 
 
-def _marker_labels(path: Path, line: str, n_markers: int) -> list[str]:
-    cells = _cells(line)
+def _marker_labels(path: Path, lines: list[str], n_declared: int, findings: list[str]) -> list[str]:
+    """The labels of line 4 ("" for one left empty in its place). A NumMarkers (line 3) that
+    disagrees with them is read from the labels when the data rows hold as many markers (a finding
+    names both); otherwise refused."""
+    cells = _cells(lines[3])
     if cells[:2] != ["Frame#", "Time"]:
-        raise InputError(f"{path}: line 4: expected 'Frame#<tab>Time<tab>labels...', got {line[:60]!r}")
+        raise InputError(f"{path}: line 4: expected 'Frame#<tab>Time<tab>labels...', got {lines[3][:60]!r}")
     labels = [c for c in cells[2:] if c]
-    if len(labels) != n_markers:
-        raise InputError(f"{path}: line 4: {len(labels)} marker labels, but line 3 says NumMarkers={n_markers}")
-    return labels
+    if len(labels) == n_declared:
+        return labels
+    row = next((line for line in lines[_FIRST_DATA_LINE - 1:] if line.strip()), "")
+    width = len(row.rstrip("\r\n").split("\t"))
+    at = [cells[2 + 3 * k] if 2 + 3 * k < len(cells) else "" for k in range(n_declared)]
+    if row and width == 2 + 3 * n_declared and sum(map(bool, at)) == len(labels):
+        return at  # a label left empty in its place: said and left out by read_trc
+    if row and width == 2 + 3 * len(labels):
+        findings.append(f"{path.name}: line 3: NumMarkers is {n_declared} but line 4 has {len(labels)} marker labels "
+                        f"and the data rows {width} columns (2 + 3 x {len(labels)}); read the {len(labels)} markers "
+                        f"of line 4 and the rows")
+        logger.warning("%s", findings[-1])
+        return labels
+    raise InputError(f"{path}: line 4: {len(labels)} marker labels, but line 3 says NumMarkers={n_declared}"
+                     + (f" and the first data row has {width} columns ({(width - 2) / 3:g} markers)" if row else ""))
 
 
 def _data(path: Path, lines: list[str], n_markers: int) -> tuple[np.ndarray, np.ndarray, list[int]]:

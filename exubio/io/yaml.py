@@ -5,12 +5,23 @@ from __future__ import annotations
 import difflib
 import math
 import os
+import re
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
 import yaml
 
 from exubio.errors import ExubioError, ProtocolError
+
+class _Loader(yaml.SafeLoader):
+    """PyYAML's safe loader, reading a number written with an exponent and no point (``2e3``,
+    ``1E-4``) as a float, as YAML 1.2 and every other YAML reader do; PyYAML (YAML 1.1) reads it as
+    the text '2e3', which a protocol or model then refused as "not a number"."""
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float", re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."))
 
 MAX_NESTING = 64
 """The deepest nesting of mappings and lists a configuration file may have. exubio's own files nest
@@ -42,7 +53,7 @@ def _parse(text: str, path: str, error: type[ExubioError]) -> dict[str, Any]:
     try:
         _check_nesting(text, p, error)
         _check_duplicate_keys(yaml.compose(text, Loader=yaml.SafeLoader), p, error)
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_Loader)  # _Loader is a SafeLoader
     except yaml.YAMLError as exc:
         raise error(f"{p}: not valid YAML: {exc}") from None
     if not isinstance(data, dict):

@@ -143,6 +143,7 @@ def model_from_mapping(data: Any, src: str, /, *, name: str, body_mass_kg: float
         segments.append(Segment(name=name, parent=parent, joint=joint, mass_kg=m, com_m=com,
                                 inertia_kgm2=inertia, points=local_points))
 
+    _check_unique_names(raw_segments, segments, src)
     ell = data["ellipsoid"]
     check_keys(ell, _ELLIPSOID_KEYS, f"{src}: ellipsoid", error=ModelError, required=_ELLIPSOID_KEYS)
     if not isinstance(ell["contact_points"], list):
@@ -165,9 +166,33 @@ def model_from_mapping(data: Any, src: str, /, *, name: str, body_mass_kg: float
     if not isinstance(data.get("calibration") or {}, Mapping):
         raise ModelError(f"{src}: calibration: expected a mapping (what a calibration recorded), "
                          f"got {type(data['calibration']).__name__}")
-    metadata = {"side": data.get("side", "right"), "calibration": data.get("calibration")}
+    side = data.get("side", "right")
+    if side not in ("right", "left"):
+        raise ModelError(f"{src}: side: expected 'right' or 'left' (the arm the model's segments describe), "
+                         f"got {side!r}")
+    metadata = {"side": side, "calibration": data.get("calibration")}
     return Model(name=str(data.get("name", name)), segments=tuple(segments), ellipsoid=ellipsoid,
                  body_mass_kg=mass, source=src, metadata=metadata)
+
+
+def _check_unique_names(raw_segments: list, segments: list[Segment], src: str) -> None:
+    """Segment and coordinate names each name one thing: a repeated one is refused naming both
+    places (the coordinates are columns of every result; a repeated name was a traceback later)."""
+    seen: dict[str, str] = {}
+    for i, raw in enumerate(raw_segments):
+        where = f"segments[{i}].name"
+        if raw["name"] in seen:
+            raise ModelError(f"{src}: {where}: segment '{raw['name']}' is defined twice ({seen[raw['name']]} and "
+                             f"{where}); each segment name must be unique")
+        seen[raw["name"]] = where
+    seen = {}
+    for i, segment in enumerate(segments):
+        for k, coordinate in enumerate(segment.joint.coordinates if segment.joint is not None else ()):
+            where = f"segments[{i}].joint.coordinates[{k}].name"
+            if coordinate in seen:
+                raise ModelError(f"{src}: {where}: coordinate '{coordinate}' is named twice ({seen[coordinate]} and "
+                                 f"{where}); each coordinate name must be unique")
+            seen[coordinate] = where
 
 
 def _segment_isb_frame(segment: str, points: Mapping[str, np.ndarray], where: str) -> np.ndarray:

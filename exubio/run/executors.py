@@ -44,7 +44,7 @@ def map_in_processes(fn: Callable, items: list, jobs: int, /, *, on_error: Calla
     (the workers ignore SIGINT): the pool is stopped at once, every worker is sent SIGTERM (it then
     stops as on Ctrl-C, removing its unfinished files) and killed after STOP_WAIT_S, and the
     KeyboardInterrupt goes on to the caller (the CLI: one line, exit 130)."""
-    pool = ProcessPoolExecutor(max_workers=jobs, initializer=_pool_worker_signals)
+    pool = ProcessPoolExecutor(max_workers=jobs, initializer=_pool_worker_signals, initargs=(os.getpid(),))
     try:
         with interrupt.kept_from_new_processes():  # a terminal's Ctrl-C reaches the whole process group
             futures: list[Future] = [pool.submit(fn, item) for item in items]
@@ -63,11 +63,13 @@ def map_in_processes(fn: Callable, items: list, jobs: int, /, *, on_error: Calla
         raise
 
 
-def _pool_worker_signals() -> None:
+def _pool_worker_signals(parent: int) -> None:
     """In a pool worker: Ctrl-C is the parent's to handle; SIGTERM (the parent stopping the pool)
     removes the temporary files and folders the worker is writing and ends it at once (not by an
     exception, which an Exudyn callback would catch and print). A result set being placed holds
-    SIGTERM back until it is complete (exubio.io.results.ResultSet)."""
+    SIGTERM back until it is complete (exubio.io.results.ResultSet). The worker is sent SIGTERM
+    when ``parent`` (the run) dies (Linux: PR_SET_PDEATHSIG): a run killed by SIGKILL left its
+    workers finishing their trial into the folder the next run resumed, then waiting forever."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -79,6 +81,27 @@ def _pool_worker_signals() -> None:
         os._exit(128 + signum)
 
     signal.signal(signal.SIGTERM, stop)
+    _end_with_parent(parent, signal.SIGTERM)
+
+
+def _end_with_parent(parent: int, signum: int) -> None:
+    """Have this process sent ``signum`` when the process that started it ends (Linux); where
+    ``parent`` has ended already (before this was set), end now. Elsewhere nothing."""
+    import ctypes
+    import ctypes.util
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        libc.prctl(1, signum, 0, 0, 0)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        return
+    from exubio.io.results import _process_runs
+
+    if not _process_runs(parent):
+        os.kill(os.getpid(), signum)
 
 
 def _stop_pool(pool: ProcessPoolExecutor) -> None:

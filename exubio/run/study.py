@@ -436,8 +436,7 @@ def run_study(spec: StudySpec, out_dir: str | Path, /, *, jobs: int = 1, schedul
         raise InputError(f"--jobs {jobs}: expected a whole number of processes >= 1")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    removed = clean_leftovers(out)
-    if removed:
+    if removed := clean_leftovers(out):
         say(f"removed {len(removed)} leftover(s) of an interrupted run")
     tasks, outcomes = plan(spec, out)
     n_total = len(tasks) + len(outcomes)
@@ -462,6 +461,8 @@ def run_study(spec: StudySpec, out_dir: str | Path, /, *, jobs: int = 1, schedul
             if scheduler:  # Dask's workers were stopped: their unfinished folders go now, not at the next run
                 _remove_after_dask(out)
             raise
+    if removed := clean_leftovers(out):  # of a killed run whose workers were still at work when this one began
+        say(f"removed {len(removed)} leftover(s) of an interrupted run")
     write_table(out, spec, outcomes)
     study_table.write_study_table(out, study_table.table_trials(spec, outcomes))
     if spec.report:
