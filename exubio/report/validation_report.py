@@ -19,7 +19,7 @@ from matplotlib.backends.backend_pdf import PdfPages
 from exubio.report.validation_exubio_figures import fig_agreement, fig_mismatch, fig_rates
 from exubio.report.validation_paper_figures import fig_invivo, fig_residuals, fig_sensitivity, fig_sier
 from exubio.report.validation_summary import summary_pages
-from exubio.report.validation_tables import ludewig_page, scapula_page, sier_realisations_page, table1_page
+from exubio.report.validation_tables import bone_page, ludewig_page, scapula_page, sier_realisations_page, table1_page
 from exubio.validation.results import ValidationResults
 
 __all__ = ["FIGURES", "REPORT_PAGES", "build_report"]
@@ -28,7 +28,7 @@ FIGURES = ("fig2_sensitivity.png", "fig3_residuals.png", "fig4_sier.png", "fig5_
            "fig6_pf_ls_agreement.png", "fig7_model_mismatch.png", "fig8_rates.png")
 REPORT_PAGES = ("summary", "fig2_sensitivity", "fig3_residuals", "table1", "fig4_sier", "sier_realisations",
                 "fig5_invivo", "ludewig_deviations", "fig6_pf_ls_agreement", "fig7_model_mismatch", "fig8_rates",
-                "scapula_calibration")
+                "scapula_calibration", "bone_truth")
 """Pages of validation.pdf in order; ludewig_deviations is two pages (numbers, corridor studies)."""
 
 
@@ -50,7 +50,8 @@ def build_report(folder: str | Path, /, *, dpi: int | None = None) -> dict[str, 
         "fig8_rates": fig_rates(r),
     }
     pages = {"summary": summary_pages(r), "table1": table1_page(r), "ludewig_deviations": ludewig_page(r),
-             "sier_realisations": sier_realisations_page(r), "scapula_calibration": scapula_page(r), **figures}
+             "sier_realisations": sier_realisations_page(r), "scapula_calibration": scapula_page(r),
+             "bone_truth": bone_page(r), **figures}
     written: dict[str, Path] = {}
     for name, fig in figures.items():
         path = folder / f"{name}.png"

@@ -346,3 +346,51 @@ def scapula_page(r: ValidationResults) -> Figure:
     _paragraphs(fig, lines, 0.33, width=200, fontsize=7.2, gap=0.01)
     _footer(fig, _data_footer(r))
     return fig
+
+
+def bone_page(r: ValidationResults) -> Figure:
+    """exubio against bone (exubio.validation.bone): per bone-referenced trial and angle, LS's RMSE /
+    max / coverage of +-2u (PF beside it where it ran), beside the published skin-marker ranges."""
+    from exubio.validation.bone import PUBLISHED, SHOWN
+    from exubio.validation.records_comparisons import BoneTruth
+
+    fig = _new_figure(A4_LANDSCAPE)
+    fig.text(0.03, 0.95, "exubio against bone: the ISB soft-tissue-artefact data-sharing trials (Cereatti et al. 2017)",
+             fontsize=12, fontweight="bold")
+    bone = r.bone
+    if not isinstance(bone, BoneTruth):
+        fig.text(0.03, 0.88, getattr(bone, "skipped", None) or "not part of this run", fontsize=10)
+        return fig
+    tasks = list(bone.tasks.values())
+    cells = []
+    for a in SHOWN:
+        row = [a]
+        for t in tasks:
+            for m in ("ls", "pf"):
+                e = t.angles.get(a, {}).get(m)
+                if e is None or not np.isfinite(e.rmse_deg):
+                    row.append("failed" if str(t.verdicts.get(m, "")).startswith("failed") else "not measured")
+                    continue
+                cov = "-" if not np.isfinite(e.coverage) else f"{e.coverage:.0%}"
+                row.append(f"{e.rmse_deg:.1f} / {e.max_deg:.0f} / {cov}")
+        cells.append(row)
+    def verdict(text: str) -> str:  # "failed: FILE: why" -> "failed: why"
+        parts = text.split(": ", 2)
+        return (f"failed: {parts[2]}" if text.startswith("failed") and len(parts) == 3 else text)[:24]
+
+    cells.append(["verdict"] + [verdict(str(t.verdicts.get(m, "-"))) for t in tasks for m in ("ls", "pf")])
+    head = ["angle"] + [f"{t.task}\n{m.upper()}" for t in tasks for m in ("ls", "pf")]
+    ax = fig.add_axes((0.02, 0.30, 0.96, 0.60))
+    w = (1 - 0.2) / max(len(head) - 1, 1)
+    _table(ax, cells, head, col_widths=[0.2] + [w] * (len(head) - 1), fontsize=6.2, header_lines=2)
+    fig.text(0.03, 0.24, "cells: RMSE / max (deg) over the frames where the angle is measured / coverage: the fraction "
+                         "of those frames where the bone lies within +-2u (aim about 95 %)", fontsize=8)
+    fig.text(0.03, 0.20, f"published, skin markers against bone (Begon et al. 2018): GH {PUBLISHED['GH'][0]:g}-"
+                         f"{PUBLISHED['GH'][1]:g} deg RMSE; the scapula, best methods below 120 deg of elevation, "
+                         f"{PUBLISHED['ST'][0]:g}-{PUBLISHED['ST'][1]:g} deg", fontsize=8)
+    fig.text(0.03, 0.16, "assumed (the files carry no thorax or clavicle marker): " + bone.assumption, fontsize=7,
+             wrap=True)
+    fig.text(0.03, 0.08, "what remains without any skin artefact (each marker carried by its bone), the artefact "
+                         "model and the coverage on simulations: benchmarks/README.md, 'exubio against bone'",
+             fontsize=7)
+    return fig

@@ -294,4 +294,33 @@ class ScapulaCrossValidation(Record):
 
 
 # --------------------------------------------------------------------------------------------
-# The paper's numbers, the checks
+# Bone truth (exubio.validation.bone)
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class BoneAngle(Record):
+    """One angle of one method against bone (deg; coverage: fraction within +-2u; NaN: not measured)."""
+
+    rmse_deg: float
+    max_deg: float
+    coverage: float
+    measured_fraction: float
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class BoneTask(Record):
+    """One bone-referenced trial: file, task, frames, each method's verdict and its angles."""
+
+    file: str
+    task: str
+    n_frames: int
+    verdicts: dict[str, str]
+    angles: dict[str, dict[str, BoneAngle]]
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class BoneTruth(Record):
+    """The chapter: the assumption every run makes, and each trial."""
+
+    assumption: str
+    tasks: dict[str, BoneTask]

@@ -61,6 +61,9 @@ from exubio.validation.records_runs import (  # noqa: F401 - the records the res
     SierRealisations,
 )
 from exubio.validation.records_comparisons import (  # noqa: F401
+    BoneAngle,
+    BoneTask,
+    BoneTruth,
     AngleComparison,
     ElevationComparison,
     CorridorMember,
@@ -265,6 +268,7 @@ class ValidationResults(Record):
     scapula: ScapulaCrossValidation | None = optional()
     ludewig: dict[str, dict[str, np.ndarray]] = array(npz="lud__{}")
     mismatch: ModelMismatch | None = optional()  # the model-mismatch section (absent in older files)
+    bone: BoneTruth | Skipped | None = optional()  # exubio against bone (exubio.validation.bone; absent in older files)
 
     # files ----------------------------------------------------------------------------------
     def table1_json(self) -> dict[str, Any]:

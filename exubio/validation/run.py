@@ -39,6 +39,7 @@ from exubio.validation.invivo import invivo_comparison, ludewig_means
 from exubio.validation.mismatch import mismatch_study
 from exubio.validation.rates import rates_against_truth, rates_checks
 from exubio.validation.scapula import scapula_checks, scapula_cross_validation
+from exubio.validation.bone import bone_checks, bone_truth_study
 from exubio.validation.paths import portable_paths
 from exubio.validation.residuals import residual_table
 from exubio.validation.results import METHODS, AgreementTrial, PaperNumbers, ValidationResults
@@ -104,6 +105,8 @@ def run_validation(out_dir: str | Path = "reports/validation", /, *, quick: bool
     say("rates against the truth")
     rates = rates_against_truth(s, say)
     scapula = scapula_cross_validation(s, say)
+    say("bone truth (the ISB soft-tissue-artefact data-sharing trials)")
+    bone = bone_truth_study(say, quick=s.quick)
     paper = decode(PaperNumbers, PAPER)
     results = ValidationResults(
         exubio_version=exubio.__version__, python=platform.python_version(),
@@ -114,10 +117,10 @@ def run_validation(out_dir: str | Path = "reports/validation", /, *, quick: bool
         sensitivity=sensitivity, table1=table1, sier=sier, sier_realisations=realisations, invivo=invivo,
         agreement=agreement, c3d_tasks=c3d_tasks, truth_rmse_deg=_truth_rmse_deg(trials), paper=paper,
         checks=paper_checks(sier, realisations, agreement, sensitivity, invivo, paper) + rates_checks(rates)
-        + scapula_checks(scapula),
+        + scapula_checks(scapula) + bone_checks(bone),
         rates=rates, scapula=scapula,
         invivo_aims=invivo_aims(invivo), total_wall_s=time.perf_counter() - t_start, ludewig=ludewig,
-        mismatch=mismatch)
+        mismatch=mismatch, bone=bone)
     results = _portable(results)
     results.save(out)
 
