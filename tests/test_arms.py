@@ -96,10 +96,12 @@ def test_two_arm_trial_recovers_both_truths(tmp_path):
         _, names, ang = read_angles_csv(out / side / "both.ls.csv")
         _, truth = anatomical_table(load_model(), sim.q_true)
         err = np.degrees(np.abs(np.angle(np.exp(1j * (ang - truth)))))
-        summ = json.loads((out / side / "both.ls.summary.json").read_text(encoding="utf-8"))
-        measured = [i for i, n in enumerate(names) if summ["anatomical_angles"]["status"][n[:-4]] == "measured"]
-        assert len(measured) >= 18
-        assert err[:, measured].max() < 0.5, (side, names[int(np.argmax(err.max(axis=0)))])
+        from exubio.io.results import read_npz_arrays
+
+        status = read_npz_arrays(out / side / "both.ls.npz", ("angle_status",))["angle_status"]
+        measured = status == 0  # per frame: the gimbal margin and the uncertainty bound take some frames
+        assert int(measured.any(axis=0).sum()) >= 18
+        assert np.where(measured, err, 0.0).max() < 0.5, (side, names[int(np.argmax(np.where(measured, err, 0).max(axis=0)))])
         head = (out / side / "both.ls.csv").read_text(encoding="utf-8").splitlines()
         assert any(("LEFT arm" in ln) == (side == "left") for ln in head if ln.startswith("#") and "arm" in ln)
 

@@ -322,7 +322,13 @@ def test_a_limit_leaves_the_other_coordinates_at_the_minimum_of_the_potential(ki
     assert np.abs(projected).max() < 2e-3
     best = minimize(potential, q[free], jac=True, method="SLSQP", options={"ftol": 1e-16, "maxiter": 1000},
                     constraints=[{"type": "eq", "fun": lambda x: kin.g(full(x)), "jac": lambda x: kin.G(full(x))[:, free]}])
-    assert best.success
+    # SciPy >= 1.16's SLSQP may stop at its iteration limit this close to the minimum (ftol 1e-16):
+    # what counts is that it sits on the constraint and its projected gradient vanishes there
+    x_best = full(best.x)
+    g_best = potential(best.x)[1]
+    G_best = kin.G(x_best)[:, free]
+    proj_best = g_best + G_best.T @ np.linalg.lstsq(G_best.T, -g_best, rcond=None)[0]
+    assert best.success or (np.abs(kin.g(x_best)).max() < 1e-9 and np.abs(proj_best).max() < 2e-3), best.message
     arm = np.arange(6, 13)  # gh, elbow, pronation, wrist
     # 3e-3 deg: after 17.5 s at rest the girdle's slowest mode (time constant ~2 s with the published
     # girdle geometry, weakly held by the springs) still creeps by 1e-3-2.5e-3 deg (2.5e-3 with the

@@ -59,7 +59,8 @@ def test_both_arms_noise_free_within_a_tenth_of_a_degree(tmp_path, model, right,
                 checked += 1
             elif claimed[n].startswith("partly") and measured[:, j].any():
                 assert err[measured[:, j], j].max() < 0.1, (side, n, claimed[n])
-    assert checked >= 14  # both arms: at least 7 angles each claimed measured
+                checked += 1  # measured but near a gimbal lock or beyond the uncertainty bound in some postures
+    assert checked >= 14  # both arms: at least 7 angles each claimed measured (in some postures, or all)
 
 
 def test_the_shipped_sets_are_listed_and_say_what_they_measure(capsys):

@@ -49,7 +49,8 @@ def angles_measured(model: Model, not_solved: Sequence[str], undetermined: Seque
     """(15,) bool, per ISB angle (ISB_COLUMNS order): measured by the markers. The one place the
     live output decides it. With ``protocol``: an angle the marker set cannot measure in any
     reference posture (exubio.trust.assess.angle_status_of_protocol, the status the files give) is not
-    measured; of the others, a joint's angles are not measured in a frame where one of its own
+    measured (one it measures in some postures only is judged frame by frame: live applies neither
+    the gimbal margin nor the uncertainty bound, which the files do); of the others, a joint's angles are not measured in a frame where one of its own
     coordinates is not solved (held, locked) or undetermined there (exubio.trust.observability's noise
     gain), ``unmeasurable`` coordinates (the set cannot determine them anyway) left aside.
     ``structural``: that status, computed once by a caller that asks frame after frame."""
@@ -62,8 +63,9 @@ def angles_measured(model: Model, not_solved: Sequence[str], undetermined: Seque
     if structural is not None:
         status = structural
         for i, name in enumerate(ISB_NAMES):
-            if status.get(_ISB_AS_ANATOMICAL.get(name, name), "measured") != "measured":
-                out[i] = False
+            if status.get(_ISB_AS_ANATOMICAL.get(name, name), "measured") in ("not measured", "modelled"):
+                out[i] = False  # "partly ...": measured in some postures (the gimbal margin, the
+                # uncertainty bound of exubio.trust.angle_uncertainty): live, the frame decides
             elif not any(c in set(not_solved) for c in _joint_coordinates(model, ISB_JOINT_OF[i])) and \
                     not any(c in set(undetermined) - set(unmeasurable) for c in _joint_coordinates(model, ISB_JOINT_OF[i])):
                 out[i] = True  # the set measures it and nothing of this frame says otherwise
