@@ -175,17 +175,31 @@ def evidence_table(evidence: Mapping[str, SegmentEvidence], /) -> list[dict]:
 
 CONTACT_OFFSET_MM = 6.0
 """Scapula: the signed mean distance from the thorax ellipsoid of the contact points (TS, AI) where
-the scapula's own markers put them (``contact_offset_mean_mm``) beyond this (either sign): check.
+the scapula's own markers put them (``contact_offset_mean_mm``) beyond this OUTSIDE the ellipsoid, or
+beyond CONTACT_INSIDE_MM inside it: check.
 Measured: no mismatch, noise and STA up to 20 mm: at most 2.2 mm; real C3D trials: at most 4.0 mm
 (martin_dynamique; the others 0.0-1.0 mm); an ellipsoid 10 mm more posterior, or 8 % larger, or
 5 mm + 4 % (each costs 5.8-7.3 deg RMSE on a measured angle): 7.9-11.4 mm; 10 mm + 8 % either way:
 15.1-20.2 mm. (The TRC trials: 7.3 and 11.9 mm; an ellipsoid refitted through these contact points
 halves their residual and moves their ST angles by 6-15 deg: a real mismatch, see benchmarks/README.md.)"""
 
-CONTACT_OFFSET_RMS_MM = 9.0
+CONTACT_INSIDE_MM = 12.0
+"""... inside: the skin over the scapula, sliding as the bone-pin trials show (the cluster lags the
+bone's upward rotation: exubio simulate --sta bone), puts the contact points 2.9-9.3 mm inside the
+ellipsoid on average with no mismatch at all (30 simulated abductions, flexions and scaptions,
+benchmarks/verdict_false_alarms.py); 6 mm there gave a check on every one of them. An ellipsoid
+10 mm more anterior or 8 % smaller, with that artefact: 12.5-13.7 mm inside (caught); with the
+per-marker artefact 6.8-7.8 mm (a note now, no longer a check: the skin can do as much)."""
+
+CONTACT_OFFSET_RMS_MM = 20.0
 """Scapula: the RMS of that distance beyond this: check (an ellipsoid wrong in a way whose mean
-cancels over the trial). No mismatch: at most 3.7 mm; real C3D trials: at most 6.3 mm; the
-ellipsoid perturbations above: 8.0-20.3 mm (caught by the mean rule)."""
+cancels over the trial). No mismatch: at most 3.7 mm with the per-marker artefact, 10.2-15.8 mm
+with the bone-pin artefact (9 mm, the rule's first value, flagged all 30); real C3D trials: at most
+6.3 mm; an ellipsoid 10 mm posterior and 8 % larger: 20.2-20.3 mm."""
+
+CONTACT_NOTE_MM = (6.0, 9.0)
+"""(mean, RMS) beyond which a contact offset that stays under the check's limits is said as a note
+(within what the skin's sliding gives; a scapula trial, --scapula-trial, tells the two apart)."""
 
 BIAS_MM = 8.0
 """Clavicle, ulna, radius, hand: the RMS over a segment's markers of the trial mean of its residual
@@ -211,13 +225,14 @@ class MismatchFinding:
 
     segment: str
     evidence: str  # the sentence of the verdict's reason
+    level: str = "check"  # "note": evidence within what the skin alone gives
     pose_gap_deg: float | None = None
     normal_mm: float | None = None
     contact_offset_mm: float | None = None
     contact_offset_mean_mm: float | None = None
 
     def to_dict(self) -> dict:
-        return {"segment": self.segment, "evidence": self.evidence,
+        return {"segment": self.segment, "evidence": self.evidence, "level": self.level,
                 "pose_gap_deg": None if self.pose_gap_deg is None else round(self.pose_gap_deg, 2),
                 "normal_mm": None if self.normal_mm is None else round(self.normal_mm, 2)}
 
@@ -243,16 +258,24 @@ def mismatch_findings(evidence: Mapping[str, SegmentEvidence], /, *, skip_segmen
     """The segments whose evidence crosses a threshold (CONTACT_OFFSET_MM, CONTACT_OFFSET_RMS_MM,
     BIAS_MM), except ``skip_segments``."""
     out = []
+    notes: list[MismatchFinding] = []
     for seg, ev in evidence.items():
         if seg in skip_segments:
             continue
         parts = []
         mean, rms = ev.contact_offset_mean_mm, ev.contact_offset_mm
-        if mean is not None and (abs(mean) > CONTACT_OFFSET_MM or rms > CONTACT_OFFSET_RMS_MM):
-            parts.append(f"where its own markers ({', '.join(ev.markers)}) put it, its contact points lie "
-                         f"{abs(mean):.1f} mm {'outside' if mean > 0 else 'inside'} the thorax ellipsoid on average "
-                         f"(RMS {rms:.1f} mm; check above {CONTACT_OFFSET_MM:g} mm, RMS {CONTACT_OFFSET_RMS_MM:g} mm), "
-                         f"while the model holds them on it: the ellipsoid does not fit this subject")
+        where = (f"where its own markers ({', '.join(ev.markers)}) put it, its contact points lie "
+                 f"{abs(mean or 0.0):.1f} mm {'outside' if (mean or 0.0) > 0 else 'inside'} the thorax ellipsoid on "
+                 f"average (RMS {rms or 0.0:.1f} mm")
+        if mean is not None and (mean > CONTACT_OFFSET_MM or mean < -CONTACT_INSIDE_MM or rms > CONTACT_OFFSET_RMS_MM):
+            parts.append(f"{where}; check above {CONTACT_OFFSET_MM:g} mm outside, {CONTACT_INSIDE_MM:g} mm inside, RMS "
+                         f"{CONTACT_OFFSET_RMS_MM:g} mm), while the model holds them on it: the ellipsoid does not fit "
+                         f"this subject")
+        elif mean is not None and (abs(mean) > CONTACT_NOTE_MM[0] or rms > CONTACT_NOTE_MM[1]):
+            notes.append(MismatchFinding(seg, f"{where}): within what the skin sliding over the scapula gives "
+                                              f"(bone-pin artefact: up to 9 mm inside, RMS 16 mm), not a check; "
+                                              f"a mismatched ellipsoid can look the same",
+                                         level="note", pose_gap_deg=ev.pose_gap_deg, normal_mm=ev.normal_mm))
         if seg in BIAS_SEGMENTS and ev.bias_mm > BIAS_MM:
             parts.append(f"its markers sit {ev.bias_mm:.1f} mm (RMS over {', '.join(ev.markers)}; {ev.worst_bias_marker} "
                          f"{ev.worst_bias_mm:.1f} mm) from their model points on average over the trial, always in the "
@@ -260,7 +283,7 @@ def mismatch_findings(evidence: Mapping[str, SegmentEvidence], /, *, skip_segmen
                          f"of one proximal to it, a joint centre or a marker's place does not fit this subject")
         if parts:
             out.append(MismatchFinding(seg, "; ".join(parts), pose_gap_deg=ev.pose_gap_deg, normal_mm=ev.normal_mm))
-    return tuple(out)
+    return tuple(out) + tuple(n for n in notes if n.segment not in {f.segment for f in out})
 
 
 def assess_mismatch(kin: Kinematics, points: PointSet, q: np.ndarray, measured_m: np.ndarray, time_s: np.ndarray,
@@ -305,9 +328,14 @@ def mismatch_reasons(assessment: MismatchAssessment | None, /, *, calibrated: bo
 
     if assessment is None:
         return []
-    return [Reason("model_mismatch", "check", f"model mismatch on the {f.segment}: {f.evidence}; in simulations "
-                   f"this much costs more than 5 deg on a measured angle; {_advice(f, calibrated)}")
-            for f in assessment.findings]
+    out = []
+    for f in assessment.findings:
+        if f.level == "note":
+            out.append(Reason("model_mismatch", "note", f"the {f.segment}: {f.evidence}; {_advice(f, calibrated)}"))
+        else:
+            out.append(Reason("model_mismatch", "check", f"model mismatch on the {f.segment}: {f.evidence}; in "
+                              f"simulations this much costs more than 5 deg on a measured angle; {_advice(f, calibrated)}"))
+    return out
 
 
 UNSEEN_MISMATCH = (
