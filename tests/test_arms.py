@@ -4,7 +4,6 @@ arm gives the same angles; a trial with both arms is reconstructed as two chains
 arm, and each recovers its own truth."""
 from __future__ import annotations
 
-import json
 
 import numpy as np
 import pytest
