@@ -101,46 +101,16 @@ PATH_PLACEHOLDERS = {
     "<DATA>": "the folder of the real trials (../shared/data), the same for both unless a kept base run "
               "was made elsewhere",
 }
-# Changes made on purpose since 336130f, each undone before the comparison (base: in the base run's
-# text, head: in the head run's), so that everything else is still compared exactly. Each is one
-# pattern whose every match is replaced; --no-ignore shows them.
-KNOWN_CHANGES = (
-    ("base", r"written by exubio\.model\.save_model\.", "written by exubio.model.load.save_model.",
-     "model YAML header: save_model moved with the model layer (exubio/model/load.py)"),
-    ("base", r"/\.tmp-([^/\s\"']+)-\d+-\d+/", r"/\1/",
-     "a study's trial calibrated on its own frames named the temporary folder it was written in (fixed: its "
-     "folder after the rename)"),
-    ("head", r"(?m)^  inputs_sha256: [0-9a-f]{64}\n", "",
-     "model YAML calibration section: the fingerprint of the calibration's inputs (a session folder's "
-     "calibration is reused when they are the same)"),
-    ("head", r',\n\s*"inputs_sha256": "[0-9a-f]{64}"', "",
-     "summary.json: the fingerprint of the run's inputs (a re-run of the same inputs keeps a complete set: "
-     "exubio.run.resume)"),
-    ("head", r',\s*"inertia_scale": 0\.1\b', "",
-     "PF's options name inertia_scale (its default 0.1; the head runs with 1.0, the old dynamics: "
-     "HEAD_BEHAVIOUR)"),
-    ("head", r',\s*"fallback": true\b', "",
-     "PF's options name fallback (a run that stops is run again with inertia x 0.01 and full Newton; "
-     "none of the compared runs stops, so none uses it)"),
-)
-# Changes of behaviour made on purpose since 336130f, undone in the head's runs (code its
-# sitecustomize runs before the command), so that everything else is compared exactly.
-HEAD_BEHAVIOUR = (
-    ("""
-def _pf_physical_inertia():
-    import exubio.backend.exudyn_system as system
-    init = system.PFSystem.__init__
-
-    def __init__(self, *args, **kw):
-        kw["inertia_scale"] = 1.0
-        init(self, *args, **kw)
-    system.PFSystem.__init__ = __init__
-
-
-_pf_physical_inertia()
-""", "PF's segments are given 0.1 of their masses and inertias (PFOptions.inertia_scale, which cuts the "
-        "springs' inertial lag tenfold); the head runs with the physical ones, as 336130f did"),
-)
+KNOWN_CHANGES: tuple = ()
+"""Changes made on purpose since the base the tests compare with (tests/test_same_outputs.py BASE),
+each a (side, pattern, replacement, why) undone before the comparison. Empty: the base moved to
+c522596 (issue 33), after the changes of issues 33, 35, 36 and 37 that change every output on
+purpose (each angle's uncertainty column, per-frame statuses from the gimbal margin and the
+uncertainty bound, the verdict's notes and advice, the study's reasons and angles table, the
+readers' findings); the ones since 336130f (issue 19) are in this file's history."""
+HEAD_BEHAVIOUR: tuple = ()
+"""Changes of behaviour since the base, undone in the head's runs (code its sitecustomize runs
+before the command): none since c522596 (PF's inertia scale is the same in both)."""
 PDF_REASON = ("PDF reports print wall times and ms per frame (trial report, study table), and matplotlib "
               "writes the creation date: their bytes differ run to run. Compared: the page count. The "
               "numbers they plot are the CSV/NPZ files compared exactly, and a trial report's first page "
