@@ -40,9 +40,7 @@ def _errors_deg(out, stem, model, q_true):
 @pytest.mark.parametrize("motion", ["abduction", "flexion"])
 def test_both_arms_noise_free_within_a_tenth_of_a_degree(tmp_path, model, right, motion):
     c3d = tmp_path / f"{right}.c3d"
-    # a whole 5-s cycle: on the first 3 s of it, the partial-swap check (exubio.trust.label_ranges) names
-    # R_AA/R_AI of the ISB set "exchanged" in frames 0-30 (a false positive: with three scapula markers it
-    # compares against the epicondyles, whose distances change with the motion); left open, see the report
+    # a whole 5-s cycle (a 3-s part of it: tests/test_partial_swaps.py, the false exchange it once gave)
     assert main(["-q", "simulate", "--motion", motion, "--duration", "5", "--rate", "50", "--protocol", right,
                  "--protocol", SETS[right], "--out", str(c3d)]) == 0
     out = tmp_path / "out"

@@ -51,3 +51,32 @@ def test_the_verdict_fails_on_a_partial_swap_and_repair_labels_reports_the_frame
     s = json.loads((tmp_path / "repaired" / "jump.ls.summary.json").read_text(encoding="utf-8"))
     codes = {x["code"]: x for x in s["quality"]["reasons"]}
     assert "partial_swap" not in codes and "frames 100-259" in codes["label_repaired"]["message"]
+
+
+def test_three_scapula_markers_raise_no_false_exchange_on_a_short_trial(tmp_path):
+    """The ISB-name set has three scapula markers: two of them were judged against the humerus's
+    epicondyles, whose distances move with the arm, and a correctly labelled 3-s abduction failed
+    with R_AA/R_AI "exchanged in frames 0-30". With the third scapula marker as the only partner
+    (rigid with both) nothing is found; a real exchange of two scapula markers still is."""
+    import dataclasses
+
+    import numpy as np
+
+    from exubio.cli import main
+    from exubio.io.trial import read_trial
+    from exubio.run.inputs import load_model_and_protocol, protocol_for_model
+    from exubio.trust.label_ranges import find_partial_swaps
+
+    c3d = tmp_path / "isb.c3d"
+    assert main(["-q", "simulate", "--motion", "abduction", "--duration", "3", "--rate", "50", "--protocol",
+                 "isb_landmarks", "--protocol", "isb_landmarks_left", "--out", str(c3d)]) == 0
+    model, _ = load_model_and_protocol()
+    protocol = protocol_for_model(model, "isb_landmarks")
+    traj = read_trial(c3d)
+    assert find_partial_swaps(traj, protocol, model) == ()
+    pos = traj.positions_m.copy()
+    i, j = traj.labels.index("R_AA"), traj.labels.index("R_TS")
+    pos[60:110, [i, j]] = pos[60:110, [j, i]]
+    found = find_partial_swaps(dataclasses.replace(traj, positions_m=pos), protocol, model)
+    assert [(s.a, s.b) for s in found] in ([("R_AA", "R_TS")], [("R_TS", "R_AA")])
+    assert np.isclose(sum(b - a for a, b in found[0].ranges), 50, atol=5)

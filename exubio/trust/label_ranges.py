@@ -94,10 +94,18 @@ def find_partial_swaps(traj: Trajectories, protocol: Protocol, model: Model, /, 
     pairs = []
     for i, j in itertools.combinations(range(k), 2):
         parts = []
+        rigid_only = False
         for me, other in ((i, j), (j, i)):
-            p = same[me] if (same[me] & (np.arange(k) != other)).sum() >= 2 else near[me]
+            own = same[me] & (np.arange(k) != other)
+            if own.sum() >= 2:
+                p = same[me]
+            elif own.sum() == 1 and same[other][me]:  # both on one segment with one more marker: that
+                p, rigid_only = same[me], True        # marker alone (neighbours' distances move with the posture)
+            else:
+                p = near[me]
             parts.append(p & (np.arange(k) != i) & (np.arange(k) != j))
-        if parts[0].sum() >= 2 and parts[1].sum() >= 2:
+        need = 1 if rigid_only else 2
+        if parts[0].sum() >= need and parts[1].sum() >= need:
             pairs.append((i, j, parts[0], parts[1]))
     if not pairs:
         return ()
@@ -109,13 +117,16 @@ def find_partial_swaps(traj: Trajectories, protocol: Protocol, model: Model, /, 
             warnings.simplefilter("ignore", RuntimeWarning)  # frames where a marker is missing: NaN, no swap
             D = np.linalg.norm(P[:, :, None] - P[:, None], axis=-1)
             for c, (i, j, pi, pj) in enumerate(pairs):
-                e0 = (np.sqrt(np.nanmean((D[:, i, pi] - ref[i, pi]) ** 2, axis=1))
-                      + np.sqrt(np.nanmean((D[:, j, pj] - ref[j, pj]) ** 2, axis=1)))
-                e1 = (np.sqrt(np.nanmean((D[:, j, pi] - ref[i, pi]) ** 2, axis=1))
-                      + np.sqrt(np.nanmean((D[:, i, pj] - ref[j, pj]) ** 2, axis=1)))
-                g = (e0 - e1) * 1000.0
+                e0i = np.sqrt(np.nanmean((D[:, i, pi] - ref[i, pi]) ** 2, axis=1))
+                e0j = np.sqrt(np.nanmean((D[:, j, pj] - ref[j, pj]) ** 2, axis=1))
+                e1i = np.sqrt(np.nanmean((D[:, j, pi] - ref[i, pi]) ** 2, axis=1))
+                e1j = np.sqrt(np.nanmean((D[:, i, pj] - ref[j, pj]) ** 2, axis=1))
+                g = (e0i + e0j - e1i - e1j) * 1000.0
+                # an exchange puts BOTH labels back among their partners: each side must gain (one side
+                # alone gaining is a marker far from partners whose distances move with the posture)
+                both = (e0i > e1i) & (e0j > e1j)
                 gains[a:a + BLOCK_FRAMES, c] = np.nan_to_num(g, nan=0.0)
-                swapped[a:a + BLOCK_FRAMES, c] = np.nan_to_num(g, nan=-np.inf) > gain_mm
+                swapped[a:a + BLOCK_FRAMES, c] = (np.nan_to_num(g, nan=-np.inf) > gain_mm) & both
     found = []
     for c, (i, j, _, _) in enumerate(pairs):
         runs = [r for r in _runs(swapped[:, c]) if r[1] - r[0] >= MIN_RUN_FRAMES]
