@@ -271,9 +271,9 @@ def test_real_trial_is_calibrated_and_prepared():
 
 
 def test_a_calibrated_trial_report_has_a_calibration_page(tmp_path):
-    """A trial reconstructed with a calibration: the PDF gets a fifth page with the scale factors,
-    the joint centres, the static pose and every marker; without one it has three (verdict, anatomical
-    angles, residuals)."""
+    """A trial reconstructed with a calibration: the PDF gets a page more with the scale factors,
+    the joint centres, the static pose and every marker; without one it has four (verdict, anatomical
+    angles, residuals, and the rhythm page of the arm's raise: exubio.report.rhythm_page)."""
     from exubio.cli import main
     from exubio.io.c3d import write_c3d
     from exubio.model.load import load_model
@@ -281,11 +281,11 @@ def test_a_calibrated_trial_report_has_a_calibration_page(tmp_path):
 
     trial = simulate_trial(load_model(), "abduction", duration_s=1.0, rate_hz=100.0, noise_mm=0.5, seed=2)
     path = write_c3d(tmp_path / "t.c3d", trial.trajectories)
-    for extra, pages in (([], 3), (["--static-frames", "0:20"], 4)):
+    for extra, pages in (([], 4), (["--static-frames", "0:20"], 5)):
         out = tmp_path / f"out{pages}"
         main(["-q", "reconstruct", str(path), "--method", "ls", "--out", str(out), *extra])
         assert _pdf_pages(out / "t.report.pdf") == pages
-    summary = json.loads((tmp_path / "out4" / "t.ls.summary.json").read_text(encoding="utf-8"))
+    summary = json.loads((tmp_path / "out5" / "t.ls.summary.json").read_text(encoding="utf-8"))
     from exubio.report.trial_report import calibration_page
 
     fig = calibration_page({}, {"ls": summary})

@@ -351,7 +351,8 @@ def scapula_page(r: ValidationResults) -> Figure:
 def bone_page(r: ValidationResults) -> Figure:
     """exubio against bone (exubio.validation.bone): per bone-referenced trial and angle, LS's RMSE /
     max / coverage of +-2u (PF beside it where it ran), beside the published skin-marker ranges."""
-    from exubio.validation.bone import PUBLISHED, SHOWN
+    from exubio.validation.records_comparisons import BONE_PUBLISHED as PUBLISHED
+    from exubio.validation.records_comparisons import BONE_SHOWN as SHOWN
     from exubio.validation.records_comparisons import BoneTruth
 
     fig = _new_figure(A4_LANDSCAPE)

@@ -13,6 +13,8 @@ from typing import Callable
 import numpy as np
 
 from exubio.validation.paths import shared_data_dir
+from exubio.validation.records_comparisons import BONE_PUBLISHED as PUBLISHED
+from exubio.validation.records_comparisons import BONE_SHOWN as SHOWN
 from exubio.validation.records_comparisons import BoneAngle, BoneTask, BoneTruth
 from exubio.validation.records_runs import Skipped
 from exubio.validation.results import Check
@@ -21,14 +23,6 @@ __all__ = ["BONE_RATES_HZ", "BoneAngle", "BoneTask", "BoneTruth", "PUBLISHED", "
 
 BONE_RATES_HZ = {"S2M": 300.0, "ARTANIM": 30.0}
 """The sampling rates the files do not store, from the dataset's documentation (SOURCES.md)."""
-
-PUBLISHED = {"GH": (3.0, 10.0), "ST": (3.0, 6.0)}
-"""Skin markers against bone, RMSE ranges in deg (Begon et al. 2018): GH; the scapula's best
-methods below 120 deg of elevation."""
-
-SHOWN = ("ST_Y_internal_rotation", "ST_X_upward_rotation", "ST_Z_posterior_tilt", "GH_phadke_X_elevation",
-         "GH_phadke_Z_flexion", "GH_phadke_Y_internal_rotation", "GH_X_elevation", "HT_X_elevation")
-
 
 def bone_truth_study(say: Callable[[str], None] = lambda _: None, /, *, quick: bool = False) -> BoneTruth | Skipped:
     """Every .mat trial under ``<shared data>/truth/sta_opendata`` through exubio.truth (``quick``:

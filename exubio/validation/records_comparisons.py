@@ -296,6 +296,14 @@ class ScapulaCrossValidation(Record):
 # --------------------------------------------------------------------------------------------
 # Bone truth (exubio.validation.bone)
 
+BONE_PUBLISHED = {"GH": (3.0, 10.0), "ST": (3.0, 6.0)}
+"""Skin markers against bone, RMSE ranges in deg (Begon et al. 2018): GH; the scapula's best
+methods below 120 deg of elevation."""
+
+BONE_SHOWN = ("ST_Y_internal_rotation", "ST_X_upward_rotation", "ST_Z_posterior_tilt", "GH_phadke_X_elevation",
+         "GH_phadke_Z_flexion", "GH_phadke_Y_internal_rotation", "GH_X_elevation", "HT_X_elevation")
+
+
 
 @dataclass(frozen=True, eq=False, kw_only=True)
 class BoneAngle(Record):
