@@ -84,6 +84,8 @@ IGNORED_KEYS = {
                  "recovery, residuals, total (summary.json)",
     "exudyn_cpu_times_s": "Exudyn's CPU-time breakdown of the PF solve (summary.json, info_json of the PF .npz)",
     "wall_s": "wall-clock seconds of a study trial (study.json)",
+    "inputs_sha256": "the fingerprint of a run's inputs (exubio.run.resume): it hashes the calibrated model's "
+                     "file, whose text names the checkout's absolute paths (the base worktree's and the head's)",
 }
 # .npz arrays not compared at all
 IGNORED_NPZ_ARRAYS = {

@@ -73,8 +73,9 @@ def write_study_table(out_dir: Path, trials: Iterable[tuple[dict, Path]], /) -> 
     df = study_table(trials)
     df.attrs = {}
     pq = atomic_write(out_dir / PARQUET, lambda tmp: df.to_parquet(tmp, engine="pyarrow", index=False))
-    gz = atomic_write(out_dir / CSV_GZ, lambda tmp: df.to_csv(tmp, index=False, compression="gzip",
-                                                              float_format="%.6f"))
+    # mtime 0 in the gzip header: the same rows give the same bytes (a study run twice, or resumed)
+    gz = atomic_write(out_dir / CSV_GZ, lambda tmp: df.to_csv(tmp, index=False, float_format="%.6f",
+                                                              compression={"method": "gzip", "mtime": 0}))
     return pq, gz
 
 
