@@ -10,6 +10,9 @@ verdict (the trial's verdict of that method). Text columns are categoricals, num
 pyarrow; the CSV gzip-compressed, the same rows, readable by any statistics tool)."""
 from __future__ import annotations
 
+import gzip
+import io
+
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterable
 
@@ -73,9 +76,15 @@ def write_study_table(out_dir: Path, trials: Iterable[tuple[dict, Path]], /) -> 
     df = study_table(trials)
     df.attrs = {}
     pq = atomic_write(out_dir / PARQUET, lambda tmp: df.to_parquet(tmp, engine="pyarrow", index=False))
-    # mtime 0 in the gzip header: the same rows give the same bytes (a study run twice, or resumed)
-    gz = atomic_write(out_dir / CSV_GZ, lambda tmp: df.to_csv(tmp, index=False, float_format="%.6f",
-                                                              compression={"method": "gzip", "mtime": 0}))
+    # no file name and mtime 0 in the gzip header, so the same rows give the same bytes (a study run
+    # twice, or resumed; the temporary file's name would otherwise be in it); streamed, not one string
+
+    def write_gz(tmp) -> None:
+        with open(tmp, "wb") as raw, gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0) as gz_file:
+            with io.TextIOWrapper(gz_file, encoding="utf-8", newline="") as text:
+                df.to_csv(text, index=False, float_format="%.6f")
+
+    gz = atomic_write(out_dir / CSV_GZ, write_gz)
     return pq, gz
 
 
