@@ -106,13 +106,13 @@ PATH_PLACEHOLDERS = {
 KNOWN_CHANGES: tuple = ()
 """Changes made on purpose since the base the tests compare with (tests/test_same_outputs.py BASE),
 each a (side, pattern, replacement, why) undone before the comparison. Empty: the base moved to
-12b4b84 (issue 33), after the changes of issues 33, 35, 36 and 37 that change every output on
+f64e71d (issue 33), after the changes of issues 33, 35, 36 and 37 that change every output on
 purpose (each angle's uncertainty column, per-frame statuses from the gimbal margin and the
 uncertainty bound, the verdict's notes and advice, the study's reasons and angles table, the
 readers' findings); the ones since 336130f (issue 19) are in this file's history."""
 HEAD_BEHAVIOUR: tuple = ()
 """Changes of behaviour since the base, undone in the head's runs (code its sitecustomize runs
-before the command): none since 12b4b84 (PF's inertia scale is the same in both)."""
+before the command): none since f64e71d (PF's inertia scale is the same in both)."""
 PDF_REASON = ("PDF reports print wall times and ms per frame (trial report, study table), and matplotlib "
               "writes the creation date: their bytes differ run to run. Compared: the page count. The "
               "numbers they plot are the CSV/NPZ files compared exactly, and a trial report's first page "
