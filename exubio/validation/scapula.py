@@ -198,30 +198,12 @@ def scapula_cross_validation(s: ValidationSettings, progress: Progress) -> Scapu
 
 
 def scapula_checks(scv: ScapulaCrossValidation) -> tuple[Check, ...]:
-    """The aims of issue 21 for the cross-validated calibration (PF; both directions), and the
-    simulated subject's 2 deg."""
-    out = []
+    """The simulated subject's 2 deg. The real TRC subject's aims of issue 21 (ts/ai within 12 mm, ST
+    within 5 deg of the data) are withdrawn (issue 33): that subject's aa/ts/ai are one rigid
+    registration of an acromion cluster, not bone, so missing them says nothing about the scapula;
+    the cross-validation's figures stay on the report's scapula page, and the scapula is judged
+    against bone in the bone-truth chapter (exubio.validation.bone)."""
     err = max(scv.simulated.st_max_error_deg.get("static_motion", (np.nan,)))
-    out.append(Check(what="simulated subject (ellipsoid 10 mm, 8 % off): flexion ST max error after the scapula "
-                          "calibration on the abduction", value=float(err), limit=2.0, unit="deg", kind="aim",
-                     passed=bool(err <= 2.0) if np.isfinite(err) else None))
-    for key, d in scv.real.items():
-        v = d.variants.get("cal_still_motion")
-        if not isinstance(v, ScapulaVariant):
-            continue
-        worst = max(v.marker_rmse_mm["pf"].get("ts", np.nan), v.marker_rmse_mm["pf"].get("ai", np.nan))
-        st = max(v.st_model_minus_data_rmse_deg["pf"])
-        note = None
-        if v.data_ac_from_model_sc_mm is not None and (worst > AIM_MARKER_RMSE_MM or st > AIM_ST_RMSE_DEG):
-            lo, hi = v.data_ac_from_model_sc_mm
-            off = max(abs(lo - v.model_clavicle_mm), abs(hi - v.model_clavicle_mm))
-            note = (f"measured limit: the data's AC lies {lo:.1f}-{hi:.1f} mm from the model's SC, whose clavicle is a "
-                    f"rigid {v.model_clavicle_mm:.1f} mm: up to {off:.1f} mm off the sphere the model's AC must stay on, "
-                    "which no ellipsoid changes (benchmarks/README.md, issue 21)")
-        out.append(Check(what=f"scapula calibrated over motion, {key.replace('_', ' ')}: PF ts/ai RMSE (worst)",
-                         value=float(worst), limit=AIM_MARKER_RMSE_MM, unit="mm", kind="aim",
-                         passed=bool(worst <= AIM_MARKER_RMSE_MM), note=note if worst > AIM_MARKER_RMSE_MM else None))
-        out.append(Check(what=f"scapula calibrated over motion, {key.replace('_', ' ')}: PF model-minus-data ST "
-                              f"RMSE over HT 30-120 (worst angle)", value=float(st), limit=AIM_ST_RMSE_DEG, unit="deg",
-                         kind="aim", passed=bool(st <= AIM_ST_RMSE_DEG), note=note if st > AIM_ST_RMSE_DEG else None))
-    return tuple(out)
+    return (Check(what="simulated subject (ellipsoid 10 mm, 8 % off): flexion ST max error after the scapula "
+                       "calibration on the abduction", value=float(err), limit=2.0, unit="deg", kind="aim",
+                  passed=bool(err <= 2.0) if np.isfinite(err) else None),)
