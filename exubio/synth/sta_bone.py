@@ -91,15 +91,11 @@ class RigidSplit:
 
 
 def _kabsch(ref: np.ndarray, cur: np.ndarray) -> np.ndarray:
-    """Rotations Q (n, 3, 3) with cur - mean(cur) ~ Q (ref - mean(ref)) in least squares."""
-    a = ref - ref.mean(axis=0)
-    b = cur - cur.mean(axis=1, keepdims=True)
-    H = np.einsum("ki,nkj->nij", a, b)
-    U, _, Vt = np.linalg.svd(H)
-    V, Ut = np.swapaxes(Vt, 1, 2), np.swapaxes(U, 1, 2)
-    D = np.tile(np.eye(3), (cur.shape[0], 1, 1))
-    D[:, 2, 2] = np.sign(np.linalg.det(V @ Ut))
-    return V @ D @ Ut
+    """Rotations Q (n, 3, 3) with cur - mean(cur) ~ Q (ref - mean(ref)) in least squares (the
+    cluster fit of exubio.calibration.cluster)."""
+    from exubio.calibration.cluster import cluster_poses
+
+    return cluster_poses(ref - ref.mean(axis=0), cur)[0]
 
 
 def rigid_split(markers: np.ndarray, n_reference: int, /) -> RigidSplit:

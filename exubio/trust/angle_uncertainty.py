@@ -38,6 +38,7 @@ import warnings
 import numpy as np
 
 from exubio.model.kinematics import Kinematics, PointSet
+from exubio.trust.design import constrained_design
 from exubio.trust.sta_amplitude import STAAmplitude
 
 __all__ = ["BOUND_SETS", "bound_applies", "NOISE_MM", "U_BOUND_DEG", "GIMBAL_MARGIN_DEG", "marker_covariance", "sensitivity", "gimbal_mask",
@@ -100,15 +101,8 @@ def sensitivity(kin: Kinematics, points: PointSet, qf: np.ndarray, present: np.n
     ``with_jacobian``: (K, J) with J (b, 3k, m) the markers' Jacobian (zero columns for the others),
     so J K is the step's hat matrix."""
     b, m = qf.shape
-    w = np.where(present, weights[None, :], 0.0)
-    k = w.shape[1]
-    J = kin.point_jacobian(qf, points)[..., free].reshape(b, 3 * k, len(free))
-    w3 = np.repeat(w, 3, axis=1)
-    G = kin.G(qf)[..., free]
-    _, _, Vt = np.linalg.svd(G)
-    N = np.swapaxes(Vt[:, G.shape[1]:, :], 1, 2)
-    A = J @ N
-    M = np.swapaxes(A, 1, 2) @ (A * w3[..., None])
+    k = present.shape[1]
+    J, N, A, w3, M = constrained_design(kin, points, qf, present, weights, free)
     Minv = np.linalg.pinv(M, rcond=1e-12, hermitian=True)
     Kf = N @ Minv @ (np.swapaxes(A, 1, 2) * w3[:, None, :])
     K = np.zeros((b, m, 3 * k))

@@ -25,6 +25,7 @@ from typing import Mapping
 import numpy as np
 
 from exubio.model.kinematics import Kinematics, PointSet
+from exubio.trust.design import constrained_design
 
 UNDETERMINED_DEG_PER_MM = 2.0
 """Noise gain above which a coordinate counts as undetermined. Skin-marker errors on the shoulder
@@ -301,15 +302,7 @@ def _marker_information(kin: Kinematics, points: PointSet, qf: np.ndarray, prese
                         free: np.ndarray):
     """For frames qf (b, m): N (b, f, f-2) the null space of G over the free coordinates, M and S
     of the module docstring (b, f-2, f-2)."""
-    w = np.where(present, weights[None, :], 0.0)
-    b, k = w.shape
-    J = kin.point_jacobian(qf, points)[..., free].reshape(b, 3 * k, len(free))
-    w3 = np.repeat(w, 3, axis=1)
-    G = kin.G(qf)[..., free]
-    _, _, Vt = np.linalg.svd(G)
-    N = np.swapaxes(Vt[:, G.shape[1]:, :], 1, 2)
-    A = J @ N
-    M = np.swapaxes(A, 1, 2) @ (A * w3[..., None])
+    _, N, A, w3, M = constrained_design(kin, points, qf, present, weights, free)
     S = np.swapaxes(A, 1, 2) @ (A * (w3**2)[..., None])
     return N, M, S
 
