@@ -20,7 +20,7 @@ Sets of command lines (``--set``):
               session's relabelling protocol protocols/examples/kinova_martin_session.yaml),
               martin_dynamique with martin_statique, F0_boire_05 on its first 20 frames, the two
               TRC trials with thoracoscapular_9 on their first 50 frames (as
-              benchmarks/trust_real_trials.py runs them); then export-model of two calibrated models
+              studies/trust_real_trials.py runs them); then export-model of two calibrated models
   real-quick  martin_dynamique with martin_statique only
   study100    a study of 100 trials written by ``exubio simulate`` (10 subjects x 10 trials of 4 s at
               100 Hz, the four motions, 1 mm noise, 5 mm soft-tissue artefact; odd subjects calibrated

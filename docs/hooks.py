@@ -1,5 +1,5 @@
 """MkDocs hook: the site shows files that live elsewhere in the repository without copying them
-into docs/: benchmarks/README.md as the page `benchmarks.md`, and the figures and screenshots of
+into docs/: studies/README.md as the page `measurements.md`, benchmarks/README.md as `benchmarks.md`, and the figures and screenshots of
 reports/ under `figures/` (the validation page and the report pages link them)."""
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ FIGURES = ("reports/validation", "reports/screenshots")
 
 
 def on_files(files: Files, config) -> Files:
+    files.append(File.generated(config, "measurements.md", abs_src_path=str(ROOT / "studies" / "README.md")))
     files.append(File.generated(config, "benchmarks.md", abs_src_path=str(ROOT / "benchmarks" / "README.md")))
     for folder in FIGURES:
         for png in sorted((ROOT / folder).glob("*.png")):

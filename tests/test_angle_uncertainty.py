@@ -111,7 +111,7 @@ def test_an_angle_beyond_the_bound_or_near_its_lock_is_not_measured(setting):
 def test_the_truth_lies_within_two_u_under_the_bone_pin_artefact(setting):
     """Simulated abduction with the artefact fitted on bone pins (exubio simulate --sta bone), 1 mm
     noise: in at least 85 % of the measured frames of each shoulder angle the truth is within +-2u
-    (benchmarks/uncertainty_coverage.py: 93-100 % over four motions and three seeds), both methods."""
+    (studies/uncertainty_coverage.py: 93-100 % over four motions and three seeds), both methods."""
     model, protocol, kin, pts = setting
     from exubio.synth.sta_bone import load_sta_model
 

@@ -51,6 +51,7 @@ def test_the_docs_build_with_warnings_as_errors(tmp_path):
         built = site / ("index.html" if page.stem == "index" else f"{page.stem}/index.html")
         assert built.is_file(), page
     assert (site / "benchmarks" / "index.html").is_file()  # benchmarks/README.md, shown by docs/hooks.py
+    assert (site / "measurements" / "index.html").is_file()  # studies/README.md
     assert sorted(p.name for p in (site / "figures").glob("*.png")) == sorted(
         p.name for folder in ("reports/validation", "reports/screenshots") for p in (ROOT / folder).glob("*.png"))
     api = (site / "python-api" / "index.html").read_text(encoding="utf-8")
@@ -63,7 +64,7 @@ def test_a_broken_link_fails_the_build(tmp_path):
     """The build really is strict: a copy of the docs with one link to a missing page does not build."""
     shutil.copytree(DOCS, tmp_path / "docs")
     shutil.copy(ROOT / "mkdocs.yml", tmp_path / "mkdocs.yml")
-    for name in ("exubio", "benchmarks", "reports"):
+    for name in ("exubio", "benchmarks", "studies", "reports"):
         (tmp_path / name).symlink_to(ROOT / name)
     page = tmp_path / "docs" / "live.md"
     page.write_text(page.read_text(encoding="utf-8") + "\nSee [the missing page](missing.md).\n", encoding="utf-8")

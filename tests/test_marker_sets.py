@@ -3,8 +3,8 @@ Van Sint Jan landmark names, both arms. Simulated trials of each set, noise-free
 trial (`exubio simulate --protocol R --protocol L`), reconstructed with one command
 (`exubio reconstruct --protocol R --both-arms`, LS): every angle the protocol claims as measured
 before any trial is within 0.1 deg of the truth on both arms, and so is every angle it claims as
-partly measured, on the frames its result marks measured (benchmarks/marker_sets.py prints the
-table of benchmarks/README.md "Marker sets labs use")."""
+partly measured, on the frames its result marks measured (studies/marker_sets.py prints the
+table of studies/README.md "Marker sets labs use")."""
 import dataclasses
 
 import numpy as np

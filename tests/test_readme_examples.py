@@ -110,14 +110,14 @@ def test_a_readme_example_runs_from_a_folder_outside_the_checkout(line, inputs, 
     assert "Traceback" not in done.stderr
 
 
-@pytest.mark.parametrize("doc", [*DOCS, "benchmarks/README.md"])
+@pytest.mark.parametrize("doc", [*DOCS, "benchmarks/README.md", "studies/README.md"])
 def test_every_file_the_docs_name_is_there(doc):
     """A module, test, benchmark, protocol, model source or figure the documentation points to or runs
-    (`exubio/...py`, `tests/...py`, `python benchmarks/...py`, `protocols/examples/...yaml`,
+    (`exubio/...py`, `tests/...py`, `python benchmarks/...py`, `python studies/...py`, `protocols/examples/...yaml`,
     `reports/.../...png`) exists: the README named `exubio/live/...` after the live loop had moved to
     `exubio/run/live/`."""
     text = (ROOT / doc).read_text(encoding="utf-8")
-    named = set(re.findall(r"(?<![\w/.-])((?:exubio|tests|benchmarks|models|protocols|reports|docs)/[\w/.-]+\.(?:py|yaml|png|pdf|json|csv|md))\b",
+    named = set(re.findall(r"(?<![\w/.-])((?:exubio|tests|benchmarks|studies|models|protocols|reports|docs)/[\w/.-]+\.(?:py|yaml|png|pdf|json|csv|md))\b",
                            text))
     assert named, doc
     missing = sorted(p for p in named if not (ROOT / p).is_file())

@@ -97,7 +97,7 @@ def test_left_arm_is_mirrored_onto_the_right_convention():
 @needs_data
 def test_fitted_model_reproduces_held_out_tasks():
     """Leave one task out on the four S2M tasks: measured scapula R^2 0.78-0.88 (marker displacement)
-    and 0.83-0.98 (cluster rotation); humerus displacement R^2 0.10-0.58 (benchmarks/README.md)."""
+    and 0.83-0.98 (cluster rotation); humerus displacement R^2 0.10-0.58 (studies/README.md)."""
     from exubio.synth.sta_validate import leave_one_task_out
 
     res = leave_one_task_out(S2M, rate_hz=300.0)

@@ -134,7 +134,7 @@ def test_s2m_files_read_as_the_sources_describe_them():
 @pytest.mark.slow
 def test_the_s2m_abduction_at_rest_is_the_bones_and_its_errors_are_reported():
     """At rest (the calibration) every angle equals the bone's to 0.5 deg; over the whole trial the
-    errors are those benchmarks/README.md states (here: GH elevation, Phadke, under 10 deg RMSE)."""
+    errors are those studies/README.md states (here: GH elevation, Phadke, under 10 deg RMSE)."""
     from exubio.model.angles import anatomical_table
     from exubio.model.load import model_from_mapping
     from exubio.truth.compare import compare_bone_trial, truth_angles

@@ -60,7 +60,7 @@ class IntegratorOptions:
         be an integer (targets between frames: cubic Hermite interpolation of positions and
         velocities). Longer: step_s / frame_dt_s must be an integer (see ``PFSystem.run``).
     spectral_radius, newton_relative_tolerance, modified_newton_contractivity: at one step per
-        5 ms frame (0, 1e-5, 0.2) keep q̈ closest to the derivative of q̇ (benchmarks/README.md).
+        5 ms frame (0, 1e-5, 0.2) keep q̈ closest to the derivative of q̇ (studies/README.md).
         Exudyn's Newton stops when its residual (forces in N and constraint violations in m, one
         L2 norm) has dropped by newton_relative_tolerance, or is below
         newton_absolute_tolerance.

@@ -103,7 +103,7 @@ FUNCTIONAL_MAX_SHIFT_M = 0.03
 places from the scapula and humerus markers is not used (it is reported, with the reason). Each
 estimate is good to about 10-20 mm with skin markers (regressions and functional methods alike:
 the TRC subject's SCoRE centre is 3-9 mm from its own model's, the anatomical fit's 7-8 mm,
-benchmarks/calibration_trc_vs_tsm.py); 30 mm apart, one of them is wrong, and a functional centre
+studies/calibration_trc_vs_tsm.py); 30 mm apart, one of them is wrong, and a functional centre
 from skin clusters that slide over the deltoid (SCoRE RMS 10 mm on martin_dynamique, 50 mm away)
 is the likelier one."""
 

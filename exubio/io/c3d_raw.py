@@ -21,7 +21,7 @@ defined twice, a parameter of no group, a name with control or non-ASCII charact
 SCALE, RATE, DATA_START or FRAMES (ANALOG:USED, RATE, GEN_SCALE; ROTATION:...) with no value, a
 POINT:RATE that is not a finite number. ezc3d crashes on each of the last three (a segmentation
 fault: it reads those parameters' first value or dimension unchecked; found by mutating the bytes
-of parameter sections, benchmarks/c3d_mutations.py).
+of parameter sections, studies/c3d_mutations.py).
 """
 from __future__ import annotations
 

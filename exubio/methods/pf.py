@@ -97,12 +97,12 @@ class PFOptions:
         0.008 deg (forearm pronation in flexion; abduction 0.044 -> 0.004, SIER 0.047 -> 0.005),
         halves the q̈ error against the truth, and leaves the noisy results as they were (1.5 mm
         noise: worst angle 0.63 -> 0.62 deg); the stiff mode (c/m ~ 1e4 1/s^2) stays damped by the
-        generalized-alpha step (benchmarks/README.md, "PF's inertia"). 1.0: the paper's physical
+        generalized-alpha step (studies/README.md, "PF's inertia"). 1.0: the paper's physical
         segments.
     fallback: a run whose integration stops (Newton fails, or the springs diverge) is run once more
         from the start with FALLBACK_OPTIONS (inertia x 0.01, the Jacobian rebuilt every Newton
         iteration), when the sink can start again (``restart``); the result's ``info["fallback"]``
-        gives the first run's reason, and the trial's verdict notes it. Measured (benchmarks/README.md,
+        gives the first run's reason, and the trial's verdict notes it. Measured (studies/README.md,
         "PF across its parameters"): those options finish every run of the sensitivity grid and every
         real trial, with the defaults' angles to 0.1 deg RMSE on every real run (worst 0.091 deg; model
         points <= 1.05 mm), at 1.4-1.9 times the CPU time, and x 0.01

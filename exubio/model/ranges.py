@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD = 1.0e4
-"""k_lim, the same in both methods. Measured on the 21-marker protocol (benchmarks/README.md,
+"""k_lim, the same in both methods. Measured on the 21-marker protocol (studies/README.md,
 "Joint limits"): the markers hold a joint with 16-22 N m/rad (pronation, wrist) to 620 (elbow) and
 3-5e3 (GH, girdle) when the other coordinates are held, at most ~110 N m/rad when they are free to
 compensate, which is what resists markers that drive one coordinate past its range. At 1e4 a

@@ -115,7 +115,7 @@ def lowpass(
     continuous) flips the curvature at the end and bent the ends of noise-free simulated trials by
     up to 0.6 deg at 2 Hz (RMSE over the first and last 10 frames; cubic: at most 0.1 deg). A
     quadratic, or a cubic on two periods, bent the ends more; a cubic on half a period follows
-    the noise (0.72 deg on the 1.5 mm benchmark against 0.65); measurements: benchmarks/README.md,
+    the noise (0.72 deg on the 1.5 mm benchmark against 0.65); measurements: studies/README.md,
     "Filter cut-off and end padding".
     The fit is a regression over the end window, so a noisy end sample is not amplified. Runs of
     at most 3 (order + 1) samples are left unfiltered (logged). The last axis is one sample
@@ -281,7 +281,7 @@ RESIDUAL_NOISE_BAND = (0.25, 0.75)
 noise only and the noise line is fitted (12.5-37.5 Hz at 100 Hz). For white noise and the
 2nd-order zero-lag Butterworth the residual is close to linear in the cut-off there, and the
 intercept of the line fitted there is the noise RMS within about 1 % (white noise: 1.010-1.011
-sigma at 100 and 200 Hz; section "Filter cut-off and end padding" of benchmarks/README.md)."""
+sigma at 100 and 200 Hz; section "Filter cut-off and end padding" of studies/README.md)."""
 
 AUTO_CUTOFF_STEP_HZ = 0.25
 """Grid of the residual curve inside AUTO_CUTOFF_BOUNDS_HZ; the crossing is interpolated linearly."""

@@ -204,13 +204,13 @@ def fig_mismatch(r: ValidationResults) -> Figure:
              f"{len(m.no_mismatch_not_ok)}" + (f" ({'; '.join(m.no_mismatch_not_ok)})" if m.no_mismatch_not_ok else "")
              + ".",
              "Flagged although cheaper than the limit: " + ("; ".join(m.flagged_cheap) or "none") + ".",
-             "What it cannot catch (benchmarks/README.md, 'Model mismatch'): one scapula marker placed off on the model "
+             "What it cannot catch (studies/README.md, 'Model mismatch'): one scapula marker placed off on the model "
              "(SCAP_IA 20 mm: the scapula's rigid fit absorbs it; a per-marker rule would fire on every real C3D trial, "
              "whose SCAP_Cor sits 17-19 mm off on average); an ellipsoid moved along the scapula's path (15 mm superior: "
              "GH plane of elevation and axial rotation 8-10 deg RMSE with 3 mm residual) or stretched along one axis; "
              "a scapula with fewer than 3 markers; a segment-length error with no marker distal to it; what noise and "
              "soft-tissue artefact cost by themselves (up to ~5 deg here with 20 mm STA; not a model mismatch). A static "
-             "calibration removes most of these generic-model mismatches (benchmarks/model_mismatch.py --calibrate)."]
+             "calibration removes most of these generic-model mismatches (studies/model_mismatch.py --calibrate)."]
     _paragraphs(fig, lines, 0.29, width=185, fontsize=7.5, gap=0.006)
     _footer(fig, "Data: simulated (exubio.synth.simulate with exubio.synth.perturb). " + f"exubio {r.exubio_version}"
             + (" — QUICK RUN (two cases, abduction, LS only)" if r.quick else ""))

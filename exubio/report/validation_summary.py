@@ -239,7 +239,7 @@ def _invivo_finding(r: ValidationResults) -> str:
             "80 % inside the corridor) are not met there (numbers page). Evidence: PF and LS agree within 1 deg, and "
             "on simulated trials both recover the truth, so the solvers do not cause it; the scapula skin markers "
             f"cannot all sit on a rigid scapula gliding on the ellipsoid ({worst}; the residual grows with "
-            "elevation: benchmarks/invivo_evidence.py); one subject is compared with a 12-shoulder mean, and the "
+            "elevation: studies/invivo_evidence.py); one subject is compared with a 12-shoulder mean, and the "
             "study means themselves differ by more than 10 deg in places (the corridor's width).")
 
 

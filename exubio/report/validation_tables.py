@@ -392,6 +392,6 @@ def bone_page(r: ValidationResults) -> Figure:
     fig.text(0.03, 0.16, "assumed (the files carry no thorax or clavicle marker): " + bone.assumption, fontsize=7,
              wrap=True)
     fig.text(0.03, 0.08, "what remains without any skin artefact (each marker carried by its bone), the artefact "
-                         "model and the coverage on simulations: benchmarks/README.md, 'exubio against bone'",
+                         "model and the coverage on simulations: studies/README.md, 'exubio against bone'",
              fontsize=7)
     return fig

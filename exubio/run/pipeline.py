@@ -431,7 +431,7 @@ def angle_header(det, trial: str, method: str, side: str) -> tuple[str, ...]:
         from exubio.trust.angle_uncertainty import UNCERTAINTY_DEFINITION
 
         lines.append(f"<angle>_u_deg: {UNCERTAINTY_DEFINITION}; the truth lies within +-2u in about 95 % of frames "
-                     "(coverage measured on bone pins and bone-pin artefact simulations: benchmarks/README.md)")
+                     "(coverage measured on bone pins and bone-pin artefact simulations: studies/README.md)")
     for j, n in enumerate(det.names):
         col = np.asarray(det.status[:, j])
         rule = f" ({det.rule[n]})" if n in det.rule else ""

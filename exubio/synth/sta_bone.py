@@ -57,7 +57,7 @@ MIRROR = np.diag([1.0, 1.0, -1.0])
 SCHEMA_VERSION = 1
 SHIPPED = {"bone": "sta_bone_s2m.json", "s2m": "sta_bone_s2m.json"}
 # Chosen by leave-one-task-out on the S2M trials among 16 candidate driver sets and penalties
-# (benchmarks/README.md): the scapula on HT elevation (with its square) and, linearly, the scapula's
+# (studies/README.md): the scapula on HT elevation (with its square) and, linearly, the scapula's
 # rotation from the start; the humerus linearly on the three GH angles (quadratic terms in them
 # extrapolated badly to a held-out task).
 DEFAULT_DRIVERS: dict[str, tuple[str, ...]] = {

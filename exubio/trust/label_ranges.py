@@ -27,7 +27,7 @@ __all__ = ["GAIN_MM", "MIN_RUN_FRAMES", "PartialSwap", "find_partial_swaps", "re
 log = logging.getLogger(__name__)
 
 GAIN_MM = 30.0
-"""Measured on the 10 real trials of ../shared/data as recorded (``python benchmarks/partial_swaps.py``):
+"""Measured on the 10 real trials of ../shared/data as recorded (``python studies/partial_swaps.py``):
 no exchange of any two markers reaches 10 mm over 5 frames in a row; two markers exchanged in a
 fifth of a trial give 44-76 mm (epicondyles), 53-75 mm (ARM/DELT), 96-119 mm (SCAP_IA/SCAP_AA) and
 33-43 mm (ULNA/RADIUS, in the frames where the forearm's posture tells them apart). Not found:

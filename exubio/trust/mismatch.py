@@ -24,7 +24,7 @@ expressed in the segment's frame (mm):
   ``contact_offset_mean_mm`` its signed mean.
 
 The decision (``mismatch_findings``) and its threshold are below, with the rates they were chosen
-by (benchmarks/model_mismatch.py; benchmarks/README.md, "Model mismatch").
+by (studies/model_mismatch.py; studies/README.md, "Model mismatch").
 """
 from __future__ import annotations
 
@@ -168,10 +168,10 @@ def evidence_table(evidence: Mapping[str, SegmentEvidence], /) -> list[dict]:
 
 
 # ----------------------------------------------------------------------------- the decision
-# Thresholds from benchmarks/model_mismatch.py (grid: 19 perturbations x abduction, flexion,
+# Thresholds from studies/model_mismatch.py (grid: 19 perturbations x abduction, flexion,
 # scaption x {clean; 1 mm noise + 10 mm STA; 1 mm noise + 20 mm STA}, 3 realisations; 5 s at 50 Hz,
-# LS, the generic model) and every real trial of ../shared/data (benchmarks/trust_real_trials.py);
-# the figures are in benchmarks/README.md, "Model mismatch".
+# LS, the generic model) and every real trial of ../shared/data (studies/trust_real_trials.py);
+# the figures are in studies/README.md, "Model mismatch".
 
 CONTACT_OFFSET_MM = 6.0
 """Scapula: the signed mean distance from the thorax ellipsoid of the contact points (TS, AI) where
@@ -181,13 +181,13 @@ Measured: no mismatch, noise and STA up to 20 mm: at most 2.2 mm; real C3D trial
 (martin_dynamique; the others 0.0-1.0 mm); an ellipsoid 10 mm more posterior, or 8 % larger, or
 5 mm + 4 % (each costs 5.8-7.3 deg RMSE on a measured angle): 7.9-11.4 mm; 10 mm + 8 % either way:
 15.1-20.2 mm. (The TRC trials: 7.3 and 11.9 mm; an ellipsoid refitted through these contact points
-halves their residual and moves their ST angles by 6-15 deg: a real mismatch, see benchmarks/README.md.)"""
+halves their residual and moves their ST angles by 6-15 deg: a real mismatch, see studies/README.md.)"""
 
 CONTACT_INSIDE_MM = 12.0
 """... inside: the skin over the scapula, sliding as the bone-pin trials show (the cluster lags the
 bone's upward rotation: exubio simulate --sta bone), puts the contact points 2.9-9.3 mm inside the
 ellipsoid on average with no mismatch at all (30 simulated abductions, flexions and scaptions,
-benchmarks/verdict_false_alarms.py); 6 mm there gave a check on every one of them. An ellipsoid
+studies/verdict_false_alarms.py); 6 mm there gave a check on every one of them. An ellipsoid
 10 mm more anterior or 8 % smaller, with that artefact: 12.5-13.7 mm inside (caught); with the
 per-marker artefact 6.8-7.8 mm (a note now, no longer a check: the skin can do as much)."""
 
@@ -212,7 +212,7 @@ BIAS_SEGMENTS = ("clavicle", "ulna", "radius", "hand")
 """Where the bias rule applies. Not the humerus: skin over the deltoid moves its markers (20 mm STA:
 a bias up to 11 mm with no mismatch); not the scapula: the contact-point rule above is specific to
 its ellipsoid, and its skin markers keep a 10-11 mm bias on every real C3D trial that no refitted
-ellipsoid removes (benchmarks/model_mismatch.py --real-refit)."""
+ellipsoid removes (studies/model_mismatch.py --real-refit)."""
 
 EVIDENCE_EVERY_S = 0.05
 """The evidence is computed on frames this far apart (statistics over the trial; at 200 Hz every
@@ -341,7 +341,7 @@ def mismatch_reasons(assessment: MismatchAssessment | None, /, *, calibrated: bo
 UNSEEN_MISMATCH = (
     "not seen by any check, and possible in any trial: a thorax ellipsoid that sits too high or is stretched "
     "vertically for this subject leaves the residuals and the contact points as they are while the GH angles in "
-    "ISB's Y-X'-Y'' move by up to 10 deg (benchmarks/README.md, Model mismatch); the skin over the scapula "
+    "ISB's Y-X'-Y'' move by up to 10 deg (studies/README.md, Model mismatch); the skin over the scapula "
     "sliding as a whole leaves small residuals too (that part is in each angle's uncertainty, <angle>_u_deg). "
     "A scapula trial (`--scapula-trial`) fits the ellipsoid to the subject; read GH in Phadke's sequence")
 

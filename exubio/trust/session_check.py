@@ -34,7 +34,7 @@ MIN_MARKERS = 3
 it) are not judged: one distance changes with posture far more than a configuration does."""
 
 SHIFT_MM = 6.0
-"""Measured on the sessions of ../shared/data (``python benchmarks/session_consistency.py``):
+"""Measured on the sessions of ../shared/data (``python studies/session_consistency.py``):
 same-session static/task pairs 0.7-4.2 mm (scapula) and 1.6-3.0 mm (humerus); statics of the
 other session 8.7-12.4 mm and 6.9-9.0 mm. 6 mm sits 1.4x above the largest same-session value."""
 

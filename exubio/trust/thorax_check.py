@@ -27,7 +27,7 @@ from exubio.types import Model, Protocol, Trajectories
 __all__ = ["SWAP_RATIO", "ThoraxLabels", "check_thorax_labels", "thorax_label_fit"]
 
 SWAP_RATIO = 1.5
-"""Measured on the 10 real trials of ../shared/data (``python benchmarks/thorax_labels.py``): as
+"""Measured on the 10 real trials of ../shared/data (``python studies/thorax_labels.py``): as
 labelled, the file's labels are the best assignment on every trial (7.5-29.3 mm RMS: the generic
 thorax is not the subject's), the next one 1.62-1.87 times worse; with any two landmarks exchanged
 (54 cases: 6 pairs on 8 C3D trials, 3 on 2 TRC trials) the file's labels fit 1.62-8.66 times worse

@@ -6,7 +6,7 @@ thorax and clavicle markers were not shared. What is assumed, stated in every ou
 (``ThoraxAssumption.text``):
 
 * **The thorax is fixed in the lab** (the subject stands still; measured cost on simulated trials:
-  ``benchmarks/README.md``, "Bone truth"). Its ISB frame: Y = the lab's vertical, which is the lab
+  ``studies/README.md``, "Bone truth"). Its ISB frame: Y = the lab's vertical, which is the lab
   axis closest to the humerus's long axis in the rest posture (the arm hangs); X (anterior) turned
   about Y so that the scapula's TS->AA direction, seen from above, makes the generic model's rest
   angle with the thorax's Z axis (the scapula's rest protraction is the generic model's); the origin

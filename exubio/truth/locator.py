@@ -381,7 +381,7 @@ def calibration_trials(trials: Iterable[LocatorTrial], /, *, plane: str, elevati
 
 
 # ----------------------------------------------------------------------------------------------
-# The recommended calibration (benchmarks/README.md, "Scapula calibration against the locator")
+# The recommended calibration (studies/README.md, "Scapula calibration against the locator")
 # ----------------------------------------------------------------------------------------------
 RECOMMENDED_PLANE = "flex"
 RECOMMENDED_ELEVATIONS = ("45", "120")

@@ -26,7 +26,7 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, /) -> None:
         description="Judge the scapula calibrations a lab can run against a scapula locator (bone truth): for every "
                     "static posture a calibration was not calibrated on, the distance of AA, TS and AI from the "
                     "locator and the error of the ISB scapula frame. Recommended: the double calibration of the "
-                    "skin markers at 45 and 120 deg of flexion (benchmarks/README.md).",
+                    "skin markers at 45 and 120 deg of flexion (studies/README.md).",
         epilog=f"example:\n  {EXAMPLE}\n\n{EXIT_CODES}")
     p.add_argument("file", help="locator CSV (participant, file, system, AA_x ... TS_mean; mm)")
     p.add_argument("--plane", choices=["flex", "abd"], default="flex",

@@ -93,5 +93,5 @@ def bone_checks(bone: BoneTruth | Skipped | None, /) -> tuple[Check, ...]:
         med = float(np.median(cov))
         out.append(Check(what="bone truth: median coverage of +-2u over the ST and GH angles (LS)", value=med,
                          limit=0.90, unit="fraction", kind="aim_min", passed=med >= 0.90,
-                         note="the aim is about 0.95; benchmarks/README.md, exubio against bone"))
+                         note="the aim is about 0.95; studies/README.md, exubio against bone"))
     return tuple(out)

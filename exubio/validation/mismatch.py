@@ -46,7 +46,7 @@ CASES: dict[str, ModelPerturbation] = {
     "GH centre 15 mm up, 10 mm back": P(joint_centre_mm={"humerus": (-10, 15, 0)}),
     "SCAP_IA 20 mm down": P(marker_offset_mm={"SCAP_IA": (0, -20, 0)}),
 }
-"""The perturbations of the section (benchmarks/model_mismatch.py runs a larger grid)."""
+"""The perturbations of the section (studies/model_mismatch.py runs a larger grid)."""
 QUICK_CASES = ("none", "ellipsoid 10 mm posterior, 8 % larger")
 MOTIONS = ("abduction", "flexion", "scaption")
 DURATION_S, RATE_HZ = 5.0, 50.0  # one elevation cycle 10 -> 120 -> 10 deg

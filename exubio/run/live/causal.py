@@ -17,7 +17,7 @@ cubic splines through the whole trial; both look into the future. Here, frame by
    a gap has no velocity: its spring stays off for the step into it (``PFSystem.run_live`` uses a
    spring in a step only if its marker is active at both ends) and comes on from the next one.
 
-What each choice costs in lag is measured in benchmarks/README.md ("Live: causal processing").
+What each choice costs in lag is measured in studies/README.md ("Live: causal processing").
 """
 from __future__ import annotations
 
