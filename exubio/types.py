@@ -16,6 +16,7 @@ import numpy as np
 
 from exubio.errors import InputError, ModelError
 from exubio.short_repr import short_repr
+from exubio.method_registry import Method  # noqa: F401 - a method's name, one of the registry's (re-exported)
 
 # The read-only mappings inside Model and Protocol pickle as what they show, so that loaded objects
 # travel to pool and Dask workers (a session's model and protocol are parsed once, not per trial).
@@ -372,18 +373,6 @@ class MarkerTargets:
     def present(self) -> np.ndarray:
         """(n_frames, n_markers) True where the marker was measured."""
         return ~np.isnan(self.positions_m).any(axis=2)
-
-
-class Method(str, enum.Enum):
-    PF = "pf"  # potential field (Exudyn forward dynamics)
-    LS = "ls"  # constrained least squares per frame
-
-    @classmethod
-    def parse(cls, value: "str | Method") -> "Method":
-        try:
-            return cls(value)
-        except ValueError:
-            raise InputError(f"unknown method '{value}'; valid methods are {[m.value for m in cls]}") from None
 
 
 class _Word(str, enum.Enum):

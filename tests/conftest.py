@@ -1,8 +1,10 @@
 """Fixtures shared by the test modules (the generic model and its kinematics), and the markers that
 show the layers: ``exudyn`` (the test runs the PF engine) and ``slow`` (an end-to-end run: the CLI,
-a study, the real trials, a browser). ``pytest -m "not exudyn and not slow"`` runs the pure layers
+a study, the real trials, a browser). Each test module declares its own (``pytestmark`` at its top,
+or a decorator on one test); nothing here keeps a list. ``pytest -m "not exudyn and not slow"`` runs the pure layers
 alone in seconds; then Exudyn cannot be imported at all, so a test that needs it and is not marked
 fails by name instead of passing unnoticed."""
+import ast
 import importlib.abc
 import signal
 import sys
@@ -27,17 +29,20 @@ class _NoExudyn(importlib.abc.MetaPathFinder):
         return None
 
 
-# Test modules that run the PF engine (Exudyn), and the slow end-to-end ones: every test in them
-# carries the marker. A module importing the PF method at its top is left uncollected when exudyn
-# is deselected (it could not even be imported).
-EXUDYN = {"test_angle_status.py", "test_api.py", "test_api_files.py", "test_session_folder.py", "test_api_face.py", "test_arms.py", "test_atomic_results.py",
-          "test_calibrate.py", "test_cli.py", "test_exudyn_system.py", "test_hold.py", "test_live.py", "test_ls.py",
-          "test_mismatch.py", "test_pf.py", "test_quality.py", "test_rates.py", "test_real_data.py", "test_report.py",
-          "test_run_once.py", "test_streaming.py", "test_study.py", "test_thorax_check.py", "test_trial_report.py",
-          "test_viewer.py", "test_same_outputs.py", "test_resume.py", "test_dynamics_truth.py", "test_study_table.py"}
-SLOW = {"test_marker_sets.py", "test_atomic_results.py", "test_session_folder.py", "test_cli.py", "test_labels.py", "test_permutation.py", "test_real_data.py",
-        "test_session_check.py", "test_study.py", "test_viewer.py", "test_same_outputs.py", "test_resume.py",
-        "test_study_table.py"}
+def _declared_markers(path) -> set[str]:
+    """The markers a test module declares for all its tests (``pytestmark = ...`` at its top), read
+    from its source without importing it: a module that imports the PF engine at its top could not
+    even be imported with Exudyn blocked."""
+    try:
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+    except (OSError, SyntaxError):
+        return set()
+    found: set[str] = set()
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "pytestmark" for t in node.targets):
+            found |= {n.attr for n in ast.walk(node.value) if isinstance(n, ast.Attribute)
+                      and isinstance(n.value, ast.Attribute) and n.value.attr == "mark"}
+    return found
 
 
 def _blocking(config) -> bool:
@@ -50,16 +55,10 @@ def pytest_configure(config):
 
 
 def pytest_ignore_collect(collection_path, config):
-    return True if _blocking(config) and collection_path.name in EXUDYN else None
-
-
-def pytest_collection_modifyitems(config, items):
-    for item in items:
-        name = item.path.name
-        if name in EXUDYN:
-            item.add_marker(pytest.mark.exudyn)
-        if name in SLOW:
-            item.add_marker(pytest.mark.slow)
+    """With Exudyn deselected, a module that declares ``pytest.mark.exudyn`` is not even imported."""
+    if _blocking(config) and collection_path.suffix == ".py" and collection_path.name.startswith("test_"):
+        return True if "exudyn" in _declared_markers(collection_path) else None
+    return None
 
 
 @pytest.fixture(scope="module")

@@ -17,6 +17,8 @@ from exubio.run.inputs import load_model_and_protocol, protocol_for_model
 from exubio.io.resources import shipped_file
 from exubio.synth.simulate import reference_postures
 
+pytestmark = pytest.mark.exudyn
+
 SHOULDER_MEASURED = ("SC_Y_protraction", "SC_X_elevation", "ST_Y_internal_rotation", "ST_X_upward_rotation",
                      "ST_Z_posterior_tilt", "GH_phadke_X_elevation", "GH_phadke_Z_flexion",
                      "GH_phadke_Y_internal_rotation", "HT_X_elevation", "elbow_flexion", "forearm_pronation",

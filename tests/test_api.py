@@ -12,6 +12,8 @@ import pytest
 import exubio
 from exubio.cli import main
 
+pytestmark = pytest.mark.exudyn
+
 PAGE = Path(__file__).resolve().parents[1] / "docs" / "python-api.md"
 
 
@@ -84,7 +86,7 @@ def test_methods_come_from_one_registry_and_options_are_checked():
     from exubio.types import Method
     from exubio.io.resources import shipped_file
 
-    assert set(REGISTRY) == {m.value for m in Method}
+    assert {Method.PF, Method.LS} <= set(REGISTRY)  # the shipped two; tests/test_third_method.py adds one
     trial = exubio.read_trial(shipped_file("exubio.data", "example_abduction.c3d", "exubio/data"))
     with pytest.raises(exubio.InputError, match=r"unknown option\(s\) \['tol'\].*tol_rad"):
         exubio.reconstruct(trial, method="ls", tol=1e-6)

@@ -11,6 +11,8 @@ import exubio
 from exubio.cli import main
 from exubio.io.resources import shipped_file
 
+pytestmark = pytest.mark.exudyn
+
 EXAMPLE = shipped_file("exubio.data", "example_abduction.c3d", "exubio/data")
 FACE = {"read_trial", "load_model", "load_protocol", "calibrate", "reconstruct", "assess", "angles", "angle_status",
         "to_dataframe", "write_results", "simulate", "rhythm", "load_study", "Trajectories", "Model", "Protocol", "Reconstruction"}

@@ -67,7 +67,7 @@ def test_what_draws_results_never_imports_a_solver(module):
 # decides: the validation study's typed records sit below the report that draws them, the study
 # itself above the run layer it drives).
 LAYERS = (
-    ("exubio.errors", "exubio.types", "exubio.short_repr"),
+    ("exubio.errors", "exubio.types", "exubio.short_repr", "exubio.method_registry"),
     ("exubio.io", "exubio.truth.sta_format"),  # the reader of bone-referenced trials is an io module
     ("exubio.model",),
     ("exubio.dynamics",),  # inverse dynamics: numpy on the model's kinematics, no solver, no Exudyn

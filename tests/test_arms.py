@@ -21,6 +21,8 @@ from exubio.io.resources import shipped_file
 from exubio.synth.simulate import simulate_trial
 from exubio.types import Trajectories
 
+pytestmark = pytest.mark.exudyn
+
 BASE = shipped_file("exubio.protocols", "upper_limb_21.yaml", "protocols")
 MIRROR = np.diag([1.0, 1.0, -1.0])
 

@@ -22,6 +22,8 @@ from exubio.io.results import read_npz
 from exubio.model.load import load_model
 from exubio.synth.simulate import Motion, simulate_trial
 
+pytestmark = [pytest.mark.exudyn, pytest.mark.slow]
+
 SET_FILES = ("csv", "mot", "npz", "summary.json")  # one method's result set
 TIMEOUT = 120
 

@@ -29,6 +29,8 @@ from exubio.io.resources import shipped_file
 from exubio.synth.simulate import simulate_trial
 from exubio.types import Trajectories
 
+pytestmark = pytest.mark.exudyn
+
 TRUE_SCALE = {"thorax": 1.05, "humerus": 1.10, "ulna": 0.95, "radius": 0.95, "hand": 1.05}
 MARKER_SHIFT_M = 0.005  # every marker of the subject sits 5 mm (random direction) off the generic one
 TRC_PROTOCOL = shipped_file("exubio.protocols", "thoracoscapular_9.yaml", "protocols")

@@ -12,6 +12,8 @@ from exubio.io.results import read_angles_csv, read_mot, read_npz
 from exubio.model.load import load_model
 from exubio.synth.simulate import Motion, simulate_trial
 
+pytestmark = [pytest.mark.exudyn, pytest.mark.slow]
+
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 PROTOCOL = Path(__file__).resolve().parents[1] / "protocols" / "upper_limb_21.yaml"
 

@@ -86,6 +86,8 @@ def _checked(page: str, lang: str, body: str, api: bool) -> str | None:
         runs = [line for line in lines if not (line.startswith("exubio ") or line.startswith("python3 -m venv ")
                                                or line.startswith("python -m mkdocs build"))]
         return None if runs else "tests/test_readme_examples.py, .ci/run, this file"
+    if lang == "python" and page == "docs/architecture.md" and "MethodSpec(" in body:
+        return "tests/test_third_method.py (the registry line, evaluated)"
     if lang == "python":
         return "tests/test_api.py" if api and page == "docs/python-api.md" else None
     if lang == "yaml" and "name: lab_15" in body and page == "docs/protocols.md":

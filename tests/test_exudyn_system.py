@@ -3,6 +3,8 @@ marker data tracked back to the motion that made them."""
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.exudyn
+
 pytest.importorskip("exudyn")
 
 from exubio.backend.exudyn_system import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD, IntegratorOptions, PFSystem, SpringSet  # noqa: E402

@@ -14,6 +14,8 @@ from exubio.prep.targets import prepare_targets
 from exubio.protocol.load import load_protocol
 from exubio.synth.simulate import Motion, simulate_trial
 
+pytestmark = pytest.mark.exudyn
+
 
 @pytest.fixture(scope="module")
 def setup():

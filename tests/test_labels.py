@@ -21,6 +21,8 @@ from exubio.model.kinematics import Kinematics
 from exubio.run.inputs import protocol_for_model
 from exubio.synth.simulate import simulate_trial
 
+pytestmark = pytest.mark.slow
+
 REPO = Path(__file__).resolve().parents[1]
 C3D = Path(__file__).resolve().parents[2] / "shared" / "data" / "c3d"
 SESSION = REPO / "protocols" / "examples" / "kinova_martin_session.yaml"

@@ -33,6 +33,8 @@ from exubio.run.inputs import load_model_and_protocol
 from exubio.io.resources import shipped_file
 from exubio.types import Trajectories
 
+pytestmark = pytest.mark.exudyn
+
 EXAMPLE = Path(shipped_file("exubio.data", "example_abduction.c3d", "exubio/data"))
 N_SHORT = 400  # 4 s of the example at 100 Hz
 

@@ -12,6 +12,8 @@ from exubio.prep.targets import prepare_targets
 from exubio.synth.simulate import Motion, simulate_trial
 from exubio.types import MarkerTargets
 
+pytestmark = pytest.mark.exudyn
+
 
 @pytest.fixture(scope="module")
 def model_protocol():

@@ -20,6 +20,8 @@ from exubio.run.inputs import protocol_for_model
 from exubio.trust.assess import angle_status_of_protocol
 from exubio.trust.observability import AngleStatus
 
+pytestmark = pytest.mark.slow
+
 SETS = {"plug_in_gait_upper": "plug_in_gait_upper_left", "isb_landmarks": "isb_landmarks_left"}
 
 

@@ -21,6 +21,8 @@ from exubio.prep.targets import prepare_targets
 from exubio.synth.simulate import reference_postures, simulate_trial
 from exubio.validation.mismatch import measured_angle_errors
 
+pytestmark = pytest.mark.exudyn
+
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "data"
 

@@ -38,6 +38,7 @@ def test_a_swap_in_a_frame_range_is_found_there_and_repaired_exactly():
     np.testing.assert_array_equal(fixed.positions_m, traj.positions_m)
 
 
+@pytest.mark.slow  # reconstructions end to end (about 3-4 s)
 def test_the_verdict_fails_on_a_partial_swap_and_repair_labels_reports_the_frames(tmp_path):
     traj = read_trial(TRIAL)
     path = write_c3d(tmp_path / "jump.c3d", _exchanged(traj, "ARM", "DELT", 100, 260))

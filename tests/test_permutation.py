@@ -15,7 +15,7 @@ from exubio.prep.targets import prepare_targets
 from exubio.protocol.labels import relabel_trajectories
 
 C3D = Path(__file__).resolve().parents[2] / "shared" / "data" / "c3d"
-pytestmark = pytest.mark.skipif(not C3D.is_dir(), reason=f"real data folder {C3D} is absent")
+pytestmark = [pytest.mark.slow, pytest.mark.skipif(not C3D.is_dir(), reason=f"real data folder {C3D} is absent")]
 SESSION = Path(__file__).resolve().parents[1] / "protocols" / "examples" / "kinova_martin_session.yaml"
 
 

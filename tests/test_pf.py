@@ -6,6 +6,8 @@ import dataclasses
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.exudyn
+
 pytest.importorskip("exudyn")
 
 from exubio.errors import ReconstructionError  # noqa: E402
@@ -15,7 +17,7 @@ from exubio.methods.constraints import project_on_constraints  # noqa: E402
 from exubio.methods.pf import PFOptions, reconstruct_pf  # noqa: E402
 from exubio.methods.pf_time import integration_step  # noqa: E402
 from exubio.run.pipeline import reconstruct  # noqa: E402
-from exubio.run.inputs import load_model_and_protocol
+from exubio.run.inputs import load_model_and_protocol  # noqa: E402
 from exubio.prep.targets import prepare_targets  # noqa: E402
 from exubio.synth.simulate import Motion, simulate_trial  # noqa: E402
 from exubio.types import MarkerTargets  # noqa: E402

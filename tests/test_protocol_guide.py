@@ -101,6 +101,7 @@ def test_the_guide_protocol_for_a_set_exubio_does_not_ship_measures_what_it_says
     assert summ["quality"]["verdict"] == "ok"
 
 
+@pytest.mark.slow  # calibrations and reconstructions end to end (about 3-4 s)
 def test_technical_markers_written_30_mm_off_are_caught_and_a_static_calibration_reduces_the_error(lab, capsys):
     folder, protocol = lab
     trial, truth = _simulated(folder, protocol, capsys)

@@ -67,6 +67,7 @@ def test_a_static_marker_missing_from_most_frames_is_named_as_missing(tmp_path, 
     assert "nan" not in err and "Traceback" not in err
 
 
+@pytest.mark.slow  # a calibration and a reconstruction end to end (about 6-11 s)
 def test_a_swap_in_the_static_and_the_trial_gets_one_fix_for_both(tmp_path, trial):
     swap = {"ULNA": "RADIUS", "RADIUS": "ULNA"}
     static = write_c3d(tmp_path / "static.c3d", _renamed(trial, swap))
@@ -86,6 +87,7 @@ def test_a_swap_in_the_static_and_the_trial_gets_one_fix_for_both(tmp_path, tria
     assert not [r for r in _reasons(out2 / "trial.ls.summary.json", "label") if "swap" in r["message"]]
 
 
+@pytest.mark.slow  # a reconstruction end to end (about 3-6 s)
 def test_a_swap_when_calibrating_on_the_trials_own_frames_gets_only_relabel(tmp_path, trial):
     """No separate static: the fix is --relabel alone (it is applied before the calibration)."""
     path = write_c3d(tmp_path / "trial.c3d", _renamed(trial, {"ULNA": "RADIUS", "RADIUS": "ULNA"}))

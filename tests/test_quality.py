@@ -12,6 +12,8 @@ from exubio.io.c3d import write_c3d
 from exubio.model.load import load_model
 from exubio.synth.simulate import Motion, simulate_trial
 
+pytestmark = pytest.mark.exudyn
+
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "c3d"
 
 

@@ -15,6 +15,8 @@ from exubio.validation.rates import (PF_AIM_QD_DEG_S, PF_AIM_QDD_DEG_S2, finite_
 from exubio.validation.results import Rates
 from exubio.validation.settings import QUICK_SETTINGS
 
+pytestmark = pytest.mark.exudyn
+
 
 @pytest.fixture(scope="module")
 def noise_free():

@@ -89,6 +89,7 @@ def test_the_readme_has_the_examples_this_test_runs():
         "an example names a file of the checkout: it does not run after pip install"
 
 
+@pytest.mark.slow  # the commands end to end, 2-12 s each (about 90 s in all)
 @pytest.mark.parametrize("line", [line for line in readme_lines()])
 def test_a_readme_example_runs_from_a_folder_outside_the_checkout(line, inputs, tmp_path):
     skip = next((why for key, why in NOT_RUN.items() if key in line), None)

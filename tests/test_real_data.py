@@ -18,7 +18,7 @@ from exubio.prep.targets import prepare_targets
 from exubio.io.resources import shipped_file
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
-pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"real data folder {DATA} is absent")
+pytestmark = [pytest.mark.exudyn, pytest.mark.slow, pytest.mark.skipif(not DATA.is_dir(), reason=f"real data folder {DATA} is absent")]
 
 TRC_PROTOCOL = shipped_file("exubio.protocols", "thoracoscapular_9.yaml", "protocols")
 PAPER_MAX_FRAME_MEAN_MM = 19.0

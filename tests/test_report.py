@@ -27,6 +27,8 @@ from exubio.validation.paths import portable_paths, shared_data_dir
 from exubio.validation.results import DATA_NPZ, RUNS_JSON, TABLE1_JSON
 from exubio.validation.trials import real_trial, why_no_real_trial
 
+pytestmark = pytest.mark.exudyn
+
 PACKAGE = Path(__file__).resolve().parents[1] / "exubio"
 SOLVER_MODULES = ("exubio.methods", "exubio.backend", "exubio.run.pipeline", "exudyn", "exubio.calibration",
                   "exubio.validation.run", "exubio.validation.trials")

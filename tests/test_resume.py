@@ -15,6 +15,8 @@ from exubio.io.c3d import write_c3d
 from exubio.model.load import load_model
 from exubio.synth.simulate import Motion, simulate_trial
 
+pytestmark = [pytest.mark.exudyn, pytest.mark.slow]
+
 KINDS = ("csv", "mot", "npz", "summary.json")
 
 

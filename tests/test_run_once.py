@@ -12,6 +12,8 @@ import pytest
 from exubio.cli import main
 from exubio.io.resources import shipped_file
 
+pytestmark = pytest.mark.exudyn
+
 EXAMPLE = shipped_file("exubio.data", "example_abduction.c3d", "exubio/data")
 
 

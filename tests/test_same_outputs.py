@@ -17,6 +17,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = [pytest.mark.exudyn, pytest.mark.slow]
+
 ROOT = Path(__file__).resolve().parents[1]
 BASE = "f64e71d"  # after issue 33 (the changes on purpose: benchmarks/same_outputs.py, KNOWN_CHANGES)
 EXPECTED = {"demo/example_abduction.report.png": "page 1 names exubio/trust/quality.py (was exubio/quality.py) and is laid out anew (reasons shared by the methods once, measured text, a larger picture)"}

@@ -14,7 +14,7 @@ from exubio.prep.targets import prepare_targets
 from exubio.trust.session_check import placed_anew, static_consistency
 
 C3D = Path(__file__).resolve().parents[2] / "shared" / "data" / "c3d"
-pytestmark = pytest.mark.skipif(not C3D.is_dir(), reason=f"real data folder {C3D} is absent")
+pytestmark = [pytest.mark.slow, pytest.mark.skipif(not C3D.is_dir(), reason=f"real data folder {C3D} is absent")]
 
 KINOVA_STATIC = "bioptim_exo_kinova_martin_statique.c3d"
 MARTIN_STATIC = "bioptim_exo_martin_statique.c3d"

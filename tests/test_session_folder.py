@@ -11,7 +11,7 @@ import pytest
 
 from exubio.cli import main
 
-pytestmark = pytest.mark.exudyn
+pytestmark = [pytest.mark.slow, pytest.mark.exudyn]
 
 
 @pytest.fixture(scope="module")

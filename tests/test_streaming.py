@@ -19,6 +19,8 @@ from exubio.methods.pf import PFOptions, reconstruct_pf, stream_pf
 from exubio.run.pipeline import RunSettings, load_inputs, reconstruct_file
 from exubio.io.resources import shipped_file
 
+pytestmark = pytest.mark.exudyn
+
 EXAMPLE = shipped_file("exubio.data", "example_abduction.c3d", "exubio/data")
 
 

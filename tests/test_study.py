@@ -21,6 +21,8 @@ from exubio.model.load import load_model
 from exubio.synth.simulate import simulate_trial, write_simulated_trial
 from exubio.run.study import DONE_FILE, load_study
 
+pytestmark = [pytest.mark.exudyn, pytest.mark.slow]
+
 MODEL = Path(__file__).resolve().parents[1] / "models" / "upper_extremity.yaml"
 
 

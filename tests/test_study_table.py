@@ -19,6 +19,8 @@ from exubio.io.results import read_angles_csv, read_npz_arrays
 from exubio.model.load import load_model
 from exubio.synth.simulate import simulate_trial, write_simulated_trial
 
+pytestmark = [pytest.mark.exudyn, pytest.mark.slow]
+
 
 def _trial(path: Path, motion: str, seed: int) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)

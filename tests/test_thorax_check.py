@@ -19,6 +19,8 @@ from exubio.io.resources import shipped_file
 from exubio.synth.simulate import simulate_trial
 from exubio.trust.thorax_check import check_thorax_labels, thorax_label_fit
 
+pytestmark = pytest.mark.exudyn
+
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"real data folder {DATA} is absent")
 

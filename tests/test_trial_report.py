@@ -20,6 +20,8 @@ from exubio.model.load import load_model
 from exubio.report import trial_report as tr
 from exubio.synth.simulate import simulate_trial
 
+pytestmark = pytest.mark.exudyn
+
 
 def _without_date(pdf: bytes) -> bytes:
     return re.sub(rb"/CreationDate \(D:[0-9Z'+-]+\)", b"", pdf)

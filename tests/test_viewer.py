@@ -28,6 +28,8 @@ from exubio.run.pipeline import reconstruct_file
 from exubio.io.resources import shipped_file
 from exubio.report.viewer import MAX_ANIMATION_FRAMES, find_results, write_view
 
+pytestmark = [pytest.mark.exudyn, pytest.mark.slow]
+
 EXAMPLE = shipped_file("exubio.data", "example_abduction.c3d", "exubio/data")
 BONE_RGB = (0x7A, 0x4B, 0x1E)  # exubio.report.viewer._BONE_COLOUR
 

@@ -20,6 +20,7 @@ from matplotlib.patches import Rectangle
 
 from exubio.io.results import atomic_write
 from exubio.report.calibration_page import short_paths
+from exubio.method_registry import method_names, method_style
 
 __all__ = ["build_study_report"]
 
@@ -43,11 +44,15 @@ class _Column:
     spec: str = ""  # a number's format; "" for text, which wraps
 
 
-_COLUMNS = (_Column("subject", "subject", 14), _Column("session", "session", 14), _Column("trial", "trial", 30),
-            _Column("status", "status", 9), _Column("PF", "pf_verdict", 6), _Column("LS", "ls_verdict", 6),
-            _Column("frames", "frames", 8, "d"), _Column("PF res mm", "pf_residual_mm", 11, ".2f"),
-            _Column("LS res mm", "ls_residual_mm", 11, ".2f"), _Column("PF-LS deg", "pf_ls_max_rmse_deg", 11, ".2f"),
-            _Column("wall s", "wall_s", 8, ".1f"), _Column("why: a failure, every check and fail reason", "error", 0))
+def _columns() -> tuple[_Column, ...]:
+    """The table's columns: per method of exubio.method_registry its verdict and mean residual."""
+    labels = {m: method_style(m).label for m in method_names()}
+    return (_Column("subject", "subject", 14), _Column("session", "session", 14), _Column("trial", "trial", 30),
+            _Column("status", "status", 9), *(_Column(lab, f"{m}_verdict", 6) for m, lab in labels.items()),
+            _Column("frames", "frames", 8, "d"), *(_Column(f"{lab} res mm", f"{m}_residual_mm", 11, ".2f")
+                                                   for m, lab in labels.items()),
+            _Column("PF-LS deg", "pf_ls_max_rmse_deg", 11, ".2f"), _Column("wall s", "wall_s", 8, ".1f"),
+            _Column("why: a failure, every check and fail reason", "error", 0))
 
 
 def _char_width() -> float:
@@ -63,8 +68,8 @@ def _line() -> float:
 def _widths() -> list[int]:
     """Every column's width in characters; the reason takes what the others leave."""
     total = int((_RIGHT - _LEFT) / _char_width())
-    fixed = sum(c.chars for c in _COLUMNS if c.chars)
-    return [c.chars or total - fixed for c in _COLUMNS]
+    fixed = sum(c.chars for c in _columns() if c.chars)
+    return [c.chars or total - fixed for c in _columns()]
 
 
 def _wrap(text: str, width: int) -> list[str]:
@@ -98,7 +103,7 @@ def _cell(row: dict, col: _Column) -> str:
 def _worst(row: dict) -> str:
     if row.get("status") == "failed":
         return "fail"
-    verdicts = [v for v in (row.get("pf_verdict"), row.get("ls_verdict")) if v in _ORDER]
+    verdicts = [v for v in (row.get(f"{m}_verdict") for m in method_names()) if v in _ORDER]
     return max(verdicts, key=_ORDER.index, default="")
 
 
@@ -108,7 +113,7 @@ MAX_CELL_LINES = 8
 
 def _row_lines(row: dict, widths: list[int]) -> list[list[str]]:
     cells = []
-    for c, w in zip(_COLUMNS, widths):
+    for c, w in zip(_columns(), widths):
         lines = _wrap(_cell(row, c), w - 1)
         if len(lines) > MAX_CELL_LINES:
             more = " ... (in full in study.json)"
@@ -119,7 +124,7 @@ def _row_lines(row: dict, widths: list[int]) -> list[list[str]]:
 
 def _tallies(rows: list[dict]) -> str:
     out = []
-    for method, key in (("PF", "pf_verdict"), ("LS", "ls_verdict")):
+    for method, key in ((method_style(m).label, f"{m}_verdict") for m in method_names()):
         n = {v: sum(r.get(key) == v for r in rows) for v in _ORDER}
         if sum(n.values()):
             out.append(f"{method}: " + ", ".join(f"{k} {v}" for k, v in n.items()))
@@ -158,7 +163,7 @@ def _draw_table(fig: Figure, rows: list[tuple[dict, list[list[str]]]], widths: l
     xs = [_LEFT]
     for w in widths[:-1]:
         xs.append(xs[-1] + w * cw)
-    for x, c in zip(xs, _COLUMNS):
+    for x, c in zip(xs, _columns()):
         fig.text(x, top, c.head, fontsize=_SIZE, family="monospace", weight="bold", va="top")
     y = top - line * 1.3
     for row, cells in rows:

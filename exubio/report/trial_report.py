@@ -36,8 +36,8 @@ from exubio.errors import InputError
 from exubio.io.results import atomic_write, read_angles_csv, read_npz, read_npz_arrays, read_npz_metadata
 from exubio.types import FrameStatus, Reconstruction
 from exubio.report.calibration_page import calibration_page, short_paths
+from exubio.method_registry import REGISTRY, method_style
 
-_COLOURS = {"pf": "black", "ls": "tab:red"}
 _JOINTS = (("SC (ISB Y-X'-Z'')", "SC_"), ("AC (ISB Y-X'-Z'')", "AC_"), ("ST (ISB Y-X'-Z'')", "ST_"),
            ("GH (ISB Y-X'-Y'')", ("GH_Y_", "GH_X_")), ("GH (Phadke X-Z'-Y'')", "GH_phadke_"),
            ("HT (ISB Y-X'-Y'')", "HT_"), ("elbow, forearm,\nwrist", ("elbow_", "forearm_", "wrist_")))
@@ -475,7 +475,7 @@ def angles_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[st
     axes = fig.axes
     status = (next(iter((summaries or {}).values()), {}).get("anatomical_angles") or {}).get("status") or {}
     palette = ("tab:blue", "tab:orange", "tab:green", "tab:purple")
-    method_style = {"pf": ("-", 2.0, 0.75), "ls": ((0, (4, 2)), 1.1, 1.0)}
+    line_style = {m.name: (m.style.linestyle, m.style.linewidth, m.style.alpha) for m in REGISTRY.values()}
     for ax, (label, _), idx in zip(axes, _JOINTS, groups):
         handles = {}
         for k, i in enumerate(idx):
@@ -483,7 +483,7 @@ def angles_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[st
             grey = state != "measured"
             colour = "silver" if grey else palette[k % len(palette)]
             for method, a in angles.items():
-                ls_, lw, alpha = method_style.get(method, ("-", 1.0, 1.0))
+                ls_, lw, alpha = line_style.get(method, ("-", 1.0, 1.0))
                 (h,) = ax.plot(*_envelope(a.time_s, np.rad2deg(a.values_rad[:, i])), ls=ls_, lw=lw, alpha=alpha,
                                color=colour)
                 handles.setdefault(names[i] + (f" ({state})" if grey else ""), h)
@@ -496,8 +496,8 @@ def angles_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[st
                   frameon=False)
         ax.tick_params(labelsize=6.5)
     axes[-1].set_xlabel("time (s)")
-    key = [Line2D([], [], color="dimgrey", ls=method_style[r.method][0], lw=method_style[r.method][1],
-                  label=r.method.upper()) for r in recons if r.method in method_style]
+    key = [Line2D([], [], color="dimgrey", ls=line_style[r.method][0], lw=line_style[r.method][1],
+                  label=r.method.upper()) for r in recons if r.method in line_style]
     if truth is not None:
         key.append(Line2D([], [], color="black", ls=":", lw=1.2, label=truth.label))
     fig.legend(handles=key, loc="upper right", ncol=len(key), fontsize=8, frameon=False)
@@ -523,7 +523,7 @@ def residuals_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict
     markers = recons[0].marker_names
     for k, r in enumerate(recons):
         mean, sd = per_frame_residuals_mm(r)
-        c = _COLOURS.get(r.method, None)
+        c = method_style(r.method).colour
         t_d, mean_d, sd_d = _envelope(r.time_s, mean, sd)
         ax_t.plot(t_d, mean_d, color=c, lw=1.0, label=f"{r.method.upper()} mean over markers")
         ax_t.fill_between(t_d, mean_d - sd_d, mean_d + sd_d, color=c, alpha=0.12, lw=0, label=f"{r.method.upper()} ± SD")

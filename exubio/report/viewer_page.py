@@ -26,11 +26,11 @@ from exubio.report.viewer_scene import (
     _SceneData,
 )
 from exubio.types import Model
+from exubio.method_registry import method_style
 
 log = logging.getLogger(__name__)
 
 MAX_ANIMATION_FRAMES = 300
-_METHOD_TITLES = {"pf": "PF (potential field)", "ls": "LS (least squares)"}
 _VERDICT_COLOURS = {"ok": "#2ca02c", "check": "#ff7f0e", "fail": "#d62728"}
 _BONE_COLOUR = "#7a4b1e"
 _MEASURED_COLOUR = "#1f4fd1"
@@ -182,7 +182,7 @@ def _figure(results, scenes, seg_of, times, bone_labels, model, trial, *, frames
             "camera": {"up": {"x": 0, "y": 1, "z": 0}, "eye": {"x": 1.55, "y": 0.3, "z": 0.85},
                        "center": {"x": 0, "y": 0, "z": 0}},
         }
-        title = _METHOD_TITLES.get(res.recon.method, res.recon.method.upper())
+        title = method_style(res.recon.method).title
         res_txt = f"{sc.mean_residual_mm:.2f} mm" if math.isfinite(sc.mean_residual_mm) else "n/a"
         layout["annotations"].append({
             "text": f"<b>{html.escape(title)}</b> — verdict {_verdict_html(res).split(': ', 1)[1]}, "

@@ -16,10 +16,10 @@ import numpy as np
 from exubio.errors import ExubioError, InputError
 from exubio.io.results import read_npz, read_npz_metadata
 from exubio.types import Model, Reconstruction
+from exubio.method_registry import method_names
 
 log = logging.getLogger(__name__)
 
-_METHOD_ORDER = ("pf", "ls")
 
 
 @dataclass
@@ -33,7 +33,8 @@ class _Result:
 
 
 def _method_rank(method: str) -> tuple[int, str]:
-    return (_METHOD_ORDER.index(method) if method in _METHOD_ORDER else len(_METHOD_ORDER), method)
+    order = method_names()
+    return (order.index(method) if method in order else len(order), method)
 
 
 def _method_from_name(path: Path) -> str | None:

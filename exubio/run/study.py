@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
 from exubio.io.resources import shipped_beside
 from exubio.io.yaml import read_yaml
 from exubio.errors import ExubioError, InputError
+from exubio.method_registry import method_names
 from exubio.run import interrupt, study_table
 from exubio.run.executors import run_all
 from exubio.run.study_leftovers import _TMP_PREFIX, _remove_after_dask, clean_leftovers
@@ -54,8 +55,15 @@ DONE_FILE = "DONE.json"
 _STUDY_KEYS = {"schema_version", "name", "methods", "report", "sessions"}
 _SESSION_KEYS = {"subject", "session", "protocol", "model", "static", "functional", "scapula_trial", "static_frames",
                  "trials", "methods", "relabel", "static_relabel", "trial_relabel", "tasks"}
-STUDY_COLUMNS = ("subject", "session", "trial", "status", "pf_verdict", "ls_verdict", "frames", "pf_residual_mm",
-                 "ls_residual_mm", "pf_ls_max_rmse_deg", "wall_s", "folder", "error", "reasons")
+def study_columns() -> tuple[str, ...]:
+    """study.csv's columns: per method of exubio.method_registry its verdict and mean residual."""
+    methods = method_names()
+    return ("subject", "session", "trial", "status", *(f"{m}_verdict" for m in methods), "frames",
+            *(f"{m}_residual_mm" for m in methods), "pf_ls_max_rmse_deg", "wall_s", "folder", "error", "reasons")
+
+
+STUDY_COLUMNS = study_columns()
+"""The columns with the shipped methods (pf, ls): study_columns() also lists a method added since."""
 
 
 @dataclass(frozen=True)
@@ -116,10 +124,10 @@ class TrialOutcome:
     reasons: str = ""  # every check and fail reason of every method's verdict ("PF check: ...; LS fail: ...")
 
     def row(self) -> dict[str, Any]:
+        methods = method_names()
         return {"subject": self.subject, "session": self.session, "trial": Path(self.trial).name,
-                "status": self.status, "pf_verdict": self.verdicts.get("pf", ""),
-                "ls_verdict": self.verdicts.get("ls", ""), "frames": self.frames,
-                "pf_residual_mm": self.residual_mm.get("pf"), "ls_residual_mm": self.residual_mm.get("ls"),
+                "status": self.status, **{f"{m}_verdict": self.verdicts.get(m, "") for m in methods},
+                "frames": self.frames, **{f"{m}_residual_mm": self.residual_mm.get(m) for m in methods},
                 "pf_ls_max_rmse_deg": self.pf_ls_max_rmse_deg, "wall_s": self.wall_s, "folder": self.folder,
                 "error": self.error, "reasons": self.reasons}
 
@@ -141,8 +149,9 @@ def _path(value: Any, base: Path, where: str) -> Path | None:
 def _methods(value: Any, where: str) -> tuple[str, ...]:
     if isinstance(value, str):
         value = [value]
-    if not isinstance(value, list) or not value or any(m not in ("pf", "ls") for m in value):
-        raise InputError(f"{where}: methods must be a list of 'pf' and/or 'ls', got {value!r}")
+    if not isinstance(value, list) or not value or any(m not in method_names() for m in value):
+        raise InputError(f"{where}: methods must be a list of {' and/or '.join(map(repr, method_names()))}, "
+                         f"got {value!r}")
     return tuple(dict.fromkeys(value))
 
 
@@ -371,10 +380,10 @@ def plan(spec: StudySpec, out_dir: Path) -> tuple[list[TrialTask], list[TrialOut
             if t not in pending:
                 done = json.loads((trial_dirs[t] / DONE_FILE).read_text(encoding="utf-8")).get("outcome", {})
                 o = TrialOutcome(s.subject, s.session, str(t), str(trial_dirs[t]), "skipped (complete)",
-                                 verdicts={m: done.get(f"{m}_verdict") for m in ("pf", "ls") if done.get(f"{m}_verdict")},
+                                 verdicts={m: done.get(f"{m}_verdict") for m in method_names() if done.get(f"{m}_verdict")},
                                  frames=done.get("frames"), wall_s=done.get("wall_s"),
                                  pf_ls_max_rmse_deg=done.get("pf_ls_max_rmse_deg"), reasons=done.get("reasons") or "",
-                                 residual_mm={m: done.get(f"{m}_residual_mm") for m in ("pf", "ls")
+                                 residual_mm={m: done.get(f"{m}_residual_mm") for m in method_names()
                                               if done.get(f"{m}_residual_mm") is not None})
                 skipped.append(o)
         if not pending:
@@ -407,10 +416,11 @@ def write_table(out_dir: Path, spec: StudySpec, outcomes: Iterable[TrialOutcome]
              enumerate((s, t) for s in spec.sessions for t in s.trials)}
     rows = [o.row() for o in sorted(outcomes, key=lambda o: order.get((o.subject, o.session, o.trial), 1 << 30))]
     buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=STUDY_COLUMNS, lineterminator="\n")
+    columns = study_columns()
+    w = csv.DictWriter(buf, fieldnames=columns, lineterminator="\n")
     w.writeheader()
     for r in rows:
-        w.writerow({k: ("" if r[k] is None else r[k]) for k in STUDY_COLUMNS})
+        w.writerow({k: ("" if r[k] is None else r[k]) for k in columns})
     csv_path = atomic_write(out_dir / "study.csv", lambda tmp: tmp.write_text(buf.getvalue(), encoding="utf-8"))
     json_path = write_json(out_dir / "study.json", {
         "study": spec.name, "source": str(spec.source), "trials": rows,

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Iterable
 import numpy as np
 
 from exubio.errors import InputError
+from exubio.method_registry import method_names
 from exubio.io.results import atomic_write, read_angles_csv, read_npz_arrays
 from exubio.trust.observability import AngleStatus
 
@@ -111,7 +112,7 @@ def table_trials(spec, outcomes: Iterable) -> list[tuple[dict, Path]]:
             o = by_key.get((s.subject, s.session, str(t)))
             if o is None or o.status == "failed" and not o.verdicts:
                 continue
-            for m in ("pf", "ls"):
+            for m in method_names():
                 npz = Path(o.folder) / f"{t.stem}.{m}.npz"
                 if npz.is_file():
                     out.append(({"subject": s.subject, "session": s.session, "trial": t.stem, "task": s.tasks.get(t.name, t.stem),

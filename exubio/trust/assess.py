@@ -10,12 +10,13 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from exubio.trust import quality as Q
+from exubio.trust.checks import Evidence, judge
 from exubio.calibration import SCALE_BOUNDS
 from exubio.trust.evaluate import per_frame_residuals_mm, residual_statistics
 from exubio.model.kinematics import Kinematics
 from exubio.methods.common import tracked_points, unobserved_segments
 from exubio.methods.poses import held_mask
-from exubio.trust.mismatch import MismatchAssessment, assess_mismatch, mismatch_reasons, unseen_mismatch_reasons
+from exubio.trust.mismatch import MismatchAssessment, assess_mismatch
 from exubio.trust.observability import UNDETERMINED_TRIAL_FRACTION, AngleDeterminacy, AngleStatus, Determinacy, angle_determinacy, determinacy
 from exubio.model.ranges import limit_report
 from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Reconstruction
@@ -202,34 +203,30 @@ def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recon
     off = Q.off_segment_markers(model, protocol) if calibration is not None else {}
     repeated = [f for f in static_labels if _same_finding(f, label_findings)]
     static_labels = [f for f in static_labels if not _same_finding(f, label_findings)]
-    common = (Q.label_reasons(label_findings, in_static=repeated) + Q.label_reasons(static_labels, prefix="static trial: ")
-              + Q.calibration_reasons(calibration, scale_bounds=SCALE_BOUNDS, off_segment=off, not_measured=unmeasurable,
-                                      accepted_offsets_mm={m.name: m.landmark_offset_mm for m in protocol.markers
-                                                           if m.landmark_offset_mm is not None})
-              + Q.session_reasons(session, static_name) + Q.dropped_reasons(dropped)
-              + Q.partial_swap_reasons(partial_swaps, repaired))
     named = sorted({m for f in label_findings if Q.finding_field(f, "severity") not in ("info", "note")
                     for m in Q.finding_field(f, "markers", ())})  # their residuals are the label's, not the model's
     mismatch = {r.method: assess_mismatch(kin, points, r.q_rad, targets.positions_m, targets.time_s, skip_markers=named)
                 for r in recons}
     quality = {}
     for r in recons:
-        reasons = list(common)
-        reasons += Q.residual_reasons(residual_statistics(r), per_frame_residuals_mm(r)[0])
-        reasons += Q.limit_reasons([lim.to_dict() for lim in lims[r.method]], r.n_frames, not_measured=unmeasurable)
-        reasons += Q.angle_reasons(angles[r.method].trial_status(), structural,
-                                   angles[r.method].fraction(AngleStatus.MEASURED), UNDETERMINED_TRIAL_FRACTION,
-                                   causes=angles[r.method].causes())
         status = np.asarray(r.status)
-        frames = {"not_converged": int((status == FrameStatus.NOT_CONVERGED).sum()),
-                  "too_few_markers": int((status == FrameStatus.TOO_FEW_MARKERS).sum())}
-        reasons += Q.convergence_reasons(frames, r.n_frames)
-        reasons += Q.fallback_reasons(r.info)
         dt = float(np.median(np.diff(r.time_s))) if r.n_frames > 1 else 1.0
-        reasons += Q.gap_reasons(r.gaps, r.n_frames, 1.0 / dt)
-        reasons += Q.agreement_reasons(agreement, ())
-        reasons += mismatch_reasons(mismatch[r.method], calibrated=calibration is not None)
-        reasons += unseen_mismatch_reasons(protocol, scapula_calibrated=_scapula_calibrated(calibration))
-        quality[r.method] = Q.Quality.of(reasons)
+        evidence = Evidence(
+            n_frames=r.n_frames, rate_hz=1.0 / dt, label_findings=tuple(label_findings),
+            label_findings_in_static=tuple(repeated), static_label_findings=tuple(static_labels),
+            calibration=calibration, scale_bounds=SCALE_BOUNDS, off_segment=off,
+            accepted_offsets_mm={m.name: m.landmark_offset_mm for m in protocol.markers
+                                 if m.landmark_offset_mm is not None},
+            not_measured=tuple(unmeasurable), session_shifts=tuple(session), static_name=static_name,
+            dropped_markers=tuple(dropped), partial_swaps=tuple(partial_swaps), repaired=repaired,
+            residual_mm=residual_statistics(r), per_frame_residual_mm=per_frame_residuals_mm(r)[0],
+            limits=[lim.to_dict() for lim in lims[r.method]], angle_status=angles[r.method].trial_status(),
+            structural_status=structural, measured_fraction=angles[r.method].fraction(AngleStatus.MEASURED),
+            undetermined_trial_fraction=UNDETERMINED_TRIAL_FRACTION, angle_causes=angles[r.method].causes(),
+            frames={"not_converged": int((status == FrameStatus.NOT_CONVERGED).sum()),
+                    "too_few_markers": int((status == FrameStatus.TOO_FEW_MARKERS).sum())},
+            info=r.info, gaps=r.gaps, agreement_deg=agreement, mismatch=mismatch[r.method], protocol=protocol,
+            scapula_calibrated=_scapula_calibrated(calibration))
+        quality[r.method] = judge(evidence)
     return TrialAssessment(dets, lims, quality, agreement, tuple(label_findings), not_solved, angles, structural,
                            mismatch)

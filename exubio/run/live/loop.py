@@ -436,8 +436,8 @@ class LiveSession:
             self._bind()
             from exubio.calibration import SCALE_BOUNDS
 
-            self.monitor.calibration_reasons = Q.calibration_reasons(  # as exubio.trust.assess does for the recording
-                report, scale_bounds=SCALE_BOUNDS, off_segment=Q.off_segment_markers(self.model, self.protocol))
+            self.monitor.calibration, self.monitor.scale_bounds = report, SCALE_BOUNDS  # as for the recording
+            self.monitor.off_segment = Q.off_segment_markers(self.model, self.protocol)
             if self.on_ready is not None:
                 self.on_ready(self)
         self.intake.check_units(self.causal)

@@ -12,6 +12,7 @@ import numpy as np
 from exubio.trust import quality as Q
 from exubio.trust.assess import (DETERMINACY_PERIOD_S, angle_status_of_protocol, coordinates_not_measured_by_protocol,
                                   not_solved_mask)
+from exubio.trust.checks import Evidence, LiveCounts, judge
 from exubio.trust.observability import determinacy
 from exubio.model.ranges import AT_LIMIT_TOLERANCE_RAD
 from exubio.run.live.outputs import ISB_NAMES, Event, angles_measured
@@ -36,8 +37,9 @@ class LiveMonitor:
     ``measured`` (the angles the markers measure, ISB order), ``quarantine`` (the springs a label
     swap switched off) and ``quality`` (the running verdict) are what the loop reads back.
     ``in_stream``: the markers the stream carries (the others get no gap events); ``event(kind,
-    frame, message, markers)``: the session's event report; ``calibration_reasons``: the findings of
-    a calibration on the stream's first frames, part of every verdict."""
+    frame, message, markers)``: the session's event report; ``calibration``: the report of a
+    calibration on the stream's first frames (with ``scale_bounds`` and ``off_segment``), checked in
+    every verdict."""
 
     def __init__(self, model: Model, protocol: Protocol, kin, points, rate: float, options: "LiveOptions",
                  in_stream: np.ndarray, event: Callable[..., None]):
@@ -52,7 +54,9 @@ class LiveMonitor:
         self.measured = angles_measured(model, self.not_solved, unmeasurable=self.unmeasurable,
                                         structural=self.structural)
         self.ranges = model.coordinate_ranges_rad
-        self.calibration_reasons: list[Q.Reason] = []
+        self.calibration = None  # a calibration on the stream's first frames (its report), checked in every verdict
+        self.scale_bounds: tuple[float, float] = (0.0, float("inf"))
+        self.off_segment: dict[str, float] = {}
         self.quarantine = np.zeros(k, dtype=bool)
         self.swap_count: dict = {}
         self.swapped: dict = {}
@@ -163,39 +167,33 @@ class LiveMonitor:
         "dropped", "late", "skipped", "failed" and "no_state" so far; ``events``: its events so far."""
         self.verdict_due = g + self.verdict_every
         n = g + 1
-        reasons: list[Q.Reason] = list(self.calibration_reasons)
+        residual = per_frame = None
         if self.res_n.any():
             with np.errstate(all="ignore"):
                 rmse = np.sqrt(self.res_sq / self.res_n) * 1e3
-            stats = {"mean": float(self.res_sum.sum() / self.res_n.sum()) * 1e3,
-                     "per_marker_rmse": {m: (None if self.res_n[j] == 0 else float(rmse[j]))
-                                         for j, m in enumerate(self.marker_names)}}
-            reasons += Q.residual_reasons(stats, np.asarray(self.frame_means))
+            residual = {"mean": float(self.res_sum.sum() / self.res_n.sum()) * 1e3,
+                        "per_marker_rmse": {m: (None if self.res_n[j] == 0 else float(rmse[j]))
+                                            for j, m in enumerate(self.marker_names)}}
+            per_frame = np.asarray(self.frame_means)
         names = self.model.coordinate_names
         lims = [{"coordinate": names[j], "range_deg": [float(np.degrees(self.ranges[j, 0])), float(np.degrees(self.ranges[j, 1]))],
                  "frames_at_limit": int(self.lim_count[j]), "first_frame": int(self.lim_first[j]),
                  "max_beyond_deg": float(np.degrees(self.lim_beyond[j]))} for j in np.flatnonzero(self.lim_count)]
-        reasons += Q.limit_reasons(lims, n, not_measured=self.unmeasurable)  # as the offline assessment
         open_gaps = [Gap(self.marker_names[j], int(self.gap_start[j]), n) for j in np.flatnonzero(self.in_gap)]
-        reasons += Q.gap_reasons(self.gaps + open_gaps, n, self.rate)
-        reasons += Q.convergence_reasons({"not_converged": counts["failed"], "too_few_markers": counts["no_state"]}, n)
         names_m = self.marker_names
-        for (a, b), since in self.swapped.items():
-            reasons.append(Q.Reason("label", "fail", f"markers {names_m[a]} and {names_m[b]} look swapped since "
-                                    f"t = {since / self.rate:.2f} s (springs off)"))
-        if counts["dropped"]:
-            reasons.append(Q.Reason("live_dropped", "note", f"{counts['dropped']} frame(s) never came (springs off "
-                                    "there; see the events)"))
-        if counts["late"]:
-            reasons.append(Q.Reason("live_late", "note", f"{counts['late']} sample(s) came late and were dropped"))
-        if counts["skipped"]:
-            reasons.append(Q.Reason("live_skip", "check", f"{counts['skipped']} frames skipped: the solver fell more "
-                                    f"than {self.options.max_behind_s:g} s behind"))
-        restarts = sum(1 for e in events if e.kind in ("restart", "diverged"))
-        if restarts:
-            reasons.append(Q.Reason("live_restart", "note", f"{restarts} PF run(s) restarted from the LS pose "
-                                    "(stream restarted or diverged)"))
-        quality = Q.Quality.of(reasons)
+        live = LiveCounts(dropped=counts["dropped"], late=counts["late"], skipped=counts["skipped"],
+                          restarts=sum(1 for e in events if e.kind in ("restart", "diverged")),
+                          max_behind_s=self.options.max_behind_s,
+                          swapped=tuple((names_m[a], names_m[b], since / self.rate)
+                                        for (a, b), since in self.swapped.items()))
+        # the same checks as the offline verdict (exubio.trust.checks) on what a live session knows so far
+        quality = judge(Evidence(
+            n_frames=n, rate_hz=self.rate, calibration=self.calibration, scale_bounds=self.scale_bounds,
+            off_segment=self.off_segment, not_measured=tuple(self.unmeasurable),
+            accepted_offsets_mm={m.name: m.landmark_offset_mm for m in self.protocol.markers
+                                 if m.landmark_offset_mm is not None},
+            residual_mm=residual, per_frame_residual_mm=per_frame, limits=lims, gaps=self.gaps + open_gaps,
+            frames={"not_converged": counts["failed"], "too_few_markers": counts["no_state"]}, live=live))
         if quality.verdict != self.quality.verdict:
             self._event("verdict", g, f"{quality.verdict}" + (f": {quality.reasons[0].message}" if quality.reasons else ""))
         self.quality = quality
