@@ -29,6 +29,8 @@ from typing import TYPE_CHECKING, Callable, Sequence  # noqa: E402
 import exubio  # noqa: E402
 from exubio.errors import ExubioError, InputError, ModelError, ProtocolError, ReconstructionError  # noqa: E402
 from exubio.run import interrupt  # noqa: E402 - Ctrl-C noted (small: no pipeline)
+from exubio.prep.moment_options import add_moment_arguments  # noqa: E402 - small: argparse options only
+from exubio.synth.thorax_lean import add_lean_arguments  # noqa: E402 - small: numpy and the dynamics' dataclass
 from exubio.truth.locator_cli import add_parser as add_locator_parser  # noqa: E402 - small: its work is imported when it runs
 
 if TYPE_CHECKING:  # the CLI imports the pipeline only when a command runs (fast --help)
@@ -97,6 +99,7 @@ def _methods(value: str) -> list[str]:
 def cmd_simulate(args: argparse.Namespace) -> int:
     from exubio.model.load import load_model
     from exubio.synth.simulate import Motion, simulate_trial, write_simulated_trial
+    from exubio.synth.thorax_lean import lean_from_args
 
     out = Path(args.out)
     if out.suffix.lower() != ".c3d":
@@ -111,7 +114,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     trial = simulate_trial(model, Motion.parse(args.motion), duration_s=args.duration, rate_hz=args.rate,
                            noise_mm=args.noise_mm, sta_mm=args.sta_mm, seed=args.seed, perturbation=perturbation,
-                           sta_model=args.sta, cycle_s=args.cycle_s)
+                           sta_model=args.sta, cycle_s=args.cycle_s, thorax_lean=lean_from_args(args))
     if trial.sta_model != "per-marker":
         print(f"soft-tissue artefact: {trial.sta_model}")
     if args.protocol:
@@ -132,6 +135,14 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         moments = write_truth_moments(trial, out, hand_load_kg=args.hand_load_kg)
         print(f"wrote {moments} (true joint moments, N m: {args.body_mass:g} kg, {args.hand_load_kg:g} kg in the hand)")
     return EXIT_OK
+
+
+def _moment_request(args: argparse.Namespace):
+    from exubio.prep.moment_options import moment_request
+
+    if getattr(args, "loads", None) and args.body_mass is None:
+        raise InputError("--loads: the joint moments need the subject's --body-mass (kg) too")
+    return moment_request(args)
 
 
 def _hand_load(args: argparse.Namespace) -> float | None:
@@ -379,7 +390,7 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
                      options={"pf": {"gravity": args.gravity}} if "pf" in methods else {},
                      calibration=calibration, static_frames=None if args.static else args.static_frames,
                      report=not args.no_report, relabel=relabel, repair_labels=args.repair_labels,
-                     hand_load_kg=_hand_load(args)) for t in args.trials]
+                     hand_load_kg=_hand_load(args), moment_request=_moment_request(args)) for t in args.trials]
     if len(jobs) == 1 and not args.scheduler:  # errors propagate to main(): one message, one exit code
         result = run_job(jobs[0], progress_factory=_progress_factory(not args.quiet))
         _print_trial(result, args.quiet)
@@ -720,6 +731,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "exact joint moments (Dumas et al. 2007 inertia)")
     s.add_argument("--hand-load-kg", type=float, default=0.0, help="mass held in the hand, kg (with --body-mass)")
     s.add_argument("--model", help="model YAML (default: the generic model)")
+    add_lean_arguments(s)
     s.add_argument("--perturb", nargs="+", metavar="KEY=VALUE",
                    help="generate with the model perturbed (mm in the thorax frame; a model mismatch for a reconstruction "
                         "with the unperturbed model): ellipsoid_centre_mm=DX,DY,DZ ellipsoid_radii_scale=S|SX,SY,SZ "
@@ -750,6 +762,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--body-mass", type=float, help="body mass, kg (scales segment inertia); also writes the joint "
                    "moments, <stem>.<method>.moments.csv (inverse dynamics, Dumas et al. 2007 inertia; docs: moments)")
     r.add_argument("--hand-load-kg", type=float, help="mass held in the hand, kg, for the joint moments (needs --body-mass)")
+    add_moment_arguments(r)
     r.add_argument("--out", required=True, help="output folder")
     r.add_argument("--overwrite", action="store_true", help="replace earlier results in --out")
     r.add_argument("--no-report", action="store_true", help="skip the per-trial PDF/PNG report")

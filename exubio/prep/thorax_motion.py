@@ -24,13 +24,13 @@ from exubio.dynamics.thorax_motion import STANDARD_GRAVITY_M_S2, ThoraxMotion
 from exubio.errors import InputError
 from exubio.model.kinematics import cross
 from exubio.prep.filtering import filter_markers
+from exubio.prep.moment_options import LAB_UP_CHOICES
 from exubio.prep.thorax import MAX_THORAX_GAP_S, isb_landmarks, lab_landmarks, thorax_frame
 from exubio.protocol.labels import resolve_labels
 from exubio.types import Protocol, Trajectories
 
 __all__ = ["LAB_UP_CHOICES", "frame_derivatives", "lab_gravity", "measure_thorax_motion"]
 
-LAB_UP_CHOICES = ("auto", "+x", "-x", "+y", "-y", "+z", "-z")
 MAX_TILT_DEG = 45.0
 
 
