@@ -15,7 +15,6 @@ from exubio.dynamics.moments_file import read_moments_csv
 from exubio.model.kinematics import Kinematics
 from exubio.model.load import load_model
 from exubio.prep.loads import LOAD_COLUMNS, read_loads_csv, resample_load
-from exubio.synth.simulate import simulate_trial
 
 MASS = 70.0
 
