@@ -151,3 +151,43 @@ def test_a_bad_load_file_is_one_clear_error(tmp_path, trial_c3d, capsys, case, c
     assert str(bad) in err and f"'{column}'" in err, err
     assert "Traceback" not in err
     assert not (tmp_path / "out" / "short.ls.csv").exists()
+
+
+def _with_analogs(src, dst, n_frames, labels=("Fx", "Fy", "Fz", "Mx", "My", "Mz")):
+    ezc3d = pytest.importorskip("ezc3d")
+    c = ezc3d.c3d(str(src))
+    c["parameters"]["ANALOG"]["RATE"]["value"] = np.array([1000.0])
+    c["parameters"]["ANALOG"]["LABELS"]["value"] = list(labels)
+    c["parameters"]["ANALOG"]["UNITS"]["value"] = ["N", "N", "N", "Nmm", "Nmm", "Nmm"]
+    a = np.zeros((1, 6, n_frames * 10))
+    a[0, 1], a[0, 5] = -19.5, 500.0  # exact in the file's 32-bit floats
+    c["data"]["analogs"] = a
+    c.write(str(dst))
+    return dst
+
+
+def test_a_protocol_maps_a_c3ds_analog_channels_to_a_load(tmp_path, trial_c3d, capsys):
+    """The same load from the C3D's analog channels (N, N mm) and from a CSV gives the same moments."""
+    c3d = _with_analogs(trial_c3d, tmp_path / "an.c3d", 50)
+    proto = tmp_path / "analog.yaml"
+    proto.write_text("schema_version: 1\nextends: upper_limb_21\nanalog_loads:\n  - force: [Fx, Fy, Fz]\n"
+                     "    moment: [Mx, My, Mz]\n    segment: hand\n    point_mm: [0, -80, 0]\n    frame: thorax\n",
+                     encoding="utf-8")
+    csv = _write(tmp_path / "same.csv", [[f"{k / 1000:.3f}", 0, -19.5, 0, 0, 0, 0.5, 0, -0.08, 0, "hand", "thorax"]
+                                        for k in range(501)])
+    common = ["--method", "ls", "--body-mass", str(MASS), "--no-report", "-q"]
+    assert main(["reconstruct", str(c3d), "--protocol", str(proto), "--out", str(tmp_path / "a"), *common]) == 0
+    assert main(["reconstruct", str(c3d), "--loads", str(csv), "--out", str(tmp_path / "b"), *common]) == 0
+    assert main(["reconstruct", str(c3d), "--out", str(tmp_path / "c"), *common]) == 0
+    _, cols, a = read_moments_csv(tmp_path / "a" / "an.ls.moments.csv")
+    _, _, b = read_moments_csv(tmp_path / "b" / "an.ls.moments.csv")
+    _, _, c = read_moments_csv(tmp_path / "c" / "an.ls.moments.csv")
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-6)
+    assert np.abs(a - c).max() > 1.0  # the load is in
+    assert "analog channels" in (tmp_path / "a" / "an.ls.moments.csv").read_text(encoding="utf-8")
+    # a channel the file lacks: exit 2 naming it
+    bad = _with_analogs(trial_c3d, tmp_path / "bad.c3d", 50, labels=("Fx", "Fy", "Fz_", "Mx", "My", "Mz"))
+    capsys.readouterr()
+    assert main(["reconstruct", str(bad), "--protocol", str(proto), "--out", str(tmp_path / "d"), *common]) == 2
+    err = capsys.readouterr().err
+    assert "analog channel 'Fz'" in err and "bad.c3d" in err and "Traceback" not in err, err

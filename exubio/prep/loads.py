@@ -129,3 +129,41 @@ def resample_load(raw: dict, time_s: np.ndarray, /, *, cutoff_hz: float | None, 
     how = f"low-pass {cutoff_hz:g} Hz" if cutoff_hz is not None else "not filtered"
     return ExternalLoad(segment=raw["segment"], frame=raw["frame"], force_N=out[:, 0], moment_Nm=out[:, 1],
                         point_m=out[:, 2], source=f"{raw['source']} ({how}, {rate:g} Hz resampled to the trial)")
+
+
+FORCE_UNITS = {"N": 1.0, "": 1.0}
+MOMENT_UNITS = {"Nm": 1.0, "N.m": 1.0, "N m": 1.0, "": 1.0, "Nmm": 1e-3, "N.mm": 1e-3, "N mm": 1e-3}
+
+
+def analog_load(spec, path: str | os.PathLike, /, *, protocol_source: str = "") -> dict:
+    """The raw samples (as read_loads_csv gives them) of a protocol's ``analog_loads`` entry
+    (exubio.types.AnalogLoadSpec) in the C3D file ``path``: the named analog channels, scaled to N
+    and N m by their ANALOG:UNITS, the point fixed. A channel the file lacks, or a unit that is not
+    a force's or a moment's, raises InputError naming the channel and the protocol key."""
+    from exubio.io.c3d import read_c3d_analogs
+
+    path = Path(path)
+    labels, units, rate, values = read_c3d_analogs(path)
+    where = f"{protocol_source or 'protocol'}: analog_loads"
+
+    def take(channels, known: dict, what: str) -> np.ndarray:
+        cols = []
+        for ch in channels:
+            if ch not in labels:
+                raise InputError(f"{path}: analog channel '{ch}' ({where}, {what}) is not in the file; its analog "
+                                 f"channels are {list(labels)}")
+            j = labels.index(ch)
+            if units[j] not in known:
+                raise InputError(f"{path}: analog channel '{ch}' ({where}, {what}) is in '{units[j]}'; expected one "
+                                 f"of {[u for u in known if u]}")
+            cols.append(values[:, j] * known[units[j]])
+        return np.column_stack(cols)
+
+    force = take(spec.force, FORCE_UNITS, "force")
+    moment = take(spec.moment, MOMENT_UNITS, "moment") if spec.moment else np.zeros_like(force)
+    if not np.isfinite(force).all() or not np.isfinite(moment).all():
+        raise InputError(f"{path}: an analog channel of {where} holds samples that are not numbers")
+    t = np.arange(force.shape[0]) / rate
+    return {"time_s": t, "force_N": force, "moment_Nm": moment, "point_m": np.tile(spec.point_m, (t.size, 1)),
+            "segment": spec.segment, "frame": spec.frame,
+            "source": f"{path} analog channels {list(spec.force) + list(spec.moment or ())}"}

@@ -10,7 +10,8 @@ import numpy as np
 
 from exubio.dynamics.loads import ExternalLoad
 from exubio.dynamics.thorax_motion import ThoraxMotion
-from exubio.prep.loads import read_loads_csv, resample_load
+from exubio.errors import InputError
+from exubio.prep.loads import analog_load, read_loads_csv, resample_load
 from exubio.prep.moment_options import MomentRequest
 from exubio.prep.thorax_motion import measure_thorax_motion
 from exubio.types import MarkerTargets, Model, Protocol, Trajectories
@@ -37,6 +38,12 @@ def moment_inputs(trajectories: Trajectories, protocol: Protocol, targets: Marke
                   request: MomentRequest, /) -> MomentInputs:
     thorax = measure_thorax_motion(trajectories, protocol, lab_up=request.lab_up)
     cutoff = _cutoff(protocol, targets)
-    loads = tuple(resample_load(read_loads_csv(p, segments=model.segment_names[1:]), targets.time_s, cutoff_hz=cutoff,
-                                order=protocol.filter_order) for p in request.loads)
+    raws = [read_loads_csv(p, segments=model.segment_names[1:]) for p in request.loads]
+    if protocol.analog_loads:
+        src = trajectories.source or ""
+        if not src.lower().endswith(".c3d"):
+            raise InputError(f"{protocol.source or protocol.name}: analog_loads: the trial {src or '(in memory)'} is not "
+                             f"a C3D file; its analog channels cannot be read (give the loads with --loads)")
+        raws += [analog_load(spec, src, protocol_source=protocol.source) for spec in protocol.analog_loads]
+    loads = tuple(resample_load(raw, targets.time_s, cutoff_hz=cutoff, order=protocol.filter_order) for raw in raws)
     return MomentInputs(thorax=thorax, loads=loads)
