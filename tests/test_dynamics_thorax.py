@@ -111,6 +111,9 @@ def test_noise_free_ls_with_the_measured_thorax_within_1_percent(model, lean):
     got = joint_moments(model, rec.q_rad, rec.qd_rad_s, rec.qdd_rad_s2, hand_load_kg=LOAD, thorax=measured)
     share = {c: np.abs(got.column(c) - truth.column(c)).max() / np.abs(truth.column(c)).max() for c in MOMENTS}
     assert max(share.values()) < 0.01, share
+    df = exubio.moments(rec, model, hand_load_kg=LOAD, thorax=measured)  # the API: the same table
+    np.testing.assert_allclose(df["GH_X_moment_Nm"].to_numpy(), got.column("GH_X_moment_Nm"), rtol=0, atol=1e-12)
+    assert "included" in df.attrs["thorax"]
 
 
 def test_a_trial_without_thorax_markers_assumes_the_thorax_still(model):
