@@ -223,14 +223,18 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
 
 def _moments_key(key: str | None, body_mass_kg: float, hand_load_kg: float | None, request: Any = None) -> str | None:
     """A run's fingerprint (exubio.run.resume.run_key) that also holds the joint moments' body mass
-    and hand load when it writes them, so an earlier set without them (or with others) is not kept."""
+    and hand load when it writes them, the lab vertical and the loads files' contents, so an earlier set
+    without them (or with others) is not kept."""
     if key is None or hand_load_kg is None:
         return key
     import hashlib
 
-    what = (key, "moments", float(body_mass_kg), float(hand_load_kg))
-    if request is not None and request.key() != ("auto", ()):
-        what = what + (request.key(),)
+    loads = []
+    for path in () if request is None else request.loads:  # a file's content, not only its name
+        p = Path(path)
+        loads.append(hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else str(p))
+    lab_up = "auto" if request is None else request.lab_up
+    what = (key, "moments", float(body_mass_kg), float(hand_load_kg), "thorax motion and loads", lab_up, tuple(loads))
     return hashlib.sha256(repr(what).encode()).hexdigest()
 
 
