@@ -201,18 +201,20 @@ def to_dataframe(reconstruction: Reconstruction, /, *, model: Model | None = Non
 
 
 def moments(reconstruction: Reconstruction, model: Model | None = None, /, *,
-            hand_load_kg: float = 0.0) -> "pandas.DataFrame":
+            hand_load_kg: float = 0.0, thorax=None, loads=()) -> "pandas.DataFrame":
     """The reconstruction's net joint moments (exubio.dynamics.moments: GH, elbow, forearm, wrist in
     the ISB frames, N m and N m/kg; every coordinate's generalized force; the scapulothoracic contact
     forces, N) as a pandas DataFrame indexed by time (s), the columns of <stem>.<method>.moments.csv.
     The inertia is Dumas et al. 2007's scaled by ``model``'s segment lengths and body mass (load it
-    with ``body_mass_kg``), plus ``hand_load_kg`` in the hand; ``df.attrs`` says so."""
+    with ``body_mass_kg``), plus ``hand_load_kg`` in the hand; ``thorax``: the thorax's motion in the
+    lab (exubio.prep.thorax_motion.measure_thorax_motion; None: still and upright), ``loads``:
+    external loads (exubio.dynamics.loads.ExternalLoad); ``df.attrs`` says so."""
     import pandas as pd
 
     from exubio.dynamics.moments import reconstruction_moments
 
     model = model if model is not None else load_model()
-    m = reconstruction_moments(model, reconstruction, hand_load_kg=hand_load_kg)
+    m = reconstruction_moments(model, reconstruction, hand_load_kg=hand_load_kg, thorax=thorax, loads=tuple(loads))
     df = pd.DataFrame(m.values, columns=list(m.columns), index=pd.Index(m.time_s, name="time_s"))
     df.attrs.update({"method": reconstruction.method, "units": "N m, N m/kg, N", "source": "exubio",
                      "body_mass_kg": m.body_mass_kg, "hand_load_kg": m.hand_load_kg,

@@ -318,6 +318,7 @@ class Protocol:
     side: Literal["right", "left"] = "right"  # left: markers mirrored onto the (right-arm) model
     thorax_aliases: Mapping[str, tuple[str, ...]] = field(default_factory=dict)  # thorax_frame label -> other labels
     other_arm: str | None = None  # the protocol file of the other arm of this marker set (--both-arms)
+    analog_loads: tuple = ()  # exubio.protocol.analog_loads.AnalogLoadSpec: loads from a C3D's analog channels
 
     @property
     def marker_names(self) -> tuple[str, ...]:

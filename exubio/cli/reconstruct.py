@@ -19,6 +19,7 @@ from exubio.cli.common import (
 )
 from exubio.method_registry import REGISTRY, method_names
 from exubio.errors import ExubioError, InputError, ModelError, ProtocolError
+from exubio.prep.moment_options import add_moment_arguments  # small: argparse options only
 
 if TYPE_CHECKING:  # the CLI imports the pipeline only when a command runs (fast --help)
     from exubio.run.job import TrialJob, TrialResult
@@ -26,6 +27,14 @@ if TYPE_CHECKING:  # the CLI imports the pipeline only when a command runs (fast
 
 def _methods(value: str) -> list[str]:
     return ["pf", "ls"] if value == "both" else [value]
+
+
+def _moment_request(args: argparse.Namespace):
+    from exubio.prep.moment_options import moment_request
+
+    if getattr(args, "loads", None) and args.body_mass is None:
+        raise InputError("--loads: the joint moments need the subject's --body-mass (kg) too")
+    return moment_request(args)
 
 
 def _hand_load(args: argparse.Namespace) -> float | None:
@@ -151,7 +160,7 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
                      options={"pf": {"gravity": args.gravity}} if "pf" in methods else {},
                      calibration=calibration, static_frames=None if args.static else args.static_frames,
                      report=not args.no_report, relabel=relabel, repair_labels=args.repair_labels,
-                     hand_load_kg=_hand_load(args)) for t in args.trials]
+                     hand_load_kg=_hand_load(args), moment_request=_moment_request(args)) for t in args.trials]
     if len(jobs) == 1 and not args.scheduler:  # errors propagate to main(): one message, one exit code
         result = run_job(jobs[0], progress_factory=progress_factory(not args.quiet))
         print_trial(result, args.quiet)
@@ -209,6 +218,7 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, /) -> None:
     r.add_argument("--body-mass", type=float, help="body mass, kg (scales segment inertia); also writes the joint "
                    "moments, <stem>.<method>.moments.csv (inverse dynamics, Dumas et al. 2007 inertia; docs: moments)")
     r.add_argument("--hand-load-kg", type=float, help="mass held in the hand, kg, for the joint moments (needs --body-mass)")
+    add_moment_arguments(r)
     r.add_argument("--out", required=True, help="output folder")
     r.add_argument("--overwrite", action="store_true", help="replace earlier results in --out")
     r.add_argument("--no-report", action="store_true", help="skip the per-trial PDF/PNG report")

@@ -7,11 +7,13 @@ from typing import Any
 
 from exubio.cli.common import EXIT_OK, epilog
 from exubio.errors import InputError
+from exubio.synth.thorax_lean import add_lean_arguments  # small: numpy and the dynamics' dataclass
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     from exubio.model.load import load_model
     from exubio.synth.simulate import Motion, simulate_trial, write_simulated_trial
+    from exubio.synth.thorax_lean import lean_from_args
 
     out = Path(args.out)
     if out.suffix.lower() != ".c3d":
@@ -26,7 +28,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     trial = simulate_trial(model, Motion.parse(args.motion), duration_s=args.duration, rate_hz=args.rate,
                            noise_mm=args.noise_mm, sta_mm=args.sta_mm, seed=args.seed, perturbation=perturbation,
-                           sta_model=args.sta, cycle_s=args.cycle_s)
+                           sta_model=args.sta, cycle_s=args.cycle_s, thorax_lean=lean_from_args(args))
     if trial.sta_model != "per-marker":
         print(f"soft-tissue artefact: {trial.sta_model}")
     if args.protocol:
@@ -71,6 +73,7 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, /) -> None:
                    "exact joint moments (Dumas et al. 2007 inertia)")
     s.add_argument("--hand-load-kg", type=float, default=0.0, help="mass held in the hand, kg (with --body-mass)")
     s.add_argument("--model", help="model YAML (default: the generic model)")
+    add_lean_arguments(s)
     s.add_argument("--perturb", nargs="+", metavar="KEY=VALUE",
                    help="generate with the model perturbed (mm in the thorax frame; a model mismatch for a reconstruction "
                         "with the unperturbed model): ellipsoid_centre_mm=DX,DY,DZ ellipsoid_radii_scale=S|SX,SY,SZ "

@@ -25,11 +25,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from exubio.dynamics.inertia import INERTIA_SOURCE, dynamics_model, isb_segment_frames
+from exubio.dynamics.loads import ExternalLoad, load_wrenches
 from exubio.dynamics.newton_euler import girdle_split, inverse_dynamics
+from exubio.dynamics.thorax_motion import ThoraxMotion
 from exubio.model.kinematics import Kinematics
 from exubio.types import Model
 
-__all__ = ["JOINTS", "AXIS_MOMENTS", "Moments", "joint_moments", "moments_summary", "reconstruction_moments"]
+__all__ = ["JOINTS", "AXIS_MOMENTS", "THORAX_STILL", "Moments", "joint_moments", "moments_summary",
+           "reconstruction_moments", "thorax_statement"]
 
 JOINTS: dict[str, tuple[str, str]] = {"GH": ("humerus", "humerus"), "elbow": ("ulna", "ulna"),
                                       "forearm": ("radius", "ulna"), "wrist": ("hand", "hand")}
@@ -40,6 +43,17 @@ AXIS_MOMENTS: dict[str, str] = {"elbow_flexion": "elbow_flexion", "forearm_prona
 """Anatomical moment -> the model coordinate whose axis it is about."""
 
 GIRDLE_SEGMENTS = ("clavicle", "scapula")
+
+THORAX_STILL = ("thorax assumed still in the lab and upright (gravity -Y of the thorax frame): no thorax motion was "
+                "given (a trial without thorax markers placing it in the lab, or a simulation whose trunk does not move)")
+
+
+def thorax_statement(thorax: ThoraxMotion | None, /) -> str:
+    """The line the moments file and summary give of the thorax's motion."""
+    if thorax is None:
+        return THORAX_STILL
+    return ("thorax motion in the lab included: its origin's acceleration, angular velocity and acceleration and gravity, "
+            f"in the thorax frame, enter every segment's acceleration; {thorax.source}")
 
 
 @dataclass(frozen=True)
@@ -54,6 +68,8 @@ class Moments:
     hand_load_kg: float
     inertia_source: str = INERTIA_SOURCE
     info: dict = field(default_factory=dict)
+    thorax: ThoraxMotion | None = None  # the thorax's motion in the lab the moments include (None: assumed still)
+    loads: tuple[ExternalLoad, ...] = ()  # external loads the moments include
 
     def column(self, name: str) -> np.ndarray:
         return self.values[:, self.columns.index(name)]
@@ -65,13 +81,21 @@ class Moments:
 
 
 def joint_moments(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, /, *, time_s: np.ndarray | None = None,
-                  hand_load_kg: float = 0.0, dynamic_model: Model | None = None) -> Moments:
+                  hand_load_kg: float = 0.0, dynamic_model: Model | None = None, thorax: ThoraxMotion | None = None,
+                  loads: tuple[ExternalLoad, ...] | list[ExternalLoad] = ()) -> Moments:
     """The moment table (module docstring) of q, q', q'' (n, m) on ``model`` (its lengths and body
-    mass; the inertia is Dumas et al. 2007's, exubio.dynamics.inertia, or ``dynamic_model``'s)."""
+    mass; the inertia is Dumas et al. 2007's, exubio.dynamics.inertia, or ``dynamic_model``'s);
+    ``thorax``: the thorax's motion in the lab on the same frames (None: still and upright);
+    ``loads``: external loads on the same frames (exubio.dynamics.loads)."""
     dyn = dynamics_model(model, hand_load_kg=hand_load_kg) if dynamic_model is None else dynamic_model
     kin = Kinematics(dyn)
     q, qd, qdd = (np.atleast_2d(np.asarray(x, dtype=float)) for x in (q, qd, qdd))
-    res = inverse_dynamics(kin, q, qd, qdd)
+    external = None
+    if loads:
+        fr = kin.frames(q)
+        external = load_wrenches(loads, dyn.segment_names, fr.R, fr.p, None if thorax is None else thorax.rotation,
+                                 mirrored=bool(thorax is not None and thorax.mirrored))
+    res = inverse_dynamics(kin, q, qd, qdd, frame=None if thorax is None else thorax.frame_terms(), external=external)
     frames = isb_segment_frames(model)
     cols: list[str] = []
     vals: list[np.ndarray] = []
@@ -103,16 +127,19 @@ def joint_moments(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, 
         vals.append(normal[:, k])
     t = np.arange(q.shape[0], dtype=float) if time_s is None else np.asarray(time_s, dtype=float)
     return Moments(time_s=t, columns=tuple(cols), values=np.column_stack(vals), body_mass_kg=mass,
-                   hand_load_kg=float(hand_load_kg), inertia_source=str(dyn.metadata.get("inertia_source", INERTIA_SOURCE)))
+                   hand_load_kg=float(hand_load_kg), inertia_source=str(dyn.metadata.get("inertia_source", INERTIA_SOURCE)),
+                   info={"thorax": thorax_statement(thorax)}, thorax=thorax, loads=tuple(loads))
 
 
-def reconstruction_moments(model: Model, recon, /, *, hand_load_kg: float = 0.0) -> Moments:
+def reconstruction_moments(model: Model, recon, /, *, hand_load_kg: float = 0.0, thorax: ThoraxMotion | None = None,
+                           loads: tuple[ExternalLoad, ...] | list[ExternalLoad] = ()) -> Moments:
     """The moment table of a Reconstruction (its q, q', q'': PF's integrated ones, LS's from its
     smoothed marker derivatives), with what its q'' rests on in ``info``: the method and, for PF,
-    the inertia scale of the segments the springs drove (never the inverse dynamics' inertia)."""
+    the inertia scale of the segments the springs drove (never the inverse dynamics' inertia);
+    ``thorax`` and ``loads`` as joint_moments."""
     moments = joint_moments(model, recon.q_rad, recon.qd_rad_s, recon.qdd_rad_s2, time_s=recon.time_s,
-                            hand_load_kg=hand_load_kg)
-    info: dict = {"method": recon.method}
+                            hand_load_kg=hand_load_kg, thorax=thorax, loads=loads)
+    info: dict = {"method": recon.method, **moments.info}
     options = dict((recon.info or {}).get("options") or {})
     if "inertia_scale" in options:
         info["pf_inertia_scale"] = options["inertia_scale"]
@@ -123,7 +150,7 @@ def reconstruction_moments(model: Model, recon, /, *, hand_load_kg: float = 0.0)
             info["pf_fallback"] += f"{info['pf_inertia_scale']:g}"
     return Moments(time_s=moments.time_s, columns=moments.columns, values=moments.values,
                    body_mass_kg=moments.body_mass_kg, hand_load_kg=moments.hand_load_kg,
-                   inertia_source=moments.inertia_source, info=info)
+                   inertia_source=moments.inertia_source, info=info, thorax=thorax, loads=moments.loads)
 
 
 def moments_summary(moments: Moments, /) -> dict:
@@ -132,5 +159,8 @@ def moments_summary(moments: Moments, /) -> dict:
     peaks = moments.peaks()
     keep = {c: round(v, 4) for c, v in peaks.items()
             if c.endswith("_moment_Nm") or c.endswith("_contact_normal_N")}
-    return {"peak_abs": keep, "body_mass_kg": moments.body_mass_kg, "hand_load_kg": moments.hand_load_kg,
-            "inertia_source": moments.inertia_source, **moments.info}
+    out = {"peak_abs": keep, "body_mass_kg": moments.body_mass_kg, "hand_load_kg": moments.hand_load_kg,
+           "inertia_source": moments.inertia_source, **moments.info}
+    if moments.loads:
+        out["external_loads"] = [load.describe() for load in moments.loads]
+    return out

@@ -1,9 +1,19 @@
-"""Inverse dynamics of exubio's kinematic tree (thorax fixed) in numpy, on exubio.model.kinematics:
-Newton-Euler per segment, summed over each joint's subtree.
+"""Inverse dynamics of exubio's kinematic tree in numpy, on exubio.model.kinematics: Newton-Euler
+per segment, summed over each joint's subtree, in the thorax frame (the model's world), which may
+itself move in the lab (exubio.dynamics.thorax_motion).
 
 For every segment s (centre of mass c_s, mass m_s, tensor I_s about c_s, world = thorax frame):
     F_s = m_s (a_cs - g),    N_s = I_s alpha_s + omega_s x (I_s omega_s)
 the force and moment (about c_s) the rest of the body must apply to move it as q, q', q'' say.
+With the thorax still, a_cs and alpha_s are the relative ones and g = -9.80665 Y. With the thorax
+moving (origin acceleration a_O, angular velocity w, acceleration w', gravity g, all in thorax
+coordinates: ``FrameTerms``), every vector stays in thorax coordinates and the absolute motion is
+
+    a_cs = a_O + w' x c + w x (w x c) + 2 w x v_rel + a_rel,
+    omega_s = w + omega_rel,   alpha_s = w' + alpha_rel + w x omega_rel
+
+(the non-inertial frame terms: Euler, centripetal, Coriolis). External loads (exubio.dynamics.loads)
+come off the wrench of the segment they act on.
 The net wrench the parent applies to segment s across its joint (centre p_s) is the sum over the
 subtree of s: F_joint = sum F_d, M_joint = sum (N_d + (c_d - p_s) x F_d), minus any external load
 on the subtree. The generalized force of coordinate j (axis a_j through p_s of its joint) is
@@ -16,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from exubio.dynamics.thorax_motion import FrameTerms
 from exubio.model.kinematics import Kinematics, cross
 
 __all__ = ["GRAVITY_M_S2", "InverseDynamics", "inverse_dynamics", "girdle_split"]
@@ -50,9 +61,12 @@ def _subtree(kin: Kinematics) -> np.ndarray:
 
 
 def inverse_dynamics(kin: Kinematics, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, /, *,
-                     gravity: np.ndarray = GRAVITY_M_S2) -> InverseDynamics:
+                     gravity: np.ndarray = GRAVITY_M_S2, frame: FrameTerms | None = None,
+                     external: tuple[np.ndarray, np.ndarray] | None = None) -> InverseDynamics:
     """Generalized forces and joint wrenches for q, q', q'' (n, m) (module docstring) with the
-    segments' mass, centre of mass and inertia of ``kin.model``."""
+    segments' mass, centre of mass and inertia of ``kin.model``. ``frame``: the thorax's own motion
+    (None: still, ``gravity`` in the thorax frame); ``external``: (force, moment about the origin)
+    (n, S, 3) each of the external loads per segment (exubio.dynamics.loads.load_wrenches)."""
     q, qd, qdd = (np.atleast_2d(np.asarray(x, dtype=float)) for x in (q, qd, qdd))
     model = kin.model
     fr = kin.frames(q)
@@ -60,21 +74,34 @@ def inverse_dynamics(kin: Kinematics, q: np.ndarray, qd: np.ndarray, qdd: np.nda
     c = kin.points(q, coms, frames=fr)  # (n, S, 3)
     Jc = kin.point_jacobian(q, coms, frames=fr, positions=c)  # (n, S, 3, m)
     a_c = np.einsum("nsim,nm->nsi", Jc, qdd) + kin.point_bias_acceleration(q, qd, coms)
+    g = np.broadcast_to(gravity, c.shape)
     aff = kin.affects.astype(float)
     wq = fr.axes * qd[..., None]  # (n, m, 3)
     omega = np.einsum("sm,nmc->nsc", aff, wq)
     frame_rate = np.einsum("jk,nkc->njc", kin.precedes.astype(float), wq)  # rate of the frame carrying axis j
     dax = cross(frame_rate, fr.axes) * qd[..., None] + fr.axes * qdd[..., None]
     alpha = np.einsum("sm,nmc->nsc", aff, dax)
+    if frame is not None:
+        w = np.asarray(frame.angular_velocity, dtype=float)[:, None, :]
+        wd = np.asarray(frame.angular_acceleration, dtype=float)[:, None, :]
+        v_rel = np.einsum("nsim,nm->nsi", Jc, qd)
+        a_c = (np.asarray(frame.origin_acceleration, dtype=float)[:, None, :] + cross(wd, c)
+               + cross(w, cross(w, c)) + 2.0 * cross(w, v_rel) + a_c)
+        alpha = wd + alpha + cross(w, omega)
+        omega = w + omega
+        g = np.broadcast_to(np.asarray(frame.gravity, dtype=float)[:, None, :], c.shape)
     mass = np.array([s.mass_kg for s in model.segments])
     I_local = np.array([np.asarray(s.inertia_kgm2, dtype=float) for s in model.segments])
     I_world = fr.R @ I_local @ np.swapaxes(fr.R, -1, -2)
-    F = mass[:, None] * (a_c - gravity)
+    F = mass[:, None] * (a_c - g)
     N = np.einsum("nsij,nsj->nsi", I_world, alpha) + cross(omega, np.einsum("nsij,nsj->nsi", I_world, omega))
     D = _subtree(kin)
+    Q = N + cross(c, F)  # moment about the thorax-frame origin
+    if external is not None:
+        F, Q = F - external[0], Q - external[1]
     F_joint = np.einsum("sd,ndc->nsc", D, F)
     # moment about the joint centre p_s of the subtree's wrenches: sum N_d + c_d x F_d - p_s x F_joint
-    M_joint = np.einsum("sd,ndc->nsc", D, N + cross(c, F)) - cross(fr.p, F_joint)
+    M_joint = np.einsum("sd,ndc->nsc", D, Q) - cross(fr.p, F_joint)
     F_joint[:, 0] = 0.0
     M_joint[:, 0] = 0.0
     tau = np.einsum("njc,njc->nj", fr.axes, M_joint[:, kin.coordinate_segment])

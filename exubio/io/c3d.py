@@ -110,6 +110,25 @@ def read_c3d(path: str | os.PathLike, /) -> Trajectories:
     )
 
 
+def read_c3d_analogs(path: str | os.PathLike, /) -> tuple[tuple[str, ...], tuple[str, ...], float, np.ndarray]:
+    """The analog channels of a C3D file: (labels, units (ANALOG:UNITS, "" where absent), rate Hz,
+    values (n_samples, n_channels) as ezc3d scales them), the first sample at the first point
+    frame's time. A file with no analog channel raises InputError."""
+    path = Path(path)
+    c3d = _open(path)
+    analogs = np.asarray(c3d["data"]["analogs"], dtype=float)  # (1, n_channels, n_samples)
+    params = c3d["parameters"].get("ANALOG", {})
+    if analogs.ndim != 3 or analogs.shape[1] == 0 or analogs.shape[2] == 0:
+        raise InputError(f"{path}: no analog channel (ANALOG:USED is 0); the protocol's analog_loads need them")
+    labels = tuple(str(x).strip() for x in _value(params, "LABELS"))
+    units = tuple(str(x).strip() for x in _value(params, "UNITS")) if "UNITS" in params else ()
+    rate = float(c3d["header"]["analogs"]["frame_rate"])
+    n = analogs.shape[1]
+    labels = labels[:n] + tuple(f"channel{k + 1}" for k in range(len(labels), n))
+    units = units[:n] + ("",) * max(0, n - len(units))
+    return labels, units, rate, analogs[0].T.copy()
+
+
 def _open(path: Path) -> Any:
     if not path.exists():
         raise InputError(f"{path}: file not found")

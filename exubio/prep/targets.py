@@ -14,8 +14,8 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from exubio.errors import InputError
-from exubio.prep.filtering import as_series, detect_gaps, fill_short_gaps, filter_markers, valid_runs
-from exubio.prep.thorax import MAX_THORAX_GAP_S, isb_landmarks, thorax_frame, to_thorax_frame
+from exubio.prep.filtering import as_series, detect_gaps, filter_markers, valid_runs
+from exubio.prep.thorax import MAX_THORAX_GAP_S, isb_landmarks, lab_landmarks, thorax_frame, to_thorax_frame
 from exubio.protocol.labels import resolve_labels
 from exubio.types import MarkerTargets, Protocol, Trajectories
 
@@ -137,26 +137,7 @@ def prepare_targets(
     pos[~np.isfinite(pos).all(axis=2)] = np.nan
 
     if not protocol.thorax_frame.is_identity:
-        max_gap = int(round(max_thorax_gap_s * trajectories.rate_hz))
-        landmarks = {}
-        for key, col in match.thorax_columns.items():
-            label = getattr(protocol.thorax_frame, key)
-            lm = raw[:, col].copy()
-            lm[~np.isfinite(lm).all(axis=1)] = np.nan
-            valid = ~np.isnan(lm).any(axis=1)
-            if not valid.any():
-                raise InputError(
-                    f"{src}: thorax landmark '{label}' (thorax_frame.{key}) is missing in every frame; "
-                    f"the thorax frame cannot be built"
-                )
-            filled = fill_short_gaps(lm, max_gap_frames=max_gap)
-            still = np.isnan(filled).any(axis=1)
-            if still.any():
-                log.warning(
-                    "%s: thorax landmark '%s' is missing in %d frame(s) after bridging gaps up to %d "
-                    "frames; every marker is missing there", src, label, int(still.sum()), max_gap,
-                )
-            landmarks[key] = filled
+        landmarks = lab_landmarks(trajectories, protocol, match, max_thorax_gap_s=max_thorax_gap_s)
         try:
             rot, origin = thorax_frame(*isb_landmarks(landmarks))
         except InputError as exc:

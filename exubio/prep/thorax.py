@@ -2,12 +2,17 @@
 midpoints a protocol may name instead), and lab positions expressed in it frame by frame."""
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from exubio.errors import InputError
 from exubio.model.kinematics import cross
+from exubio.prep.filtering import fill_short_gaps
 
-__all__ = ["MAX_THORAX_GAP_S", "isb_landmarks", "thorax_frame", "to_thorax_frame"]
+log = logging.getLogger(__name__)
+
+__all__ = ["MAX_THORAX_GAP_S", "isb_landmarks", "lab_landmarks", "thorax_frame", "to_thorax_frame"]
 
 MAX_THORAX_GAP_S = 0.25
 """Thorax-landmark gaps up to this long are bridged by linear interpolation (held at the ends)."""
@@ -71,3 +76,32 @@ def to_thorax_frame(positions: np.ndarray, rot: np.ndarray, origin: np.ndarray, 
     if rot.ndim == 2:
         return (p - origin) @ rot
     return np.einsum("nji,nkj->nki", rot, p - origin[:, None, :])
+
+
+def lab_landmarks(trajectories, protocol, match, /, *, max_thorax_gap_s: float = MAX_THORAX_GAP_S) -> dict[str, np.ndarray]:
+    """The protocol's thorax landmarks (key of ``protocol.thorax_frame`` -> (n, 3) lab positions) of a
+    trial, gaps up to ``max_thorax_gap_s`` bridged (exubio.prep.filtering.fill_short_gaps), longer
+    ones NaN (logged); ``match``: the trial's exubio.protocol.labels.LabelMatch. A landmark missing
+    in every frame raises InputError naming it."""
+    src = trajectories.source or "trajectories"
+    raw = trajectories.positions_m
+    max_gap = int(round(max_thorax_gap_s * trajectories.rate_hz))
+    landmarks = {}
+    for key, col in match.thorax_columns.items():
+        label = getattr(protocol.thorax_frame, key)
+        lm = raw[:, col].copy()
+        lm[~np.isfinite(lm).all(axis=1)] = np.nan
+        if np.isnan(lm).any(axis=1).all():
+            raise InputError(
+                f"{src}: thorax landmark '{label}' (thorax_frame.{key}) is missing in every frame; "
+                f"the thorax frame cannot be built"
+            )
+        filled = fill_short_gaps(lm, max_gap_frames=max_gap)
+        still = np.isnan(filled).any(axis=1)
+        if still.any():
+            log.warning(
+                "%s: thorax landmark '%s' is missing in %d frame(s) after bridging gaps up to %d "
+                "frames; every marker is missing there", src, label, int(still.sum()), max_gap,
+            )
+        landmarks[key] = filled
+    return landmarks

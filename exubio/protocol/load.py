@@ -20,6 +20,7 @@ import numpy as np
 from exubio.errors import ProtocolError
 from exubio.io.resources import resolve, shipped_file, shipped_names
 from exubio.io.yaml import _kind, check_keys, finite_float, read_yaml
+from exubio.protocol.analog_loads import parse_analog_loads
 from exubio.types import MarkerSpec, Protocol, ThoraxFrameSpec
 
 __all__ = [
@@ -38,7 +39,7 @@ SCHEMA_VERSION = 1
 THORAX_SEGMENT = "thorax"  # the fixed segment: its markers only build the thorax frame
 
 _TOP_KEYS = ("schema_version", "name", "description", "thorax_frame", "filter", "defaults", "markers", "hold",
-             "relabel", "extends", "side", "other_arm")
+             "relabel", "extends", "side", "other_arm", "analog_loads")
 _FRAME_KEYS = ("ij", "px", "c7", "t8")
 _MIDPOINT_FRAME_KEYS = ("ij", "ij_c7_midpoint", "px_t8_midpoint")
 _FILTER_KEYS = ("cutoff_hz", "order")
@@ -198,6 +199,7 @@ def load_protocol(
         side=side,
         thorax_aliases=MappingProxyType(thorax_aliases),
         other_arm=other_arm.strip() if other_arm else None,
+        analog_loads=parse_analog_loads(data.get("analog_loads"), src_of("analog_loads"), seg_names),
     )
 
 

@@ -56,6 +56,7 @@ class TrialJob:
     repair_labels: bool = False
     final_dir: Path | None = None  # where out_dir is renamed to once complete (a study's trial): what the files name
     hand_load_kg: float | None = None  # joint moments with this mass in the hand (exubio.dynamics); None: none
+    moment_request: Any = None  # the moments' lab vertical and loads files (exubio.prep.moment_inputs.MomentRequest)
 
     def __post_init__(self) -> None:
         from exubio.methods import method_spec
@@ -144,7 +145,8 @@ def _run_job(job: TrialJob, progress_factory: Callable[[str, int], Callable[[int
     if calibration is not None:
         session = calibration.session
     settings = RunSettings(method_options=dict(job.options), overwrite=job.overwrite, repair_labels=job.repair_labels,
-                           progress_factory=progress_factory, hand_load_kg=job.hand_load_kg)
+                           progress_factory=progress_factory, hand_load_kg=job.hand_load_kg,
+                           moment_request=job.moment_request)
     failed: dict[str, str] = {}
     try:
         outputs = reconstruct_file(job.trial, job.out_dir, methods=list(job.methods), session=session, settings=settings,

@@ -61,6 +61,7 @@ in part of the trial, ``repaired``: exchanged back before preparing (``--repair-
     repaired: bool = False  # ... and exchanged back (--repair-labels)
     generic_model: Model | None = None  # what the label checks expect (exubio.run.inputs.Session)
     generic_protocol: Protocol | None = None
+    moment_inputs: Any = None  # the thorax's motion and the loads (exubio.prep.moment_inputs.MomentInputs)
 
 
 @dataclass(frozen=True)
@@ -86,15 +87,17 @@ class RunSettings:
     repair_labels: bool = False
     progress_factory: Callable[[str, int], Callable[[int], None]] | None = None  # per method: a progress callback
     hand_load_kg: float | None = None  # joint moments (exubio.dynamics) with this mass in the hand; None: none
+    moment_request: Any = None  # their lab vertical and loads files (exubio.prep.moment_inputs.MomentRequest)
 
 
 def load_inputs(trial: str | Path | Trajectories, session: Session | None = None, /, *, repair_labels: bool = False,
-                prepared: Prepared | None = None) -> TrialInputs:
+                prepared: Prepared | None = None, moment_request: Any = None) -> TrialInputs:
     """Read the trial (or take it, read already), check the labels that must be right before
     anything is computed (thorax landmarks, missing markers, labels exchanged in part of the trial:
     repaired with ``repair_labels``), and prepare the marker targets (or take ``prepared``, when
     the protocol prepares the trial the same way). ``session``: default the shipped model and
-    protocol (exubio.run.inputs.load_session)."""
+    protocol (exubio.run.inputs.load_session); ``moment_request`` (exubio.prep.moment_inputs.MomentRequest):
+    also the thorax's motion in the lab and the external loads of the joint moments."""
     from exubio.trust.label_ranges import find_partial_swaps, repair_partial_swaps
     from exubio.trust.missing_markers import drop_missing_markers
     from exubio.trust.thorax_check import check_thorax_labels
@@ -112,8 +115,13 @@ def load_inputs(trial: str | Path | Trajectories, session: Session | None = None
         targets = prepared.targets
     else:
         targets = prepare_targets(traj, protocol)
+    extra = None
+    if moment_request is not None:
+        from exubio.prep.moment_inputs import moment_inputs
+
+        extra = moment_inputs(traj, protocol, targets, model, moment_request)
     return TrialInputs(TrialInfo.of(traj), model, protocol, targets, dropped, partial, repaired,
-                       session.generic_model, session.generic_protocol)
+                       session.generic_model, session.generic_protocol, extra)
 
 
 def reconstruct(model: Model, protocol: Protocol, targets: MarkerTargets, /, *, method: Method | str = Method.PF,
@@ -183,6 +191,8 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
     names = {"csv": f"{stem}.csv", "mot": f"{stem}.mot", "npz": f"{stem}.npz", "summary": f"{stem}.summary.json"}
     if moments is not None:
         names = {"moments": f"{stem}.moments.csv", **names}
+        if getattr(moments, "thorax", None) is not None:
+            names = {"thorax": f"{stem}.thorax.csv", **names}
     notes = [f"exubio_{line.split(':', 1)[0].replace(' ', '_')}={line.split(':', 1)[1].strip()}"
              for line in angles.comments if line.startswith("status ")]
     if summary_data.get("quality"):
@@ -202,19 +212,30 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
             from exubio.dynamics.moments_file import write_moments_csv
 
             write_moments_csv(staged["moments"], moments, comments=_moments_comments(moments))
+            if "thorax" in staged:
+                from exubio.dynamics.thorax_file import write_thorax_csv
+
+                write_thorax_csv(staged["thorax"], moments.thorax)
         results.write_json(staged["summary"], summary_data)
         placed = result_set.commit(last=names["summary"])
     return {kind: placed[name] for kind, name in names.items()}
 
 
-def _moments_key(key: str | None, body_mass_kg: float, hand_load_kg: float | None) -> str | None:
+def _moments_key(key: str | None, body_mass_kg: float, hand_load_kg: float | None, request: Any = None) -> str | None:
     """A run's fingerprint (exubio.run.resume.run_key) that also holds the joint moments' body mass
-    and hand load when it writes them, so an earlier set without them (or with others) is not kept."""
+    and hand load when it writes them, the lab vertical and the loads files' contents, so an earlier set
+    without them (or with others) is not kept."""
     if key is None or hand_load_kg is None:
         return key
     import hashlib
 
-    return hashlib.sha256(repr((key, "moments", float(body_mass_kg), float(hand_load_kg))).encode()).hexdigest()
+    loads = []
+    for path in () if request is None else request.loads:  # a file's content, not only its name
+        p = Path(path)
+        loads.append(hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else str(p))
+    lab_up = "auto" if request is None else request.lab_up
+    what = (key, "moments", float(body_mass_kg), float(hand_load_kg), "thorax motion and loads", lab_up, tuple(loads))
+    return hashlib.sha256(repr(what).encode()).hexdigest()
 
 
 def _moments_comments(moments: Any) -> tuple[str, ...]:
@@ -223,7 +244,19 @@ def _moments_comments(moments: Any) -> tuple[str, ...]:
     if "pf_inertia_scale" in info:
         line += (f" (PF integrated its equations of motion with the segments' inertia x {info['pf_inertia_scale']:g}; "
                  "the moments use the real inertia above)")
-    return (line,) + ((info["pf_fallback"],) if "pf_fallback" in info else ())
+    out = (line,) + ((info["pf_fallback"],) if "pf_fallback" in info else ())
+    if "thorax" in info:
+        out += (info["thorax"],)
+    return out + tuple(load.describe() for load in getattr(moments, "loads", ()))
+
+
+def _request(settings: RunSettings) -> Any:
+    """What the joint moments need prepared with the trial (None: no moments)."""
+    if settings.hand_load_kg is None:
+        return None
+    from exubio.prep.moment_options import MomentRequest
+
+    return settings.moment_request if settings.moment_request is not None else MomentRequest()
 
 
 def run_metadata(inputs: TrialInputs, trial_path: str | Path, method: Method) -> dict[str, Any]:
@@ -274,7 +307,7 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
     labels = trajectories.labels if trajectories is not None else ()
     keys = {s: _moments_key(run_key(trial_path, session.model, session.protocol, m.value, labels=labels,
                                     options=settings.method_options.get(m.value), repair_labels=settings.repair_labels),
-                            session.model.body_mass_kg, settings.hand_load_kg)
+                            session.model.body_mass_kg, settings.hand_load_kg, settings.moment_request)
             for m, s in zip(methods, stems)}
     with ExitStack() as parts:  # the locks, and the streamed model points' part files, go whatever happens
         parts.enter_context(results.claim(out_dir, stems))  # no other run writes these results meanwhile
@@ -285,7 +318,8 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
             return [kept[s] for s in stems]
         results.prepare_output_dir(out_dir, [s for s in stems if s not in kept], overwrite=settings.overwrite)
         inputs = load_inputs(trajectories if trajectories is not None else trial_path, session,
-                             repair_labels=settings.repair_labels, prepared=prepared)
+                             repair_labels=settings.repair_labels, prepared=prepared,
+                             moment_request=_request(settings))
         run = _Run(inputs, Path(trial_path), Path(out_dir), settings, calibration, keys, kept)
         return run.reconstruct(methods, stems, parts, StreamedReconstruction)
 
@@ -391,7 +425,10 @@ def write_assessed(inputs: TrialInputs, trial_path: str | Path, out_dir: str | P
         if hand_load_kg is not None:
             from exubio.dynamics.moments import moments_summary, reconstruction_moments
 
-            moments = reconstruction_moments(inputs.model, recon, hand_load_kg=hand_load_kg)
+            extra = inputs.moment_inputs
+            moments = reconstruction_moments(inputs.model, recon, hand_load_kg=hand_load_kg,
+                                             thorax=None if extra is None else extra.thorax,
+                                             loads=() if extra is None else extra.loads)
             summ["moments"] = moments_summary(moments)
         names, values = anatomical_table(inputs.model, recon.q_rad)
         det = assessment.angles[recon.method]

@@ -199,6 +199,7 @@ class SimulatedTrial:
     perturbation: ModelPerturbation | None = None  # the model was perturbed by this before generating
     model: Model | None = None  # the model the trial was generated with (perturbed, if so)
     sta_model: str = "per-marker"  # the STA model: "per-marker", or a bone model's line (exubio.synth.sta_sim)
+    thorax_motion: object = None  # exact ThoraxMotion in the lab of a leaning trunk (exubio.synth.thorax_lean), or None
 
 
 # --------------------------------------------------------------------------------------------
@@ -577,6 +578,7 @@ def simulate_trial(
     perturbation: ModelPerturbation | None = None,
     sta_model=None,
     cycle_s: float = CYCLE_S,
+    thorax_lean=None,
 ) -> SimulatedTrial:
     """Simulate a trial of ``motion`` on ``model`` (see the module docstring); with
     ``perturbation``, on ``perturbation.apply(model)`` (exubio.synth.perturb: a model mismatch for a
@@ -584,7 +586,9 @@ def simulate_trial(
     None or "per-marker" (the artefact above), or a bone STA model (a shipped name such as "bone",
     a JSON path, a BoneStaModel; exubio.synth.sta_sim) for the scapula and humerus markers.
     ``cycle_s``: the period of the elevation cycles (default CYCLE_S, a slow raise; 0.6 s makes a
-    fast one, peak angular accelerations of thousands of deg/s^2)."""
+    fast one, peak angular accelerations of thousands of deg/s^2). ``thorax_lean``: a
+    exubio.synth.thorax_lean.ThoraxLean: the thorax leans in the lab in step with the raise (the
+    arm's thorax-relative motion unchanged; its exact motion in ``thorax_motion``)."""
     from exubio.synth.sta_sim import resolve_sta_model
 
     bone = resolve_sta_model(sta_model)
@@ -626,8 +630,19 @@ def simulate_trial(
         rot, origin = _lab_transform()
     else:
         rot, origin = np.eye(3), np.zeros(3)
-    pos = pos @ rot.T + origin
-    sta = sta @ rot.T
+    thorax_motion = None
+    if thorax_lean is not None:
+        from exubio.synth.thorax_lean import lean_motion, thorax_skin_artefact
+
+        sta = sta + thorax_skin_artefact(thorax_lean, t, cycle_s, segs,
+                                         np.random.default_rng(np.random.SeedSequence([seed, 36])))
+        thorax_motion = lean_motion(thorax_lean, t, cycle_s, rot, origin)
+        R_t = thorax_motion.rotation
+        pos = np.einsum("nij,nkj->nki", R_t, pos) + thorax_motion.origin_m[:, None, :]
+        sta = np.einsum("nij,nkj->nki", R_t, sta)
+    else:
+        pos = pos @ rot.T + origin
+        sta = sta @ rot.T
     noise = (np.random.default_rng(noise_ss).normal(0.0, noise_mm * 1e-3, size=pos.shape)
              if noise_mm > 0 else np.zeros_like(pos))
     traj = Trajectories(labels=names, positions_m=pos + sta + noise, rate_hz=float(rate_hz), time_s=t,
@@ -645,10 +660,12 @@ def simulate_trial(
             f"seed {seed}; {'lab' if lab_transform else 'thorax'} frame; model {model.name}")
     if bone is not None:
         desc += f"; STA: {sta_label}"
+    if thorax_lean is not None:
+        desc += f"; {thorax_lean.describe()}"
     return SimulatedTrial(trajectories=traj, time_s=t, q_true=q, qd_true=qd, qdd_true=qdd,
                           coordinate_names=model.coordinate_names, sta_m=sta, noise_m=noise, description=desc,
                           motion=motion, lab_rotation=rot, lab_origin_m=origin, marker_segments=segs,
-                          perturbation=perturbation, model=model, sta_model=sta_label)
+                          perturbation=perturbation, model=model, sta_model=sta_label, thorax_motion=thorax_motion)
 
 
 def write_simulated_trial(trial: SimulatedTrial, path_c3d, /) -> tuple[Path, Path]:

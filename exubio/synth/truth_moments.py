@@ -1,7 +1,8 @@
 """The exact joint moments of a simulated trial: ``<stem>.truth_moments.csv``, exubio.dynamics on
 the simulation's exact q, q', q'' (analytic signals; the girdle's two solved coordinates by implicit
 differentiation of the ellipsoid constraints), with the trial's model, its body mass and the hand
-load. tests/test_dynamics_truth.py checks the file against biorbd's inverse dynamics of the same
+load, and the thorax's exact motion in the lab where the trunk moves (exubio.synth.thorax_lean).
+tests/test_dynamics_truth.py checks the file against biorbd's inverse dynamics of the same
 states on the exported .bioMod, so the truth does not rest on the code it judges."""
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ def truth_moments_path(path_c3d) -> Path:
 def write_truth_moments(trial: SimulatedTrial, path_c3d, /, *, hand_load_kg: float = 0.0) -> Path:
     """Write the exact moments of ``trial`` (its model: lengths and body mass) beside ``path_c3d``."""
     moments = joint_moments(trial.model, trial.q_true, trial.qd_true, trial.qdd_true, time_s=trial.time_s,
-                            hand_load_kg=hand_load_kg)
+                            hand_load_kg=hand_load_kg, thorax=trial.thorax_motion)
     return write_moments_csv(truth_moments_path(path_c3d), moments, comments=(
         "truth: the simulation's exact q, q', q'' (analytic; the girdle's solved coordinates by implicit "
-        "differentiation of the ellipsoid constraints)", f"trial: {trial.description}"))
+        "differentiation of the ellipsoid constraints)", f"trial: {trial.description}", moments.info["thorax"]))
