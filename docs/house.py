@@ -13,7 +13,6 @@ The figures and counts are on the docs' Architecture page."""
 from __future__ import annotations
 
 import argparse
-import ast
 import collections
 import importlib.util
 import subprocess
@@ -105,7 +104,7 @@ def _picture(rooms, layer, arrows, up, lines, counts, out: Path) -> None:
     for r in sorted(rooms):
         by_layer[layer[r]].append(r)
     pos = {}
-    for y, (lay, rs) in enumerate(sorted(by_layer.items())):
+    for y, (_, rs) in enumerate(sorted(by_layer.items())):
         for x, r in enumerate(rs):  # a lone room alternates left and right of the middle: its arrows show
             pos[r] = ((x + 0.5) / len(rs) if len(rs) > 1 else (0.42 if y % 2 else 0.58), y)
     fig, ax = plt.subplots(figsize=(12, 0.55 * len(by_layer) + 1.5))

@@ -17,7 +17,8 @@ from exubio.model.angles import (
 )
 from exubio.errors import InputError
 from exubio.model.kinematics import axis_rotation
-from exubio.synth.simulate import scapula_isb_angles, simulate_trial
+from exubio.synth.rhythm import scapula_isb_angles
+from exubio.synth.simulate import simulate_trial
 
 TAIT_BRYAN = ["XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX"]
 PROPER = ["XYX", "XZX", "YXY", "YZY", "ZXZ", "ZYZ"]

@@ -11,7 +11,8 @@ from exubio.model.kinematics import Kinematics
 from exubio.model.load import load_model
 from exubio.literature.reference import load_ludewig2009
 from exubio.io.resources import shipped_file
-from exubio.synth.simulate import PLANE_OF, Motion, simulate_trial
+from exubio.synth.rhythm import PLANE_OF
+from exubio.synth.simulate import Motion, simulate_trial
 
 # Ludewig column (axis suffix dropped) -> (exubio ISB angle set, index)
 COLUMNS = {"SC_protraction": ("SC", 0), "SC_elevation": ("SC", 1), "SC_rotation": ("SC", 2),

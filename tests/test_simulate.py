@@ -10,15 +10,12 @@ import pytest
 
 from exubio.errors import InputError
 from exubio.prep.thorax import thorax_frame
+from exubio.synth.rhythm import LUDEWIG_2009, LUDEWIG_HT_DEG, RHYTHM_TABLE_COLUMNS, scapula_isb_angles
 from exubio.synth.simulate import (
     DEFAULT_MARKERS,
-    LUDEWIG_2009,
-    LUDEWIG_HT_DEG,
-    RHYTHM_TABLE_COLUMNS,
     STA_SCALE,
     Motion,
     rhythm_table,
-    scapula_isb_angles,
     simulate_trial,
     write_simulated_trial,
 )

@@ -57,7 +57,7 @@ def fit_ellipsoid_to_points(points_m: np.ndarray, /, *, centre_z_m: float | None
     position of the centre (0: on the mid-sagittal plane, a symmetric thorax); None: fitted.
     Returns the ellipsoid (no contact points) and the residual distances (n,) in m.
     Used to build the generic model's ellipsoid from the contact points of a published rhythm
-    (``exubio.synth.simulate.rhythm_poses``) and on several static poses."""
+    (``exubio.synth.rhythm.rhythm_poses``) and on several static poses."""
     from scipy.optimize import least_squares
 
     x = np.asarray(points_m, dtype=float)
