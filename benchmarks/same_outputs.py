@@ -108,7 +108,7 @@ KNOWN_CHANGES: tuple = (
      "the scientific studies and their results moved from benchmarks/ to studies/ (issue 34): the notes "
      "and the CSV headers that point to a measurement name studies/README.md"),
 )
-"""Changes made on purpose since the base the tests compare with (tests/test_same_outputs.py BASE),
+"""Changes made on purpose since the base the tests compare with (tests/project/test_same_outputs.py BASE),
 each a (side, pattern, replacement, why) undone before the comparison. Before the studies' move, none: the base moved to
 f64e71d (issue 33), after the changes of issues 33, 35, 36 and 37 that change every output on
 purpose (each angle's uncertainty column, per-frame statuses from the gimbal margin and the

@@ -1,4 +1,4 @@
-"""The package's house, measured with the project's own rules (tests/test_architecture.py's layers
+"""The package's house, measured with the project's own rules (tests/project/test_architecture.py's layers
 and import reading): ``draw`` pictures the rooms (subpackages and top modules) by layer with the
 import arrows between them, at this checkout or at a git revision, and prints the counts;
 ``walk`` follows one trial (the shipped example, PF, no report) through the package at run time and
@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _rules():
-    spec = importlib.util.spec_from_file_location("architecture_rules", ROOT / "tests" / "test_architecture.py")
+    spec = importlib.util.spec_from_file_location("architecture_rules", ROOT / "tests" / "project" / "test_architecture.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
@@ -122,7 +122,7 @@ def _picture(rooms, layer, arrows, up, lines, counts, out: Path) -> None:
     ax.axis("off")
     ax.set_title(f"exubio at {counts['revision']}: {counts['modules']} modules in {counts['rooms']} rooms, "
                  f"{counts['room arrows']} arrows between rooms (grey, down the layers), {counts['arrows up (rooms)']} "
-                 f"up (red); layers from the bottom (tests/test_architecture.py)", fontsize=9)
+                 f"up (red); layers from the bottom (tests/project/test_architecture.py)", fontsize=9)
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)

@@ -1,6 +1,6 @@
 """exubio Model -> OpenSim model file (.osim, OpenSim 4 format).
 
-Mapping (exact, checked against ``exubio.model.kinematics`` by tests/test_export.py):
+Mapping (exact, checked against ``exubio.model.kinematics`` by tests/export/test_export.py):
 - every segment is a Body with its mass, centre of mass and inertia about the centre of mass
   (``Ixx Iyy Izz Ixy Ixz Iyz``: the entries of exubio's tensor); the body frame is exubio's segment
   frame. The thorax is welded to ground (the thorax frame is exubio's global frame).

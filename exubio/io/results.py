@@ -20,7 +20,7 @@ Angles are radians in memory and degrees in the CSV and .mot files (labelled: th
 ``inDegrees=yes``; the CSV holds degrees in every coordinate column, time in seconds).
 
 Kept whole: the one place where results become files and files results again; each writer sits
-beside its reader so that every round trip is seen (and tested, tests/test_io_results.py) together.
+beside its reader so that every round trip is seen (and tested, tests/io/test_io_results.py) together.
 """
 from __future__ import annotations
 

@@ -31,7 +31,7 @@ Conventions
   anatomical frames, **without any sign flip**: SC, AC, ST in Y-X'-Z''; GH in X-Z'-Y'' (Phadke
   et al. 2011, the sequence of the paper and of Ludewig et al. 2009 as distributed by Spartacus);
   HT in Y-X'-Y'' with the middle angle <= 0. For a right arm this gives (verified on the
-  simulated abduction and flexion of ``exubio.synth.simulate``, see tests/test_angles.py):
+  simulated abduction and flexion of ``exubio.synth.simulate``, see tests/model/test_angles.py):
 
   ====  =====================  ===========================  ==============================
   joint first angle            second angle                 third angle

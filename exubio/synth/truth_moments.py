@@ -2,7 +2,7 @@
 the simulation's exact q, q', q'' (analytic signals; the girdle's two solved coordinates by implicit
 differentiation of the ellipsoid constraints), with the trial's model, its body mass and the hand
 load, and the thorax's exact motion in the lab where the trunk moves (exubio.synth.thorax_lean).
-tests/test_dynamics_truth.py checks the file against biorbd's inverse dynamics of the same
+tests/dynamics/test_dynamics_truth.py checks the file against biorbd's inverse dynamics of the same
 states on the exported .bioMod, so the truth does not rest on the code it judges."""
 from __future__ import annotations
 

@@ -187,7 +187,7 @@ correlation of the linearised problem: holding a coordinate is conditioning on i
 or more means the hold, not the markers, decides most of what the angle is. The measured values
 are clear-cut (21-marker set, clavicle axial rotation held, elevation in three planes): 1.0 for the
 clavicle's axial rotation, 0.99 for AC upward rotation and tilt, 0.79 for AC internal rotation, at
-most 0.05 for every other angle (tests/test_angle_status.py)."""
+most 0.05 for every other angle (tests/trust/test_angle_status.py)."""
 
 RELEASE_PRIOR = 1e-8
 """Relative Tikhonov weight that keeps a released problem invertible where no marker sees a

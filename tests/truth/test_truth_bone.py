@@ -1,0 +1,182 @@
+"""Bone truth (exubio.truth): the data-sharing reader, the lab run's conventions end to end on a bone
+trial made from a known motion (both sides), the bone trials of ../shared/data/truth, the command."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.io
+
+from exubio.errors import InputError, ModelError
+from exubio.io.yaml import read_yaml
+from exubio.model.angles import anatomical_frames
+from exubio.model.kinematics import Kinematics
+from exubio.model.load import DEFAULT_MODEL, load_model
+from exubio.truth.lab_run import setup_lab_run
+from exubio.truth.sta_format import BoneSegment, BoneTrial, read_sta_trial
+
+DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "truth" / "sta_opendata"
+needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="../shared/data/truth/sta_opendata is absent")
+MIRROR = np.diag([1.0, 1.0, -1.0])
+
+
+# ---------------------------------------------------------------------------------------------
+# A bone trial from a known motion: the simulator's bones, skin markers fixed on them (no STA)
+# ---------------------------------------------------------------------------------------------
+def _bone_trial(side: str, *, n_frames: int = 120, rate: float = 60.0) -> tuple[BoneTrial, np.ndarray]:
+    import exubio
+
+    model = load_model()
+    kin = Kinematics(model)
+    sim = exubio.simulate("abduction", model, duration_s=n_frames / rate, rate_hz=rate)
+    ramp = (1 - np.cos(np.linspace(0, np.pi, 60))) / 2  # at rest in the reference posture, then smoothly into the motion
+    q = np.vstack([np.zeros((12, model.n_coordinates)), ramp[:, None] * sim.q_true[0], sim.q_true])
+    R, p = kin.poses(q)
+    A = anatomical_frames(model)
+    rng = np.random.default_rng(3)
+    segs = {}
+    for bone, origin_point, landmarks in (("scapula", "AA", ("AA", "TS", "AI")), ("humerus", "GH", ("GH", "EL", "EM"))):
+        s = model.segment_index(bone)
+        seg = model.segment(bone)
+        Rb = R[:, s] @ A[bone]  # the bone's ISB frame in the (thorax = lab) frame
+        tb = p[:, s] + np.einsum("nij,j->ni", R[:, s], seg.points[origin_point])
+        local = {k: A[bone].T @ (seg.points[k] - seg.points[origin_point]) for k in landmarks}
+        markers = A[bone].T @ (rng.normal(0, 0.04, (6, 3)) + seg.points[origin_point] * 0).T  # 6 points near the origin
+        markers = np.broadcast_to(markers.T, (len(q), 6, 3)).copy()
+        if side == "left":  # the data-sharing format's left side: everything mirrored, frames kept right-handed
+            Rb = MIRROR @ Rb @ MIRROR
+            tb = tb @ MIRROR
+            local = {k: MIRROR @ v for k, v in local.items()}
+            markers = markers @ MIRROR
+        if bone == "humerus":
+            local["GHC"] = local.pop("GH")
+        segs[bone] = BoneSegment(bone, side, tuple(f"M{j:02d}" for j in range(6)), markers, Rb, tb, local)
+    return BoneTrial(Path(f"synthetic_{side}.mat"), "dataSample_SIM_abd", side, segs), q
+
+
+@pytest.mark.parametrize("side", ["right", "left"])
+def test_a_bone_trial_of_a_known_motion_gives_the_bones_angles_back(side):
+    """Skin markers fixed on the simulator's bones, written as the data-sharing format writes them
+    (a left arm mirrored): the lab run's thorax assumption recovers the thorax, and LS's angles equal
+    the bones' (ST, GH in both sequences, HT) to 0.02 deg RMSE, 0.15 deg at most."""
+    from exubio.truth.compare import compare_bone_trial
+
+    trial, _ = _bone_trial(side)
+    run = setup_lab_run(trial, read_yaml(DEFAULT_MODEL, error=ModelError), rate_hz=60.0)
+    assert run.assumption.vertical == "+Y"
+    assert np.allclose(run.assumption.rotation, np.eye(3), atol=1e-4)  # the rest window takes the ramp's first frames
+    comp, _ = compare_bone_trial(run, methods=("ls",))
+    for angle, per in comp.angles.items():
+        e = per["ls"]
+        if e.measured_fraction > 0:
+            assert e.rmse_deg < 0.02 and e.max_deg < 0.15, (angle, e)
+    assert comp.angles["GH_phadke_X_elevation"]["ls"].measured_fraction > 0.5
+
+
+def test_the_reader_carries_markers_and_landmarks_into_the_lab(tmp_path):
+    trial, _ = _bone_trial("right", n_frames=10)
+    seg = trial.segments["scapula"]
+    path = tmp_path / "one.mat"
+    mm = lambda a: np.asarray(a) * 1000.0
+    s = {"mrk": {n: mm(seg.markers_bone[:, j]) for j, n in enumerate(seg.marker_names)},
+         "gRa": seg.rotation.reshape(len(seg.rotation), 9), "gta": mm(seg.origin),
+         "ALs": {k: mm(v) for k, v in seg.landmarks.items()}}
+    h = trial.segments["humerus"]
+    hs = {"mrk": {n: mm(h.markers_bone[:, j]) for j, n in enumerate(h.marker_names)},
+          "gRa": h.rotation.reshape(len(h.rotation), 9), "gta": mm(h.origin), "ALs": {k: mm(v) for k, v in h.landmarks.items()}}
+    scipy.io.savemat(path, {"dataSample_SIM_abd": {"subj01": {"trial01": {"R_scapula": s, "R_humerus": hs}}}})
+    back = read_sta_trial(path)
+    assert back.side == "right" and back.task == "abd" and back.lab == "SIM"
+    assert np.allclose(back.segments["scapula"].markers_lab(), seg.markers_lab(), atol=1e-12)
+    assert np.allclose(back.segments["scapula"].landmark_lab("AA"), seg.origin, atol=1e-12)
+
+
+def test_the_reader_refuses_what_is_not_the_format(tmp_path):
+    bad = tmp_path / "text.mat"
+    bad.write_text("not matlab")
+    with pytest.raises(InputError, match="text.mat"):
+        read_sta_trial(bad)
+    two = tmp_path / "two.mat"
+    scipy.io.savemat(two, {"a": 1.0, "b": 2.0})
+    with pytest.raises(InputError, match="2 variables"):
+        read_sta_trial(two)
+    rot = tmp_path / "rot.mat"
+    scipy.io.savemat(rot, {"dataSample_X_y": {"subj01": {"trial01": {"R_scapula": {
+        "mrk": {"M01": np.zeros((3, 3))}, "gRa": np.ones((3, 9)), "gta": np.zeros((3, 3))}}}}})
+    with pytest.raises(InputError, match="R_scapula.gRa is not a rotation"):
+        read_sta_trial(rot)
+
+
+# ---------------------------------------------------------------------------------------------
+# The real bone trials
+# ---------------------------------------------------------------------------------------------
+@needs_data
+def test_s2m_files_read_as_the_sources_describe_them():
+    """SOURCES.md: left arm, lab Z up (the elbow 261 mm below GH at rest), AA the scapula frame's
+    origin, rotations orthonormal; the raw markers have gaps where the filled ones have none."""
+    t = read_sta_trial(DATA / "dataSample_S2M_armAbd.mat")
+    assert t.side == "left" and t.n_frames == 1760
+    hum, scap = t.segments["humerus"], t.segments["scapula"]
+    lm = hum.landmarks_lab()
+    elbow = 0.5 * (lm["EL"][0] + lm["EM"][0])
+    assert lm["GHC"][0][2] - elbow[2] == pytest.approx(0.261, abs=0.002)
+    assert np.allclose(scap.landmarks["AA"], 0.0, atol=1e-9)
+    assert np.allclose(np.einsum("nji,njk->nik", scap.rotation, scap.rotation), np.eye(3), atol=1e-6)
+    assert np.isfinite(scap.markers_bone).all()
+    assert np.isnan(scap.markers_bone_raw).any()
+
+
+@needs_data
+@pytest.mark.slow
+def test_the_s2m_abduction_at_rest_is_the_bones_and_its_errors_are_reported():
+    """At rest (the calibration) every angle equals the bone's to 0.5 deg; over the whole trial the
+    errors are those studies/README.md states (here: GH elevation, Phadke, under 10 deg RMSE)."""
+    from exubio.model.angles import anatomical_table
+    from exubio.model.load import model_from_mapping
+    from exubio.truth.compare import compare_bone_trial, truth_angles
+
+    t = read_sta_trial(DATA / "dataSample_S2M_armAbd.mat")
+    run = setup_lab_run(t, read_yaml(DEFAULT_MODEL, error=ModelError), rate_hz=300.0)
+    comp, recs = compare_bone_trial(run)
+    model = model_from_mapping(dict(run.model_mapping), "subject", name="subject")
+    truth = truth_angles(run)
+    for m, rec in recs.items():
+        names, tab = anatomical_table(model, rec.q_rad)
+        for a, tr in truth.items():
+            if a.startswith(("GH_Y_", "HT_Y_")):
+                continue  # the arm at the side: Y-X'-Y'' first and third angles are not defined there
+            err = np.degrees(np.abs(tab[run.rest_frames, names.index(a)] - tr[run.rest_frames]))
+            assert err.max() < 0.5, (m, a, err.max())
+        assert comp.angles["GH_phadke_X_elevation"][m].rmse_deg < 10.0
+        assert comp.angles["GH_Y_plane_of_elevation"][m].measured_fraction < 0.1  # near the gimbal lock
+
+
+def test_the_command_asks_for_the_rate_and_keeps_an_existing_json(tmp_path):
+    mat = tmp_path / "t.mat"
+    mat.write_bytes(b"")
+    cmd = [sys.executable, "-m", "exubio.cli", "truth", str(mat)]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    assert r.returncode == 2 and "--rate" in r.stderr and "t.mat" in r.stderr and "Traceback" not in r.stderr
+    out = tmp_path / "out.json"
+    out.write_text("{}")
+    r = subprocess.run(cmd + ["--rate", "300", "--json", str(out)], capture_output=True, text=True)
+    assert r.returncode == 2 and "--overwrite" in r.stderr and out.read_text() == "{}"
+
+
+@needs_data
+@pytest.mark.slow
+@pytest.mark.exudyn
+def test_the_command_writes_the_issue_s_json(tmp_path):
+    out = tmp_path / "abd.json"
+    r = subprocess.run([sys.executable, "-m", "exubio.cli", "-q", "truth", str(DATA / "dataSample_S2M_armFlex.mat"),
+                        "--rate", "300", "--json", str(out)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    data = json.loads(out.read_text())
+    assert data["file"].endswith("dataSample_S2M_armFlex.mat") and "thorax fixed in the lab" in data["assumption"]
+    e = data["angles"]["GH_phadke_X_elevation"]
+    assert set(e) == {"pf", "ls"} and {"rmse_deg", "max_deg", "coverage"} <= set(e["pf"])
+    assert "GH_phadke_X_elevation" in r.stdout
