@@ -177,12 +177,13 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
     absent (exubio.io.results.ResultSet: written in a hidden staging folder, renamed into place,
     summary.json last; without ``overwrite`` no existing file is ever replaced); ``streamed``:
     arrays the reconstruction left on disk (exubio.io.streamed), copied into the .npz; with
-    ``angles.moments`` (exubio.dynamics.moments.Moments) also <stem>.moments.csv, in the same set."""
+    ``angles.moments`` (exubio.dynamics.moments.Moments) also <stem>.moments.csv and the generalized forces
+    as OpenSim's ID tool writes them, <stem>.moments.sto (exubio.export.sto), in the same set."""
     moments = angles.moments
     out = Path(out_dir)
     names = {"csv": f"{stem}.csv", "mot": f"{stem}.mot", "npz": f"{stem}.npz", "summary": f"{stem}.summary.json"}
     if moments is not None:
-        names = {"moments": f"{stem}.moments.csv", **names}
+        names = {"moments": f"{stem}.moments.csv", "moments_sto": f"{stem}.moments.sto", **names}
     notes = [f"exubio_{line.split(':', 1)[0].replace(' ', '_')}={line.split(':', 1)[1].strip()}"
              for line in angles.comments if line.startswith("status ")]
     if summary_data.get("quality"):
@@ -200,8 +201,11 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
         results.write_npz(staged["npz"], recon, metadata=metadata, extra_arrays=extra, streamed=streamed)
         if moments is not None:
             from exubio.dynamics.moments_file import write_moments_csv
+            from exubio.export.sto import write_generalized_forces_sto
+            from exubio.run.moments_outputs import moments_comments
 
-            write_moments_csv(staged["moments"], moments, comments=_moments_comments(moments))
+            write_moments_csv(staged["moments"], moments, comments=moments_comments(moments))
+            write_generalized_forces_sto(staged["moments_sto"], moments, name=f"{stem} generalized forces")
         results.write_json(staged["summary"], summary_data)
         placed = result_set.commit(last=names["summary"])
     return {kind: placed[name] for kind, name in names.items()}
@@ -215,15 +219,6 @@ def _moments_key(key: str | None, body_mass_kg: float, hand_load_kg: float | Non
     import hashlib
 
     return hashlib.sha256(repr((key, "moments", float(body_mass_kg), float(hand_load_kg))).encode()).hexdigest()
-
-
-def _moments_comments(moments: Any) -> tuple[str, ...]:
-    info = moments.info
-    line = f"q, q', q'' of the {str(info.get('method', '')).upper()} reconstruction"
-    if "pf_inertia_scale" in info:
-        line += (f" (PF integrated its equations of motion with the segments' inertia x {info['pf_inertia_scale']:g}; "
-                 "the moments use the real inertia above)")
-    return (line,) + ((info["pf_fallback"],) if "pf_fallback" in info else ())
 
 
 def run_metadata(inputs: TrialInputs, trial_path: str | Path, method: Method) -> dict[str, Any]:
@@ -388,11 +383,15 @@ def write_assessed(inputs: TrialInputs, trial_path: str | Path, out_dir: str | P
         summ = trial_summary(recon, assessment, inputs, source=str(trial_path), stem=stem, notes=notes or RunNotes(),
                              quality=quality)
         moments = None
+        from exubio.run.moments_outputs import moments_entry, pf_inertia_entry
+
+        if (pf_inertia := pf_inertia_entry(recon.info)) is not None:
+            summ["pf_inertia_scale"] = pf_inertia
         if hand_load_kg is not None:
             from exubio.dynamics.moments import moments_summary, reconstruction_moments
 
             moments = reconstruction_moments(inputs.model, recon, hand_load_kg=hand_load_kg)
-            summ["moments"] = moments_summary(moments)
+            summ["moments"] = moments_entry(moments, moments_summary(moments), stem)
         names, values = anatomical_table(inputs.model, recon.q_rad)
         det = assessment.angles[recon.method]
         angles = AngleOutputs(names, values, det.status,
