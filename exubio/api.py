@@ -112,6 +112,8 @@ def reconstruct(trial: Trajectories | MarkerTargets | str | Path, model: Model |
 
     session = _session(model, protocol)
     inputs = _inputs(trial, session)
+    if method == "pf" and "inertia_scale" not in options and inputs.protocol.pf_inertia_scale is not None:
+        options["inertia_scale"] = inputs.protocol.pf_inertia_scale  # the protocol's defaults.pf_inertia_scale
     rec = _reconstruct(inputs.model, inputs.protocol, inputs.targets, method=method, **options)
     return dataclasses.replace(rec, quality=assess_inputs(inputs, [rec]).quality[rec.method])
 

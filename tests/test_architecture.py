@@ -17,7 +17,7 @@ OWNERS = {
     "matplotlib": {"report/trial_report.py", "report/study_report.py", "report/validation_report.py",
                    "report/validation_common.py", "report/validation_tables.py", "report/validation_summary.py",
                    "report/validation_paper_figures.py", "report/validation_exubio_figures.py",
-                   "report/calibration_page.py", "report/rhythm_page.py"},
+                   "report/calibration_page.py", "report/rhythm_page.py", "report/moments_page.py"},
     "plotly": {"report/viewer.py", "report/viewer_page.py", "report/viewer_scene.py", "report/viewer_results.py"},
     "distributed": {"run/executors.py"},
     "dask": {"run/executors.py"},

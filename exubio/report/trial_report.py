@@ -8,7 +8,8 @@ findings and the angles that are not measurements. Page 2: the anatomical angles
 against time (``<trial>.<method>.csv``; one colour per angle, PF solid, LS dashed, the truth dotted;
 modelled and not measured in grey). Then, for a trial that raises or lowers the arm, the rhythm
 page of each method (exubio.report.rhythm_page: ST, SC, GH angles against HT elevation with the
-in vivo corridor). Page 3: marker residuals (mean ± SD over markers per frame, per-marker RMSE), constraint residuals and the gaps.
+in vivo corridor), and, with ``--body-mass``, the joint-moments page of each method
+(exubio.report.moments_page: against time and HT elevation). Page 3: marker residuals (mean ± SD over markers per frame, per-marker RMSE), constraint residuals and the gaps.
 
 Kept whole: one report, its three pages drawn from the same loaded results (one figure module per
 page would pass the same loaded arrays around three times).
@@ -596,6 +597,10 @@ def build_trial_report(npz_paths: Sequence[str | Path], pdf_path: str | Path, /,
 
         pages += [f for f in (trial_rhythm_figure(p, _title(recons, meta), r.method)
                               for p, r in zip(npz_paths, recons) if r.method in angles) if f is not None]
+    from exubio.report.moments_page import trial_moments_figure  # with --body-mass: the joint moments
+
+    pages += [f for f in (trial_moments_figure(p, _title(recons, meta), r.method, angles.get(r.method),
+                                               summaries.get(r.method)) for p, r in zip(npz_paths, recons)) if f is not None]
     pages.append(residuals_page(recons, meta, summaries))
     cal_page = calibration_page(meta, summaries)
     if cal_page is not None:

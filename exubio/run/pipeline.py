@@ -165,6 +165,7 @@ class AngleOutputs:
     undetermined: np.ndarray | None = None  # (n, m) per model coordinate: not determined by the markers
     uncertainty_rad: np.ndarray | None = None  # (n, a) standard uncertainty (exubio.trust.angle_uncertainty)
     moments: Any = None  # the joint moments of the same frames (exubio.dynamics.moments.Moments) or None: <stem>.moments.csv
+    thorax_coordinates: np.ndarray | None = None  # (n, 6) the trunk in the lab (exubio.export.thorax); None: 0 in the .mot
 
 
 def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
@@ -197,7 +198,7 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
         staged = {kind: result_set.path(name) for kind, name in names.items()}
         results.write_angles_csv(staged["csv"], recon.time_s, [f"{n}_deg" for n in angles.names], angles.values_rad,
                                  comments=angles.comments, uncertainty_rad=angles.uncertainty_rad)
-        results.write_mot(staged["mot"], recon.time_s, angles.names, angles.values_rad, name=stem, notes=notes)
+        _write_mot(staged["mot"], recon, angles, stem, notes)
         results.write_npz(staged["npz"], recon, metadata=metadata, extra_arrays=extra, streamed=streamed)
         if moments is not None:
             from exubio.dynamics.moments_file import write_moments_csv
@@ -209,6 +210,18 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
         results.write_json(staged["summary"], summary_data)
         placed = result_set.commit(last=names["summary"])
     return {kind: placed[name] for kind, name in names.items()}
+
+
+def _write_mot(path: Path, recon: Reconstruction, angles: AngleOutputs, stem: str, notes: list[str]) -> None:
+    """The .mot: the anatomical angles and the thorax's free-joint coordinates (exubio.export.thorax:
+    the exported .osim's, so OpenSim's tools run on the file with the trunk's motion; 0 without it)."""
+    from exubio.export.thorax import THORAX_TRANSLATIONS, thorax_mot_columns
+
+    names, values = thorax_mot_columns(recon.n_frames, angles.thorax_coordinates)
+    if angles.thorax_coordinates is None:
+        notes = [*notes, "exubio_thorax_columns=0 (the thorax-fixed model: the ground is the thorax frame)"]
+    results.write_mot(path, recon.time_s, (*angles.names, *names), np.column_stack([angles.values_rad, values]),
+                      name=stem, notes=notes, metres=THORAX_TRANSLATIONS)
 
 
 def _moments_key(key: str | None, body_mass_kg: float, hand_load_kg: float | None) -> str | None:
