@@ -21,7 +21,7 @@ OWNERS = {
     "plotly": {"report/viewer.py", "report/viewer_page.py", "report/viewer_scene.py", "report/viewer_results.py"},
     "distributed": {"run/executors.py"},
     "dask": {"run/executors.py"},
-    "pandas": {"api.py", "run/study_table.py"},  # the study's angles table (Parquet, CSV) is a DataFrame
+    "pandas": {"api.py", "run/study_table.py", "run/study_moments.py"},  # the study's angles table (Parquet, CSV) is a DataFrame
     "pylsl": {"run/live/transport.py"},
 }
 VALIDATION_STUDY = tuple(f"exubio.validation.{m}" for m in ("run", "trials", "determinacy", "sensitivity", "residuals",

@@ -1,0 +1,230 @@
+"""The joint moments' outputs (issue 36): the .sto of the generalized forces read back (a parser
+written here and OpenSim's TimeSeriesTable); the same q, q', q'' through exubio, biorbd
+(InverseDynamics on the exported .bioMod) and OpenSim's own inverse dynamics tool (on the exported
+.osim, free thorax and all, and a .mot written by exubio's writer) give the same generalized
+forces to 1e-6 N m, with the trunk still and moving (biorbd and OpenSim, free thorax); the .osim's
+thorax coordinates place the thorax as exubio.export.thorax says; PF's inertia scale as a CLI
+option and a protocol key, named in summary.json, the moments headers and the report; the study's
+moments table matches the per-trial files; the benchmark script's figure."""
+import dataclasses
+import json
+import locale
+
+import numpy as np
+import pytest
+import yaml
+
+from exubio.dynamics.inertia import dynamics_model
+from exubio.dynamics.moments import joint_moments
+from exubio.errors import InputError, ProtocolError
+from exubio.export import write_biomod, write_osim
+from exubio.export.sto import write_generalized_forces_sto
+from exubio.export.thorax import (THORAX_COORDINATES, THORAX_TRANSLATIONS, thorax_coordinates, thorax_pose,
+                                  with_thorax_inertia)
+from exubio.io.results import write_mot
+from exubio.model.load import load_model
+
+TOL_NM = 1e-6
+RATE_HZ, N_FRAMES = 20.0, 21
+
+
+@pytest.fixture(autouse=True)
+def _keep_the_locale():
+    before = locale.setlocale(locale.LC_ALL)  # biorbd.Model() sets LC_ALL=C (see tests/test_export.py)
+    yield
+    locale.setlocale(locale.LC_ALL, before)
+
+
+@pytest.fixture(scope="module")
+def dyn():
+    return dynamics_model(load_model(body_mass_kg=70.0), hand_load_kg=2.0)
+
+
+def parse_sto(path):
+    """(header key=value, column names, table (n, 1 + k)) of an OpenSim storage file."""
+    lines = path.read_text(encoding="utf-8").splitlines()
+    end = lines.index("endheader")
+    header = dict(line.split("=", 1) for line in lines[1:end] if "=" in line)
+    columns = lines[end + 1].split("\t")
+    table = np.array([[float(x) for x in line.split("\t")] for line in lines[end + 2:] if line.strip()])
+    return header, columns, table
+
+
+def quadratic_motion(model, seed=0):
+    """q(t) = A + B t + C t^2 per coordinate, in whole degrees, sampled at RATE_HZ: every sample is
+    an exact decimal of a few places (a .mot's 6 decimals of degrees hold it exactly), and any
+    spline of degree >= 2 through the samples (OpenSim's ID tool fits a quintic GCV spline) is the
+    quadratic itself, so its q' and q'' are B + 2Ct and 2C exactly. Returns t, q, q', q'' (rad)."""
+    rng = np.random.default_rng(seed)
+    lo, hi = np.degrees(model.coordinate_ranges_rad.T)
+    A = np.round((lo + hi) / 2)
+    B = rng.integers(-20, 21, model.n_coordinates).astype(float)
+    C = rng.integers(-30, 31, model.n_coordinates).astype(float)
+    t = np.arange(N_FRAMES) / RATE_HZ
+    T = t[:, None]
+    q = np.radians(A + B * T + C * T ** 2)
+    assert np.all((q >= model.coordinate_ranges_rad[:, 0]) & (q <= model.coordinate_ranges_rad[:, 1]))
+    return t, q, np.radians(B + 2 * C * T), np.radians(np.broadcast_to(2 * C, q.shape))
+
+
+def opensim_inverse_dynamics(opensim, osim_path, mot_path, out_dir, t_end):
+    """OpenSim's InverseDynamicsTool on the files (no filter): its output as a TimeSeriesTable."""
+    model = opensim.Model(str(osim_path))
+    model.initSystem()
+    tool = opensim.InverseDynamicsTool()
+    tool.setModel(model)
+    tool.setCoordinatesFileName(str(mot_path))
+    tool.setStartTime(0.0)
+    tool.setEndTime(t_end)
+    tool.setLowpassCutoffFrequency(-1.0)
+    tool.setResultsDir(str(out_dir))
+    tool.setOutputGenForceFileName("id.sto")
+    assert tool.run()
+    return opensim.TimeSeriesTable(str(out_dir / "id.sto"))
+
+
+# ------------------------------------------------------------------------------------------ .sto
+def test_sto_round_trip(dyn, tmp_path):
+    t, q, qd, qdd = quadratic_motion(dyn)
+    m = joint_moments(dyn, q, qd, qdd, time_s=t, dynamic_model=dyn)
+    m = dataclasses.replace(m, info={"method": "pf", "pf_inertia_scale": 0.1})
+    path = write_generalized_forces_sto(tmp_path / "x.pf.moments.sto", m, notes={"note": "a=b\nc"})
+    header, columns, table = parse_sto(path)
+    names = list(dyn.coordinate_names)
+    assert columns == ["time"] + [f"{n}_moment" for n in names]
+    assert header["nRows"] == str(len(t)) and header["nColumns"] == str(len(names) + 1)
+    assert header["inDegrees"] == "no" and header["pf_inertia_scale"] == "0.1" and header["note"] == "a:b c"
+    assert "Dumas" in header["inertia_source"] and header["body_mass_kg"] == "70"
+    np.testing.assert_allclose(table[:, 0], t, rtol=0, atol=1e-12)
+    ref = np.column_stack([m.column(f"{n}_generalized_force_Nm") for n in names])
+    np.testing.assert_allclose(table[:, 1:], ref, rtol=1e-11, atol=1e-12)
+    opensim = pytest.importorskip("opensim")
+    tab = opensim.TimeSeriesTable(str(path))
+    assert list(tab.getColumnLabels()) == columns[1:]
+    np.testing.assert_allclose(tab.getDependentColumn("gh_abduction_moment").to_numpy(),
+                               m.column("gh_abduction_generalized_force_Nm"), rtol=1e-11, atol=1e-12)
+    with pytest.raises(InputError, match="generalized-force"):
+        write_generalized_forces_sto(tmp_path / "bad.sto", dataclasses.replace(m, columns=tuple(
+            c.replace("generalized_force", "gf") for c in m.columns)))
+
+
+# --------------------------------------------------------------- the three tools on the same motion
+def test_exubio_biorbd_and_opensim_id_tool_agree(dyn, tmp_path):
+    """exubio's generalized forces (its .sto), biorbd's InverseDynamics on the exported .bioMod and
+    OpenSim's ID tool on the exported .osim (free thorax, its columns 0 in the .mot: the
+    thorax-fixed model) and the .mot: equal to 1e-6 N m on every coordinate of the open chain."""
+    opensim = pytest.importorskip("opensim")
+    biorbd = pytest.importorskip("biorbd")
+    t, q, qd, qdd = quadratic_motion(dyn)
+    names = list(dyn.coordinate_names)
+    m = joint_moments(dyn, q, qd, qdd, time_s=t, dynamic_model=dyn)
+    _, columns, table = parse_sto(write_generalized_forces_sto(tmp_path / "exubio.sto", m))
+    ours = table[:, 1:]
+    assert np.abs(ours).max() > 10.0, "the motion loads the joints"
+    bio = biorbd.Model(str(write_biomod(dyn, tmp_path / "dyn.bioMod")))
+    ref = np.array([bio.InverseDynamics(a, b, c).to_array() for a, b, c in zip(q, qd, qdd)])
+    np.testing.assert_allclose(ours, ref, rtol=0, atol=TOL_NM)
+    mot = write_mot(tmp_path / "q.mot", t, [*THORAX_COORDINATES, *names], np.column_stack([np.zeros((len(t), 6)), q]),
+                    metres=THORAX_TRANSLATIONS)
+    osim = write_osim(dyn, tmp_path / "dyn.osim", coordinates="model")
+    tab = opensim_inverse_dynamics(opensim, osim, mot, tmp_path, t[-1])
+    assert list(tab.getColumnLabels())[6:] == columns[1:], "exubio's .sto names the columns as OpenSim's ID tool"
+    np.testing.assert_allclose(np.asarray(tab.getIndependentColumn()), t, rtol=0, atol=1e-9)
+    theirs = np.column_stack([tab.getDependentColumn(c).to_numpy() for c in columns[1:]])
+    np.testing.assert_allclose(ours, theirs, rtol=0, atol=TOL_NM)
+    # the thorax's residual force: the whole body's weight and the arm's acceleration, through the ground
+    mass = with_thorax_inertia(dyn).segments[0].mass_kg + sum(s.mass_kg for s in dyn.segments[1:])
+    assert mass == pytest.approx(70 * 0.331 + sum(s.mass_kg for s in dyn.segments[1:]), rel=1e-3)
+    fy = tab.getDependentColumn("thorax_ty_force").to_numpy()
+    assert np.abs(fy / (mass * 9.80665) - 1).max() < 0.05  # the arm's accelerations move it a little
+
+
+def test_a_moving_trunk_through_biorbd_and_opensim_id_tool(dyn, tmp_path):
+    """The thorax's six coordinates moving too (quadratic: tilt, list, rotation and translations):
+    OpenSim's ID tool on the .osim and .mot and biorbd on the free-thorax .bioMod agree on all 19
+    generalized forces to 1e-6 N m; the arm's differ from the thorax-fixed ones (the trunk's
+    motion matters)."""
+    opensim = pytest.importorskip("opensim")
+    biorbd = pytest.importorskip("biorbd")
+    t, q, qd, qdd = quadratic_motion(dyn, seed=3)
+    T = t[:, None]
+    rot = np.array([[5.0, 10.0, -40.0], [-3.0, -20.0, 25.0], [10.0, 30.0, 20.0]]).T  # A, B, C (deg) per angle
+    lin = np.array([[0.1, 0.2, 0.5], [1.2, 0.1, -1.0], [-0.05, -0.3, 0.25]]).T  # A, B, C (m) per translation
+    qa, qx = rot[0] + rot[1] * T + rot[2] * T ** 2, lin[0] + lin[1] * T + lin[2] * T ** 2
+    names = [*THORAX_COORDINATES, *dyn.coordinate_names]
+    mot = write_mot(tmp_path / "q.mot", t, names, np.column_stack([np.radians(qa), qx, q]), metres=THORAX_TRANSLATIONS)
+    tab = opensim_inverse_dynamics(opensim, write_osim(dyn, tmp_path / "dyn.osim", coordinates="model"), mot,
+                                   tmp_path, t[-1])
+    theirs = np.column_stack([tab.getDependentColumn(n + ("_force" if n in THORAX_TRANSLATIONS else "_moment")).to_numpy()
+                              for n in names])
+    bio = biorbd.Model(str(write_biomod(dyn, tmp_path / "free.bioMod", thorax="free")))
+    assert bio.nbQ() == 19
+    bq = np.column_stack([qx, np.radians(qa), q])  # biorbd: translations, then tilt, list, rotation, then exubio's
+    bqd = np.column_stack([lin[1] + 2 * lin[2] * T, np.radians(rot[1] + 2 * rot[2] * T), qd])
+    bqdd = np.column_stack([np.broadcast_to(2 * lin[2], qx.shape), np.broadcast_to(np.radians(2 * rot[2]), qa.shape), qdd])
+    ref = np.array([bio.InverseDynamics(a, b, c).to_array() for a, b, c in zip(bq, bqd, bqdd)])
+    ref = np.column_stack([ref[:, 3:6], ref[:, 0:3], ref[:, 6:]])
+    np.testing.assert_allclose(theirs, ref, rtol=0, atol=TOL_NM)
+    fixed = joint_moments(dyn, q, qd, qdd, dynamic_model=dyn)
+    arm = np.column_stack([fixed.column(f"{n}_generalized_force_Nm") for n in dyn.coordinate_names])
+    assert np.abs(theirs[:, 6:] - arm).max() > 1.0, "the trunk's motion changes the arm's moments"
+
+
+def test_thorax_coordinates_place_the_thorax(dyn, tmp_path):
+    """thorax_coordinates of a pose, set on the .osim's free joint, put the thorax body at that pose
+    in OpenSim's ground; thorax_pose inverts them."""
+    rng = np.random.default_rng(4)
+    R, origin = thorax_pose(np.column_stack([rng.uniform(-1.2, 1.2, (6, 3)), rng.normal(0, 0.5, (6, 3))]))
+    c = thorax_coordinates(R, origin)
+    R2, o2 = thorax_pose(c)
+    np.testing.assert_allclose(R2, R, atol=1e-12)
+    np.testing.assert_allclose(o2, origin, atol=1e-12)
+    opensim = pytest.importorskip("opensim")
+    model = opensim.Model(str(write_osim(dyn, tmp_path / "dyn.osim", coordinates="model")))
+    state = model.initSystem()
+    coords = model.getCoordinateSet()
+    body = model.getBodySet().get("thorax")
+    assert body.getMass() == pytest.approx(0.028 * 20.866630055554726 / 1.7650184258291826 * 70.0, rel=1e-12)
+    for k in range(len(c)):
+        for j, name in enumerate(THORAX_COORDINATES):
+            coords.get(name).setValue(state, float(c[k, j]), False)
+        model.realizePosition(state)
+        X = body.getTransformInGround(state)
+        got_R = np.array([[X.R().get(i, j) for j in range(3)] for i in range(3)])
+        np.testing.assert_allclose(got_R, R[k], atol=1e-12)
+        np.testing.assert_allclose(X.p().to_numpy(), origin[k], atol=1e-12)
+    weld = (tmp_path / "weld.osim")
+    write_osim(dyn, weld, coordinates="model", thorax="weld")
+    assert "WeldJoint" in weld.read_text(encoding="utf-8") and "thorax_tilt" not in weld.read_text(encoding="utf-8")
+
+
+# ------------------------------------------------------------------------ PF's inertia scale option
+def test_pf_inertia_scale_option_and_protocol_key(tmp_path):
+    import argparse
+
+    from exubio.cli import build_parser
+    from exubio import load_protocol
+    from exubio.run.moments_outputs import pf_inertia_entry, pf_options
+
+    protocol = tmp_path / "p.yaml"
+    protocol.write_text(yaml.safe_dump({"schema_version": 1, "extends": "upper_limb_21",
+                                        "defaults": {"pf_inertia_scale": 0.3}}), encoding="utf-8")
+    prot = load_protocol(protocol)
+    assert prot.pf_inertia_scale == 0.3
+    args = build_parser().parse_args(["reconstruct", "t.c3d", "--out", "o"])
+    assert pf_options(args, prot) == {"gravity": False, "inertia_scale": 0.3}
+    assert pf_options(args, load_protocol()) == {"gravity": False}  # PF's own default (0.1) stays
+    args = build_parser().parse_args(["reconstruct", "t.c3d", "--out", "o", "--pf-inertia-scale", "1"])
+    assert pf_options(args, prot)["inertia_scale"] == 1.0  # the command line wins
+    with pytest.raises(InputError, match="--pf-inertia-scale"):
+        pf_options(argparse.Namespace(pf_inertia_scale=-1.0), prot)
+    protocol.write_text(yaml.safe_dump({"schema_version": 1, "extends": "upper_limb_21",
+                                        "defaults": {"pf_inertia_scale": 0}}), encoding="utf-8")
+    with pytest.raises(ProtocolError, match="defaults.pf_inertia_scale"):
+        load_protocol(protocol)
+    # a fallback run: the scale used and the one asked, and why they differ
+    info = {"options": {"inertia_scale": 0.01}, "fallback": {"first_run": "Newton failed", "asked_inertia_scale": 0.1,
+                                                              "options": {"inertia_scale": 0.01}}}
+    entry = pf_inertia_entry(info)
+    assert entry["used"] == 0.01 and entry["asked"] == 0.1 and "Newton failed" in entry["fallback"]
+    assert pf_inertia_entry({"options": {"step_s": 0.01}}) is None  # LS: none
