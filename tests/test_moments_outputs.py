@@ -228,3 +228,100 @@ def test_pf_inertia_scale_option_and_protocol_key(tmp_path):
     entry = pf_inertia_entry(info)
     assert entry["used"] == 0.01 and entry["asked"] == 0.1 and "Newton failed" in entry["fallback"]
     assert pf_inertia_entry({"options": {"step_s": 0.01}}) is None  # LS: none
+
+
+# ------------------------------------------------------------------------- a run's files and a study
+@pytest.fixture(scope="module")
+def trial_file(tmp_path_factory):
+    from exubio.cli import main
+
+    c3d = tmp_path_factory.mktemp("trial") / "raise.c3d"
+    assert main(["simulate", "--motion", "abduction", "--duration", "4", "--rate", "50", "--out", str(c3d)]) == 0
+    return c3d
+
+
+@pytest.mark.exudyn
+def test_reconstruct_writes_the_sto_and_names_pf_inertia_scale(trial_file, tmp_path):
+    from exubio.cli import main
+    from exubio.dynamics.moments_file import read_moments_csv
+    from exubio.report.moments_page import trial_moments_figure
+    from exubio.report.trial_report import read_angles
+
+    out = tmp_path / "out"
+    assert main(["reconstruct", str(trial_file), "--method", "both", "--body-mass", "70", "--hand-load-kg", "1",
+                 "--pf-inertia-scale", "0.5", "--out", str(out), "-q"]) == 0
+    for method in ("pf", "ls"):
+        header, columns, table = parse_sto(out / f"raise.{method}.moments.sto")
+        t, cols, values = read_moments_csv(out / f"raise.{method}.moments.csv")
+        names = [c.removesuffix("_moment") for c in columns[1:]]
+        assert names == list(load_model().coordinate_names)
+        np.testing.assert_allclose(table[:, 0], t, rtol=0, atol=1e-9)
+        ref = np.column_stack([values[:, cols.index(f"{n}_generalized_force_Nm")] for n in names])
+        np.testing.assert_allclose(table[:, 1:], ref, rtol=1e-8, atol=1e-9)  # the CSV prints 9 digits
+        summary = json.loads((out / f"raise.{method}.summary.json").read_text(encoding="utf-8"))
+        contact = summary["moments"]["scapulothoracic_contact"]
+        for point in ("TS", "AI"):
+            v = values[:, cols.index(f"{point}_contact_normal_N")]
+            assert contact[point]["median_N"] == pytest.approx(np.median(v), abs=1e-4)
+            assert contact[point]["peak_N"] == pytest.approx(v[np.argmax(np.abs(v))], abs=1e-4)
+            assert contact[point]["compression_share"] == pytest.approx(np.mean(v > 0), abs=1e-4)
+        assert summary["moments"]["files"] == [f"raise.{method}.moments.csv", f"raise.{method}.moments.sto"]
+        csv_text = (out / f"raise.{method}.moments.csv").read_text(encoding="utf-8")
+        page = trial_moments_figure(out / f"raise.{method}.npz", "raise", method, read_angles(out / f"raise.{method}.npz"),
+                                    summary)
+        page_text = " ".join(t.get_text() for t in page.findobj(match=lambda a: hasattr(a, "get_text")))
+        mot = (out / f"raise.{method}.mot").read_text(encoding="utf-8").splitlines()
+        mot_columns = mot[mot.index("endheader") + 1].split("\t")
+        assert mot_columns[-6:] == list(THORAX_COORDINATES)
+        assert all(line.split("\t")[-6:] == ["0.000000"] * 6 for line in mot[mot.index("endheader") + 2:])
+        if method == "pf":  # PF ran with the option, and every output says so
+            assert summary["info"]["options"]["inertia_scale"] == 0.5
+            assert summary["pf_inertia_scale"]["used"] == 0.5 and summary["pf_inertia_scale"]["asked"] == 0.5
+            assert header["pf_inertia_scale"] == "0.5" and "pf_inertia_scale 0.5" in csv_text
+            assert "PF inertia scale x0.5" in page_text
+        else:
+            assert "pf_inertia_scale" not in summary and "pf_inertia_scale" not in header
+            assert "inertia scale" not in page_text and "LS reconstruction" in csv_text
+    assert (out / "raise.report.pdf").is_file()
+    assert main(["reconstruct", str(trial_file), "--method", "pf", "--pf-inertia-scale", "0", "--out",
+                 str(tmp_path / "bad"), "-q", "--no-report"]) == 2
+
+
+@pytest.mark.exudyn
+def test_study_moments_table(trial_file, tmp_path):
+    import shutil
+
+    import exubio
+    from exubio.cli import main
+    from exubio.dynamics.moments_file import read_moments_csv
+    from exubio.run.study import load_study
+
+    for sub in ("a", "b"):
+        (tmp_path / sub).mkdir()
+        shutil.copy(trial_file, tmp_path / sub / "raise.c3d")
+    study = tmp_path / "study.yaml"
+    sessions = [{"subject": "A", "trials": ["a/*.c3d"], "static_frames": "0:20", "body_mass_kg": 70, "hand_load_kg": 1},
+                {"subject": "B", "trials": ["b/*.c3d"], "static_frames": "0:20"}]
+    study.write_text(yaml.safe_dump({"schema_version": 1, "methods": ["ls"], "report": False, "sessions": sessions}),
+                     encoding="utf-8")
+    out = tmp_path / "out"
+    assert main(["study", str(study), "--out", str(out), "-q"]) == 0
+    df = exubio.load_study(out, table="moments")
+    assert set(df["subject"]) == {"A"}, "only the session with a body mass has moments"
+    t, cols, values = read_moments_csv(out / "A" / "s1" / "raise" / "raise.ls.moments.csv")
+    assert len(df) == values.size and set(df["method"]) == {"ls"}
+    gh = df[df["quantity"] == "GH_X_moment_Nm"]
+    np.testing.assert_allclose(gh["value"].to_numpy(), values[:, cols.index("GH_X_moment_Nm")], rtol=0, atol=0)
+    np.testing.assert_allclose(gh["time_s"].to_numpy(), t, rtol=0, atol=0)
+    assert set(gh["unit"]) == {"N m"} and set(df[df["quantity"] == "TS_contact_normal_N"]["unit"]) == {"N"}
+    assert (df["body_mass_kg"] == 70).all() and (df["hand_load_kg"] == 1).all()
+    assert not list((out / "B").rglob("*.moments.csv"))
+    # --body-mass: every session without its own
+    spec = load_study(study, body_mass_kg=80.0)
+    assert [(s.body_mass_kg, s.hand_load_kg) for s in spec.sessions] == [(70.0, 1.0), (80.0, 0.0)]
+    sessions[1]["hand_load_kg"] = 2
+    study.write_text(yaml.safe_dump({"schema_version": 1, "sessions": sessions}), encoding="utf-8")
+    with pytest.raises(InputError, match=r"sessions\[1\]\.hand_load_kg"):
+        load_study(study)
+    with pytest.raises(InputError, match="moments.parquet"):
+        exubio.load_study(tmp_path, table="moments")
