@@ -325,3 +325,31 @@ def test_study_moments_table(trial_file, tmp_path):
         load_study(study)
     with pytest.raises(InputError, match="moments.parquet"):
         exubio.load_study(tmp_path, table="moments")
+
+
+@pytest.mark.exudyn
+def test_opensim_id_tool_on_exubios_own_mot_gives_its_moments(trial_file, tmp_path):
+    """The user's path: `exubio reconstruct --body-mass` writes the .mot (anatomical angles and the
+    thorax's six columns), `exubio export-model --body-mass` the .osim with the same inertia; OpenSim's
+    ID tool on them gives exubio's elbow, forearm and wrist moments (the coordinates the two share)
+    within 0.5 % of their peak (OpenSim differentiates the .mot's 6-decimal angles by its own
+    splines, exubio uses LS's q', q'')."""
+    opensim = pytest.importorskip("opensim")
+    from exubio.cli import main
+    from exubio.dynamics.moments_file import read_moments_csv
+
+    out = tmp_path / "out"
+    assert main(["reconstruct", str(trial_file), "--method", "ls", "--body-mass", "70", "--hand-load-kg", "2",
+                 "--out", str(out), "-q", "--no-report"]) == 0
+    osim = tmp_path / "subject.osim"
+    assert main(["export-model", str(load_model().source), "--format", "osim", "--out", str(osim), "--body-mass", "70",
+                 "--hand-load-kg", "2"]) == 0
+    t, cols, values = read_moments_csv(out / "raise.ls.moments.csv")
+    tab = opensim_inverse_dynamics(opensim, osim, out / "raise.ls.mot", tmp_path, t[-1])
+    np.testing.assert_allclose(np.asarray(tab.getIndependentColumn()), t, atol=1e-6)
+    for name in ("elbow_flexion", "forearm_pronation", "wrist_flexion", "wrist_radial_deviation"):
+        ours = values[:, cols.index(f"{name}_moment_Nm")]
+        theirs = tab.getDependentColumn(f"{name}_moment").to_numpy()
+        assert np.abs(theirs - ours).max() < 0.005 * np.abs(ours).max(), name
+    assert main(["export-model", str(load_model().source), "--format", "osim", "--out", str(tmp_path / "x.osim"),
+                 "--hand-load-kg", "2"]) == 2

@@ -94,3 +94,29 @@ def moments_entry(moments: Any, summary: Mapping[str, Any], stem: str, /) -> dic
     out["scapulothoracic_contact"] = contact
     out["files"] = [f"{stem}.moments.csv", f"{stem}.moments.sto"]
     return out
+
+
+def add_export_arguments(parser: argparse.ArgumentParser) -> None:
+    """``exubio export-model``'s ``--body-mass`` and ``--hand-load-kg``: the inverse dynamics' inertia."""
+    parser.add_argument("--body-mass", type=float, metavar="KG",
+                        help="write the segments' inertia the joint moments use (Dumas et al. 2007 scaled by the model's "
+                             "lengths and this body mass; the thorax's: exubio.export.thorax), so OpenSim's ID tool "
+                             "on the .osim gives exubio's moments (docs: moments)")
+    parser.add_argument("--hand-load-kg", type=float, metavar="KG", help="with --body-mass: a mass held in the hand")
+    parser.add_argument("--thorax", choices=["free", "weld"],
+                        help="free: a 6-DOF joint to the ground with the thorax's mass (the .mot's thorax columns move it; "
+                             "the .osim's default); weld: fixed to the ground (the .bioMod's default)")
+
+
+def export_model(model: Any, args: argparse.Namespace, /) -> Any:
+    """The model ``exubio export-model`` writes: ``model`` (loaded at ``--body-mass``, when given),
+    with ``--body-mass`` the inverse dynamics' (exubio.dynamics.inertia.dynamics_model,
+    ``--hand-load-kg`` in the hand)."""
+    mass, load = getattr(args, "body_mass", None), getattr(args, "hand_load_kg", None)
+    if mass is None:
+        if load is not None:
+            raise InputError("--hand-load-kg: the inverse dynamics' inertia needs the subject's --body-mass (kg) too")
+        return model
+    from exubio.dynamics.inertia import dynamics_model
+
+    return dynamics_model(model, hand_load_kg=float(load or 0.0))
