@@ -228,6 +228,14 @@ def test_pf_inertia_scale_option_and_protocol_key(tmp_path):
     entry = pf_inertia_entry(info)
     assert entry["used"] == 0.01 and entry["asked"] == 0.1 and "Newton failed" in entry["fallback"]
     assert pf_inertia_entry({"options": {"step_s": 0.01}}) is None  # LS: none
+    # ... and the report says it: page 1's figures line, the moments page's title
+    from exubio.report.moments_page import moments_page
+    from exubio.report.trial_report import _pf_inertia
+
+    assert _pf_inertia(entry) == "; PF's segment inertia x0.01, fallback run (asked x0.1)" and _pf_inertia(None) == ""
+    page = moments_page(np.arange(3.0), ("GH_X_moment_Nm",), np.zeros((3, 1)), title="t", method="pf",
+                        moments_summary={"body_mass_kg": 70.0, "hand_load_kg": 0.0}, pf_inertia=entry)
+    assert "PF inertia scale x0.01" in page._suptitle.get_text() and "asked x0.1" in page._suptitle.get_text()
 
 
 # ------------------------------------------------------------------------- a run's files and a study

@@ -79,7 +79,8 @@ def moments_page(time_s: np.ndarray, columns: Sequence[str], values: np.ndarray,
             ax.axhline(0.0, color="0.6", lw=0.6)
         top.set_xlabel("time (s)", fontsize=7)
         bottom.set_xlabel("HT elevation (deg)", fontsize=7)
-        top.legend(fontsize=6.5, frameon=False, loc="best")
+        if top.get_legend_handles_labels()[0]:
+            top.legend(fontsize=6.5, frameon=False, loc="best")
         if not (cycle >= 0).any():
             bottom.text(0.5, 0.5, "no raising or lowering of the arm", transform=bottom.transAxes, ha="center",
                         va="center", fontsize=7, color="0.4")

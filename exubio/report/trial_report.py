@@ -298,7 +298,15 @@ def _figures_line(r: Reconstruction, s: dict) -> str:
     worst = sorted(per, key=per.get, reverse=True)[:3]
     return (f"{s.get('n_frames', r.n_frames)} frames; residual mean {rs.get('mean', float('nan')):.1f} mm, "
             f"worst markers (RMSE): " + ", ".join(f"{m} {per[m]:.1f} mm" for m in worst)
-            + f"; max |g| {np.nanmax(np.abs(r.constraint)):.0e}")
+            + f"; max |g| {np.nanmax(np.abs(r.constraint)):.0e}" + _pf_inertia(s.get("pf_inertia_scale")))
+
+
+def _pf_inertia(entry: dict | None) -> str:
+    """PF's inertia scale as page 1 names it (summary.json's pf_inertia_scale; '' for LS)."""
+    if not entry:
+        return ""
+    fallback = f", fallback run (asked x{entry['asked']:g})" if entry.get("fallback") and entry.get("asked") else ""
+    return f"; PF's segment inertia x{entry['used']:g}{fallback}"
 
 
 def _ellipsis(text: str, n: int) -> str:
