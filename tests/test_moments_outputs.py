@@ -324,6 +324,12 @@ def test_study_moments_table(trial_file, tmp_path):
     assert set(gh["unit"]) == {"N m"} and set(df[df["quantity"] == "TS_contact_normal_N"]["unit"]) == {"N"}
     assert (df["body_mass_kg"] == 70).all() and (df["hand_load_kg"] == 1).all()
     assert not list((out / "B").rglob("*.moments.csv"))
+    # run again with --body-mass: B's complete trial had no moments, so it runs again (A's is kept)
+    done_a = (out / "A" / "s1" / "raise" / "DONE.json").stat().st_mtime_ns
+    assert main(["study", str(study), "--out", str(out), "-q", "--body-mass", "80"]) == 0
+    df = exubio.load_study(out, table="moments")
+    assert set(df["subject"]) == {"A", "B"} and set(df[df["subject"] == "B"]["body_mass_kg"]) == {80.0}
+    assert (out / "A" / "s1" / "raise" / "DONE.json").stat().st_mtime_ns == done_a
     # --body-mass: every session without its own
     spec = load_study(study, body_mass_kg=80.0)
     assert [(s.body_mass_kg, s.hand_load_kg) for s in spec.sessions] == [(70.0, 1.0), (80.0, 0.0)]

@@ -61,7 +61,8 @@ def with_thorax_inertia(model: Model, /) -> Model:
 
 def thorax_coordinates(R: np.ndarray, origin: np.ndarray, /) -> np.ndarray:
     """(n, 6) free-joint coordinates (tilt, list, rotation rad; tx, ty, tz m) of thorax poses in the
-    ground: ``R`` (n, 3, 3) columns the thorax's ISB axes, ``origin`` (n, 3) IJ."""
+    ground: ``R`` (n, 3, 3) columns the thorax's ISB axes, ``origin`` (n, 3) IJ, both in a ground
+    frame whose Y is up (the .osim's gravity is -Y: a lab with Z up is turned onto it first)."""
     R = np.asarray(R, dtype=float).reshape(-1, 3, 3)
     return np.column_stack([euler_angles(R, THORAX_SEQUENCE), np.asarray(origin, dtype=float).reshape(-1, 3)])
 

@@ -43,7 +43,7 @@ from exubio.errors import ExubioError, InputError
 from exubio.run import interrupt, study_table
 from exubio.run.executors import run_all
 from exubio.run.study_leftovers import _TMP_PREFIX, _remove_after_dask, clean_leftovers
-from exubio.run.study_moments import SESSION_KEYS, session_moments, write_moments_table
+from exubio.run.study_moments import SESSION_KEYS, moments_as_asked, session_moments, write_moments_table
 
 if TYPE_CHECKING:
     from exubio.run.job import TrialResult
@@ -373,7 +373,8 @@ def plan(spec: StudySpec, out_dir: Path) -> tuple[list[TrialTask], list[TrialOut
     for s in spec.sessions:
         folder = out_dir / s.subject / s.session
         trial_dirs = {t: folder / t.stem for t in s.trials}
-        pending = [t for t in s.trials if not (trial_dirs[t] / DONE_FILE).is_file()]
+        pending = [t for t in s.trials if not (trial_dirs[t] / DONE_FILE).is_file()
+                   or not moments_as_asked(trial_dirs[t], t.stem, s.methods, s.body_mass_kg, s.hand_load_kg)]
         for t in s.trials:
             if t not in pending:
                 done = json.loads((trial_dirs[t] / DONE_FILE).read_text(encoding="utf-8")).get("outcome", {})

@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     import pandas
 
 __all__ = ["SESSION_KEYS", "PARQUET", "CSV_GZ", "MOMENT_COLUMNS", "session_moments", "moments_study_table",
-           "write_moments_table", "read_moments_table", "unit_of"]
+           "write_moments_table", "read_moments_table", "unit_of", "moments_as_asked"]
 
 SESSION_KEYS = ("body_mass_kg", "hand_load_kg")
 PARQUET = "moments.parquet"
@@ -135,3 +135,25 @@ def read_moments_table(folder: str | Path, /) -> "pandas.DataFrame":
         return pd.read_parquet(path, engine="pyarrow")
     except Exception as exc:  # noqa: BLE001 - any reader error is a damaged or foreign file, said
         raise InputError(f"{path}: not a readable Parquet table ({type(exc).__name__}: {exc})") from None
+
+
+def moments_as_asked(folder: Path, stem: str, methods: Iterable[str], body_mass_kg: float | None,
+                     hand_load_kg: float | None, /) -> bool:
+    """Whether a complete trial folder of an earlier run holds the moments its session asks for now:
+    none asked, or every method's summary.json there with a ``moments`` entry of the same body mass
+    and hand load (otherwise the trial is run again: a set without them, or with others, is not kept)."""
+    import json
+
+    if body_mass_kg is None:
+        return True
+    for m in methods:
+        path = Path(folder) / f"{stem}.{m}.summary.json"
+        if not path.is_file():  # that method failed in the earlier run: nothing of it to keep or redo here
+            continue
+        try:
+            entry = json.loads(path.read_text(encoding="utf-8")).get("moments")
+        except (OSError, ValueError):
+            return False
+        if not entry or entry.get("body_mass_kg") != body_mass_kg or entry.get("hand_load_kg") != hand_load_kg:
+            return False
+    return True
