@@ -373,9 +373,10 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
             fix = f"; to fix: --static-relabel {','.join(f'{a}={b}' for a, b in f.relabel.items())}" if f.relabel else ""
             print(f"static trial {args.static}: {f.severity}: {f.kind} ({', '.join(f.markers)}): {f.evidence}{fix}")
     from exubio.run.job import TrialJob, run_job
-    from exubio.run.moments_outputs import pf_options
+    from exubio.run.moments_outputs import check_pf_option, pf_options
 
     methods = _methods(args.method)
+    check_pf_option(args, methods)
     jobs = [TrialJob(t, args.out, methods=tuple(methods), session=session, overwrite=args.overwrite,
                      options={"pf": pf_options(args, session.protocol)} if "pf" in methods else {},
                      calibration=calibration, static_frames=None if args.static else args.static_frames,

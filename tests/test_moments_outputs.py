@@ -293,6 +293,8 @@ def test_reconstruct_writes_the_sto_and_names_pf_inertia_scale(trial_file, tmp_p
     assert (out / "raise.report.pdf").is_file()
     assert main(["reconstruct", str(trial_file), "--method", "pf", "--pf-inertia-scale", "0", "--out",
                  str(tmp_path / "bad"), "-q", "--no-report"]) == 2
+    assert main(["reconstruct", str(trial_file), "--method", "ls", "--pf-inertia-scale", "1", "--out",
+                 str(tmp_path / "bad"), "-q", "--no-report"]) == 2  # no PF run: the option would change nothing
 
 
 @pytest.mark.exudyn

@@ -14,7 +14,7 @@ import numpy as np
 
 from exubio.errors import InputError
 
-__all__ = ["DEFAULT_PF_INERTIA_SCALE", "add_moments_arguments", "moments_comments", "moments_entry",
+__all__ = ["DEFAULT_PF_INERTIA_SCALE", "add_moments_arguments", "check_pf_option", "moments_comments", "moments_entry",
            "pf_inertia_entry", "pf_options"]
 
 DEFAULT_PF_INERTIA_SCALE = 0.1
@@ -43,6 +43,13 @@ def pf_options(args: argparse.Namespace, protocol: Any, /) -> dict[str, Any]:
                              f"with; 1 = physical), got {scale}")
         out["inertia_scale"] = float(scale)
     return out
+
+
+def check_pf_option(args: argparse.Namespace, methods: list[str], /) -> None:
+    """``--pf-inertia-scale`` with no PF run is refused (it would change nothing), InputError."""
+    if getattr(args, "pf_inertia_scale", None) is not None and "pf" not in methods:
+        raise InputError(f"--pf-inertia-scale {args.pf_inertia_scale:g}: applies to PF, and --method "
+                         f"{getattr(args, 'method', '')} runs no PF; use --method pf or both, or leave the option out")
 
 
 def pf_inertia_entry(info: Mapping[str, Any] | None, /) -> dict[str, Any] | None:
