@@ -112,6 +112,8 @@ def reconstruct(trial: Trajectories | MarkerTargets | str | Path, model: Model |
 
     session = _session(model, protocol)
     inputs = _inputs(trial, session)
+    if method == "pf" and "inertia_scale" not in options and inputs.protocol.pf_inertia_scale is not None:
+        options["inertia_scale"] = inputs.protocol.pf_inertia_scale  # the protocol's defaults.pf_inertia_scale
     rec = _reconstruct(inputs.model, inputs.protocol, inputs.targets, method=method, **options)
     return dataclasses.replace(rec, quality=assess_inputs(inputs, [rec]).quality[rec.method])
 
@@ -321,10 +323,21 @@ def rhythm(source: "Reconstruction | str | Path", model: Model | None = None, pr
     return out
 
 
-def load_study(folder: str | Path, /) -> "pandas.DataFrame":
+def load_study(folder: str | Path, /, *, table: str = "angles") -> "pandas.DataFrame":
     """The angles of a study that ``exubio study`` ran into ``folder``: its ``angles.parquet``, one
     row per trial, method, frame and angle (subject, session, trial, task, method, time_s, angle,
-    value_deg, u_deg, status, verdict; exubio.run.study_table), text columns categorical."""
+    value_deg, u_deg, status, verdict; exubio.run.study_table), text columns categorical.
+    ``table="moments"``: its joint moments, ``moments.parquet`` (sessions with a body mass; one row
+    per trial, method, frame and quantity: ... quantity, value (SI), unit, body_mass_kg,
+    hand_load_kg, verdict; exubio.run.study_moments)."""
+    from exubio.errors import InputError
+
+    if table == "moments":
+        from exubio.run.study_moments import read_moments_table
+
+        return read_moments_table(folder)
+    if table != "angles":
+        raise InputError(f"load_study: table must be 'angles' or 'moments', got {table!r}")
     from exubio.run.study_table import read_study_table
 
     return read_study_table(folder)

@@ -319,6 +319,7 @@ class Protocol:
     thorax_aliases: Mapping[str, tuple[str, ...]] = field(default_factory=dict)  # thorax_frame label -> other labels
     other_arm: str | None = None  # the protocol file of the other arm of this marker set (--both-arms)
     analog_loads: tuple = ()  # exubio.protocol.analog_loads.AnalogLoadSpec: loads from a C3D's analog channels
+    pf_inertia_scale: float | None = None  # defaults.pf_inertia_scale: PF's inertia scale (None: PF's default)
 
     @property
     def marker_names(self) -> tuple[str, ...]:

@@ -11,13 +11,15 @@ def cmd_export_model(args: argparse.Namespace) -> int:
     from exubio.export import write_biomod, write_osim
     from exubio.model.load import load_model
 
-    model = load_model(args.model)
+    from exubio.run.moments_outputs import export_model
+
+    model = export_model(load_model(args.model, body_mass_kg=args.body_mass), args)  # --body-mass: the moments' inertia
     if args.format == "osim":
-        path = write_osim(model, args.out, overwrite=args.overwrite, coordinates=args.coordinates)
+        path = write_osim(model, args.out, overwrite=args.overwrite, coordinates=args.coordinates, thorax=args.thorax or "free")
         plays = ("its coordinates are the anatomical angles, so exubio's .mot plays on it" if args.coordinates == "anatomical"
                  else "its coordinates are exubio's model coordinates (the q of the .npz)")
     else:
-        path = write_biomod(model, args.out, overwrite=args.overwrite)
+        path = write_biomod(model, args.out, overwrite=args.overwrite, thorax=args.thorax or "weld")
         plays = "its generalized coordinates are exubio's model coordinates (the q of the .npz)"
     print(f"wrote {path}: an open chain (the scapulothoracic ellipsoid cannot be expressed in this format; the file's "
           f"header gives it); {plays}")
@@ -36,4 +38,7 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, /) -> None:
     e.add_argument("--coordinates", choices=["anatomical", "model"], default="anatomical",
                    help="osim only: anatomical (default; SC, AC, GH between the ISB frames with the anatomical angles "
                         "as coordinates, so exubio's .mot plays on it) or model (exubio's own joint coordinates)")
+    from exubio.run.moments_outputs import add_export_arguments
+
+    add_export_arguments(e)
     e.set_defaults(func=cmd_export_model)

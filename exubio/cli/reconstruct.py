@@ -154,10 +154,12 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
             fix = f"; to fix: --static-relabel {','.join(f'{a}={b}' for a, b in f.relabel.items())}" if f.relabel else ""
             print(f"static trial {args.static}: {f.severity}: {f.kind} ({', '.join(f.markers)}): {f.evidence}{fix}")
     from exubio.run.job import TrialJob, run_job
+    from exubio.run.moments_outputs import check_pf_option, pf_options
 
     methods = _methods(args.method)
+    check_pf_option(args, methods)
     jobs = [TrialJob(t, args.out, methods=tuple(methods), session=session, overwrite=args.overwrite,
-                     options={"pf": {"gravity": args.gravity}} if "pf" in methods else {},
+                     options={"pf": pf_options(args, session.protocol)} if "pf" in methods else {},
                      calibration=calibration, static_frames=None if args.static else args.static_frames,
                      report=not args.no_report, relabel=relabel, repair_labels=args.repair_labels,
                      hand_load_kg=_hand_load(args), moment_request=_moment_request(args)) for t in args.trials]
@@ -242,4 +244,7 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, /) -> None:
     r.add_argument("--gravity", action="store_true",
                    help="PF: apply gravity (-Y of the thorax frame); off by default, the springs then also "
                         "carry the limb's weight and model points sag below their markers")
+    from exubio.run.moments_outputs import add_moments_arguments
+
+    add_moments_arguments(r)
     r.set_defaults(func=cmd_reconstruct)

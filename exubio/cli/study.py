@@ -19,7 +19,7 @@ def cmd_study(args: argparse.Namespace) -> int:
         return 0
     if not args.study or not args.out:
         raise InputError("exubio study: expected STUDY.yaml and --out FOLDER (or --template to print a study file)")
-    spec = load_study(args.study)  # every key, path and glob checked before any work
+    spec = load_study(args.study, body_mass_kg=args.body_mass)  # every key, path and glob checked before any work
     if args.jobs < 1:
         raise InputError(f"--jobs {args.jobs}: expected a whole number of processes >= 1")
     check_output_folder(Path(args.out), args.out)
@@ -44,6 +44,8 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, /) -> None:
     st.add_argument("--out", help="output folder: <subject>/<session>/<trial>/, study.csv, study.json")
     st.add_argument("--template", action="store_true", help="print a study file with every key explained, and exit")
     st.add_argument("--jobs", type=int, default=1, help="trials in parallel local processes (default 1)")
+    st.add_argument("--body-mass", type=float, help="body mass, kg, of every session without its own body_mass_kg: "
+                    "the joint moments too (moments.parquet; docs: moments)")
     st.add_argument("--scheduler", help="run the trials on Dask: local:N (a local cluster of N workers) or "
                                         "tcp://HOST:PORT (a running scheduler)")
     st.set_defaults(func=cmd_study)

@@ -9,7 +9,10 @@ scapulothoracic ellipsoid constraint, is stated in a comment at the top of each 
 model is an open chain (13 free coordinates); postures reconstructed by exubio already satisfy the
 constraint and replay exactly.
 
-The pieces both writers share are in exubio.export.common.
+The pieces both writers share are in exubio.export.common. The thorax of the exported models (its
+mass and the .osim's free joint to the ground, exubio's .mot carrying its six coordinates) is
+exubio.export.thorax; a reconstruction's generalized forces as OpenSim's inverse dynamics tool
+writes them (``<stem>.<method>.moments.sto``) are exubio.export.sto.
 """
 from __future__ import annotations
 

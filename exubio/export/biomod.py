@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from exubio.export.common import UNLIMITED_RAD, check_names, complete_basis, ellipsoid_note, marker_table, vec, write_text
+from exubio.export.thorax import THORAX_COORDINATES, THORAX_TRANSLATIONS, with_thorax_inertia
 from exubio.model.kinematics import Kinematics
 from exubio.types import Model
 
@@ -59,16 +60,27 @@ def _inertial(seg) -> str:
     return f"\tmass {vec([seg.mass_kg])}\n\tcom {vec(seg.com_m)}\n\tinertia\n{inertia}"
 
 
-def biomod_text(model: Model) -> str:
-    """The .bioMod document for ``model`` (see the module docstring)."""
+def biomod_text(model: Model, *, thorax: str = "weld") -> str:
+    """The .bioMod document for ``model`` (see the module docstring); ``thorax``: "weld" (fixed:
+    q is exubio's) or "free" (exubio.export.thorax: the thorax's mass, and a free joint, its six
+    coordinates first in q: thorax_tx, thorax_ty, thorax_tz (m), thorax_tilt, thorax_list,
+    thorax_rotation (rad), then exubio's)."""
+    if thorax not in ("free", "weld"):
+        raise ValueError(f"thorax: expected 'free' or 'weld', got {thorax!r}")
     Kinematics(model)  # the structure exubio can compute with (fixed root, orthogonal axes)
     check_names(model, [f"{s.name}_{s.joint.name}" for s in model.segments[1:]])
-    lines = [f"// {line}" for line in ellipsoid_note(model, "biorbd .bioMod")]
-    lines.append("// Generalized coordinates q (biorbd order = exubio order): "
-                 + ", ".join(f"{i}: {n}" for i, n in enumerate(model.coordinate_names)))
+    free = thorax == "free"
+    if free:
+        model = with_thorax_inertia(model)
+    lines = [f"// {line}" for line in ellipsoid_note(model, "biorbd .bioMod", free_thorax=free)]
+    names = ([*THORAX_TRANSLATIONS, *THORAX_COORDINATES[:3]] if free else []) + list(model.coordinate_names)
+    lines.append(f"// Generalized coordinates q (biorbd order = {'the thorax, then ' if free else ''}exubio order): "
+                 + ", ".join(f"{i}: {n}" for i, n in enumerate(names)))
     out = "\n".join(lines) + "\n\nversion 4\n\ngravity 0 -9.80665 0\n\n"
     root = model.segments[0]
-    out += f"segment {root.name}\n{_inertial(root)}endsegment\n\n"
+    dof = ("\ttranslations xyz\n\trotations zxy\n\trangesQ\n" + "\t\t-10 10\n" * 3
+           + f"\t\t{vec([-UNLIMITED_RAD, UNLIMITED_RAD])}\n" * 3) if free else ""
+    out += f"segment {root.name}\n{dof}{_inertial(root)}endsegment\n\n"
     for seg in model.segments[1:]:
         joint = seg.joint
         B, letters = joint_frame(joint.axes)
@@ -85,7 +97,8 @@ def biomod_text(model: Model) -> str:
     return out
 
 
-def write_biomod(model: Model, path: str | Path, *, overwrite: bool = False) -> Path:
+def write_biomod(model: Model, path: str | Path, *, overwrite: bool = False, thorax: str = "weld") -> Path:
     """Write ``model`` as a biorbd model file (version 4) at ``path`` (atomically); an existing
-    file is replaced only with ``overwrite`` (otherwise InputError naming it). Returns the path."""
-    return write_text(path, biomod_text(model), overwrite=overwrite)
+    file is replaced only with ``overwrite`` (otherwise InputError naming it); ``thorax``: see
+    ``biomod_text``. Returns the path."""
+    return write_text(path, biomod_text(model, thorax=thorax), overwrite=overwrite)

@@ -33,15 +33,23 @@ def write_text(path, text: str, *, overwrite: bool) -> Path:
     return atomic_write(path, writer)
 
 
-def ellipsoid_note(model: Model, fmt_name: str) -> list[str]:
-    """Lines (no comment marks) saying what the file cannot express: the thorax ellipsoid."""
+def ellipsoid_note(model: Model, fmt_name: str, *, free_thorax: bool = False) -> list[str]:
+    """Lines (no comment marks) saying what the file cannot express: the thorax ellipsoid; with
+    ``free_thorax``, how the thorax's free joint places it (exubio.export.thorax)."""
     ell = model.ellipsoid
     points = ", ".join(f"{pt} on {seg}" for seg, pt in ell.contact_points)
+    root = (["Units: m, kg, kg m^2; angles rad. The first segment (thorax) is fixed: the global frame is",
+             "exubio's thorax frame. Segment frames are exubio's (at the joint centre, parallel to the"]
+            if not free_thorax else
+            ["Units: m, kg, kg m^2; angles rad. The first segment (thorax) moves on a free joint to the ground",
+             "(thorax_tilt about Z, thorax_list about X', thorax_rotation about Y'', thorax_tx/ty/tz along the",
+             "ground's axes; all 0: the ground is exubio's thorax frame, gravity -Y). Its mass: "
+             f"{model.segments[0].mass_kg:.6g} kg",
+             "(exubio.export.thorax). Segment frames are exubio's (at the joint centre, parallel to the"])
     return [
         f"exubio model '{model.name}' exported by exubio.export ({fmt_name}).",
         f"Source: {model.source or model.name}.",
-        "Units: m, kg, kg m^2; angles rad. The first segment (thorax) is fixed: the global frame is",
-        "exubio's thorax frame. Segment frames are exubio's (at the joint centre, parallel to the",
+        *root,
         "thorax frame when every coordinate is 0); markers are exubio's model points.",
         "NOT EXPRESSED: the scapulothoracic constraint of exubio. The two scapula points",
         f"({points}) are held on the thorax ellipsoid",

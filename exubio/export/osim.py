@@ -3,7 +3,9 @@
 Mapping (exact, checked against ``exubio.model.kinematics`` by tests/export/test_export.py):
 - every segment is a Body with its mass, centre of mass and inertia about the centre of mass
   (``Ixx Iyy Izz Ixy Ixz Iyz``: the entries of exubio's tensor); the body frame is exubio's segment
-  frame. The thorax is welded to ground (the thorax frame is exubio's global frame).
+  frame. The thorax moves on a free joint to the ground with its mass (exubio.export.thorax: all six
+  coordinates 0 = exubio's thorax-fixed model, ground = the thorax frame, gravity -Y), or, with
+  ``thorax="weld"``, is welded to the ground.
 - every joint is a CustomJoint named as exubio's joint: parent frame = a PhysicalOffsetFrame on
   the parent body at the joint centre (no rotation), child frame = the child body itself. Its
   SpatialTransform rotation1..k turn about exubio's joint axes with the coordinates (LinearFunction
@@ -26,6 +28,7 @@ from xml.sax.saxutils import escape, quoteattr
 import numpy as np
 
 from exubio.export.common import UNLIMITED_RAD, check_names, complete_basis, ellipsoid_note, fmt, marker_table, vec, write_text
+from exubio.export.thorax import THORAX_COORDINATES, THORAX_ROTATION_AXES, THORAX_TRANSLATIONS, with_thorax_inertia
 from exubio.model.kinematics import Kinematics
 from exubio.types import Model
 
@@ -150,22 +153,39 @@ def _anatomical_joints(model: Model) -> dict[str, dict]:
     return out
 
 
-def osim_text(model: Model, *, coordinates: str = "anatomical") -> str:
+def _free_joint(root: str) -> str:
+    """The thorax's free joint to the ground (exubio.export.thorax)."""
+    coords = "".join(_coordinate(n, "0", vec([-UNLIMITED_RAD, UNLIMITED_RAD]) if n not in THORAX_TRANSLATIONS
+                                 else "-10 10") for n in THORAX_COORDINATES)
+    axes = "".join(_transform_axis(f"rotation{i + 1}", THORAX_ROTATION_AXES[i], THORAX_COORDINATES[i]) for i in range(3))
+    axes += "".join(_transform_axis(f"translation{i + 1}", np.eye(3)[i], THORAX_COORDINATES[3 + i]) for i in range(3))
+    return _joint_xml(f"ground_{root}", "/ground", f"/bodyset/{root}", coords, "", axes)
+
+
+def osim_text(model: Model, *, coordinates: str = "anatomical", thorax: str = "free") -> str:
     """The .osim document for ``model`` (see the module docstring). ``coordinates``: "anatomical"
     (SC, AC and GH between the ISB frames with the anatomical angles as coordinates, elbow, forearm
     and wrist named as the anatomical angles: exubio's .mot plays on it) or "model" (exubio's own
-    joint coordinates: its .npz q plays on it)."""
+    joint coordinates: its .npz q plays on it). ``thorax``: "free" (a 6-DOF joint to the ground
+    and the thorax's mass, exubio.export.thorax: OpenSim's ID tool runs on the .mot with the trunk's
+    motion) or "weld" (fixed to the ground: the ground is exubio's thorax frame)."""
     if coordinates not in ("anatomical", "model"):
         raise ValueError(f"coordinates: expected 'anatomical' or 'model', got {coordinates!r}")
+    if thorax not in ("free", "weld"):
+        raise ValueError(f"thorax: expected 'free' or 'weld', got {thorax!r}")
     Kinematics(model)  # the structure exubio can compute with (fixed root, orthogonal axes)
-    check_names(model)
+    check_names(model, list(THORAX_COORDINATES) if thorax == "free" else [])
+    if thorax == "free":
+        model = with_thorax_inertia(model)
     anatomical = _anatomical_joints(model) if coordinates == "anatomical" else {}
     root = model.segments[0]
-    note = "\n".join("  " + line.replace("--", "- -") for line in ellipsoid_note(model, "OpenSim .osim"))
-    weld = (f"\t\t\t\t<WeldJoint name={quoteattr('ground_' + root.name)}>\n"
-            "\t\t\t\t\t<socket_parent_frame>/ground</socket_parent_frame>\n"
-            f"\t\t\t\t\t<socket_child_frame>/bodyset/{escape(root.name)}</socket_child_frame>\n"
-            "\t\t\t\t</WeldJoint>\n")
+    note = "\n".join("  " + line.replace("--", "- -")
+                     for line in ellipsoid_note(model, "OpenSim .osim", free_thorax=thorax == "free"))
+    weld = _free_joint(root.name) if thorax == "free" else (
+        f"\t\t\t\t<WeldJoint name={quoteattr('ground_' + root.name)}>\n"
+        "\t\t\t\t\t<socket_parent_frame>/ground</socket_parent_frame>\n"
+        f"\t\t\t\t\t<socket_child_frame>/bodyset/{escape(root.name)}</socket_child_frame>\n"
+        "\t\t\t\t</WeldJoint>\n")
     markers = "".join(
         f"\t\t\t\t<Marker name={quoteattr(name)}>\n"
         f"\t\t\t\t\t<socket_parent_frame>/bodyset/{escape(seg)}</socket_parent_frame>\n"
@@ -204,8 +224,9 @@ def _renamed(seg):
     return dataclasses.replace(seg, joint=joint)
 
 
-def write_osim(model: Model, path: str | Path, *, overwrite: bool = False, coordinates: str = "anatomical") -> Path:
+def write_osim(model: Model, path: str | Path, *, overwrite: bool = False, coordinates: str = "anatomical",
+               thorax: str = "free") -> Path:
     """Write ``model`` as an OpenSim 4 model file at ``path`` (atomically); an existing file is
-    replaced only with ``overwrite`` (otherwise InputError naming it); ``coordinates``: see
-    ``osim_text``. Returns the path."""
-    return write_text(path, osim_text(model, coordinates=coordinates), overwrite=overwrite)
+    replaced only with ``overwrite`` (otherwise InputError naming it); ``coordinates`` and
+    ``thorax``: see ``osim_text``. Returns the path."""
+    return write_text(path, osim_text(model, coordinates=coordinates, thorax=thorax), overwrite=overwrite)

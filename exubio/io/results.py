@@ -549,15 +549,19 @@ def _table_text(time: np.ndarray, q_deg: np.ndarray, sep: str) -> str:
     return buf.getvalue()
 
 
-def _write_table(path: Path, head: str, time: np.ndarray, q_rad: np.ndarray, sep: str) -> Path:
-    """``head`` then the rows (time, degrees), formatted a block of rows at a time (a long trial's
-    table is never one string in memory)."""
+def _write_table(path: Path, head: str, time: np.ndarray, q_rad: np.ndarray, sep: str,
+                 as_is: np.ndarray | None = None) -> Path:
+    """``head`` then the rows (time, degrees; the columns ``as_is`` (bool mask) unconverted),
+    formatted a block of rows at a time (a long trial's table is never one string in memory)."""
     def writer(tmp: Path) -> None:
         with open(tmp, "w", encoding="utf-8", newline="") as fh:
             fh.write(head)
             for a in range(0, time.shape[0], TABLE_BLOCK_ROWS):
                 b = min(a + TABLE_BLOCK_ROWS, time.shape[0])
-                fh.write(_table_text(time[a:b], np.degrees(q_rad[a:b]), sep))
+                block = np.degrees(q_rad[a:b])
+                if as_is is not None:
+                    block[:, as_is] = q_rad[a:b][:, as_is]
+                fh.write(_table_text(time[a:b], block, sep))
 
     return atomic_write(path, writer)
 
@@ -624,10 +628,13 @@ def write_mot(
     *,
     name: str = "exubio",
     notes: Sequence[str] = (),
+    metres: Sequence[str] = (),
 ) -> Path:
     """OpenSim motion file (.mot, storage version 1): angles in degrees (``inDegrees=yes``),
     tab-separated, ``time`` then the coordinates. ``notes``: single-line ``key=value`` remarks
-    written in the header before ``endheader`` (e.g. coordinates that are not measurements)."""
+    written in the header before ``endheader`` (e.g. coordinates that are not measurements).
+    ``metres``: coordinates that are translations (m; e.g. the thorax's free joint,
+    exubio.export.thorax): written as they are (OpenSim converts only rotational coordinates)."""
     path = Path(path)
     time, names, q = _check_angles(path, time_s, coordinate_names, q_rad)
     if "\n" in name or "\r" in name:
@@ -638,7 +645,11 @@ def write_mot(
         f"{name}\nversion=1\nnRows={time.shape[0]}\nnColumns={len(names) + 1}\n"
         f"inDegrees=yes\n" + "".join(f"{n}\n" for n in notes) + "endheader\n" + "\t".join(("time",) + names) + "\n"
     )
-    return _write_table(path, header, time, q, "\t")
+    unknown = sorted(set(metres) - set(names))
+    if unknown:
+        raise InputError(f"{path}: metres names {unknown}, which are not columns of the .mot")
+    as_is = np.array([n in set(metres) for n in names], dtype=bool) if metres else None
+    return _write_table(path, header, time, q, "\t", as_is)
 
 
 def read_mot(path: str | os.PathLike, /) -> tuple[np.ndarray, tuple[str, ...], np.ndarray]:

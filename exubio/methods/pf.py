@@ -250,7 +250,8 @@ def stream_pf(model: Model, protocol: Protocol, targets: MarkerTargets, sink: Ch
         except ReconstructionError as second:
             raise ReconstructionError(f"{first}; run again with inertia x {FALLBACK_OPTIONS['inertia_scale']:g} and full "
                                       f"Newton (PFOptions.fallback), it stopped too: {second}") from None
-        info["fallback"] = {"first_run": str(first), "first_run_s": first_s, "options": dict(FALLBACK_OPTIONS)}
+        info["fallback"] = {"first_run": str(first), "first_run_s": first_s, "options": dict(FALLBACK_OPTIONS),
+                            "asked_inertia_scale": options.inertia_scale}
         return timings, info
 
 

@@ -43,7 +43,7 @@ _TOP_KEYS = ("schema_version", "name", "description", "thorax_frame", "filter", 
 _FRAME_KEYS = ("ij", "px", "c7", "t8")
 _MIDPOINT_FRAME_KEYS = ("ij", "ij_c7_midpoint", "px_t8_midpoint")
 _FILTER_KEYS = ("cutoff_hz", "order")
-_DEFAULT_KEYS = ("stiffness_n_per_m", "damping_ns_per_m")
+_DEFAULT_KEYS = ("stiffness_n_per_m", "damping_ns_per_m", "pf_inertia_scale")
 _MARKER_KEYS = (
     "segment",
     "point",
@@ -107,6 +107,9 @@ def load_protocol(
     frame = _parse_thorax_frame(data, src_of("thorax_frame"))
     cutoff, order = _parse_filter(data, src_of("filter"))
     stiffness0, damping0 = _parse_defaults(data, src_of("defaults"))
+    pf_inertia = (data.get("defaults") or {}).get("pf_inertia_scale") if isinstance(data.get("defaults"), dict) else None
+    if pf_inertia is not None:  # PF's inertia scale (exubio.run.moments_outputs.pf_options; --pf-inertia-scale wins)
+        pf_inertia = _number(pf_inertia, "defaults.pf_inertia_scale", src_of("defaults"), minimum=0.0, strict=True)
     relabel = _parse_relabel(data.get("relabel"), src_of("relabel"))
     side = data.get("side", "right")
     if side not in ("right", "left"):
@@ -198,6 +201,7 @@ def load_protocol(
         relabel=relabel,
         side=side,
         thorax_aliases=MappingProxyType(thorax_aliases),
+        pf_inertia_scale=pf_inertia,
         other_arm=other_arm.strip() if other_arm else None,
         analog_loads=parse_analog_loads(data.get("analog_loads"), src_of("analog_loads"), seg_names),
     )

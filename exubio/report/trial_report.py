@@ -8,7 +8,8 @@ findings and the angles that are not measurements. Page 2: the anatomical angles
 against time (``<trial>.<method>.csv``; one colour per angle, PF solid, LS dashed, the truth dotted;
 modelled and not measured in grey). Then, for a trial that raises or lowers the arm, the rhythm
 page of each method (exubio.report.rhythm_page: ST, SC, GH angles against HT elevation with the
-in vivo corridor). Page 3: marker residuals (mean ± SD over markers per frame, per-marker RMSE), constraint residuals and the gaps.
+in vivo corridor), and, with ``--body-mass``, the joint-moments page of each method
+(exubio.report.moments_page: against time and HT elevation). Page 3: marker residuals (mean ± SD over markers per frame, per-marker RMSE), constraint residuals and the gaps.
 
 Kept whole: one report, its three pages drawn from the same loaded results (one figure module per
 page would pass the same loaded arrays around three times).
@@ -297,7 +298,15 @@ def _figures_line(r: Reconstruction, s: dict) -> str:
     worst = sorted(per, key=per.get, reverse=True)[:3]
     return (f"{s.get('n_frames', r.n_frames)} frames; residual mean {rs.get('mean', float('nan')):.1f} mm, "
             f"worst markers (RMSE): " + ", ".join(f"{m} {per[m]:.1f} mm" for m in worst)
-            + f"; max |g| {np.nanmax(np.abs(r.constraint)):.0e}")
+            + f"; max |g| {np.nanmax(np.abs(r.constraint)):.0e}" + _pf_inertia(s.get("pf_inertia_scale")))
+
+
+def _pf_inertia(entry: dict | None) -> str:
+    """PF's inertia scale as page 1 names it (summary.json's pf_inertia_scale; '' for LS)."""
+    if not entry:
+        return ""
+    fallback = f", fallback run (asked x{entry['asked']:g})" if entry.get("fallback") and entry.get("asked") else ""
+    return f"; PF's segment inertia x{entry['used']:g}{fallback}"
 
 
 def _ellipsis(text: str, n: int) -> str:
@@ -596,6 +605,10 @@ def build_trial_report(npz_paths: Sequence[str | Path], pdf_path: str | Path, /,
 
         pages += [f for f in (trial_rhythm_figure(p, _title(recons, meta), r.method)
                               for p, r in zip(npz_paths, recons) if r.method in angles) if f is not None]
+    from exubio.report.moments_page import trial_moments_figure  # with --body-mass: the joint moments
+
+    pages += [f for f in (trial_moments_figure(p, _title(recons, meta), r.method, angles.get(r.method),
+                                               summaries.get(r.method)) for p, r in zip(npz_paths, recons)) if f is not None]
     pages.append(residuals_page(recons, meta, summaries))
     cal_page = calibration_page(meta, summaries)
     if cal_page is not None:

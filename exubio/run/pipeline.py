@@ -15,7 +15,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
-import numpy as np
 
 import exubio
 from exubio.errors import InputError, PartialReconstructionError, ReconstructionError
@@ -24,6 +23,7 @@ from exubio.io.trial import read_trial
 from exubio.prep.targets import preparation_key, prepare_targets
 from exubio.run.inputs import Session, load_session
 from exubio.run.summary_file import RunNotes, trial_quality, trial_summary
+from exubio.run.trial_files import AngleOutputs, angle_header, mot_thorax, write_outputs  # noqa: F401 - re-exported
 from exubio.types import MarkerTargets, Method, Model, Protocol, Reconstruction, Trajectories
 
 log = logging.getLogger(__name__)
@@ -160,67 +160,6 @@ def output_stem(trial_path: str | Path, method: Method | str) -> str:
     return f"{Path(trial_path).stem}.{Method.parse(method).value}"
 
 
-@dataclass(frozen=True)
-class AngleOutputs:
-    """The anatomical angles of one reconstruction as the files carry them: names
-    (exubio.model.angles.ANATOMICAL_COLUMNS), values (n, a) rad, status (n, a) AngleStatus codes, the
-    comment lines that describe them (``angle_header``)."""
-
-    names: tuple[str, ...]
-    values_rad: np.ndarray
-    status: np.ndarray
-    comments: tuple[str, ...] = ()
-    undetermined: np.ndarray | None = None  # (n, m) per model coordinate: not determined by the markers
-    uncertainty_rad: np.ndarray | None = None  # (n, a) standard uncertainty (exubio.trust.angle_uncertainty)
-    moments: Any = None  # the joint moments of the same frames (exubio.dynamics.moments.Moments) or None: <stem>.moments.csv
-
-
-def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
-                  metadata: dict[str, Any], summary_data: dict[str, Any], angles: AngleOutputs,
-                  streamed: dict[str, Any] | None = None,
-                  overwrite: bool = True) -> dict[str, Path]:
-    """Write <stem>.csv and .mot (the anatomical angles ``angles`` in degrees, each one's status in
-    the header), .npz (everything: the model coordinates, ``angles.undetermined`` (n, m) per coordinate and
-    the angles' status per frame) and .summary.json into out_dir as one result set, complete or
-    absent (exubio.io.results.ResultSet: written in a hidden staging folder, renamed into place,
-    summary.json last; without ``overwrite`` no existing file is ever replaced); ``streamed``:
-    arrays the reconstruction left on disk (exubio.io.streamed), copied into the .npz; with
-    ``angles.moments`` (exubio.dynamics.moments.Moments) also <stem>.moments.csv, in the same set."""
-    moments = angles.moments
-    out = Path(out_dir)
-    names = {"csv": f"{stem}.csv", "mot": f"{stem}.mot", "npz": f"{stem}.npz", "summary": f"{stem}.summary.json"}
-    if moments is not None:
-        names = {"moments": f"{stem}.moments.csv", **names}
-        if getattr(moments, "thorax", None) is not None:
-            names = {"thorax": f"{stem}.thorax.csv", **names}
-    notes = [f"exubio_{line.split(':', 1)[0].replace(' ', '_')}={line.split(':', 1)[1].strip()}"
-             for line in angles.comments if line.startswith("status ")]
-    if summary_data.get("quality"):
-        notes.append(f"exubio_quality={summary_data['quality']['verdict']}")
-    extra = {"angle_status": np.asarray(angles.status, dtype=np.int8), "angle_names": np.array(angles.names)}
-    if angles.undetermined is not None:
-        extra["undetermined"] = angles.undetermined
-    if angles.uncertainty_rad is not None:
-        extra["angle_uncertainty_rad"] = np.asarray(angles.uncertainty_rad, dtype=float)
-    with results.ResultSet(out, stem, overwrite=overwrite) as result_set:
-        staged = {kind: result_set.path(name) for kind, name in names.items()}
-        results.write_angles_csv(staged["csv"], recon.time_s, [f"{n}_deg" for n in angles.names], angles.values_rad,
-                                 comments=angles.comments, uncertainty_rad=angles.uncertainty_rad)
-        results.write_mot(staged["mot"], recon.time_s, angles.names, angles.values_rad, name=stem, notes=notes)
-        results.write_npz(staged["npz"], recon, metadata=metadata, extra_arrays=extra, streamed=streamed)
-        if moments is not None:
-            from exubio.dynamics.moments_file import write_moments_csv
-
-            write_moments_csv(staged["moments"], moments, comments=_moments_comments(moments))
-            if "thorax" in staged:
-                from exubio.dynamics.thorax_file import write_thorax_csv
-
-                write_thorax_csv(staged["thorax"], moments.thorax)
-        results.write_json(staged["summary"], summary_data)
-        placed = result_set.commit(last=names["summary"])
-    return {kind: placed[name] for kind, name in names.items()}
-
-
 def _moments_key(key: str | None, body_mass_kg: float, hand_load_kg: float | None, request: Any = None) -> str | None:
     """A run's fingerprint (exubio.run.resume.run_key) that also holds the joint moments' body mass
     and hand load when it writes them, the lab vertical and the loads files' contents, so an earlier set
@@ -236,18 +175,6 @@ def _moments_key(key: str | None, body_mass_kg: float, hand_load_kg: float | Non
     lab_up = "auto" if request is None else request.lab_up
     what = (key, "moments", float(body_mass_kg), float(hand_load_kg), "thorax motion and loads", lab_up, tuple(loads))
     return hashlib.sha256(repr(what).encode()).hexdigest()
-
-
-def _moments_comments(moments: Any) -> tuple[str, ...]:
-    info = moments.info
-    line = f"q, q', q'' of the {str(info.get('method', '')).upper()} reconstruction"
-    if "pf_inertia_scale" in info:
-        line += (f" (PF integrated its equations of motion with the segments' inertia x {info['pf_inertia_scale']:g}; "
-                 "the moments use the real inertia above)")
-    out = (line,) + ((info["pf_fallback"],) if "pf_fallback" in info else ())
-    if "thorax" in info:
-        out += (info["thorax"],)
-    return out + tuple(load.describe() for load in getattr(moments, "loads", ()))
 
 
 def _request(settings: RunSettings) -> Any:
@@ -422,6 +349,10 @@ def write_assessed(inputs: TrialInputs, trial_path: str | Path, out_dir: str | P
         summ = trial_summary(recon, assessment, inputs, source=str(trial_path), stem=stem, notes=notes or RunNotes(),
                              quality=quality)
         moments = None
+        from exubio.run.moments_outputs import moments_entry, pf_inertia_entry
+
+        if (pf_inertia := pf_inertia_entry(recon.info)) is not None:
+            summ["pf_inertia_scale"] = pf_inertia
         if hand_load_kg is not None:
             from exubio.dynamics.moments import moments_summary, reconstruction_moments
 
@@ -429,60 +360,15 @@ def write_assessed(inputs: TrialInputs, trial_path: str | Path, out_dir: str | P
             moments = reconstruction_moments(inputs.model, recon, hand_load_kg=hand_load_kg,
                                              thorax=None if extra is None else extra.thorax,
                                              loads=() if extra is None else extra.loads)
-            summ["moments"] = moments_summary(moments)
+            summ["moments"] = moments_entry(moments, moments_summary(moments), stem)
         names, values = anatomical_table(inputs.model, recon.q_rad)
         det = assessment.angles[recon.method]
         angles = AngleOutputs(names, values, det.status,
                               angle_header(det, Path(trial_path).name, method.value, inputs.protocol.side),
-                              assessment.determinacy[recon.method].undetermined, det.uncertainty_rad, moments)
+                              assessment.determinacy[recon.method].undetermined, det.uncertainty_rad, moments,
+                              thorax_coordinates=mot_thorax(moments))
         paths = write_outputs(recon, out_dir, stem, metadata=meta, summary_data=summ, angles=angles,
                               streamed=None if model_points is None else {"model_points_m": model_points},
                               overwrite=overwrite)
         out.append((recon, paths, summ))
     return out
-
-
-MAX_STATUS_RUNS = 12
-"""An angle whose status changes more often than this is summarised by shares in the file headers
-(its every frame is in the .npz)."""
-
-
-def angle_header(det, trial: str, method: str, side: str) -> tuple[str, ...]:
-    """Comment lines of ``<trial>.<method>.csv``: what the angles are (definition, sign), and each
-    one's status (exubio.trust.observability.AngleStatus) with the frame ranges where it changes."""
-    from exubio.model.angles import ANATOMICAL_ANGLES
-    from exubio.trust.observability import AngleStatus
-
-    lines = [f"exubio anatomical joint angles of {trial} ({method.upper()}); angles in degrees, time in seconds",
-             "ISB frames (Wu et al. 2005) from the model's landmarks, intrinsic sequences, raw signs; GH in ISB Y-X'-Y'' "
-             "and in Phadke's X-Z'-Y''"]
-    lines += [f"{n}: {d}; {m}" for n, d, m in ANATOMICAL_ANGLES]
-    if side == "left":
-        lines.append("LEFT arm: its markers were mirrored through the thorax's sagittal plane (Z -> -Z of the ISB thorax "
-                     "frame) onto the right-arm model, so every angle carries the right arm's sign (Wu et al. 2005)")
-    else:
-        lines.append("right arm, signs of Wu et al. 2005")
-    lines.append("status: measured = the markers determine it; modelled = set by a named protocol rule; not measured = "
-                 "neither (read it as no measurement)")
-    if getattr(det, "uncertainty_rad", None) is not None:
-        from exubio.trust.angle_uncertainty import UNCERTAINTY_DEFINITION
-
-        lines.append(f"<angle>_u_deg: {UNCERTAINTY_DEFINITION}; the truth lies within +-2u in about 95 % of frames "
-                     "(coverage measured on bone pins and bone-pin artefact simulations: studies/README.md)")
-    for j, n in enumerate(det.names):
-        col = np.asarray(det.status[:, j])
-        rule = f" ({det.rule[n]})" if n in det.rule else ""
-        change = np.flatnonzero(np.diff(col)) + 1
-        if not change.size:
-            lines.append(f"status {n}: {AngleStatus(int(col[0])).label if col.size else 'measured'}{rule}")
-            continue
-        if change.size > MAX_STATUS_RUNS:
-            share = ", ".join(f"{AngleStatus(k).label} {100 * np.mean(col == k):.0f} %" for k in np.unique(col))
-            lines.append(f"status {n}: changes {change.size} times: {share} of the frames (every frame: the .npz, "
-                         f"angle_status){rule}")
-            continue
-        starts = np.concatenate([[0], change])
-        ends = np.concatenate([change, [col.size]])
-        runs = ", ".join(f"{AngleStatus(int(col[a])).label} {a}-{b - 1}" for a, b in zip(starts, ends))
-        lines.append(f"status {n}: by frame: {runs}{rule}")
-    return tuple(lines)

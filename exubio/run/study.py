@@ -13,7 +13,9 @@ killed run are removed by the next run, which skips the trials that are complete
 
 ``OUT/study.csv`` and ``OUT/study.json``: one row per trial (verdict per method, frames, mean
 residual, PF-LS agreement, wall time, or the error); ``study.report.pdf``: the same table and the rhythm
-pages; ``angles.parquet`` and ``angles.csv.gz``: every angle in one table (exubio.run.study_table).
+pages; ``angles.parquet`` and ``angles.csv.gz``: every angle in one table (exubio.run.study_table);
+with a session's ``body_mass_kg`` (or ``--body-mass``), ``moments.parquet`` and ``moments.csv.gz``: every
+joint moment in one table (exubio.run.study_moments).
 
 Execution: a local process pool (``jobs``), or Dask (``scheduler``: ``"local:N"`` starts a local
 cluster of N workers, ``"tcp://HOST:PORT"`` uses a running scheduler). Workers are long-lived
@@ -42,6 +44,7 @@ from exubio.method_registry import method_names
 from exubio.run import interrupt, study_table
 from exubio.run.executors import run_all
 from exubio.run.study_leftovers import _TMP_PREFIX, _remove_after_dask, clean_leftovers
+from exubio.run.study_moments import SESSION_KEYS, moments_as_asked, session_moments, write_moments_table
 
 if TYPE_CHECKING:
     from exubio.run.job import TrialResult
@@ -54,7 +57,9 @@ __all__ = ["StudySpec", "SessionSpec", "TrialTask", "TrialOutcome", "load_study"
 DONE_FILE = "DONE.json"
 _STUDY_KEYS = {"schema_version", "name", "methods", "report", "sessions"}
 _SESSION_KEYS = {"subject", "session", "protocol", "model", "static", "functional", "scapula_trial", "static_frames",
-                 "trials", "methods", "relabel", "static_relabel", "trial_relabel", "tasks"}
+                 "trials", "methods", "relabel", "static_relabel", "trial_relabel", "tasks", *SESSION_KEYS}
+
+
 def study_columns() -> tuple[str, ...]:
     """study.csv's columns: per method of exubio.method_registry its verdict and mean residual."""
     methods = method_names()
@@ -82,6 +87,8 @@ class SessionSpec:
     static_relabel: Mapping[str, str] | None = None  # the static only (None: relabel)
     trial_relabel: Mapping[str, Mapping[str, str]] = field(default_factory=dict)  # trial file name -> its own
     tasks: Mapping[str, str] = field(default_factory=dict)  # trial file name -> its task (default: its stem)
+    body_mass_kg: float | None = None  # with it, the joint moments (exubio.run.study_moments)
+    hand_load_kg: float | None = None  # the mass in the hand of the joint moments; None: no moments
 
     def relabel_of(self, trial: Path) -> dict[str, str]:
         return dict(self.trial_relabel.get(trial.name, self.relabel))
@@ -166,9 +173,10 @@ def _relabel_map(value: Any, where: str) -> dict[str, str] | None:
     return dict(value)
 
 
-def load_study(path: str | Path, /) -> StudySpec:
+def load_study(path: str | Path, /, *, body_mass_kg: float | None = None) -> StudySpec:
     """Read and check a study file: every key, path and glob, before any work (InputError naming
-    the file and the key)."""
+    the file and the key); ``body_mass_kg`` (``--body-mass``): the joint moments of every session
+    that gives no body_mass_kg of its own (exubio.run.study_moments)."""
     path = Path(path)
     data = read_yaml(path, error=InputError)
     src = str(path)
@@ -248,7 +256,8 @@ def load_study(path: str | Path, /) -> StudySpec:
             if str(name) not in names:
                 raise InputError(f"{where}.trial_relabel.{name}: not a trial of this session; its trials are {sorted(names)}")
             trial_relabel[str(name)] = _relabel_map(mapping, f"{where}.trial_relabel.{name}") or {}
-        sessions.append(SessionSpec(
+        mass, load = session_moments(s, where, default_mass_kg=body_mass_kg)
+        sessions.append(SessionSpec(body_mass_kg=mass, hand_load_kg=load,
             subject=subject, session=session, trials=tuple(trials), relabel=relabel, static_relabel=static_relabel,
             trial_relabel=trial_relabel, tasks=study_table.tasks_key(s.get("tasks"), names, f"{where}.tasks"),
             protocol=_path(shipped_beside(s.get("protocol"), base, "exubio.protocols", "protocols", "upper_limb_21.yaml"),
@@ -339,7 +348,7 @@ def _calibrate_session(s: SessionSpec, folder: Path) -> tuple[Any, Any, str]:
 
     tmp = folder / f"{_TMP_PREFIX}calibration-{os.getpid()}"
     try:
-        session = load_session(model_path=s.model, protocol_path=s.protocol)
+        session = load_session(model_path=s.model, protocol_path=s.protocol, body_mass_kg=s.body_mass_kg)
         if s.static is None:
             return session, None, ""
         cal_dir = folder / "calibration"
@@ -375,7 +384,8 @@ def plan(spec: StudySpec, out_dir: Path) -> tuple[list[TrialTask], list[TrialOut
     for s in spec.sessions:
         folder = out_dir / s.subject / s.session
         trial_dirs = {t: folder / t.stem for t in s.trials}
-        pending = [t for t in s.trials if not (trial_dirs[t] / DONE_FILE).is_file()]
+        pending = [t for t in s.trials if not (trial_dirs[t] / DONE_FILE).is_file()
+                   or not moments_as_asked(trial_dirs[t], t.stem, s.methods, s.body_mass_kg, s.hand_load_kg)]
         for t in s.trials:
             if t not in pending:
                 done = json.loads((trial_dirs[t] / DONE_FILE).read_text(encoding="utf-8")).get("outcome", {})
@@ -396,8 +406,11 @@ def plan(spec: StudySpec, out_dir: Path) -> tuple[list[TrialTask], list[TrialOut
                 continue
             from exubio.run.job import TrialJob
 
+            scale = session.protocol.pf_inertia_scale  # the protocol's defaults.pf_inertia_scale
             job = TrialJob(t, trial_dirs[t], methods=s.methods, session=session, static_frames=s.static_frames,
-                           report=spec.report, calibration=cal, relabel=s.relabel_of(t) or {})
+                           report=spec.report, calibration=cal, relabel=s.relabel_of(t) or {},
+                           options={"pf": {"inertia_scale": scale}} if scale is not None and "pf" in s.methods else {},
+                           hand_load_kg=s.hand_load_kg)
             tasks.append(TrialTask(subject=s.subject, session=s.session, trial=str(t), final_dir=str(trial_dirs[t]),
                                    job=job))
     return tasks, skipped
@@ -475,6 +488,7 @@ def run_study(spec: StudySpec, out_dir: str | Path, /, *, jobs: int = 1, schedul
         say(f"removed {len(removed)} leftover(s) of an interrupted run")
     write_table(out, spec, outcomes)
     study_table.write_study_table(out, study_table.table_trials(spec, outcomes))
+    write_moments_table(out, study_table.table_trials(spec, outcomes))  # sessions with a body mass: moments.parquet
     if spec.report:
         from exubio.report.study_report import build_study_report
 

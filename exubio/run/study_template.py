@@ -21,6 +21,8 @@ sessions:
     trial_relabel:                  # optional: per trial file name, for that trial only (replaces relabel for it)
       task_03.c3d: {EPI_lat: EPI_med, EPI_med: EPI_lat}
     tasks: {task_03.c3d: drinking}  # optional: per trial file name, its task in angles.parquet (default: the file's stem)
+    body_mass_kg: 72.5              # optional: the joint moments too (kg; moments.parquet; or every session: --body-mass)
+    hand_load_kg: 1.0               # optional, with body_mass_kg: a mass held in the hand (kg)
   - subject: S02                    # a session without a static trial
     static_frames: "0:50"           # optional: each trial calibrated on these frames of its own (0-based, end excluded)
     trials: ["S02/*.trc"]

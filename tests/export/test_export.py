@@ -11,6 +11,7 @@ import pytest
 from exubio.calibration import marker_point_names
 from exubio.errors import InputError, ModelError
 from exubio.export import marker_table, write_biomod, write_osim
+from exubio.export.thorax import THORAX_COORDINATES, THORAX_TRANSLATIONS, with_thorax_inertia
 from exubio.model.kinematics import Kinematics
 from exubio.model.load import load_model
 from exubio.io.results import read_npz
@@ -94,7 +95,12 @@ def test_osim_names_ranges_and_inertia_round_trip(exported, tmp_path):
     opensim = pytest.importorskip("opensim")
     osim_model, _ = load_osim(opensim, write_osim(exported, tmp_path / "model.osim", coordinates="model"))
     coords = osim_model.getCoordinateSet()
-    assert [coords.get(i).getName() for i in range(coords.getSize())] == list(exported.coordinate_names)
+    assert [coords.get(i).getName() for i in range(coords.getSize())] == [*THORAX_COORDINATES, *exported.coordinate_names]
+    for name in THORAX_COORDINATES:  # the thorax's free joint (exubio.export.thorax)
+        linear = name in THORAX_TRANSLATIONS
+        assert coords.get(name).getMotionType() == (opensim.Coordinate.Translational if linear
+                                                    else opensim.Coordinate.Rotational)
+    exported = with_thorax_inertia(exported)  # the .osim carries the thorax's mass
     for name, (lo, hi) in zip(exported.coordinate_names, exported.coordinate_ranges_rad):
         c = coords.get(name)
         assert (c.getRangeMin(), c.getRangeMax()) == (lo, hi)
@@ -176,7 +182,8 @@ def test_osim_and_biomod_have_the_same_mass_matrix(exported, tmp_path):
     centres of mass and inertias in the same frames)."""
     opensim = pytest.importorskip("opensim")
     biorbd = pytest.importorskip("biorbd")
-    osim_model, state = load_osim(opensim, write_osim(exported, tmp_path / "model.osim", coordinates="model"))
+    osim_model, state = load_osim(opensim, write_osim(exported, tmp_path / "model.osim", coordinates="model",
+                                                      thorax="weld"))
     bio = biorbd.Model(str(write_biomod(exported, tmp_path / "model.bioMod")))
     for q in postures(exported, n=3)[3:]:
         osim_markers(osim_model, state, exported, q)  # sets q
@@ -214,11 +221,13 @@ def test_reconstruct_mot_plays_on_exported_osim(exported, reconstruction, tmp_pa
     labels = list(table.getColumnLabels())
     assert table.getTableMetaDataAsString("inDegrees") == "yes"
     names, angles = anatomical_table(exported, rec.q_rad)
-    assert labels == list(names)
+    assert labels == [*names, *THORAX_COORDINATES]  # the thorax's free joint: 0, the thorax-fixed model
     coordinates = [coords.get(i).getName() for i in range(coords.getSize())]
     assert set(coordinates) <= set(labels), "every coordinate of the .osim is a column of the .mot"
     np.testing.assert_allclose(np.asarray(table.getIndependentColumn()), rec.time_s, rtol=0, atol=5e-7)
-    for j, name in enumerate(labels):  # degrees, printed to 1e-6 deg
+    for name in THORAX_COORDINATES:
+        assert not table.getDependentColumn(name).to_numpy().any()
+    for j, name in enumerate(names):  # degrees, printed to 1e-6 deg
         values = table.getDependentColumn(name).to_numpy()
         np.testing.assert_allclose(values, np.degrees(angles[:, j]), rtol=0, atol=5.01e-7, err_msg=name)
 
@@ -226,7 +235,7 @@ def test_reconstruct_mot_plays_on_exported_osim(exported, reconstruction, tmp_pa
     storage = opensim.Storage(str(mot))
     osim_model.getSimbodyEngine().convertDegreesToRadians(storage)
     q_mot = {}
-    for name in coordinates:
+    for name in (c for c in coordinates if c not in THORAX_COORDINATES):
         column = opensim.ArrayDouble()
         storage.getDataColumn(name, column)
         q_mot[name] = np.array([column.get(i) for i in range(column.getSize())])
@@ -239,7 +248,7 @@ def test_reconstruct_mot_plays_on_exported_osim(exported, reconstruction, tmp_pa
     wanted = [name_of[(m.segment, point_of[m.name])] for m in protocol.markers]
     markers = osim_model.getMarkerSet()
     for i in range(0, rec.n_frames, 50):
-        for name in coordinates:
+        for name in q_mot:
             coords.get(name).setValue(state, float(q_mot[name][i]), False)
         osim_model.realizePosition(state)
         got = np.array([[markers.get(n).getLocationInGround(state).get(k) for k in range(3)] for n in wanted])

@@ -9,6 +9,7 @@ import pytest
 from exubio.cli import main
 from exubio.io.c3d import write_c3d
 from exubio.io.results import read_angles_csv, read_mot, read_npz
+from exubio.export.thorax import THORAX_COORDINATES
 from exubio.model.load import load_model
 from exubio.synth.simulate import Motion, simulate_trial
 
@@ -37,7 +38,8 @@ def test_reconstruct_writes_all_outputs_with_consistent_content(tmp_path, c3d, t
     assert names == tuple(f"{n}_deg" for n in ANATOMICAL_COLUMNS)  # the anatomical angles, unit in the name
     assert np.allclose(t, trial.time_s)
     t2, names2, ang2 = read_mot(out / "abd.ls.mot")
-    assert names2 == ANATOMICAL_COLUMNS and np.abs(ang2 - ang).max() < 1e-7
+    assert names2[:len(ANATOMICAL_COLUMNS)] == ANATOMICAL_COLUMNS and np.abs(ang2[:, :len(names)] - ang).max() < 1e-7
+    assert names2[len(ANATOMICAL_COLUMNS):] == THORAX_COORDINATES and not ang2[:, len(names):].any()  # the thorax: 0
     recon = read_npz(out / "abd.ls.npz")
     assert recon.coordinate_names == load_model().coordinate_names  # the model coordinates stay in the .npz
     _, ref = anatomical_table(load_model(), recon.q_rad)

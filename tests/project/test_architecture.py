@@ -17,11 +17,11 @@ OWNERS = {
     "matplotlib": {"report/trial_report.py", "report/study_report.py", "report/validation_report.py",
                    "report/validation_common.py", "report/validation_tables.py", "report/validation_summary.py",
                    "report/validation_paper_figures.py", "report/validation_exubio_figures.py",
-                   "report/calibration_page.py", "report/rhythm_page.py"},
+                   "report/calibration_page.py", "report/rhythm_page.py", "report/moments_page.py"},
     "plotly": {"report/viewer.py", "report/viewer_page.py", "report/viewer_scene.py", "report/viewer_results.py"},
     "distributed": {"run/executors.py"},
     "dask": {"run/executors.py"},
-    "pandas": {"api.py", "run/study_table.py"},  # the study's angles table (Parquet, CSV) is a DataFrame
+    "pandas": {"api.py", "run/study_table.py", "run/study_moments.py"},  # the study's angles table (Parquet, CSV) is a DataFrame
     "pylsl": {"run/live/transport.py"},
 }
 VALIDATION_STUDY = tuple(f"exubio.validation.{m}" for m in ("run", "trials", "determinacy", "sensitivity", "residuals",

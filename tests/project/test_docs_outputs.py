@@ -61,7 +61,9 @@ def test_the_csv_and_mot_columns_are_those_of_the_page(run, page):
     assert header.split(",") == documented
     mot = (run / "trial.ls.mot").read_text(encoding="utf-8").splitlines()
     columns = mot[mot.index("endheader") + 1].split("\t")
-    assert columns == ["time"] + [c.removesuffix("_deg") for c in documented[1:] if not c.endswith("_u_deg")]
+    thorax = [c for c in columns if c.startswith("thorax_")]  # the free thorax joint's (exubio.export.thorax)
+    assert columns == ["time"] + [c.removesuffix("_deg") for c in documented[1:] if not c.endswith("_u_deg")] + thorax
+    assert len(thorax) == 6 and all(f"`{c}`" in page for c in thorax)
 
 
 def test_the_npz_arrays_are_those_of_the_page(run, page):
