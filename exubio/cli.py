@@ -30,6 +30,7 @@ import exubio  # noqa: E402
 from exubio.errors import ExubioError, InputError, ModelError, ProtocolError, ReconstructionError  # noqa: E402
 from exubio.run import interrupt  # noqa: E402 - Ctrl-C noted (small: no pipeline)
 from exubio.truth.locator_cli import add_parser as add_locator_parser  # noqa: E402 - small: its work is imported when it runs
+from exubio.model.signs import add_signs_arguments  # noqa: E402 - small: the --signs option (exubio/model/signs.py)
 
 if TYPE_CHECKING:  # the CLI imports the pipeline only when a command runs (fast --help)
     from exubio.run.job import TrialJob, TrialResult
@@ -352,7 +353,8 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
         raise InputError(f"--static-relabel {args.static_relabel}: relabels the static trial; give --static STATIC too")
     from exubio.run.inputs import load_session
 
-    session = load_session(model_path=args.model, protocol_path=args.protocol, body_mass_kg=args.body_mass)
+    session = load_session(model_path=args.model, protocol_path=args.protocol, body_mass_kg=args.body_mass,
+                           signs=args.signs)
     calibration = None
     if args.static:
         from exubio.run.session import calibrate_session
@@ -437,7 +439,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from exubio.run.inputs import load_session
     from exubio.run.pipeline import RunSettings
 
-    session = load_session()
+    session = load_session(signs=args.signs)
     outputs = reconstruct_file(c3d, out, methods=["pf", "ls"], session=session,
                                settings=RunSettings(overwrite=True, progress_factory=_progress_factory(not args.quiet)))
     t_true, names, q_true = read_angles_csv(truth_csv)
@@ -583,7 +585,7 @@ def cmd_study(args: argparse.Namespace) -> int:
         return 0
     if not args.study or not args.out:
         raise InputError("exubio study: expected STUDY.yaml and --out FOLDER (or --template to print a study file)")
-    spec = load_study(args.study)  # every key, path and glob checked before any work
+    spec = load_study(args.study, signs=args.signs)  # every key, path and glob checked before any work
     if args.jobs < 1:
         raise InputError(f"--jobs {args.jobs}: expected a whole number of processes >= 1")
     _check_output_folder(Path(args.out), args.out)
@@ -773,6 +775,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--gravity", action="store_true",
                    help="PF: apply gravity (-Y of the thorax frame); off by default, the springs then also "
                         "carry the limb's weight and model points sag below their markers")
+    add_signs_arguments(r)
     r.set_defaults(func=cmd_reconstruct)
 
     c = sub.add_parser("calibrate", parents=[common], formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -821,6 +824,7 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--jobs", type=int, default=1, help="trials in parallel local processes (default 1)")
     st.add_argument("--scheduler", help="run the trials on Dask: local:N (a local cluster of N workers) or "
                                         "tcp://HOST:PORT (a running scheduler)")
+    add_signs_arguments(st)
     st.set_defaults(func=cmd_study)
 
     w = sub.add_parser("view", parents=[common], formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -912,6 +916,7 @@ def build_parser() -> argparse.ArgumentParser:
     d = sub.add_parser("demo", parents=[common], formatter_class=argparse.RawDescriptionHelpFormatter,
                        epilog=_epilog("demo"), help="reconstruct the shipped example trial with PF and LS, compare with its truth")
     d.add_argument("--out", default="exubio_demo", help="output folder (default ./exubio_demo)")
+    add_signs_arguments(d)
     d.set_defaults(func=cmd_demo)
 
     from exubio.truth.cli_truth import add_parser as add_truth_parser

@@ -317,6 +317,7 @@ class Protocol:
     side: Literal["right", "left"] = "right"  # left: markers mirrored onto the (right-arm) model
     thorax_aliases: Mapping[str, tuple[str, ...]] = field(default_factory=dict)  # thorax_frame label -> other labels
     other_arm: str | None = None  # the protocol file of the other arm of this marker set (--both-arms)
+    signs: Literal["isb", "clinical"] = "isb"  # sign convention of the written angles (exubio.model.signs)
 
     @property
     def marker_names(self) -> tuple[str, ...]:

@@ -51,7 +51,7 @@ __all__ = ["StudySpec", "SessionSpec", "TrialTask", "TrialOutcome", "load_study"
            "STUDY_COLUMNS"]
 
 DONE_FILE = "DONE.json"
-_STUDY_KEYS = {"schema_version", "name", "methods", "report", "sessions"}
+_STUDY_KEYS = {"schema_version", "name", "methods", "report", "sessions", "signs"}
 _SESSION_KEYS = {"subject", "session", "protocol", "model", "static", "functional", "scapula_trial", "static_frames",
                  "trials", "methods", "relabel", "static_relabel", "trial_relabel", "tasks"}
 STUDY_COLUMNS = ("subject", "session", "trial", "status", "pf_verdict", "ls_verdict", "frames", "pf_residual_mm",
@@ -85,6 +85,7 @@ class StudySpec:
     source: Path
     sessions: tuple[SessionSpec, ...]
     report: bool = True
+    signs: str | None = None  # the angles' sign convention of every trial (exubio.model.signs); None: each protocol's
 
 
 @dataclass(frozen=True)
@@ -157,9 +158,10 @@ def _relabel_map(value: Any, where: str) -> dict[str, str] | None:
     return dict(value)
 
 
-def load_study(path: str | Path, /) -> StudySpec:
+def load_study(path: str | Path, /, *, signs: str | None = None) -> StudySpec:
     """Read and check a study file: every key, path and glob, before any work (InputError naming
-    the file and the key)."""
+    the file and the key). ``signs`` (--signs): the angles' sign convention over the file's
+    ``signs`` key (which is over each session's protocol's)."""
     path = Path(path)
     data = read_yaml(path, error=InputError)
     src = str(path)
@@ -174,6 +176,10 @@ def load_study(path: str | Path, /) -> StudySpec:
     report = data.get("report", True)
     if not isinstance(report, bool):
         raise InputError(f"{src}: report: expected true or false, got {report!r}")
+    if signs is None and data.get("signs") is not None:
+        from exubio.model.signs import check_signs
+
+        signs = check_signs(data["signs"], f"{src}: signs")
     raw = data.get("sessions")
     if not isinstance(raw, list) or not raw:
         raise InputError(f"{src}: sessions: expected a non-empty list of sessions")
@@ -248,7 +254,8 @@ def load_study(path: str | Path, /) -> StudySpec:
                         base, f"{where}.model"), static=static, functional=functional,
             static_frames=None if frames is None else str(frames), scapula_trials=scapula_trials,
             methods=_methods(s["methods"], f"{where}.methods") if "methods" in s else methods))
-    return StudySpec(name=str(data.get("name", path.stem)), source=path, sessions=tuple(sessions), report=report)
+    return StudySpec(name=str(data.get("name", path.stem)), source=path, sessions=tuple(sessions), report=report,
+                     signs=signs)
 
 
 # --------------------------------------------------------------------------------------------
@@ -321,7 +328,7 @@ def _write_done(folder: Path, out: TrialOutcome, result: TrialResult) -> None:
 # --------------------------------------------------------------------------------------------
 # The study
 # --------------------------------------------------------------------------------------------
-def _calibrate_session(s: SessionSpec, folder: Path) -> tuple[Any, Any, str]:
+def _calibrate_session(s: SessionSpec, folder: Path, signs: str | None = None) -> tuple[Any, Any, str]:
     """(session, calibration, error) of a session: its model and protocol loaded once and, with a
     static trial, calibrated (exubio.run.session.SessionCalibration, its model file in
     ``folder/calibration``)."""
@@ -330,7 +337,7 @@ def _calibrate_session(s: SessionSpec, folder: Path) -> tuple[Any, Any, str]:
 
     tmp = folder / f"{_TMP_PREFIX}calibration-{os.getpid()}"
     try:
-        session = load_session(model_path=s.model, protocol_path=s.protocol)
+        session = load_session(model_path=s.model, protocol_path=s.protocol, signs=signs)
         if s.static is None:
             return session, None, ""
         cal_dir = folder / "calibration"
@@ -360,6 +367,21 @@ def _calibrate_session(s: SessionSpec, folder: Path) -> tuple[Any, Any, str]:
         return None, None, f"calibration on {s.static.name} failed: {exc}"
 
 
+def _same_signs(folder: Path, signs: str | None) -> None:
+    """A complete trial of an earlier run is kept only when its angles are in the convention this
+    run asks for (``signs``; None: whatever its protocol said): else InputError naming it."""
+    if signs is None:
+        return
+    for summary in sorted(folder.glob("*.summary.json")):
+        try:
+            had = json.loads(summary.read_text(encoding="utf-8")).get("signs", "isb")
+        except (OSError, ValueError):
+            continue
+        if had != signs:
+            raise InputError(f"{summary}: this trial's angles were written with signs {had}, this run asks for {signs} "
+                             f"(signs key or --signs); run the study into another --out folder")
+
+
 def plan(spec: StudySpec, out_dir: Path) -> tuple[list[TrialTask], list[TrialOutcome]]:
     """The trials to run and the ones already complete (skipped); sessions are calibrated here."""
     tasks, skipped = [], []
@@ -369,6 +391,7 @@ def plan(spec: StudySpec, out_dir: Path) -> tuple[list[TrialTask], list[TrialOut
         pending = [t for t in s.trials if not (trial_dirs[t] / DONE_FILE).is_file()]
         for t in s.trials:
             if t not in pending:
+                _same_signs(trial_dirs[t], spec.signs)
                 done = json.loads((trial_dirs[t] / DONE_FILE).read_text(encoding="utf-8")).get("outcome", {})
                 o = TrialOutcome(s.subject, s.session, str(t), str(trial_dirs[t]), "skipped (complete)",
                                  verdicts={m: done.get(f"{m}_verdict") for m in ("pf", "ls") if done.get(f"{m}_verdict")},
@@ -380,7 +403,7 @@ def plan(spec: StudySpec, out_dir: Path) -> tuple[list[TrialTask], list[TrialOut
         if not pending:
             continue
         folder.mkdir(parents=True, exist_ok=True)
-        session, cal, err = _calibrate_session(s, folder)
+        session, cal, err = _calibrate_session(s, folder, spec.signs)
         for t in pending:
             if err:
                 skipped.append(TrialOutcome(s.subject, s.session, str(t), str(trial_dirs[t]), "failed", error=err))
