@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
+from exubio.errors import InputError
 from exubio.types import MarkerTargets, Model, Protocol, Reconstruction, Trajectories
 
 if TYPE_CHECKING:  # pandas is imported when a DataFrame is asked for
@@ -60,22 +61,38 @@ def load_protocol(path: str | Path | None = None, /, *, model: Model | None = No
     return protocol_for_model(model if model is not None else load_model(), path)
 
 
+_CALIBRATIONS: dict[int, Any] = {}
+"""id(calibrated model) -> the calibration exubio.calibrate made it with (its session left out, so
+the model is not kept alive by it), for as long as that model object lives: reconstruct, assess
+and write_results read it, as ``exubio reconstruct --static`` reads its session's calibration."""
+
+
+def _calibration_of(model: Model | None, /) -> Any:
+    return _CALIBRATIONS.get(id(model)) if model is not None else None
+
+
 def calibrate(static: Trajectories, model: Model | None = None, protocol: Protocol | None = None, /, *,
               frames: slice | None = None, functional: Trajectories | None = None,
               scapula_motion: Trajectories | None = None):
     """Fit the model to the subject from a static trial (optionally a functional trial for the
     glenohumeral centre, and a movement trial whose scapula postures the thorax ellipsoid is fitted
-    through): (calibrated model, protocol bound to it, CalibrationReport)."""
-    from exubio.calibration import calibrate_model, calibrated_protocol
-    from exubio.prep.targets import prepare_targets
+    through): (calibrated model, protocol bound to it, CalibrationReport). The calibration is that
+    of ``exubio reconstruct --static`` (exubio.run.session), and the calibrated model carries it:
+    ``reconstruct``, ``assess`` and ``write_results`` with this model give the CLI's verdict for
+    the same static and trial, its calibration and static-label reasons included."""
+    import weakref
 
-    model = model if model is not None else load_model()
-    protocol = protocol if protocol is not None else load_protocol(model=model)
-    fun = prepare_targets(functional, protocol) if functional is not None else None
-    sca = prepare_targets(scapula_motion, protocol) if scapula_motion is not None else None
-    calibrated, report = calibrate_model(model, protocol, static, frames=frames, functional=fun,
-                                         scapula_motion=sca)
-    return calibrated, calibrated_protocol(protocol, calibrated), report
+    from exubio.run.session import StaticSpec, calibrate_in_memory
+
+    if frames is not None and (not isinstance(frames, slice) or frames.step not in (None, 1)):
+        raise InputError(f"frames: expected a slice of the static's frames like slice(0, 50), got {frames!r}")
+    spec = StaticSpec(frames=None if frames is None else f"{frames.start or ''}:{'' if frames.stop is None else frames.stop}",
+                      functional=functional, scapula_trials=() if scapula_motion is None else (scapula_motion,))
+    cal = calibrate_in_memory(static, _session(model, protocol), spec)
+    calibrated, bound = cal.session.model, cal.session.protocol
+    _CALIBRATIONS[id(calibrated)] = dataclasses.replace(cal, session=None)
+    weakref.finalize(calibrated, _CALIBRATIONS.pop, id(calibrated), None)
+    return calibrated, bound, cal.report
 
 
 def _session(model: Model | None, protocol: Protocol | None, /):
@@ -113,7 +130,17 @@ def reconstruct(trial: Trajectories | MarkerTargets | str | Path, model: Model |
     session = _session(model, protocol)
     inputs = _inputs(trial, session)
     rec = _reconstruct(inputs.model, inputs.protocol, inputs.targets, method=method, **options)
-    return dataclasses.replace(rec, quality=assess_inputs(inputs, [rec]).quality[rec.method])
+    cal = _calibration_of(model)
+    quality = assess_inputs(inputs, [rec], cal).quality[rec.method]
+    return dataclasses.replace(rec, quality=_with_input_notes(quality, inputs, cal))
+
+
+def _with_input_notes(quality: Any, inputs: Any, calibration: Any, /) -> Any:
+    """The verdict as the CLI's summary gives it: with a note per finding of the trial's and the
+    static's readers (exubio.run.summary_file.trial_quality)."""
+    from exubio.run.summary_file import _file_findings, input_notes
+
+    return quality.with_reasons(input_notes(_file_findings(inputs, calibration)))
 
 
 def assess(trial: Trajectories | MarkerTargets | str | Path, reconstructions: Sequence[Reconstruction],
@@ -124,7 +151,7 @@ def assess(trial: Trajectories | MarkerTargets | str | Path, reconstructions: Se
     from exubio.run.pipeline import assess_inputs
 
     session = _session(model, protocol)
-    return assess_inputs(_inputs(trial, session), list(reconstructions))
+    return assess_inputs(_inputs(trial, session), list(reconstructions), _calibration_of(model))
 
 
 def angles(reconstruction: Reconstruction | np.ndarray, model: Model | None = None, /, *,
@@ -261,7 +288,8 @@ def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str
         session = _session(model, protocol)
         session = session.with_signs(_signs(signs, session.protocol))
         inputs = _inputs(trial, session)
-        assessment = assess_inputs(inputs, [reconstruction])
+        cal = _calibration_of(model)
+        assessment = assess_inputs(inputs, [reconstruction], cal)
         results.prepare_output_dir(out_dir, [full], overwrite=overwrite)
         source = str(trial) if isinstance(trial, (str, Path)) else inputs.trial.source
         done = [(Method.parse(reconstruction.method), full, reconstruction, None)]
@@ -272,7 +300,7 @@ def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str
             key = run_key(trial, session.model, session.protocol, reconstruction.method,
                           options=dict(reconstruction.info["options"]))
         return write_assessed(inputs, source, out_dir, done, assessment, overwrite=overwrite,
-                              notes=RunNotes(inputs_sha256=key))[0][1]
+                              notes=RunNotes(cal, inputs_sha256=key))[0][1]
     model = model if model is not None else load_model()
     protocol = protocol if protocol is not None else load_protocol(model=model)
     signs = _signs(signs, protocol)
@@ -306,7 +334,6 @@ def rhythm(source: "Reconstruction | str | Path", model: Model | None = None, pr
     flip with it (HT elevation is positive in both; SD and uncertainty are the same)."""
     import pandas as pd
 
-    from exubio.errors import InputError
     from exubio.scapulohumeral import files, reference, table
 
     categorical = ("phase", "angle", "method", "plane", "level", "subject")
