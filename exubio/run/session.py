@@ -147,24 +147,22 @@ def calibrate_session(static: str | Path | Trajectories, session: Session, out_d
         written = {**report.to_dict(), **({"inputs_sha256": key} if key else {})}
         save_model(model, model_file, calibration=written)
         model = as_written(model, calibration=written, source=model_file)
-    return _session_calibration(source, session, spec, model, report, model_file, gprot, targets, reference,
-                                reused is not None)
+    findings, distances = _static_evidence(source, session, spec, report, gprot, targets, reference)
+    return SessionCalibration(session.with_model(model), report, source.source, model_file, spec.frames, findings,
+                              distances, tuple(source.input_findings), reused is not None)
 
 
-def _session_calibration(source: Trajectories, session: Session, spec: StaticSpec, model: Any, report: Any,
-                         model_file: Path | None, gprot: Protocol, targets: MarkerTargets, reference: bool, reused: bool, /
-                         ) -> SessionCalibration:
-    """The calibration with the static's evidence the trials' verdicts read: its label findings
-    against the generic model, its pair distances (with ``reference``) and its reader's findings."""
+def _static_evidence(source: Trajectories, session: Session, spec: StaticSpec, report: Any, gprot: Protocol,
+                     targets: MarkerTargets, reference: bool, /) -> tuple[tuple, Any]:
+    """What the trials' verdicts read of the static besides the calibration: its label findings
+    against the generic model, and its pair distances (with ``reference``, else None)."""
     from exubio.calibration import parse_frames
     from exubio.trust.labels import check_trial, pair_distances
 
     gmodel = session.generic_model
     pos = targets.positions_m[slice(*report.frames)] if parse_frames(spec.frames) is not None else targets.positions_m
     findings = check_trial(targets, model=gmodel, protocol=gprot, ranges_rad=gmodel.coordinate_ranges_rad)
-    return SessionCalibration(session.with_model(model), report, source.source, model_file, spec.frames, tuple(findings),
-                              pair_distances(pos, targets.marker_names, source=source.source) if reference else None,
-                              tuple(source.input_findings), reused)
+    return tuple(findings), (pair_distances(pos, targets.marker_names, source=source.source) if reference else None)
 
 
 def calibrate_in_memory(static: str | Path | Trajectories, session: Session, spec: StaticSpec = StaticSpec(), /
@@ -176,7 +174,9 @@ def calibrate_in_memory(static: str | Path | Trajectories, session: Session, spe
     gprot = calibration_protocol(source, session)
     targets = prepare_targets(source, gprot)
     model, report = calibrate(source, dataclasses.replace(session, generic_protocol=gprot), spec, targets=targets)
-    return _session_calibration(source, session, spec, model, report, None, gprot, targets, True, False)
+    findings, distances = _static_evidence(source, session, spec, report, gprot, targets, True)
+    return SessionCalibration(session.with_model(model), report, source.source, None, spec.frames, findings, distances,
+                              tuple(source.input_findings))
 
 
 def calibration_key(static: Trajectories, session: Session, spec: StaticSpec, /) -> str | None:
