@@ -216,3 +216,34 @@ def test_a_bad_value_is_one_error_naming_the_key(tmp_path, capsys, runs):
     with pytest.raises(exubio.InputError, match="signs"):
         exubio.to_dataframe(exubio.reconstruct(exubio.read_trial(runs["c3d"]), runs["model"], method="ls"),
                             model=runs["model"], signs="abduction")
+
+
+def test_the_live_stream_publishes_in_the_protocols_convention(runs):
+    """exubio live's output rows: the angles and their rates in the protocol's convention (the
+    recording, ISB inside, is the same in both)."""
+    import dataclasses
+    import math
+
+    from exubio.run.live.loop import LiveSession, SessionHooks
+    from exubio.run.live.options import LiveOptions
+    from exubio.run.live.outputs import ISB_NAMES
+    from exubio.run.live.sources import Faults, ReplaySource
+
+    trial = exubio.read_trial(runs["c3d"])
+    protocol = exubio.load_protocol(model=runs["model"])
+    rows = {}
+    for signs in ("isb", "clinical"):
+        got: list = []
+        opts = dataclasses.replace(LiveOptions(), end_after_s=None, max_behind_s=math.inf, stall_s=math.inf)
+        LiveSession(runs["model"], dataclasses.replace(protocol, signs=signs), ReplaySource(trial, speed=None, faults=Faults()),
+                    options=opts, hooks=SessionHooks(publish=lambda row, ts, got=got: got.append(row))).run()
+        rows[signs] = np.array(got)
+    a = len(ISB_NAMES)
+    expect = np.array([_sign(n) for n in ISB_NAMES])
+    i, c = rows["isb"], rows["clinical"]
+    assert i.shape == c.shape and i.shape[0] > 100
+    np.testing.assert_allclose(c[:, :a], i[:, :a] * expect)  # the angles
+    np.testing.assert_allclose(c[:, a:2 * a], i[:, a:2 * a] * expect)  # their rates flip with them
+    np.testing.assert_array_equal(c[:, 2 * a:-1], i[:, 2 * a:-1])  # measured flags, residuals, verdict...
+    ht = ISB_NAMES.index("HT_X_elevation")
+    assert np.nanmax(c[:, ht]) > 60.0 and np.nanmin(i[:, ht]) < -60.0  # the raised arm
