@@ -565,7 +565,8 @@ def cmd_export_model(args: argparse.Namespace) -> int:
 
     model = load_model(args.model)
     if args.format == "osim":
-        path = write_osim(model, args.out, overwrite=args.overwrite, coordinates=args.coordinates)
+        path = write_osim(model, args.out, overwrite=args.overwrite, coordinates=args.coordinates,
+                          signs=args.signs or "isb")
         plays = ("its coordinates are the anatomical angles, so exubio's .mot plays on it" if args.coordinates == "anatomical"
                  else "its coordinates are exubio's model coordinates (the q of the .npz)")
     else:
@@ -813,6 +814,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--coordinates", choices=["anatomical", "model"], default="anatomical",
                    help="osim only: anatomical (default; SC, AC, GH between the ISB frames with the anatomical angles "
                         "as coordinates, so exubio's .mot plays on it) or model (exubio's own joint coordinates)")
+    add_signs_arguments(e, default="isb; osim with anatomical coordinates: the convention of the .mot it is to play")
     e.set_defaults(func=cmd_export_model)
 
     st = sub.add_parser("study", parents=[common], formatter_class=argparse.RawDescriptionHelpFormatter,

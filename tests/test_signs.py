@@ -247,3 +247,39 @@ def test_the_live_stream_publishes_in_the_protocols_convention(runs):
     np.testing.assert_array_equal(c[:, 2 * a:-1], i[:, 2 * a:-1])  # measured flags, residuals, verdict...
     ht = ISB_NAMES.index("HT_X_elevation")
     assert np.nanmax(c[:, ht]) > 60.0 and np.nanmin(i[:, ht]) < -60.0  # the raised arm
+
+
+def test_a_clinical_mot_plays_on_the_osim_exported_with_clinical_signs(runs, tmp_path):
+    """The anatomical .osim exported with --signs clinical turns a reversed angle about the reversed
+    axis: the clinical .mot's angles put its markers where exubio's model points were (and the ISB
+    .osim's markers at the ISB .mot's angles, the same places)."""
+    opensim = pytest.importorskip("opensim")
+    from exubio.export import marker_table
+    from exubio.io.results import read_npz
+
+    model = runs["model"]
+    rec = read_npz(runs["dirs"]["isb"] / "abd.ls.npz")
+    name_of = {(seg, point): name for name, seg, point in marker_table(model)}
+    kin_points = {}
+    for signs in ("isb", "clinical"):
+        assert main(["-q", "export-model", model.source, "--format", "osim", "--signs", signs,
+                     "--out", str(tmp_path / f"{signs}.osim")]) == 0
+        osim = opensim.Model(str(tmp_path / f"{signs}.osim"))
+        state = osim.initSystem()
+        coords = osim.getCoordinateSet()
+        _, names, q = read_mot(runs["dirs"][signs] / "abd.ls.mot")
+        markers = osim.getMarkerSet()
+        got = []
+        for i in range(0, rec.n_frames, 30):
+            for k in range(coords.getSize()):
+                c = coords.get(k)
+                c.setValue(state, float(q[i, list(names).index(c.getName())]), False)
+            osim.realizePosition(state)
+            got.append([markers.get(n).getLocationInGround(state).to_numpy() for n in name_of.values()])
+        kin_points[signs] = np.array(got)
+    assert np.abs(kin_points["clinical"] - kin_points["isb"]).max() < 1e-5  # the same postures (CSV's 6 decimals)
+    from exubio.model.kinematics import Kinematics
+
+    kin = Kinematics(model)
+    want = kin.points(rec.q_rad[::30], kin.point_set(list(name_of)))
+    assert np.abs(kin_points["clinical"] - want).max() < 1e-5

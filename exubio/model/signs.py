@@ -109,12 +109,13 @@ def mot_note(signs: str, /) -> str:
     return f"exubio_signs=clinical (sign of {' '.join(CLINICAL_FLIPPED)} reversed from raw ISB; each angle's sign in the .csv header)"
 
 
-def add_signs_arguments(parser, /) -> None:
-    """The ``--signs`` option of the commands that write angles (reconstruct, study, demo)."""
+def add_signs_arguments(parser, /, *, default: str = "the protocol's (study file's) signs key, else isb") -> None:
+    """The ``--signs`` option of the commands that write angles (reconstruct, study, demo) or play
+    them (export-model); ``default``: what it is when not given, for the help."""
     parser.add_argument("--signs", choices=SIGNS, default=None,
-                        help="sign convention of the written angles: isb (raw ISB decompositions: elevation negative) "
-                             "or clinical (elevation, abduction, flexion, upward rotation positive); default: the "
-                             "protocol's (study file's) signs key, else isb (docs: outputs, Sign conventions)")
+                        help="sign convention of the angles: isb (raw ISB decompositions: elevation negative) "
+                             f"or clinical (elevation, abduction, flexion, upward rotation positive); default: {default} "
+                             "(docs: outputs, Sign conventions)")
 
 
 def signs_of_file(csv_path, /) -> str:
