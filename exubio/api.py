@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
+from exubio.errors import InputError
 from exubio.types import MarkerTargets, Model, Protocol, Reconstruction, Trajectories
 
 if TYPE_CHECKING:  # pandas is imported when a DataFrame is asked for
@@ -60,22 +61,38 @@ def load_protocol(path: str | Path | None = None, /, *, model: Model | None = No
     return protocol_for_model(model if model is not None else load_model(), path)
 
 
+_CALIBRATIONS: dict[int, Any] = {}
+"""id(calibrated model) -> the calibration exubio.calibrate made it with (its session left out, so
+the model is not kept alive by it), for as long as that model object lives: reconstruct, assess
+and write_results read it, as ``exubio reconstruct --static`` reads its session's calibration."""
+
+
+def _calibration_of(model: Model | None, /) -> Any:
+    return _CALIBRATIONS.get(id(model)) if model is not None else None
+
+
 def calibrate(static: Trajectories, model: Model | None = None, protocol: Protocol | None = None, /, *,
               frames: slice | None = None, functional: Trajectories | None = None,
               scapula_motion: Trajectories | None = None):
     """Fit the model to the subject from a static trial (optionally a functional trial for the
     glenohumeral centre, and a movement trial whose scapula postures the thorax ellipsoid is fitted
-    through): (calibrated model, protocol bound to it, CalibrationReport)."""
-    from exubio.calibration import calibrate_model, calibrated_protocol
-    from exubio.prep.targets import prepare_targets
+    through): (calibrated model, protocol bound to it, CalibrationReport). The calibration is that
+    of ``exubio reconstruct --static`` (exubio.run.session), and the calibrated model carries it:
+    ``reconstruct``, ``assess`` and ``write_results`` with this model give the CLI's verdict for
+    the same static and trial, its calibration and static-label reasons included."""
+    import weakref
 
-    model = model if model is not None else load_model()
-    protocol = protocol if protocol is not None else load_protocol(model=model)
-    fun = prepare_targets(functional, protocol) if functional is not None else None
-    sca = prepare_targets(scapula_motion, protocol) if scapula_motion is not None else None
-    calibrated, report = calibrate_model(model, protocol, static, frames=frames, functional=fun,
-                                         scapula_motion=sca)
-    return calibrated, calibrated_protocol(protocol, calibrated), report
+    from exubio.run.session import StaticSpec, calibrate_in_memory
+
+    if frames is not None and (not isinstance(frames, slice) or frames.step not in (None, 1)):
+        raise InputError(f"frames: expected a slice of the static's frames like slice(0, 50), got {frames!r}")
+    spec = StaticSpec(frames=None if frames is None else f"{frames.start or ''}:{'' if frames.stop is None else frames.stop}",
+                      functional=functional, scapula_trials=() if scapula_motion is None else (scapula_motion,))
+    cal = calibrate_in_memory(static, _session(model, protocol), spec)
+    calibrated, bound = cal.session.model, cal.session.protocol
+    _CALIBRATIONS[id(calibrated)] = dataclasses.replace(cal, session=None)
+    weakref.finalize(calibrated, _CALIBRATIONS.pop, id(calibrated), None)
+    return calibrated, bound, cal.report
 
 
 def _session(model: Model | None, protocol: Protocol | None, /):
@@ -115,7 +132,17 @@ def reconstruct(trial: Trajectories | MarkerTargets | str | Path, model: Model |
     if method == "pf" and "inertia_scale" not in options and inputs.protocol.pf_inertia_scale is not None:
         options["inertia_scale"] = inputs.protocol.pf_inertia_scale  # the protocol's defaults.pf_inertia_scale
     rec = _reconstruct(inputs.model, inputs.protocol, inputs.targets, method=method, **options)
-    return dataclasses.replace(rec, quality=assess_inputs(inputs, [rec]).quality[rec.method])
+    cal = _calibration_of(model)
+    quality = assess_inputs(inputs, [rec], cal).quality[rec.method]
+    return dataclasses.replace(rec, quality=_with_input_notes(quality, inputs, cal))
+
+
+def _with_input_notes(quality: Any, inputs: Any, calibration: Any, /) -> Any:
+    """The verdict as the CLI's summary gives it: with a note per finding of the trial's and the
+    static's readers (exubio.run.summary_file.trial_quality)."""
+    from exubio.run.summary_file import _file_findings, input_notes
+
+    return quality.with_reasons(input_notes(_file_findings(inputs, calibration)))
 
 
 def assess(trial: Trajectories | MarkerTargets | str | Path, reconstructions: Sequence[Reconstruction],
@@ -126,18 +153,32 @@ def assess(trial: Trajectories | MarkerTargets | str | Path, reconstructions: Se
     from exubio.run.pipeline import assess_inputs
 
     session = _session(model, protocol)
-    return assess_inputs(_inputs(trial, session), list(reconstructions))
+    return assess_inputs(_inputs(trial, session), list(reconstructions), _calibration_of(model))
 
 
-def angles(reconstruction: Reconstruction | np.ndarray, model: Model | None = None, /) -> dict[str, np.ndarray]:
+def angles(reconstruction: Reconstruction | np.ndarray, model: Model | None = None, /, *,
+           signs: str = "isb") -> dict[str, np.ndarray]:
     """The anatomical angles (exubio.model.angles.ANATOMICAL_ANGLES: ISB SC, AC, ST, GH, HT, GH in
     Phadke's sequence, elbow, forearm, wrist) of a reconstruction or of coordinates q (n, m), in
-    radians, by name; definitions and signs in exubio.model.angles."""
+    radians, by name; definitions and ISB signs in exubio.model.angles; ``signs="clinical"``:
+    elevation, abduction and upward rotation positive (exubio.model.signs)."""
     from exubio.model.angles import anatomical_table
+    from exubio.model.signs import check_signs, convert
 
+    signs = check_signs(signs, "signs")
     q = reconstruction.q_rad if isinstance(reconstruction, Reconstruction) else np.asarray(reconstruction, dtype=float)
     names, table = anatomical_table(model if model is not None else load_model(), np.atleast_2d(q))
+    table = convert(names, table, "isb", signs)
     return {n: table[:, j] for j, n in enumerate(names)}
+
+
+def _signs(signs: str | None, protocol: Protocol | None, /) -> str:
+    """The convention asked for: ``signs``, else the protocol's ``signs`` key, else isb."""
+    from exubio.model.signs import check_signs
+
+    if signs is not None:
+        return check_signs(signs, "signs")
+    return protocol.signs if protocol is not None else "isb"
 
 
 def simulate(motion: str = "abduction", model: Model | None = None, /, *, duration_s: float = 10.0,
@@ -172,20 +213,25 @@ def angle_status(reconstruction: Reconstruction, model: Model | None = None, pro
 
 
 def to_dataframe(reconstruction: Reconstruction, /, *, model: Model | None = None,
-                 protocol: Protocol | None = None) -> "pandas.DataFrame":
+                 protocol: Protocol | None = None, signs: str | None = None) -> "pandas.DataFrame":
     """The reconstruction's anatomical angles (exubio.model.angles.ANATOMICAL_ANGLES) as a pandas
     DataFrame indexed by time (s): ``<angle>_deg`` in degrees, ``<angle>_u_deg`` its standard
     uncertainty (exubio.trust.angle_uncertainty) and ``<angle>_status`` (measured, modelled, not
-    measured: a categorical column), as in the CSV; ``df.attrs`` holds the method,
-    units and each angle's definition. The model coordinates stay in the reconstruction."""
+    measured: a categorical column), as in the CSV; ``df.attrs`` holds the method, units, the
+    sign convention (``signs``: "isb" or "clinical", exubio.model.signs; default the protocol's
+    ``signs`` key, else isb) and each angle's definition with its sign in it. The model
+    coordinates stay in the reconstruction."""
     import pandas as pd
 
     from exubio.model.angles import ANATOMICAL_ANGLES, anatomical_table
+    from exubio.model.signs import convert, meaning
     from exubio.trust.observability import AngleStatus
 
     r = reconstruction
+    signs = _signs(signs, protocol)
     model = model if model is not None else load_model()
     names, ang = anatomical_table(model, r.q_rad)
+    ang = convert(names, ang, "isb", signs)
     det = angle_status(r, model, protocol)
     status = det.status
     labels = pd.Categorical.from_codes(np.zeros(0, dtype=int), categories=[s.label for s in AngleStatus])
@@ -197,8 +243,8 @@ def to_dataframe(reconstruction: Reconstruction, /, *, model: Model | None = Non
     data.update({f"{n}_status": pd.Categorical.from_codes(status[:, i].astype(int), categories=labels.categories)
                  for i, n in enumerate(names)})
     df = pd.DataFrame(data, index=pd.Index(r.time_s, name="time_s"))
-    df.attrs.update({"method": r.method, "units": "deg", "source": "exubio",
-                     "definitions": {n: f"{d}; {m}" for n, d, m in ANATOMICAL_ANGLES}})
+    df.attrs.update({"method": r.method, "units": "deg", "source": "exubio", "signs": signs,
+                     "definitions": {n: f"{d}; {meaning(n, signs)}" for n, d, _ in ANATOMICAL_ANGLES}})
     return df
 
 
@@ -226,14 +272,15 @@ def moments(reconstruction: Reconstruction, model: Model | None = None, /, *,
 
 def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str, /, *, model: Model | None = None,
                   protocol: Protocol | None = None, trial: Trajectories | str | Path | None = None,
-                  overwrite: bool = False) -> dict[str, Path]:
+                  overwrite: bool = False, signs: str | None = None) -> dict[str, Path]:
     """Write ``<stem>.<method>.csv`` and ``.mot`` (the anatomical angles, each one's status in the
     header), ``.npz`` and ``.summary.json`` into out_dir, as one set complete or absent; refuses to
     replace earlier results unless ``overwrite``. Returns the paths by kind. Given the ``trial``
     it was reconstructed from (its file, or the read trial), the files are those ``exubio
     reconstruct`` writes for it (the same assessment, verdict, label checks and header lines; only
     the wall-clock timings differ); without it, the reconstruction with its angles' status and
-    the verdict it carries (exubio.reconstruct)."""
+    the verdict it carries (exubio.reconstruct). ``signs``: the angles' sign convention in every
+    file ("isb" or "clinical", exubio.model.signs; default the protocol's ``signs`` key, else isb)."""
     from exubio.io import results
     from exubio.model.angles import anatomical_table
     from exubio.run.pipeline import AngleOutputs, angle_header, assess_inputs, write_assessed, write_outputs
@@ -243,8 +290,10 @@ def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str
     full = f"{stem}.{reconstruction.method}"
     if trial is not None:
         session = _session(model, protocol)
+        session = session.with_signs(_signs(signs, session.protocol))
         inputs = _inputs(trial, session)
-        assessment = assess_inputs(inputs, [reconstruction])
+        cal = _calibration_of(model)
+        assessment = assess_inputs(inputs, [reconstruction], cal)
         results.prepare_output_dir(out_dir, [full], overwrite=overwrite)
         source = str(trial) if isinstance(trial, (str, Path)) else inputs.trial.source
         done = [(Method.parse(reconstruction.method), full, reconstruction, None)]
@@ -255,23 +304,24 @@ def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str
             key = run_key(trial, session.model, session.protocol, reconstruction.method,
                           options=dict(reconstruction.info["options"]))
         return write_assessed(inputs, source, out_dir, done, assessment, overwrite=overwrite,
-                              notes=RunNotes(inputs_sha256=key))[0][1]
+                              notes=RunNotes(cal, inputs_sha256=key))[0][1]
     model = model if model is not None else load_model()
     protocol = protocol if protocol is not None else load_protocol(model=model)
+    signs = _signs(signs, protocol)
     results.prepare_output_dir(out_dir, [full], overwrite=overwrite)
     det = angle_status(reconstruction, model, protocol)
     names, values = anatomical_table(model, reconstruction.q_rad)
     meta = {"written_by": "exubio.write_results", "method": reconstruction.method,
             "units": {"angles_in_files": "deg", "positions_in_npz": "m", "time": "s"}}
-    summ = reconstruction_summary(reconstruction, det, source=stem)
-    angles = AngleOutputs(names, values, det.status, angle_header(det, stem, reconstruction.method, protocol.side),
-                          uncertainty_rad=det.uncertainty_rad)
+    summ = reconstruction_summary(reconstruction, det, source=stem, signs=signs)
+    angles = AngleOutputs(names, values, det.status, angle_header(det, stem, reconstruction.method, protocol.side, signs),
+                          uncertainty_rad=det.uncertainty_rad, signs=signs)
     return write_outputs(reconstruction, out_dir, full, metadata=meta, summary_data=summ, angles=angles,
                          overwrite=overwrite)
 
 
 def rhythm(source: "Reconstruction | str | Path", model: Model | None = None, protocol: Protocol | None = None, /, *,
-           method: str | None = None) -> "pandas.DataFrame":
+           method: str | None = None, signs: str | None = None) -> "pandas.DataFrame":
     """The scapulohumeral rhythm (exubio.scapulohumeral): ST, SC and GH angles against HT elevation,
     raising and lowering apart, with the in vivo corridor in the same frames for the plane of the
     raising, as a long DataFrame (the table behind the report's rhythm page).
@@ -282,42 +332,55 @@ def rhythm(source: "Reconstruction | str | Path", model: Model | None = None, pr
     corridor_lo_deg, corridor_hi_deg); or the output folder of ``exubio study`` (``method``: only
     that method's trials): one row per method, plane, level (group, subject), subject, phase, HT
     grid point and angle (mean_deg, sd_deg, n, corridor). ``df.attrs``: the plane, how it was found,
-    the studies in the corridor and those left out with the reason. Raw ISB signs, degrees."""
+    the studies in the corridor and those left out with the reason, ``signs``. Degrees, in the
+    convention ``signs`` ("isb" or "clinical", exubio.model.signs; default: a result file's or a
+    study's own, else the protocol's ``signs`` key, else isb): value_deg, mean_deg and the corridor
+    flip with it (HT elevation is positive in both; SD and uncertainty are the same)."""
     import pandas as pd
 
-    from exubio.errors import InputError
     from exubio.scapulohumeral import files, reference, table
 
     categorical = ("phase", "angle", "method", "plane", "level", "subject")
+    if signs is not None:
+        from exubio.model.signs import check_signs
+
+        signs = check_signs(signs, "signs")
     if isinstance(source, Reconstruction):
         model = model if model is not None else load_model()
-        df = to_dataframe(source, model=model, protocol=protocol)
+        df = to_dataframe(source, model=model, protocol=protocol, signs="isb")  # ISB inside, flipped at the table
         names = [c.removesuffix("_deg") for c in df.columns if c.endswith("_deg") and not c.endswith("_u_deg")]
         vals = np.column_stack([df[f"{n}_deg"].to_numpy() for n in names])
         u = np.column_stack([df[f"{n}_u_deg"].to_numpy() if f"{n}_u_deg" in df else np.full(len(df), np.nan)
                              for n in names])
         ok = np.column_stack([(df[f"{n}_status"] == "measured").to_numpy() for n in names])
-        r = table.trial_rhythm(df.index.to_numpy(), names, vals, u, ok)
+        r = table.trial_rhythm(df.index.to_numpy(), names, vals, u, ok, signs=_signs(signs, protocol))
         plane, deg, why = reference.trial_plane(r)
         ref = reference.reference(model, plane, plane_deg=deg, why=why)
         cols = files.trial_columns(r, ref)
+        shown = r.signs
     else:
         path = Path(source)
         if path.is_dir():
             groups = files.study_rhythm(path, method=method)
+            if signs is not None:
+                groups = [dataclasses.replace(g, signs=signs) for g in groups]
             cols = files.study_columns(groups)
+            shown = groups[0].signs if groups else (signs or "isb")
             ref = groups[0].reference if groups else None
         elif path.suffix in (".npz", ".csv") and path.is_file():
             npz = path.with_suffix(".npz")
             r = files.read_trial_rhythm(npz)
+            r = dataclasses.replace(r, signs=signs) if signs is not None else r
             ref, _ = files.trial_reference(npz, r)
             cols = files.trial_columns(r, ref)
+            shown = r.signs
         else:
             raise InputError(f"{path}: expected a result of exubio reconstruct (<trial>.<method>.npz or .csv) or the "
                              f"output folder of exubio study (with study.json)")
     out = pd.DataFrame({c: (pd.Categorical(v) if c in categorical else v) for c, v in cols.items()})
+    out.attrs["signs"] = shown
     if ref is not None:
-        out.attrs.update({"plane": ref.plane, "plane_how": ref.why, "units": "deg", "signs": "isb",
+        out.attrs.update({"plane": ref.plane, "plane_how": ref.why, "units": "deg", "signs": shown,
                           "corridor_studies": sorted({s for v in ref.studies.values() for s, _, _ in v}),
                           "corridor_left_out": ref.excluded})
     return out

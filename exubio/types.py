@@ -320,6 +320,7 @@ class Protocol:
     other_arm: str | None = None  # the protocol file of the other arm of this marker set (--both-arms)
     analog_loads: tuple = ()  # exubio.protocol.analog_loads.AnalogLoadSpec: loads from a C3D's analog channels
     pf_inertia_scale: float | None = None  # defaults.pf_inertia_scale: PF's inertia scale (None: PF's default)
+    signs: Literal["isb", "clinical"] = "isb"  # sign convention of the written angles (exubio.model.signs)
 
     @property
     def marker_names(self) -> tuple[str, ...]:

@@ -6,6 +6,7 @@ from pathlib import Path
 from typing import Any
 
 from exubio.cli.common import EXIT_OK, epilog, print_quality, print_result, progress_factory
+from exubio.model.signs import add_signs_arguments  # small: the --signs option
 
 EXAMPLE_COMMAND = ("exubio simulate --motion abduction --duration 10 --rate 100 --noise-mm 1 --sta-mm 10 "
                    "--seed 1 --out exubio/data/example_abduction.c3d")
@@ -29,7 +30,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from exubio.run.inputs import load_session
     from exubio.run.pipeline import RunSettings
 
-    session = load_session()
+    session = load_session(signs=args.signs)
     outputs = reconstruct_file(c3d, out, methods=["pf", "ls"], session=session,
                                settings=RunSettings(overwrite=True, progress_factory=progress_factory(not args.quiet)))
     t_true, names, q_true = read_angles_csv(truth_csv)
@@ -68,4 +69,5 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, /) -> None:
     d = sub.add_parser("demo", parents=[common], formatter_class=argparse.RawDescriptionHelpFormatter,
                        epilog=epilog("demo"), help="reconstruct the shipped example trial with PF and LS, compare with its truth")
     d.add_argument("--out", default="exubio_demo", help="output folder (default ./exubio_demo)")
+    add_signs_arguments(d)
     d.set_defaults(func=cmd_demo)

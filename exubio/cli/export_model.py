@@ -5,6 +5,7 @@ import argparse
 from typing import Any
 
 from exubio.cli.common import EXIT_OK, epilog
+from exubio.model.signs import add_signs_arguments  # small: the --signs option
 
 
 def cmd_export_model(args: argparse.Namespace) -> int:
@@ -15,7 +16,8 @@ def cmd_export_model(args: argparse.Namespace) -> int:
 
     model = export_model(load_model(args.model, body_mass_kg=args.body_mass), args)  # --body-mass: the moments' inertia
     if args.format == "osim":
-        path = write_osim(model, args.out, overwrite=args.overwrite, coordinates=args.coordinates, thorax=args.thorax or "free")
+        path = write_osim(model, args.out, overwrite=args.overwrite, coordinates=args.coordinates, thorax=args.thorax or "free",
+                          signs=args.signs or "isb")
         plays = ("its coordinates are the anatomical angles, so exubio's .mot plays on it" if args.coordinates == "anatomical"
                  else "its coordinates are exubio's model coordinates (the q of the .npz)")
     else:
@@ -41,4 +43,5 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, /) -> None:
     from exubio.run.moments_outputs import add_export_arguments
 
     add_export_arguments(e)
+    add_signs_arguments(e, default="isb; osim with anatomical coordinates: the convention of the .mot it is to play")
     e.set_defaults(func=cmd_export_model)

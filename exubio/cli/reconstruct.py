@@ -20,6 +20,7 @@ from exubio.cli.common import (
 from exubio.method_registry import REGISTRY, method_names
 from exubio.errors import ExubioError, InputError, ModelError, ProtocolError
 from exubio.prep.moment_options import add_moment_arguments  # small: argparse options only
+from exubio.model.signs import add_signs_arguments  # small: the --signs option
 
 if TYPE_CHECKING:  # the CLI imports the pipeline only when a command runs (fast --help)
     from exubio.run.job import TrialJob, TrialResult
@@ -133,7 +134,8 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
         raise InputError(f"--static-relabel {args.static_relabel}: relabels the static trial; give --static STATIC too")
     from exubio.run.inputs import load_session
 
-    session = load_session(model_path=args.model, protocol_path=args.protocol, body_mass_kg=args.body_mass)
+    session = load_session(model_path=args.model, protocol_path=args.protocol, body_mass_kg=args.body_mass,
+                           signs=args.signs)
     calibration = None
     if args.static:
         from exubio.run.session import calibrate_session
@@ -247,4 +249,5 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, /) -> None:
     from exubio.run.moments_outputs import add_moments_arguments
 
     add_moments_arguments(r)
+    add_signs_arguments(r)
     r.set_defaults(func=cmd_reconstruct)

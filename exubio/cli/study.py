@@ -8,6 +8,7 @@ from typing import Any
 
 from exubio.cli.common import EXIT_CODES_HELP, EXIT_FAILED, EXIT_OK, check_output_folder, epilog
 from exubio.errors import InputError
+from exubio.model.signs import add_signs_arguments  # small: the --signs option
 
 
 def cmd_study(args: argparse.Namespace) -> int:
@@ -19,7 +20,7 @@ def cmd_study(args: argparse.Namespace) -> int:
         return 0
     if not args.study or not args.out:
         raise InputError("exubio study: expected STUDY.yaml and --out FOLDER (or --template to print a study file)")
-    spec = load_study(args.study, body_mass_kg=args.body_mass)  # every key, path and glob checked before any work
+    spec = load_study(args.study, body_mass_kg=args.body_mass, signs=args.signs)  # every key, path and glob checked before any work
     if args.jobs < 1:
         raise InputError(f"--jobs {args.jobs}: expected a whole number of processes >= 1")
     check_output_folder(Path(args.out), args.out)
@@ -48,4 +49,5 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, /) -> None:
                     "the joint moments too (moments.parquet; docs: moments)")
     st.add_argument("--scheduler", help="run the trials on Dask: local:N (a local cluster of N workers) or "
                                         "tcp://HOST:PORT (a running scheduler)")
+    add_signs_arguments(st)
     st.set_defaults(func=cmd_study)

@@ -114,15 +114,18 @@ def _offset(name: str, body: str, translation, R: np.ndarray) -> str:
 
 
 def _anatomical_joint(seg, offset: str, *, parent_frame: np.ndarray, child_frame: np.ndarray, sequence: str,
-                      names: tuple[str, ...], defaults: np.ndarray) -> str:
+                      names: tuple[str, ...], defaults: np.ndarray, signs: np.ndarray) -> str:
     """The joint between the parent's and the child's ISB frames: rotation1..3 about the frame axes
     of ``sequence`` (intrinsic) with the anatomical angles ``names`` as coordinates, so the
-    coordinates are exactly the published angles (default: their values in the reference posture)."""
+    coordinates are exactly the published angles (default: their values in the reference posture).
+    ``signs`` (+-1 per angle, exubio.model.signs): an angle written with the sign reversed turns
+    about the reversed axis (the same rotation), so a .mot of that convention plays on it."""
     joint = seg.joint
     child = f"{seg.name}_isb"
-    coords = "".join(_coordinate(name, fmt(d), vec([-UNLIMITED_RAD, UNLIMITED_RAD])) for name, d in zip(names, defaults))
+    coords = "".join(_coordinate(name, fmt(d * f), vec([-UNLIMITED_RAD, UNLIMITED_RAD]))
+                     for name, d, f in zip(names, defaults, signs))
     unit = {"X": np.eye(3)[0], "Y": np.eye(3)[1], "Z": np.eye(3)[2]}
-    axes = "".join(_transform_axis(f"rotation{i + 1}", unit[sequence[i]], names[i]) for i in range(3))
+    axes = "".join(_transform_axis(f"rotation{i + 1}", unit[sequence[i]] * signs[i], names[i]) for i in range(3))
     axes += "".join(_transform_axis(f"translation{i + 1}", np.eye(3)[i], None) for i in range(3))
     frames = _offset(offset, seg.parent, joint.centre_m, parent_frame) + _offset(child, seg.name, np.zeros(3), child_frame)
     return _joint_xml(joint.name, offset, child, coords, frames, axes)
@@ -140,8 +143,9 @@ DISTAL_NAMES = {"elbow_flexion": "elbow_flexion", "pronation": "forearm_pronatio
 """Model coordinate -> its anatomical angle name (exubio.model.angles.ANATOMICAL_ANGLES)."""
 
 
-def _anatomical_joints(model: Model) -> dict[str, dict]:
+def _anatomical_joints(model: Model, signs: str = "isb") -> dict[str, dict]:
     from exubio.model.angles import anatomical_frames, anatomical_table
+    from exubio.model.signs import factors
 
     frames = anatomical_frames(model)
     names, ref = anatomical_table(model, np.zeros(model.n_coordinates))
@@ -149,7 +153,8 @@ def _anatomical_joints(model: Model) -> dict[str, dict]:
     for seg_name, (sequence, angle_names) in ANATOMICAL_JOINTS.items():
         seg = model.segment(seg_name)
         out[seg_name] = {"parent_frame": frames[seg.parent], "child_frame": frames[seg_name], "sequence": sequence,
-                         "names": angle_names, "defaults": np.array([ref[names.index(n)] for n in angle_names])}
+                         "names": angle_names, "defaults": np.array([ref[names.index(n)] for n in angle_names]),
+                         "signs": factors(angle_names, signs)}
     return out
 
 
@@ -162,13 +167,14 @@ def _free_joint(root: str) -> str:
     return _joint_xml(f"ground_{root}", "/ground", f"/bodyset/{root}", coords, "", axes)
 
 
-def osim_text(model: Model, *, coordinates: str = "anatomical", thorax: str = "free") -> str:
+def osim_text(model: Model, *, coordinates: str = "anatomical", thorax: str = "free", signs: str = "isb") -> str:
     """The .osim document for ``model`` (see the module docstring). ``coordinates``: "anatomical"
     (SC, AC and GH between the ISB frames with the anatomical angles as coordinates, elbow, forearm
     and wrist named as the anatomical angles: exubio's .mot plays on it) or "model" (exubio's own
     joint coordinates: its .npz q plays on it). ``thorax``: "free" (a 6-DOF joint to the ground
     and the thorax's mass, exubio.export.thorax: OpenSim's ID tool runs on the .mot with the trunk's
-    motion) or "weld" (fixed to the ground: the ground is exubio's thorax frame)."""
+    motion) or "weld" (fixed to the ground: the ground is exubio's thorax frame). ``signs``: the sign
+    convention of the .mot it is to play (exubio.model.signs; anatomical coordinates only)."""
     if coordinates not in ("anatomical", "model"):
         raise ValueError(f"coordinates: expected 'anatomical' or 'model', got {coordinates!r}")
     if thorax not in ("free", "weld"):
@@ -177,7 +183,7 @@ def osim_text(model: Model, *, coordinates: str = "anatomical", thorax: str = "f
     check_names(model, list(THORAX_COORDINATES) if thorax == "free" else [])
     if thorax == "free":
         model = with_thorax_inertia(model)
-    anatomical = _anatomical_joints(model) if coordinates == "anatomical" else {}
+    anatomical = _anatomical_joints(model, signs) if coordinates == "anatomical" else {}
     root = model.segments[0]
     note = "\n".join("  " + line.replace("--", "- -")
                      for line in ellipsoid_note(model, "OpenSim .osim", free_thorax=thorax == "free"))
@@ -225,8 +231,8 @@ def _renamed(seg):
 
 
 def write_osim(model: Model, path: str | Path, *, overwrite: bool = False, coordinates: str = "anatomical",
-               thorax: str = "free") -> Path:
+               thorax: str = "free", signs: str = "isb") -> Path:
     """Write ``model`` as an OpenSim 4 model file at ``path`` (atomically); an existing file is
-    replaced only with ``overwrite`` (otherwise InputError naming it); ``coordinates`` and
-    ``thorax``: see ``osim_text``. Returns the path."""
-    return write_text(path, osim_text(model, coordinates=coordinates, thorax=thorax), overwrite=overwrite)
+    replaced only with ``overwrite`` (otherwise InputError naming it); ``coordinates``, ``thorax``
+    and ``signs``: see ``osim_text``. Returns the path."""
+    return write_text(path, osim_text(model, coordinates=coordinates, thorax=thorax, signs=signs), overwrite=overwrite)

@@ -619,6 +619,23 @@ def read_angles_csv(path: str | os.PathLike, /, *, uncertainty: bool = False):
     return table[:, 0].copy(), angles, values, u
 
 
+def read_angles_comments(path: str | os.PathLike, /) -> list[str]:
+    """The ``# comment`` lines at the head of a file of ``write_angles_csv`` (without the '# ')."""
+    path = Path(path)
+    out = []
+    try:
+        with open(path, encoding="utf-8", newline="") as fh:
+            for line in fh:
+                if not line.startswith("#"):
+                    break
+                out.append(line[1:].strip())
+    except FileNotFoundError:
+        raise InputError(f"{path}: file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: cannot read ({exc})") from exc
+    return out
+
+
 def write_mot(
     path: str | os.PathLike,
     time_s: np.ndarray,

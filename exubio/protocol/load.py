@@ -39,7 +39,7 @@ SCHEMA_VERSION = 1
 THORAX_SEGMENT = "thorax"  # the fixed segment: its markers only build the thorax frame
 
 _TOP_KEYS = ("schema_version", "name", "description", "thorax_frame", "filter", "defaults", "markers", "hold",
-             "relabel", "extends", "side", "other_arm", "analog_loads")
+             "relabel", "extends", "side", "other_arm", "analog_loads", "signs")
 _FRAME_KEYS = ("ij", "px", "c7", "t8")
 _MIDPOINT_FRAME_KEYS = ("ij", "ij_c7_midpoint", "px_t8_midpoint")
 _FILTER_KEYS = ("cutoff_hz", "order")
@@ -114,6 +114,10 @@ def load_protocol(
     side = data.get("side", "right")
     if side not in ("right", "left"):
         raise ProtocolError(f"{src_of('side')}: side: expected 'right' or 'left', got {side!r}")
+    signs = data.get("signs", "isb")
+    if signs not in ("isb", "clinical"):  # exubio.model.signs.SIGNS
+        raise ProtocolError(f"{src_of('signs')}: signs: expected 'isb' or 'clinical' (the sign convention of the written "
+                            f"angles), got {signs!r}")
     src_markers = src_of("markers")
 
     raw_markers = data.get("markers")
@@ -204,6 +208,7 @@ def load_protocol(
         pf_inertia_scale=pf_inertia,
         other_arm=other_arm.strip() if other_arm else None,
         analog_loads=parse_analog_loads(data.get("analog_loads"), src_of("analog_loads"), seg_names),
+        signs=signs,
     )
 
 

@@ -16,8 +16,8 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
-from exubio.model.angles import ANATOMICAL_ANGLES
-from exubio.scapulohumeral.files import StudyRhythm
+from exubio.model.signs import factors, meaning
+from exubio.scapulohumeral.files import StudyRhythm, shown_band
 from exubio.scapulohumeral.reference import Reference
 from exubio.scapulohumeral.table import HT_GRID_DEG, PHASES, RHYTHM_ANGLES, Average, TrialRhythm
 
@@ -25,15 +25,15 @@ __all__ = ["trial_rhythm_page", "study_rhythm_pages", "angle_label"]
 
 _PHASE_STYLE = {1: ("tab:blue", "-"), 2: ("tab:orange", (0, (5, 2)))}
 _CORRIDOR = "0.55"
-_MEANING = {n: m for n, _, m in ANATOMICAL_ANGLES}
 
 
-def angle_label(name: str, labels: dict | None = None) -> str:
-    """The angle's name in the figure with its sign (``labels`` overrides, e.g. clinical signs)."""
+def angle_label(name: str, labels: dict | None = None, signs: str = "isb") -> str:
+    """The angle's name in the figure with its sign in the convention ``signs`` (exubio.model.signs;
+    ``labels`` overrides)."""
     if labels and name in labels:
         return labels[name]
     title = dict(RHYTHM_ANGLES)[name]
-    return f"{title} (deg)\n{_MEANING.get(name, '')}"
+    return f"{title} (deg)\n{meaning(name, signs)}"
 
 
 def _figure() -> tuple[Figure, np.ndarray]:
@@ -44,19 +44,20 @@ def _figure() -> tuple[Figure, np.ndarray]:
     return fig, axes
 
 
-def _corridor(ax, ref: Reference | None, name: str) -> None:
+def _corridor(ax, ref: Reference | None, name: str, signs: str) -> None:
     if ref is None or name not in ref.lo:
         return
-    lo, hi = ref.lo[name], ref.hi[name]
+    f = factors([name], signs)[0]  # the corridor is ISB: drawn in the page's convention
+    lo, hi = shown_band(ref.lo[name], ref.hi[name], f)
     ax.fill_between(ref.ht_grid_deg, lo, hi, color=_CORRIDOR, alpha=0.28, lw=0, zorder=0)
     for _, ht, deg in ref.studies.get(name, []):
-        ax.plot(ht, deg, color=_CORRIDOR, lw=0.8, ls=":", zorder=0)
+        ax.plot(ht, np.asarray(deg) * f, color=_CORRIDOR, lw=0.8, ls=":", zorder=0)
 
 
-def _axes_style(ax, name: str, labels: dict | None, bottom: bool) -> None:
-    ax.set_title(angle_label(name, labels).split("\n")[0], fontsize=8)
-    ax.set_ylabel(angle_label(name, labels).split("\n")[1] if "\n" in angle_label(name, labels) else "deg",
-                  fontsize=6.5)
+def _axes_style(ax, name: str, labels: dict | None, bottom: bool, signs: str = "isb") -> None:
+    label = angle_label(name, labels, signs)
+    ax.set_title(label.split("\n")[0], fontsize=8)
+    ax.set_ylabel(label.split("\n")[1] if "\n" in label else "deg", fontsize=6.5)
     ax.tick_params(labelsize=6.5)
     ax.grid(alpha=0.3)
     ax.set_xlim(0, 180)
@@ -92,19 +93,20 @@ def trial_rhythm_page(r: TrialRhythm, ref: Reference | None, title: str, /, *, m
     fig, axes = _figure()
     has_u = np.isfinite(r.u_deg).any()
     for k, (ax, name) in enumerate(zip(axes, r.names)):
-        _corridor(ax, ref, name)
+        _corridor(ax, ref, name, r.signs)
+        f = factors([name], r.signs)[0]  # ISB inside, drawn in the trial's convention
         for c in np.unique(r.cycle[r.cycle >= 0]):
             sel = r.cycle == c
             p = int(r.phase[sel][0])
             colour, ls = _PHASE_STYLE[p]
-            ht, y, ok = r.ht_deg[sel], r.values_deg[sel, k], r.measured[sel, k]
+            ht, y, ok = r.ht_deg[sel], r.values_deg[sel, k] * f, r.measured[sel, k]
             ax.plot(ht, np.where(ok, np.nan, y), color="silver", lw=1.0, ls=ls)
             ax.plot(ht, np.where(ok, y, np.nan), color=colour, lw=1.3, ls=ls)
             if has_u:
                 band = 2.0 * r.u_deg[sel, k]
                 ax.fill_between(ht, np.where(ok, y - band, np.nan), np.where(ok, y + band, np.nan), color=colour,
                                 alpha=0.15, lw=0)
-        _axes_style(ax, name, r.labels, k >= 4)
+        _axes_style(ax, name, r.labels, k >= 4, r.signs)
     extra = [Line2D([], [], color="silver", label="not a measurement")]
     if has_u:
         extra.append(Patch(color="grey", alpha=0.15, label="±2u (standard uncertainty)"))
@@ -120,10 +122,10 @@ def trial_rhythm_page(r: TrialRhythm, ref: Reference | None, title: str, /, *, m
     return fig
 
 
-def _average_curves(ax, a: Average, k: int, *, thick: bool, band: bool) -> None:
+def _average_curves(ax, a: Average, k: int, *, thick: bool, band: bool, f: float = 1.0) -> None:
     for p in (1, 2):
         colour, ls = _PHASE_STYLE[p]
-        m, sd = a.mean_deg[p - 1, :, k], a.sd_deg[p - 1, :, k]
+        m, sd = a.mean_deg[p - 1, :, k] * f, a.sd_deg[p - 1, :, k]
         ax.plot(HT_GRID_DEG, m, color=colour, ls=ls, lw=2.0 if thick else 0.7, alpha=1.0 if thick else 0.55)
         if band:
             ax.fill_between(HT_GRID_DEG, m - sd, m + sd, color=colour, alpha=0.18, lw=0)
@@ -133,18 +135,20 @@ def _study_page(g: StudyRhythm, title: str, main: Average, thin: Sequence[Averag
                 labels: dict | None) -> Figure:
     fig, axes = _figure()
     for k, (ax, name) in enumerate(zip(axes, (a for a, _ in RHYTHM_ANGLES))):
-        _corridor(ax, g.reference, name)
+        _corridor(ax, g.reference, name, g.signs)
+        f = factors([name], g.signs)[0]  # averaged as ISB, drawn in the study's convention
         for t in thin:
             if isinstance(t, Average):
-                _average_curves(ax, t, k, thick=False, band=False)
+                _average_curves(ax, t, k, thick=False, band=False, f=f)
             else:
                 for p in (1, 2):
-                    ax.plot(HT_GRID_DEG, t[p - 1, :, k], color=_PHASE_STYLE[p][0], ls=_PHASE_STYLE[p][1], lw=0.7,
+                    ax.plot(HT_GRID_DEG, t[p - 1, :, k] * f, color=_PHASE_STYLE[p][0], ls=_PHASE_STYLE[p][1], lw=0.7,
                             alpha=0.55)
-        _average_curves(ax, main, k, thick=True, band=True)
-        _axes_style(ax, name, labels, k >= 4)
+        _average_curves(ax, main, k, thick=True, band=True, f=f)
+        _axes_style(ax, name, labels, k >= 4, g.signs)
     _legend(fig, g.reference, [Patch(color="grey", alpha=0.18, label="mean ± SD")])
-    fig.suptitle(f"{title}\n{what}", fontsize=9)
+    fig.suptitle(f"{title}\n{what}; {'ISB' if g.signs == 'isb' else 'clinical'} signs (stated under each title)",
+                 fontsize=9)
     n = int(main.n.max(initial=0))
     fig.text(0.06, 0.015, _notes(g.reference, [
         f"resampled on HT elevation every {HT_GRID_DEG[1] - HT_GRID_DEG[0]:.0f} deg (exubio.scapulohumeral.table): a trial is the "

@@ -35,6 +35,7 @@ from matplotlib.transforms import Bbox
 from exubio.trust.evaluate import per_frame_residuals_mm, residual_statistics
 from exubio.errors import InputError
 from exubio.io.results import atomic_write, read_angles_csv, read_npz, read_npz_arrays, read_npz_metadata
+from exubio.model.signs import CLINICAL_FLIPPED, convert, factors, signs_of_file
 from exubio.types import FrameStatus, Reconstruction
 from exubio.report.calibration_page import calibration_page, short_paths
 from exubio.method_registry import REGISTRY, method_style
@@ -56,9 +57,14 @@ class Angles:
     values_rad: np.ndarray
     status: np.ndarray
     uncertainty_rad: np.ndarray | None = None  # (n, a) standard uncertainty, where the result carries it
+    signs: str = "isb"  # the convention of the CSV (exubio.model.signs); values_rad are ISB, converted on reading
 
     def measured(self, j: int) -> np.ndarray:
         return self.status[:, j] == 0
+
+    def shown_deg(self, j: int) -> np.ndarray:
+        """Angle j in degrees as the CSV holds it (in ``signs``): what the pages draw."""
+        return np.degrees(self.values_rad[:, j]) * factors([self.names[j]], self.signs)[0]
 
 
 def read_angles(npz_path: Path) -> Angles | None:
@@ -69,8 +75,9 @@ def read_angles(npz_path: Path) -> Angles | None:
     except InputError:
         return None
     t, names, values, u = read_angles_csv(csv, uncertainty=True)
-    return Angles(t, tuple(n.removesuffix("_deg") for n in names), values, status,
-                  None if np.isnan(u).all() else u)
+    names = tuple(n.removesuffix("_deg") for n in names)
+    signs = signs_of_file(csv)
+    return Angles(t, names, convert(names, values, signs, "isb"), status, None if np.isnan(u).all() else u, signs)
 
 
 def _figure(size=(11.69, 8.27)) -> Figure:
@@ -378,11 +385,9 @@ def _key_angles(fig: Figure, recons: Sequence[Reconstruction], angles: dict[str,
         if name not in a.names:
             continue
         j = a.names.index(name)
-        deg = np.degrees(a.values_rad[:, j])
+        deg = a.shown_deg(j)  # as the CSV has it, in its convention; the label says the sign
         ok = a.measured(j)
-        if name in ("HT_X_elevation", "GH_phadke_X_elevation", "ST_X_upward_rotation", "SC_X_elevation"):
-            deg = -deg  # raw ISB sign: elevation and upward rotation are negative; drawn as positive
-            label += " (-raw)"
+        label += " (-)" if name in CLINICAL_FLIPPED and a.signs == "isb" else " (+)"  # the named motion's sign
         ax.plot(a.time_s, np.where(ok, deg, np.nan), color=colour, lw=1.4, label=label)
         if a.uncertainty_rad is not None:  # the +-2u band (about 95 %) where the angle is measured
             band = 2.0 * np.degrees(a.uncertainty_rad[:, j])
@@ -398,7 +403,8 @@ def _key_angles(fig: Figure, recons: Sequence[Reconstruction], angles: dict[str,
     ax.set_ylabel("deg", fontsize=7)
     ax.tick_params(labelsize=6.5)
     ax.grid(alpha=0.3)
-    ax.set_title(f"key anatomical angles ({method.upper()}; every angle: page 2)", fontsize=8)
+    ax.set_title(f"key anatomical angles ({method.upper()}; {'raw ISB' if a.signs == 'isb' else 'clinical'} signs, as "
+                 f"in the CSV: (+)/(-) the sign of the named motion; every angle: page 2)", fontsize=8)
     ax.legend(fontsize=6.5, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
 
 
@@ -479,6 +485,7 @@ def angles_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[st
     a measurement (modelled, or not measured) in grey; legends outside the axes."""
     angles = angles or {}
     names = next(iter(angles.values())).names
+    signs = next(iter(angles.values())).signs
     groups = [_members(names, prefix) for _, prefix in _JOINTS]
     fig, _ = _page_figure(("angles", tuple(bool(g) for g in groups)), _angles_layout)
     axes = fig.axes
@@ -493,12 +500,12 @@ def angles_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[st
             colour = "silver" if grey else palette[k % len(palette)]
             for method, a in angles.items():
                 ls_, lw, alpha = line_style.get(method, ("-", 1.0, 1.0))
-                (h,) = ax.plot(*_envelope(a.time_s, np.rad2deg(a.values_rad[:, i])), ls=ls_, lw=lw, alpha=alpha,
+                (h,) = ax.plot(*_envelope(a.time_s, a.shown_deg(i)), ls=ls_, lw=lw, alpha=alpha,
                                color=colour)
                 handles.setdefault(names[i] + (f" ({state})" if grey else ""), h)
             if truth is not None and names[i] in truth.names:
-                ax.plot(*_envelope(truth.time_s, np.rad2deg(truth.q_rad[:, truth.names.index(names[i])])), ls=":", lw=1.2,
-                        color="black")
+                ax.plot(*_envelope(truth.time_s, np.rad2deg(truth.q_rad[:, truth.names.index(names[i])])
+                                   * factors([names[i]], signs)[0]), ls=":", lw=1.2, color="black")
         ax.set_ylabel(f"{label}\n(deg)", fontsize=7)
         ax.grid(alpha=0.3)
         ax.legend(list(handles.values()), list(handles), fontsize=6, loc="upper left", bbox_to_anchor=(1.005, 1.0),
@@ -511,7 +518,8 @@ def angles_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[st
         key.append(Line2D([], [], color="black", ls=":", lw=1.2, label=truth.label))
     fig.legend(handles=key, loc="upper right", ncol=len(key), fontsize=8, frameon=False)
     fig.suptitle(_title(recons, meta) + "\nanatomical angles (ISB frames of Wu et al. 2005 from the model's landmarks, "
-                 "intrinsic sequences, raw signs; the definitions are in the CSV header)", fontsize=9)
+                 f"intrinsic sequences, {'raw' if signs == 'isb' else 'clinical'} signs; the definitions and each "
+                 "angle's sign are in the CSV header)", fontsize=9)
     fig.subplots_adjust(left=0.1, right=0.76, top=0.89, bottom=0.06, hspace=0.2)
     return fig
 

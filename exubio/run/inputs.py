@@ -38,20 +38,29 @@ class Session:
         the points the calibration registered (exubio.calibration.calibrated_protocol)."""
         return dataclasses.replace(self, model=model, protocol=calibrated_protocol(self.generic_protocol, model))
 
+    def with_signs(self, signs: str | None, /) -> "Session":
+        """This session writing its angles in ``signs`` (exubio.model.signs; None: the protocol's own
+        ``signs`` key): set on both protocols, so a calibration's rebound protocol keeps it."""
+        if signs is None:
+            return self
+        return dataclasses.replace(self, protocol=dataclasses.replace(self.protocol, signs=signs),
+                                   generic_protocol=dataclasses.replace(self.generic_protocol, signs=signs))
+
 
 def load_session(*, model_path: str | Path | None = None, protocol_path: str | Path | None = None,
-                 body_mass_kg: float | None = None) -> Session:
+                 body_mass_kg: float | None = None, signs: str | None = None) -> Session:
     """Read the model (default: the shipped generic one) and the protocol (default: the shipped
     21-marker one) once; a calibrated model brings its generic model (its recorded file, else the
-    shipped one) with it."""
+    shipped one) with it. ``signs``: the written angles' sign convention over the protocol's
+    ``signs`` key (--signs; None: the protocol's)."""
     model = load_model(model_path or DEFAULT_MODEL, body_mass_kg=body_mass_kg)
     calibration = model.metadata.get("calibration")
     if not calibration:
         protocol = protocol_for_model(model, protocol_path)
-        return Session(model, protocol, model, protocol)
+        return Session(model, protocol, model, protocol).with_signs(signs)
     generic = _generic_model(model)
     protocol = protocol_for_model(generic, protocol_path)
-    return Session(generic, protocol, generic, protocol).with_model(model)
+    return Session(generic, protocol, generic, protocol).with_signs(signs).with_model(model)
 
 
 def _generic_model(calibrated: Model, /) -> Model:

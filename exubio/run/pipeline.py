@@ -363,10 +363,11 @@ def write_assessed(inputs: TrialInputs, trial_path: str | Path, out_dir: str | P
             summ["moments"] = moments_entry(moments, moments_summary(moments), stem)
         names, values = anatomical_table(inputs.model, recon.q_rad)
         det = assessment.angles[recon.method]
+        signs = inputs.protocol.signs
         angles = AngleOutputs(names, values, det.status,
-                              angle_header(det, Path(trial_path).name, method.value, inputs.protocol.side),
+                              angle_header(det, Path(trial_path).name, method.value, inputs.protocol.side, signs),
                               assessment.determinacy[recon.method].undetermined, det.uncertainty_rad, moments,
-                              thorax_coordinates=mot_thorax(moments))
+                              thorax_coordinates=mot_thorax(moments), signs=signs)
         paths = write_outputs(recon, out_dir, stem, metadata=meta, summary_data=summ, angles=angles,
                               streamed=None if model_points is None else {"model_points_m": model_points},
                               overwrite=overwrite)

@@ -36,6 +36,9 @@ def run_key(trial_path: str | Path, model: Any, protocol: Any, method: str, /, *
         h.update(hashlib.sha256(f.read_bytes()).digest())
     opts = repr(method_spec(method).make_options(options))
     h.update(repr((method, tuple(labels), opts, bool(repair_labels), exubio.__version__)).encode())
+    signs = getattr(protocol, "signs", "isb")
+    if signs != "isb":  # the angles' sign convention (the protocol's key, or --signs over it): other files
+        h.update(f"signs={signs}".encode())
     return h.hexdigest()
 
 

@@ -34,7 +34,7 @@ class StaticSpec:
     frames: str | None = None
     functional: Path | None = None
     more_statics: tuple[Path, ...] = ()
-    scapula_trials: tuple[Path, ...] = ()
+    scapula_trials: tuple[Path, ...] = ()  # (each of these paths may be a read Trajectories: the API's)
 
 
 @dataclass(frozen=True)
@@ -74,9 +74,9 @@ def calibrate(static: Trajectories, session: Session, spec: StaticSpec = StaticS
     from exubio.calibration import calibrate_model, parse_frames
 
     protocol = session.generic_protocol
-    functional = prepare_targets(read_trial(spec.functional), protocol) if spec.functional is not None else None
-    more = tuple(prepare_targets(read_trial(p), protocol) for p in spec.more_statics)
-    scapula = tuple(prepare_targets(read_trial(p), protocol) for p in spec.scapula_trials) or None
+    functional = prepare_targets(_read(spec.functional), protocol) if spec.functional is not None else None
+    more = tuple(prepare_targets(_read(p), protocol) for p in spec.more_statics)
+    scapula = tuple(prepare_targets(_read(p), protocol) for p in spec.scapula_trials) or None
     return calibrate_model(session.generic_model, protocol, static, frames=parse_frames(spec.frames), targets=targets,
                            functional=functional, more_statics=more, scapula_motion=scapula)
 
@@ -130,15 +130,12 @@ def calibrate_session(static: str | Path | Trajectories, session: Session, out_d
     a static trial apart from the task trials) keep its pair distances, which the session's trials
     are checked against. ``targets``: the static already prepared with the generic protocol, or with
     calibration_protocol's (the generic one with a marker the static lacks made optional)."""
-    from exubio.calibration import parse_frames
     from exubio.model.load import as_written, save_model
-    from exubio.trust.labels import check_trial, pair_distances
 
     source = _read(static)  # read once for the calibration and the checks
     model_file = Path(out_dir) / f"{stem}.model.yaml"
     key = calibration_key(source, session, spec)
     reused = None if overwrite else reusable_calibration(model_file, key)
-    gmodel = session.generic_model
     gprot = calibration_protocol(source, session) if targets is None else _without_absent(session.generic_protocol,
                                                                                             targets)
     targets = targets if targets is not None else prepare_targets(source, gprot)  # prepared once
@@ -150,11 +147,36 @@ def calibrate_session(static: str | Path | Trajectories, session: Session, out_d
         written = {**report.to_dict(), **({"inputs_sha256": key} if key else {})}
         save_model(model, model_file, calibration=written)
         model = as_written(model, calibration=written, source=model_file)
+    findings, distances = _static_evidence(source, session, spec, report, gprot, targets, reference)
+    return SessionCalibration(session.with_model(model), report, source.source, model_file, spec.frames, findings,
+                              distances, tuple(source.input_findings), reused is not None)
+
+
+def _static_evidence(source: Trajectories, session: Session, spec: StaticSpec, report: Any, gprot: Protocol,
+                     targets: MarkerTargets, reference: bool, /) -> tuple[tuple, Any]:
+    """What the trials' verdicts read of the static besides the calibration: its label findings
+    against the generic model, and its pair distances (with ``reference``, else None)."""
+    from exubio.calibration import parse_frames
+    from exubio.trust.labels import check_trial, pair_distances
+
+    gmodel = session.generic_model
     pos = targets.positions_m[slice(*report.frames)] if parse_frames(spec.frames) is not None else targets.positions_m
     findings = check_trial(targets, model=gmodel, protocol=gprot, ranges_rad=gmodel.coordinate_ranges_rad)
-    return SessionCalibration(session.with_model(model), report, source.source, model_file, spec.frames, tuple(findings),
-                              pair_distances(pos, targets.marker_names, source=source.source) if reference else None,
-                              tuple(source.input_findings), reused is not None)
+    return tuple(findings), (pair_distances(pos, targets.marker_names, source=source.source) if reference else None)
+
+
+def calibrate_in_memory(static: str | Path | Trajectories, session: Session, spec: StaticSpec = StaticSpec(), /
+                        ) -> SessionCalibration:
+    """What calibrate_session does for ``exubio reconstruct --static``, without writing the model
+    (``model_file`` None): the calibration exubio.calibrate returns, so the API's verdicts read
+    the same calibration, static labels and static pair distances as the CLI's."""
+    source = _read(static)
+    gprot = calibration_protocol(source, session)
+    targets = prepare_targets(source, gprot)
+    model, report = calibrate(source, dataclasses.replace(session, generic_protocol=gprot), spec, targets=targets)
+    findings, distances = _static_evidence(source, session, spec, report, gprot, targets, True)
+    return SessionCalibration(session.with_model(model), report, source.source, None, spec.frames, findings, distances,
+                              tuple(source.input_findings))
 
 
 def calibration_key(static: Trajectories, session: Session, spec: StaticSpec, /) -> str | None:

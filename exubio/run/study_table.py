@@ -4,7 +4,8 @@ One row per trial, method, frame and anatomical angle (exubio.model.angles.ANATO
 subject, session, trial (the file's stem), task (the session's ``tasks`` key, else the trial's
 stem), method, time_s, angle, value_deg, u_deg (standard uncertainty; NaN where the result has
 none, inf where the angle is not measured at all), status (measured, modelled, not measured) and
-verdict (the trial's verdict of that method). Text columns are categoricals, numbers float64
+verdict (the trial's verdict of that method) and signs (the sign convention of the trial's files,
+exubio.model.signs: isb or clinical; value_deg is in it, as in the per-trial CSV). Text columns are categoricals, numbers float64
 (time, value, uncertainty). Read from each trial's ``<trial>.<method>.csv`` and the status in its
 ``.npz``: the numbers are those of the per-trial files. Written atomically (the Parquet by
 pyarrow; the CSV gzip-compressed, the same rows, readable by any statistics tool)."""
@@ -21,6 +22,7 @@ import numpy as np
 from exubio.errors import InputError
 from exubio.method_registry import method_names
 from exubio.io.results import atomic_write, read_angles_csv, read_npz_arrays
+from exubio.model.signs import SIGNS, signs_of_file
 from exubio.trust.observability import AngleStatus
 
 if TYPE_CHECKING:
@@ -32,8 +34,8 @@ __all__ = ["TABLE_COLUMNS", "PARQUET", "CSV_GZ", "trial_rows", "study_table", "w
 PARQUET = "angles.parquet"
 CSV_GZ = "angles.csv.gz"
 TABLE_COLUMNS = ("subject", "session", "trial", "task", "method", "time_s", "angle", "value_deg", "u_deg", "status",
-                 "verdict")
-_CATEGORICAL = ("subject", "session", "trial", "task", "method", "angle", "status", "verdict")
+                 "verdict", "signs")
+_CATEGORICAL = ("subject", "session", "trial", "task", "method", "angle", "status", "verdict", "signs")
 _STATUS = tuple(s.label for s in AngleStatus)
 _VERDICTS = ("ok", "check", "fail", "")
 
@@ -53,7 +55,8 @@ def trial_rows(npz: Path, /, **keys: str) -> dict[str, np.ndarray]:
     out = {k: np.full(n * a, v, dtype=object) for k, v in keys.items()}
     out.update({"time_s": np.tile(t, a), "angle": np.repeat([s.removesuffix("_deg") for s in names], n).astype(object),
                 "value_deg": np.degrees(values.T.ravel()), "u_deg": np.degrees(u.T.ravel()),
-                "status": np.asarray(_STATUS, dtype=object)[codes]})
+                "status": np.asarray(_STATUS, dtype=object)[codes],
+                "signs": np.full(n * a, signs_of_file(csv), dtype=object)})
     return out
 
 
@@ -67,7 +70,7 @@ def study_table(trials: Iterable[tuple[dict, Path]], /) -> "pandas.DataFrame":
     for c in ("time_s", "value_deg", "u_deg"):
         df[c] = df[c].astype("float64")
     for c in _CATEGORICAL:
-        cats = {"status": _STATUS, "verdict": _VERDICTS}.get(c)
+        cats = {"status": _STATUS, "verdict": _VERDICTS, "signs": SIGNS}.get(c)
         df[c] = pd.Categorical(df[c], categories=cats if cats else list(dict.fromkeys(df[c])))
     return df
 

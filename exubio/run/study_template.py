@@ -7,6 +7,7 @@ schema_version: 1
 name: shoulder study                # optional
 methods: [pf, ls]                   # optional (default [pf, ls]); a session may override
 report: true                        # optional: the per-trial PDF/PNG report (default true)
+signs: isb                          # optional: isb (raw ISB angles) or clinical (elevation positive); default: each protocol's signs key, else isb
 sessions:
   - subject: S01
     session: day1                   # optional (default: s1, s2, ... in order, per subject)

@@ -10,6 +10,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from exubio.model.angles import ANATOMICAL_ANGLES
+from exubio.model.signs import meaning
 from exubio.protocol.labels import resolve_labels
 from exubio.trust.assess import TrialAssessment
 from exubio.trust.evaluate import residual_statistics
@@ -162,14 +163,16 @@ def trial_summary(recon: Reconstruction, assessment: TrialAssessment, inputs: An
         out["input_findings"] = list(file_findings)
     if notes.failures:
         out["failed_methods"] = dict(notes.failures)
+    signs = inputs.protocol.signs
     out["angles"] = {"files": [f"{stem}.csv", f"{stem}.mot"], "units": "deg", "side": inputs.protocol.side,
-                     "definitions": {n: {"definition": d, "meaning": m} for n, d, m in ANATOMICAL_ANGLES}}
+                     "definitions": {n: {"definition": d, "meaning": meaning(n, signs)} for n, d, _ in ANATOMICAL_ANGLES}}
+    out["signs"] = signs
     if notes.inputs_sha256:
         out["inputs_sha256"] = notes.inputs_sha256
     return out
 
 
-def reconstruction_summary(recon: Reconstruction, angles: Any, /, *, source: str = "") -> dict[str, Any]:
+def reconstruction_summary(recon: Reconstruction, angles: Any, /, *, source: str = "", signs: str = "isb") -> dict[str, Any]:
     """The summary.json of a reconstruction written on its own (exubio.write_results): the
     reconstruction, its anatomical angles' status (``angles``: AngleDeterminacy) and, when the
     reconstruction carries one (exubio.reconstruct), its verdict."""
@@ -177,4 +180,5 @@ def reconstruction_summary(recon: Reconstruction, angles: Any, /, *, source: str
     out["anatomical_angles"] = angles.to_dict()
     if getattr(recon, "quality", None) is not None:
         out["quality"] = recon.quality.to_dict()
+    out["signs"] = signs
     return out

@@ -27,6 +27,7 @@ class AngleOutputs:
     uncertainty_rad: np.ndarray | None = None  # (n, a) standard uncertainty (exubio.trust.angle_uncertainty)
     moments: Any = None  # the joint moments of the same frames (exubio.dynamics.moments.Moments) or None: <stem>.moments.csv
     thorax_coordinates: np.ndarray | None = None  # (n, 6) the trunk in the lab (exubio.export.thorax); None: 0 in the .mot
+    signs: str = "isb"  # the files' sign convention (exubio.model.signs); values_rad stay ISB
 
 
 def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
@@ -40,8 +41,14 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
     summary.json last; without ``overwrite`` no existing file is ever replaced); ``streamed``:
     arrays the reconstruction left on disk (exubio.io.streamed), copied into the .npz; with
     ``angles.moments`` (exubio.dynamics.moments.Moments) also <stem>.moments.csv and the generalized forces
-    as OpenSim's ID tool writes them, <stem>.moments.sto (exubio.export.sto), in the same set."""
+    as OpenSim's ID tool writes them, <stem>.moments.sto (exubio.export.sto), in the same set.
+    The angles are written in ``angles.signs`` (exubio.model.signs: the ISB values times each
+    angle's sign, flipped here and nowhere else); the .mot header, the .npz (``angle_signs``, the
+    metadata's ``signs``) and the CSV header (``angles.comments``) say which."""
+    from exubio.model.signs import convert, factors, mot_note
+
     moments = angles.moments
+    written = convert(angles.names, angles.values_rad, "isb", angles.signs)
     out = Path(out_dir)
     names = {"csv": f"{stem}.csv", "mot": f"{stem}.mot", "npz": f"{stem}.npz", "summary": f"{stem}.summary.json"}
     if moments is not None:
@@ -52,16 +59,19 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
              for line in angles.comments if line.startswith("status ")]
     if summary_data.get("quality"):
         notes.append(f"exubio_quality={summary_data['quality']['verdict']}")
-    extra = {"angle_status": np.asarray(angles.status, dtype=np.int8), "angle_names": np.array(angles.names)}
+    notes.append(mot_note(angles.signs))
+    metadata = {**metadata, "signs": angles.signs}
+    extra = {"angle_status": np.asarray(angles.status, dtype=np.int8), "angle_names": np.array(angles.names),
+             "angle_signs": factors(angles.names, angles.signs).astype(np.int8)}
     if angles.undetermined is not None:
         extra["undetermined"] = angles.undetermined
     if angles.uncertainty_rad is not None:
         extra["angle_uncertainty_rad"] = np.asarray(angles.uncertainty_rad, dtype=float)
     with results.ResultSet(out, stem, overwrite=overwrite) as result_set:
         staged = {kind: result_set.path(name) for kind, name in names.items()}
-        results.write_angles_csv(staged["csv"], recon.time_s, [f"{n}_deg" for n in angles.names], angles.values_rad,
+        results.write_angles_csv(staged["csv"], recon.time_s, [f"{n}_deg" for n in angles.names], written,
                                  comments=angles.comments, uncertainty_rad=angles.uncertainty_rad)
-        _write_mot(staged["mot"], recon, angles, stem, notes)
+        _write_mot(staged["mot"], recon, angles.names, written, angles.thorax_coordinates, stem, notes)
         results.write_npz(staged["npz"], recon, metadata=metadata, extra_arrays=extra, streamed=streamed)
         if moments is not None:
             from exubio.dynamics.moments_file import write_moments_csv
@@ -79,17 +89,19 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
     return {kind: placed[name] for kind, name in names.items()}
 
 
-def _write_mot(path: Path, recon: Reconstruction, angles: AngleOutputs, stem: str, notes: list[str]) -> None:
-    """The .mot: the anatomical angles and the thorax's free-joint coordinates (exubio.export.thorax:
-    the exported .osim's, so OpenSim's tools run on the file with the trunk's motion; 0 without it)."""
+def _write_mot(path: Path, recon: Reconstruction, names: tuple[str, ...], written: np.ndarray,
+               thorax_coordinates: np.ndarray | None, stem: str, notes: list[str]) -> None:
+    """The .mot: the anatomical angles as written (their sign convention) and the thorax's free-joint
+    coordinates (exubio.export.thorax: the exported .osim's, so OpenSim's tools run on the file with the
+    trunk's motion; 0 without it)."""
     from exubio.export.thorax import THORAX_TRANSLATIONS, thorax_mot_columns
 
-    names, values = thorax_mot_columns(recon.n_frames, angles.thorax_coordinates)
-    if angles.thorax_coordinates is None:
+    thorax_names, values = thorax_mot_columns(recon.n_frames, thorax_coordinates)
+    if thorax_coordinates is None:
         notes = [*notes, "exubio_thorax_columns=0 (the thorax-fixed model: the ground is the thorax frame)"]
     else:
         notes = [*notes, "exubio_thorax_columns=measured (the thorax's pose in the lab, the lab turned so that Y is up)"]
-    results.write_mot(path, recon.time_s, (*angles.names, *names), np.column_stack([angles.values_rad, values]),
+    results.write_mot(path, recon.time_s, (*names, *thorax_names), np.column_stack([written, values]),
                       name=stem, notes=notes, metres=THORAX_TRANSLATIONS)
 
 
@@ -109,21 +121,25 @@ MAX_STATUS_RUNS = 12
 (its every frame is in the .npz)."""
 
 
-def angle_header(det, trial: str, method: str, side: str) -> tuple[str, ...]:
-    """Comment lines of ``<trial>.<method>.csv``: what the angles are (definition, sign), and each
-    one's status (exubio.trust.observability.AngleStatus) with the frame ranges where it changes."""
+def angle_header(det, trial: str, method: str, side: str, signs: str = "isb") -> tuple[str, ...]:
+    """Comment lines of ``<trial>.<method>.csv``: what the angles are (definition, sign in the
+    convention ``signs``, exubio.model.signs), and each one's status
+    (exubio.trust.observability.AngleStatus) with the frame ranges where it changes."""
     from exubio.model.angles import ANATOMICAL_ANGLES
+    from exubio.model.signs import header_line, meaning
     from exubio.trust.observability import AngleStatus
 
     lines = [f"exubio anatomical joint angles of {trial} ({method.upper()}); angles in degrees, time in seconds",
-             "ISB frames (Wu et al. 2005) from the model's landmarks, intrinsic sequences, raw signs; GH in ISB Y-X'-Y'' "
-             "and in Phadke's X-Z'-Y''"]
-    lines += [f"{n}: {d}; {m}" for n, d, m in ANATOMICAL_ANGLES]
+             "ISB frames (Wu et al. 2005) from the model's landmarks, intrinsic sequences, "
+             + ("raw signs" if signs == "isb" else "clinical signs") + "; GH in ISB Y-X'-Y'' and in Phadke's X-Z'-Y''",
+             header_line(signs)]
+    lines += [f"{n}: {d}; {meaning(n, signs)}" for n, d, _ in ANATOMICAL_ANGLES]
     if side == "left":
         lines.append("LEFT arm: its markers were mirrored through the thorax's sagittal plane (Z -> -Z of the ISB thorax "
                      "frame) onto the right-arm model, so every angle carries the right arm's sign (Wu et al. 2005)")
     else:
-        lines.append("right arm, signs of Wu et al. 2005")
+        lines.append("right arm, signs of Wu et al. 2005" if signs == "isb" else
+                     "right arm, signs of Wu et al. 2005 but for the reversed ones named in the signs line")
     lines.append("status: measured = the markers determine it; modelled = set by a named protocol rule; not measured = "
                  "neither (read it as no measurement)")
     if getattr(det, "uncertainty_rad", None) is not None:

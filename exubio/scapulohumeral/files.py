@@ -11,13 +11,14 @@ import numpy as np
 
 from exubio.errors import InputError
 from exubio.io.results import read_angles_csv, read_npz_arrays, read_npz_metadata
+from exubio.model.signs import convert, factors, signs_of_file
 from exubio.scapulohumeral.reference import Reference, reference, trial_plane
 from exubio.scapulohumeral.table import (HT_GRID_DEG, PHASES, RHYTHM_ANGLES, Average, Resampled, TrialRhythm, average, resample,
                                  trial_rhythm)
 from exubio.types import Model
 
 __all__ = ["read_trial_rhythm", "trial_model", "trial_reference", "StudyTrial", "StudyRhythm", "study_trials",
-           "study_rhythm", "trial_columns", "study_columns"]
+           "study_rhythm", "trial_columns", "study_columns", "shown_band"]
 
 
 def read_trial_rhythm(npz_path: str | Path, /) -> TrialRhythm:
@@ -30,8 +31,10 @@ def read_trial_rhythm(npz_path: str | Path, /) -> TrialRhythm:
     names = tuple(n.removesuffix("_deg") for n in names)
     if status.shape != values.shape:
         raise InputError(f"{npz_path}: angle_status has shape {status.shape}, the angles of {csv.name} {values.shape}")
+    signs = signs_of_file(csv)  # the rhythm holds ISB values; the table and the page show the file's convention
     try:
-        return trial_rhythm(t, names, np.degrees(values), np.degrees(u), status == 0)
+        return trial_rhythm(t, names, np.degrees(convert(names, values, signs, "isb")), np.degrees(u), status == 0,
+                            signs=signs)
     except KeyError as exc:
         raise InputError(f"{csv}: {exc.args[0]}") from None
 
@@ -102,17 +105,21 @@ class StudyRhythm:
     group: Average | None = None
     reference: Reference | None = None
     left_out: list[tuple[StudyTrial, str]] = field(default_factory=list)
+    signs: str = "isb"  # the convention the pages and the table show (the trials' files'); the averages are ISB
 
 
 def study_rhythm(study_dir: str | Path, /, *, method: str | None = None) -> list[StudyRhythm]:
     """One StudyRhythm per method and plane that has trials (trials raising in no studied plane,
-    or without a raising, are in ``left_out`` of the first)."""
+    or without a raising, are in ``left_out`` of the first). Every trial is read as ISB (whatever
+    its file's convention) and averaged so; ``signs``: the convention the trials' files share (isb
+    when they differ)."""
     from exubio.model.load import load_model
 
     trials = study_trials(study_dir, method=method)
     groups: dict[tuple[str, str], StudyRhythm] = {}
     left: list[tuple[StudyTrial, str]] = []
     planes: dict[str, float] = {}
+    seen_signs: set[str] = set()
     for st in trials:
         try:
             r = read_trial_rhythm(st.npz)
@@ -126,6 +133,7 @@ def study_rhythm(study_dir: str | Path, /, *, method: str | None = None) -> list
         g = groups.setdefault((st.method, plane), StudyRhythm(st.method, plane))
         planes.setdefault(plane, deg)
         g.trials.append((st, resample(r)))
+        seen_signs.add(r.signs)
     model = load_model() if groups else None
     for (_m, plane), g in groups.items():
         subjects: dict[str, list[np.ndarray]] = {}
@@ -135,6 +143,7 @@ def study_rhythm(study_dir: str | Path, /, *, method: str | None = None) -> list
         g.group = average([a.mean_deg for a in g.subjects.values()])
         g.reference = reference(model, plane, plane_deg=planes[plane],
                                 why=f"{plane} plane (the trials' raising); corridor on the generic model's bones")
+        g.signs = next(iter(seen_signs)) if len(seen_signs) == 1 else "isb"
     out = list(groups.values())
     if out:
         out[0].left_out = left
@@ -142,6 +151,13 @@ def study_rhythm(study_dir: str | Path, /, *, method: str | None = None) -> list
         raise InputError(f"{study_dir}: no trial of the study has a rhythm: " + "; ".join(
             f"{t.subject}/{t.session}/{t.trial} ({t.method}): {why}" for t, why in left[:5]))
     return out
+
+
+def shown_band(lo: np.ndarray, hi: np.ndarray, factor: float, /) -> tuple[np.ndarray, np.ndarray]:
+    """A band (lo, hi) of ISB values in the convention whose factor is ``factor`` (+-1): flipped
+    and swapped when it is -1, so lo stays the lower bound."""
+    lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+    return (lo, hi) if factor > 0 else (-hi, -lo)
 
 
 def trial_columns(r: TrialRhythm, ref: Reference, /) -> dict[str, np.ndarray]:
@@ -152,13 +168,14 @@ def trial_columns(r: TrialRhythm, ref: Reference, /) -> dict[str, np.ndarray]:
     cols: dict[str, list] = {c: [] for c in ("time_s", "phase", "cycle", "ht_elevation_deg", "angle", "value_deg",
                                              "u_deg", "measured", "corridor_lo_deg", "corridor_hi_deg")}
     for i, name in enumerate(r.names):
-        lo, hi = ref.at(name, r.ht_deg[rows])
+        f = factors([name], r.signs)[0]  # ISB inside; the table in the trial's convention
+        lo, hi = shown_band(*ref.at(name, r.ht_deg[rows]), f)
         cols["time_s"].append(r.time_s[rows])
         cols["phase"].append(np.where(r.phase[rows] == 1, "raising", "lowering"))
         cols["cycle"].append(r.cycle[rows])
         cols["ht_elevation_deg"].append(r.ht_deg[rows])
         cols["angle"].append(np.full(rows.size, name, dtype=object))
-        cols["value_deg"].append(r.values_deg[rows, i])
+        cols["value_deg"].append(r.values_deg[rows, i] * f)
         cols["u_deg"].append(r.u_deg[rows, i])
         cols["measured"].append(r.measured[rows, i])
         cols["corridor_lo_deg"].append(lo)
@@ -180,12 +197,13 @@ def study_columns(groups: list[StudyRhythm], /) -> dict[str, np.ndarray]:
                 for i, name in enumerate(names):
                     ok = a.n[p, :, i] > 0
                     m = int(ok.sum())
-                    lo, hi = g.reference.at(name, HT_GRID_DEG[ok])
+                    f = factors([name], g.signs)[0]
+                    lo, hi = shown_band(*g.reference.at(name, HT_GRID_DEG[ok]), f)
                     for c, v in (("method", g.method), ("plane", g.plane), ("level", level), ("subject", subject),
                                  ("phase", phase), ("angle", name)):
                         cols[c].append(np.full(m, v, dtype=object))
                     cols["ht_elevation_deg"].append(HT_GRID_DEG[ok])
-                    cols["mean_deg"].append(a.mean_deg[p, ok, i])
+                    cols["mean_deg"].append(a.mean_deg[p, ok, i] * f)
                     cols["sd_deg"].append(a.sd_deg[p, ok, i])
                     cols["n"].append(a.n[p, ok, i])
                     cols["corridor_lo_deg"].append(lo)

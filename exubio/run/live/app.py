@@ -88,7 +88,8 @@ def run_live(model: Model, protocol: Protocol, source, output: LiveOutput, /, *,
                       "protocol": session.protocol.source or session.protocol.name,
                       "input_stream": session.info.name,
                       "angles": "ISB (Wu et al. 2005) SC, AC, ST Y-X'-Z''; GH X-Z'-Y''; HT Y-X'-Y''; degrees",
-                      "rates": "backward differences of the published angles",
+                      "signs": session.protocol.signs,
+                      "rates": "backward differences of the published angles (their sign flips with the angle's)",
                       "processing": options.causal.describe()},
             source_id=f"exubio-{session.info.source_id or session.info.name}")
 

@@ -175,7 +175,8 @@ class LiveSession:
         mean_res = float(res[ok].mean()) * 1e3 if ok.any() else np.nan
         self.out_mean_res, self.out_behind = mean_res, behind
         if self.publish is not None:
-            row = np.concatenate([np.degrees(isb), np.degrees(rate), self.monitor.measured.astype(float), res * 1e3,
+            row = np.concatenate([np.degrees(isb) * self.angle_signs, np.degrees(rate) * self.angle_signs,
+                                  self.monitor.measured.astype(float), res * 1e3,
                                   [mean_res, VERDICT_CODES[self.monitor.quality.verdict], float(q is not None), behind,
                                    g, ts]])
             self.publish(row, ts)
@@ -402,6 +403,10 @@ class LiveSession:
         self.n_frames = 0
         self.tracking = False
         self.angles = PublishedAngles(self.model, self.kin, self.rate)
+        from exubio.model.signs import factors
+        from exubio.run.live.outputs import ISB_NAMES
+
+        self.angle_signs = factors(ISB_NAMES, self.protocol.signs)  # the stream's convention (ISB inside)
         self.current_sample = None
         self.status_due = 0.0
 
