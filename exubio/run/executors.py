@@ -98,7 +98,7 @@ def _end_with_parent(parent: int, signum: int) -> None:
         libc.prctl(1, signum, 0, 0, 0)  # PR_SET_PDEATHSIG
     except (OSError, AttributeError):
         return
-    from exubio.io.results import _process_runs
+    from exubio.io.result_set import _process_runs
 
     if not _process_runs(parent):
         os.kill(os.getpid(), signum)

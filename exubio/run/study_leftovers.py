@@ -19,7 +19,7 @@ _TMP_PID = re.compile(rf"^{re.escape(_TMP_PREFIX)}(?:calibration-(?P<cpid>\d+)|.
 def clean_leftovers(out_dir: Path, /) -> list[Path]:
     """Remove the temporary folders and files of killed runs: those whose process (the pid in their
     name) no longer runs; a running study's (another one into the same folder) are left alone."""
-    from exubio.io.results import _TEMP_NAME, _process_runs
+    from exubio.io.result_set import _TEMP_NAME, _process_runs
 
     removed = []
     for p in sorted(out_dir.rglob(f"{_TMP_PREFIX}*")):
@@ -38,7 +38,7 @@ def clean_leftovers(out_dir: Path, /) -> list[Path]:
 def _remove_after_dask(out_dir: Path, /, *, wait_s: float = 1.0) -> None:
     """clean_leftovers once the workers named in the leftovers have ended (at most ``wait_s``)."""
     deadline = time.monotonic() + wait_s
-    from exubio.io.results import _process_runs
+    from exubio.io.result_set import _process_runs
 
     while time.monotonic() < deadline:
         pids = {int(m["pid"] or m["cpid"]) for p in out_dir.rglob(f"{_TMP_PREFIX}*") if (m := _TMP_PID.match(p.name))}

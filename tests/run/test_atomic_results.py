@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import exubio.io.result_set
 import exubio.io.results
 from exubio.cli import main
 from exubio.io.c3d import write_c3d
@@ -144,7 +145,8 @@ def test_an_injected_enospc_leaves_each_set_complete_or_absent_and_one_error(tmp
 
         return original(path, write, **kw)
 
-    monkeypatch.setattr(exubio.io.results, "atomic_write", full_disk)
+    monkeypatch.setattr(exubio.io.results, "atomic_write", full_disk)  # the files' writers
+    monkeypatch.setattr(exubio.io.result_set, "atomic_write", full_disk)  # the result set's journal
     out = tmp_path / "out"
     code = main(["-q", "reconstruct", str(tiny), "--method", "both", "--no-report", "--out", str(out)])
     assert _check_full_disk_run(code, capsys.readouterr().err, out, "tiny") != "written"
@@ -170,6 +172,8 @@ def atomic_write(path, writer, /, **kw):
         event("wrote " + os.path.basename(str(path)))
     return original(path, write, **kw)
 results.atomic_write = atomic_write
+import exubio.io.result_set as result_set
+result_set.atomic_write = atomic_write  # the journal
 for name in ("replace", "link"):
     def renamer(src, dst, *a, _f=getattr(os, name), _n=name, **k):
         event(_n + " " + os.path.basename(str(dst)))
@@ -523,7 +527,7 @@ def test_ctrl_c_of_a_study_with_2_jobs_is_one_line_exit_130(tmp_path, ctrl_c_tri
 
 def test_a_lock_is_taken_over_from_a_killed_run_and_from_a_reused_pid_never_from_a_running_one(tmp_path):
     from exubio.errors import InputError
-    from exubio.io.results import _start_time, claim
+    from exubio.io.result_set import _start_time, claim
 
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
     lock = tmp_path / ".t.ls.lock"
@@ -548,7 +552,7 @@ def test_a_lock_is_taken_over_from_a_killed_run_and_from_a_reused_pid_never_from
 def test_an_empty_lock_left_by_a_run_killed_while_taking_it_is_taken_over_said_once(tmp_path, caplog):
     """SIGKILL between creating the lock and writing the pid in it left an empty lock, and every next
     run was refused with "another exubio run is writing this result" though none was."""
-    from exubio.io.results import EMPTY_LOCK_GRACE_S, claim
+    from exubio.io.result_set import EMPTY_LOCK_GRACE_S, claim
 
     lock = tmp_path / ".t.ls.lock"
     lock.write_text("")
@@ -603,9 +607,9 @@ def test_a_study_killed_by_sigkill_leaves_no_worker_and_its_resume_no_tmp_folder
     p.kill()
     p.wait(timeout=60)
     deadline = time.monotonic() + 30
-    while time.monotonic() < deadline and any(exubio.io.results._process_runs(w) for w in workers):
+    while time.monotonic() < deadline and any(exubio.io.result_set._process_runs(w) for w in workers):
         time.sleep(0.1)
-    outlived = [w for w in workers if exubio.io.results._process_runs(w)]
+    outlived = [w for w in workers if exubio.io.result_set._process_runs(w)]
     for w in outlived:  # this test's own workers: not left running when it fails
         os.kill(w, signal.SIGKILL)
     assert not outlived, "a worker outlived the killed study"
