@@ -14,7 +14,7 @@ PACKAGE = Path(__file__).resolve().parents[2] / "exubio"
 OWNERS = {
     "exudyn": {"backend/exudyn_system.py", "backend/exudyn_limits.py", "backend/exudyn_integrate.py"},
     "ezc3d": {"io/c3d.py"},
-    "matplotlib": {"report/trial_report.py", "report/study_report.py", "report/validation_report.py",
+    "matplotlib": {"report/trial_report.py", "report/page_figures.py", "report/study_report.py", "report/validation_report.py",
                    "report/validation_common.py", "report/validation_tables.py", "report/validation_summary.py",
                    "report/validation_paper_figures.py", "report/validation_exubio_figures.py",
                    "report/calibration_page.py", "report/rhythm_page.py", "report/moments_page.py"},

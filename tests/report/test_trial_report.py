@@ -18,6 +18,7 @@ from exubio.cli import main
 from exubio.io.c3d import write_c3d
 from exubio.model.load import load_model
 from exubio.report import trial_report as tr
+from exubio.report import page_figures
 from exubio.synth.simulate import simulate_trial
 
 pytestmark = pytest.mark.exudyn
@@ -54,15 +55,15 @@ def test_reports_drawn_into_reused_figures_are_those_of_new_figures(result_sets,
     items = list(result_sets.items()) + [(f"both {p.name}", [p]) for p in result_sets["both"]]  # PF, LS alone
     fresh = {}
     for name, npz in items:
-        tr._FREE_PAGES.clear()
+        page_figures._FREE_PAGES.clear()
         pdf, png = tr.build_trial_report(npz, tmp_path / "fresh.report.pdf")
         fresh[name] = (_without_date(pdf.read_bytes()), png.read_bytes())
-    tr._FREE_PAGES.clear()
+    page_figures._FREE_PAGES.clear()
     for name, npz in items + items[::-1]:
         pdf, png = tr.build_trial_report(npz, tmp_path / "reused.report.pdf")
         assert (_without_date(pdf.read_bytes()), png.read_bytes()) == fresh[name], name
     # the plot pages went back for the next report: one figure per layout, not one per report
-    assert tr._FREE_PAGES and all(len(figs) == 1 for figs in tr._FREE_PAGES.values())
+    assert page_figures._FREE_PAGES and all(len(figs) == 1 for figs in page_figures._FREE_PAGES.values())
 
 
 def test_a_page_function_hands_out_a_figure_no_report_will_draw_into(result_sets):
@@ -73,7 +74,7 @@ def test_a_page_function_hands_out_a_figure_no_report_will_draw_into(result_sets
     angles = {r.method: tr.read_angles(p) for p, r in zip(npz, recons)}
     first = tr.angles_page(recons, read_npz_metadata(npz[0]), {}, angles=angles)
     second = tr.angles_page(recons, read_npz_metadata(npz[0]), {}, angles=angles)
-    assert first is not second and all(first is not f for figs in tr._FREE_PAGES.values() for f in figs)
+    assert first is not second and all(first is not f for figs in page_figures._FREE_PAGES.values() for f in figs)
 
 
 def test_bisection_wraps_where_matplotlib_wraps():
