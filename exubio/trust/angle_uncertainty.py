@@ -148,6 +148,7 @@ def marker_covariance(kin: Kinematics, points: PointSet, qf: np.ndarray, present
     names = [s.name for s in model.segments]
     hum = names.index("humerus") if "humerus" in names else None
     theta_hum = _rotation_angle(R[:, hum]) if hum is not None else np.zeros(b)
+    seen: dict[str, tuple] = {}  # measured segments: (rows, B, T, theta) for the cross terms
     for s_idx in np.unique(points.segment_index):
         sel = np.flatnonzero(points.segment_index == s_idx)
         seg = names[s_idx]
@@ -186,6 +187,20 @@ def marker_covariance(kin: Kinematics, points: PointSet, qf: np.ndarray, present
                 C[:, a_i, :, a_i, :] += S_nr
         rows = (3 * sel[:, None] + np.arange(3)[None, :]).reshape(-1)
         sigma[:, rows[:, None], rows[None, :]] += C.reshape(b, 3 * len(sel), 3 * len(sel))
+        if measured and not misfit_only:
+            seen[seg] = (rows, B, T, theta)
+    names_seen = list(seen)
+    for i, a in enumerate(names_seen):  # two bones' clusters move together (both driven by the arm)
+        for c in names_seen[i + 1:]:
+            X = amplitude.cross_of(a, c) if hasattr(amplitude, "cross_of") else None
+            if X is None:
+                continue
+            ra, Ba, Ta, tha = seen[a]
+            rc, Bc, Tc, _ = seen[c]
+            S = Ta @ X[None] @ np.swapaxes(Tc, -1, -2) * (tha ** 2)[:, None, None]
+            Cx = np.einsum("bixk,bkl,bjyl->bixjy", Ba, S, Bc).reshape(b, ra.size, rc.size)
+            sigma[:, ra[:, None], rc[None, :]] += Cx
+            sigma[:, rc[:, None], ra[None, :]] += np.swapaxes(Cx, 1, 2)
     return sigma
 
 
