@@ -213,3 +213,53 @@ def expected_residual_ms(J: np.ndarray, K: np.ndarray, sigma: np.ndarray, /) -> 
     R = I_H @ sigma @ np.swapaxes(I_H, -1, -2)
     d = np.einsum("bii->bi", R).reshape(b, n3 // 3, 3)
     return d.sum(axis=2) / 3.0
+
+
+def trunk_angle_variance(kin: Kinematics, points: PointSet, qf: np.ndarray, DK: np.ndarray, trunk: np.ndarray,
+                         /) -> np.ndarray:
+    """(b, a) rad^2: what a trunk that moves unseen, in a run that assumes the thorax still, adds to
+    each anatomical angle's variance at poses qf (b, m). The trunk turns by omega (thorax axes, about
+    IJ: the thorax frame's origin) and IJ moves by t, with second moment ``trunk`` (6, 6) per rad^2
+    of the humerus's rotation (exubio.truth.trunk_amplitude); every marker then moves by
+    omega x (p - IJ) + t in the assumed thorax frame, and the reconstruction follows by DK (b, a, 3k:
+    the angles' change per marker displacement) as far as the model lets it (the sternoclavicular
+    joint and the ellipsoid are fixed in the thorax); the angles relative to the (assumed) thorax
+    (SC, ST, HT) of the bones themselves turn by omega, the relative ones (AC, GH, distal) do not. The
+    error is the difference: E = DK B - G, variance E C E^T theta^2."""
+    from exubio.model.angles import anatomical_frames, angles_of_frames, segment_anatomical_rotations
+
+    model = kin.model
+    b = qf.shape[0]
+    R, p = kin.poses(qf)
+    names = [s.name for s in model.segments]
+    origin = p[:, names.index("thorax")] if "thorax" in names else np.zeros((b, 3))
+    T = R[:, names.index("thorax")] if "thorax" in names else np.broadcast_to(np.eye(3), (b, 3, 3))
+    r = kin.points(qf, points) - origin[:, None, :]  # (b, k, 3)
+    B = np.concatenate([-_skew(r), np.broadcast_to(np.eye(3), r.shape + (3,))], axis=-1)  # (b, k, 3, 6)
+    B = B.reshape(b, -1, 6)
+    T6 = np.zeros((b, 6, 6))
+    T6[:, :3, :3] = T
+    T6[:, 3:, 3:] = T
+    frames = segment_anatomical_rotations(model, qf, kinematics=kin, frames=anatomical_frames(model), rotations=R)
+    sets = list(angles_of_frames(frames))
+
+    def table(fr):
+        a = angles_of_frames(fr)
+        return np.concatenate([a[s] for s in sets], axis=-1)
+
+    base = table(frames)
+    n_a = DK.shape[1]
+    G = np.zeros((b, n_a, 6))
+    eps = 1e-6
+    for i in range(3):
+        w = np.zeros(3)
+        w[i] = eps
+        Q = np.eye(3) + _skew(w)  # first order: the bones turn by w about the thorax's axes
+        moved = {s: (F if s == "thorax" else Q @ F) for s, F in frames.items()}
+        d = (table(moved) - base + np.pi) % (2 * np.pi) - np.pi
+        G[:, : d.shape[1], i] = d / eps
+    E = (DK @ B - G) @ T6  # (b, a, 6): per unit of the trunk's motion in its own axes
+    names_seg = names
+    hum = names_seg.index("humerus") if "humerus" in names_seg else None
+    theta = _rotation_angle(R[:, hum]) if hum is not None else np.zeros(b)
+    return np.einsum("bai,ij,baj->ba", E, np.asarray(trunk, dtype=float), E) * theta[:, None] ** 2
