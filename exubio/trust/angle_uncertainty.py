@@ -19,7 +19,11 @@ move by D dq (D = d angle / d q). The markers' error covariance has two parts:
   markers move together by a rigid rotation about their centroid and a translation (standard
   deviations per ISB axis, proportional to the motion away from the reference posture), plus
   independent non-rigid parts. The rigid part is what averaging over a cluster cannot remove: it is
-  why an angle's error under real skin is far larger than its marker residual suggests.
+  why an angle's error under real skin is far larger than its marker residual suggests. The
+  scapula's and the humerus's clusters move together (both skins are dragged by the same arm): their
+  cross second moment, measured on the same pins, couples the two segments' rigid parts;
+* in a run that assumes the thorax still (no thorax marker: ``exubio truth``), the trunk's unseen
+  motion (``trunk_angle_variance``), added by ``observability.angle_determinacy`` to the variance.
 
 The variance is D K Sigma K^T D^T. It is not the residual of this trial: a trial whose markers fit
 the model well can still carry a large rigid artefact, which no residual shows.
@@ -61,8 +65,9 @@ away from the lock; the ISB GH Y-X'-Y'' plane of elevation and axial rotation er
 
 UNCERTAINTY_DEFINITION = (
     f"standard uncertainty (1 SD, deg): {NOISE_MM:g} mm marker noise and the soft-tissue artefact model fitted on "
-    "bone pins (rigid cluster rotation and translation plus non-rigid parts per segment, growing with the motion "
-    "from the reference posture; exubio.trust.sta_amplitude), carried through the reconstruction's first-order "
+    "bone pins (rigid cluster rotation and translation plus non-rigid parts per segment, the scapula's and humerus's "
+    "correlated, growing with the motion from the reference posture; exubio.trust.sta_amplitude), carried through "
+    "the reconstruction's first-order "
     f"sensitivity; an ST, GH or HT angle is not measured where u > {U_BOUND_DEG:g} deg, any angle within "
     f"{GIMBAL_MARGIN_DEG:g} deg of its sequence's gimbal lock (SC, AC and distal angles: u from coefficients borrowed "
     "from the humerus, no bone data)")
