@@ -86,13 +86,19 @@ def main(argv=None) -> int:
     print()
     print(table([run(f, without_sta=True) for f in files], "markers carried rigidly by the bones (no STA)"))
     if args.loto:
+        import dataclasses
+
+        from exubio.trust.sta_amplitude import load_sta_amplitude
         from exubio.truth.sta_amplitude import fit_sta_amplitude
+
+        shipped = load_sta_amplitude()
         from exubio.truth.sta_format import read_sta_trial
 
         s2m = [f for f in files if "S2M" in f.name]
         loto = []
         for held in s2m:
             amp = fit_sta_amplitude([(read_sta_trial(f), RATES["S2M"]) for f in s2m if f != held])
+            amp = dataclasses.replace(amp, trunk=shipped.trunk, trunk_source=shipped.trunk_source)  # not from these files
             loto.append(run(held, amplitude=amp))
         print()
         print(table(loto, "STA amplitude fitted on the other three S2M tasks (leave one task out)"))

@@ -65,7 +65,9 @@ humerus marker's artefact therefore peaks at exactly ``sta_mm`` (the paper's art
 ~20 mm on its GH marker). A marker whose driving coordinates do not move gets no artefact
 (in SIER: forearm and hand). Thorax markers get no artefact. With ``sta_model`` (a bone STA model
 fitted on bone-pin data, exubio.synth.sta_bone / sta_sim) the scapula and humerus markers instead move
-as that model predicts from the simulated angles; the other segments keep the per-marker artefact.
+as that model predicts from the simulated angles (the regression's mean course, plus a draw of its
+held-out residual from the stream ``SeedSequence([seed, 33])``); the other segments keep the
+per-marker artefact.
 
 Noise (``noise_mm``): independent Gaussian, SD ``noise_mm`` per coordinate and sample, on every
 marker (thorax markers included). STA and noise use independent seeded streams
@@ -413,7 +415,8 @@ def simulate_trial(
         from exubio.synth.sta_sim import apply_bone_sta, describe
 
         sta, replaced, _ = apply_bone_sta(model, kin, q, fr.R, pos, segs, bone, sta,
-                                          np.random.default_rng(sta_ss.spawn(1)[0]))
+                                          np.random.default_rng(sta_ss.spawn(1)[0]), rate_hz=float(rate_hz),
+                                          residual_rng=np.random.default_rng(np.random.SeedSequence([seed, 33])))
         sta_label = describe(bone, replaced, sta_mm)
     if lab_transform:
         rot, origin = _lab_transform()

@@ -31,13 +31,15 @@ RMS amplitude (``nonrigid_sd_m``) and as each data marker's own regression on th
 (``nonrigid_coef``), from which a simulation draws its markers' non-rigid motion.
 
 Application (``segment_displacements``): for markers at bone-frame positions m_k with centroid c,
-d_k(t) = T(t) + (Q(t) - I)(m_k - c) + e_k(t), Q = exp(rotation), in the bone frame.
+d_k(t) = T(t) + (Q(t) - I)(m_k - c) + e_k(t), Q = exp(rotation), in the bone frame; the rigid
+parameters are the regression's mean course plus, in a simulation, a draw of what the regression
+leaves on held-out tasks (``residual``, ``exubio.synth.sta_residual``).
 """
 from __future__ import annotations
 
 import datetime as _dt
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -45,10 +47,12 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from exubio.errors import InputError
+from exubio.synth.sta_residual import ResidualProcess, measure_residual
 
 __all__ = [
     "CALIBRATION_S", "DEFAULT_DRIVERS", "BoneStaModel", "SegmentSta", "RigidSplit", "fit_sta_model", "load_sta_model",
     "rigid_split", "trial_drivers", "features", "segment_targets", "predict_rigid", "segment_displacements",
+    "rigid_parameters", "held_out_residual",
 ]
 
 CALIBRATION_S = 0.3
@@ -74,6 +78,9 @@ DRIVER_DEFINITIONS = {
     "scapula_rotation_y": "the same, Y component", "scapula_rotation_z": "the same, Z component",
     "gh_x": "glenohumeral angle scapula -> humerus, X-Z'-Y'' (Phadke 2011), first angle (rad), right-arm convention",
     "gh_z": "the same, second angle (Z')", "gh_y": "the same, third angle (Y'', axial rotation)",
+    "humerus_rotation": "the humerus's rotation angle (rad) from its start orientation (the calibration window): "
+                        "in the lab for the bone-referenced data (thorax assumed fixed), in the thorax in a "
+                        "simulation; it scales the held-out residual (exubio.synth.sta_residual)",
 }
 
 
@@ -145,6 +152,8 @@ def trial_drivers(trial, /, *, n_reference: int) -> dict[str, np.ndarray]:
 def _drivers(Rs: np.ndarray, Rh: np.ndarray, M: np.ndarray, *, vertical: np.ndarray, n_reference: int,
              euler) -> dict[str, np.ndarray]:
     out = {"ht_elevation": np.arccos(np.clip(Rh[:, :, 1] @ vertical, -1.0, 1.0))}
+    h0 = Rotation.from_matrix(Rh[:n_reference]).mean().as_matrix()
+    out["humerus_rotation"] = np.arccos(np.clip((np.einsum("ij,nij->n", h0, Rh) - 1.0) / 2.0, -1.0, 1.0))
     start = Rotation.from_matrix(Rs[:n_reference]).mean().as_matrix()
     rel = M @ start.T @ Rs @ M
     rv = Rotation.from_matrix(rel).as_rotvec()
@@ -211,13 +220,16 @@ class SegmentSta:
     vector (rad) and centroid translation (m) in the bone frame (right-arm convention);
     ``nonrigid_sd_m`` the RMS per coordinate of the non-rigid rest; ``nonrigid_coef`` (k, f, 3):
     each data marker's non-rigid rest regressed on the features (m per feature unit; a marker of the
-    same name in several trials pooled)."""
+    same name in several trials pooled); ``residual``: what the rigid regression leaves on held-out
+    tasks, drawn as a smooth random process in a simulation (``exubio.synth.sta_residual``; None:
+    the regression's mean course alone, as a model fitted on one trial or written before it)."""
 
     drivers: tuple[str, ...]
     rigid_coef: np.ndarray
     nonrigid_sd_m: float
     nonrigid_coef: np.ndarray
     fit: Mapping[str, object] = field(default_factory=dict)
+    residual: ResidualProcess | None = None
 
     @property
     def feature_names(self) -> tuple[str, ...]:
@@ -242,6 +254,8 @@ class BoneStaModel:
                 "nonrigid_coef_m": np.round(m.nonrigid_coef, 7).tolist(),
                 "fit": dict(m.fit),
             }
+            if m.residual is not None:
+                segs[s]["residual"] = m.residual.to_json()
         return {"schema_version": SCHEMA_VERSION, **dict(self.meta), "driver_definitions":
                 {_base(d): DRIVER_DEFINITIONS[_base(d)] for m in self.segments.values() for d in m.drivers}, "segments": segs}
 
@@ -275,7 +289,9 @@ class BoneStaModel:
             if coef.shape != (f, 6) or (nr.size and nr.shape[1:] != (f, 3)):
                 raise InputError(f"{where}: segment '{s}': rigid_coef has shape {coef.shape}, expected ({f}, 6); "
                                  f"nonrigid_coef_m {nr.shape}, expected (k, {f}, 3)")
-            segs[s] = SegmentSta(drivers, coef, sd, nr.reshape(-1, f, 3), dict(m.get("fit", {})))
+            res = m.get("residual")
+            res = None if res is None else ResidualProcess.from_json(res, where=f"{where}: segment '{s}'")
+            segs[s] = SegmentSta(drivers, coef, sd, nr.reshape(-1, f, 3), dict(m.get("fit", {})), res)
         meta = {k: v for k, v in data.items() if k not in ("schema_version", "segments", "driver_definitions")}
         return cls(segs, meta, str(data.get("name", where)))
 
@@ -312,6 +328,8 @@ class SegmentData:
     nonrigid: np.ndarray
     marker_names: tuple[str, ...]
     split: RigidSplit
+    theta: np.ndarray | None = None  # (n,) rad: the humerus's rotation from the start (the residual's driver)
+    rate_hz: float = 0.0
 
 
 def segment_data(trial, segment: str, drivers: Sequence[str], *, rate_hz: float,
@@ -327,8 +345,10 @@ def segment_data(trial, segment: str, drivers: Sequence[str], *, rate_hz: float,
     seg = trial.segments[segment]
     M = MIRROR if trial.side == "left" else np.eye(3)
     split = rigid_split(seg.markers_bone @ M, n_ref)  # mirrored positions: the split comes out right-armed
-    X = features(trial_drivers(trial, n_reference=n_ref), drivers, n_reference=n_ref)
-    return SegmentData(trial.task, X, segment_targets(split), split.nonrigid, seg.marker_names, split)
+    drv = trial_drivers(trial, n_reference=n_ref)
+    X = features(drv, drivers, n_reference=n_ref)
+    return SegmentData(trial.task, X, segment_targets(split), split.nonrigid, seg.marker_names, split,
+                       drv["humerus_rotation"], float(rate_hz))
 
 
 def fit_segment(data: Sequence[SegmentData], drivers: Sequence[str], *, ridge: float = RIDGE) -> SegmentSta:
@@ -358,6 +378,22 @@ def fit_segment(data: Sequence[SegmentData], drivers: Sequence[str], *, ridge: f
     return SegmentSta(tuple(drivers), B, sd, np.stack(nr_coef), fit)
 
 
+def held_out_residual(data: Sequence[SegmentData], drivers: Sequence[str], *, ridge: float = RIDGE) -> ResidualProcess:
+    """What the rigid regression leaves on a task it was not fitted to (``exubio.synth.sta_residual``):
+    for each trial of ``data`` (at least 2, one sampling rate), the regression fitted on the others,
+    its residual on it."""
+    if len(data) < 2:
+        raise InputError("a held-out residual needs at least two trials (one fitted on the other)")
+    rates = {d.rate_hz for d in data}
+    if len(rates) != 1 or any(d.theta is None for d in data):
+        raise InputError(f"held-out residual: the trials need one sampling rate and their drivers, got rates {sorted(rates)}")
+    res = []
+    for i, held in enumerate(data):
+        seg = fit_segment([d for j, d in enumerate(data) if j != i], drivers, ridge=ridge)
+        res.append(held.Y - held.X @ seg.rigid_coef)
+    return measure_residual(res, [d.theta for d in data], rates.pop(), tasks=[d.task for d in data])
+
+
 def fit_sta_model(paths: Sequence[str | Path], /, *, rate_hz: float,
                   drivers: Mapping[str, Sequence[str]] | None = None, ridge: float | Mapping[str, float] | None = None,
                   citation: str = "", name: str = "") -> BoneStaModel:
@@ -376,8 +412,11 @@ def fit_sta_model(paths: Sequence[str | Path], /, *, rate_hz: float,
     trials = [read_sta_trial(p) for p in paths]
     ridges = ridge if isinstance(ridge, Mapping) else {s: (DEFAULT_RIDGE.get(s, RIDGE) if ridge is None else ridge)
                                                         for s in drivers}
-    segs = {s: fit_segment([segment_data(t, s, d, rate_hz=rate_hz) for t in trials], d, ridge=ridges.get(s, RIDGE))
-            for s, d in drivers.items()}
+    segs = {}
+    for s, d in drivers.items():
+        data = [segment_data(t, s, d, rate_hz=rate_hz) for t in trials]
+        seg = fit_segment(data, d, ridge=ridges.get(s, RIDGE))
+        segs[s] = seg if len(data) < 2 else replace(seg, residual=held_out_residual(data, d, ridge=ridges.get(s, RIDGE)))
     meta = {
         "name": name or "bone STA model: " + ", ".join(f"{t.lab} {t.task}".strip() for t in trials),
         "fitted": _dt.date.today().isoformat(),
@@ -392,8 +431,9 @@ def fit_sta_model(paths: Sequence[str | Path], /, *, rate_hz: float,
         "units": "rotation vectors rad, translations m, drivers rad; features = drivers and their pairwise "
                  "products minus their start values",
         "model": "rigid: rotation vector (about the markers' centroid) and centroid translation of the segment's "
-                 "skin-marker cluster in the bone frame = features @ rigid_coef; non-rigid: per data marker, "
-                 "features @ nonrigid_coef_m[k], RMS nonrigid_sd_m",
+                 "skin-marker cluster in the bone frame = features @ rigid_coef, plus (in a simulation) the held-out "
+                 "residual drawn as a smooth random process (segment key 'residual', with how it was measured); "
+                 "non-rigid: per data marker, features @ nonrigid_coef_m[k], RMS nonrigid_sd_m",
     }
     return BoneStaModel(segs, meta, meta["name"])
 
@@ -406,6 +446,22 @@ def predict_rigid(seg: SegmentSta, drivers: Mapping[str, np.ndarray], /, *, n_re
     return features(drivers, seg.drivers, n_reference=n_reference) @ seg.rigid_coef
 
 
+def rigid_parameters(seg: SegmentSta, X: np.ndarray, drivers: Mapping[str, np.ndarray], /, *,
+                     residual_rng: np.random.Generator | None = None, rate_hz: float | None = None) -> np.ndarray:
+    """The cluster's rigid parameters (n, 6) for features X (n, f): the regression's mean course,
+    plus one draw of the held-out residual process where the model has one and ``residual_rng``
+    and ``rate_hz`` are given (scaled by the drivers' ``humerus_rotation``)."""
+    params = X @ seg.rigid_coef
+    if seg.residual is not None and residual_rng is not None:
+        if rate_hz is None or not rate_hz > 0:
+            raise InputError(f"the STA residual process needs the sampling rate, got {rate_hz}")
+        if "humerus_rotation" not in drivers:
+            raise InputError("the STA residual process needs the driver 'humerus_rotation'")
+        params = params + seg.residual.draw(np.asarray(drivers["humerus_rotation"], dtype=float), rate_hz,
+                                            residual_rng)
+    return params
+
+
 def rigid_displacements(params: np.ndarray, points: np.ndarray, /) -> np.ndarray:
     """Displacements (n, k, 3) of points (k, 3) in the bone frame under the rigid cluster motion
     ``params`` (n, 6) about the points' centroid."""
@@ -416,13 +472,16 @@ def rigid_displacements(params: np.ndarray, points: np.ndarray, /) -> np.ndarray
 
 
 def segment_displacements(seg: SegmentSta, drivers: Mapping[str, np.ndarray], points: np.ndarray,
-                          rng: np.random.Generator, /, *, n_reference: int = 1) -> tuple[np.ndarray, np.ndarray]:
+                          rng: np.random.Generator, /, *, n_reference: int = 1,
+                          residual_rng: np.random.Generator | None = None,
+                          rate_hz: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(rigid, non-rigid) displacements (n, k, 3) m in the bone frame of markers at ``points``
-    (k, 3) m in the bone frame: the predicted rigid cluster motion about their centroid, and for
-    each marker the non-rigid regression of a data marker drawn at random (``rng``); both zero at
-    the start posture."""
+    (k, 3) m in the bone frame: the predicted rigid cluster motion about their centroid (with
+    ``residual_rng`` and ``rate_hz``, and a model that has one, plus a draw of the held-out
+    residual, ``rigid_parameters``), and for each marker the non-rigid regression of a data marker
+    drawn at random (``rng``); both zero at the start posture."""
     X = features(drivers, seg.drivers, n_reference=n_reference)
-    rigid = rigid_displacements(X @ seg.rigid_coef, points)
+    rigid = rigid_displacements(rigid_parameters(seg, X, drivers, residual_rng=residual_rng, rate_hz=rate_hz), points)
     nonrigid = np.zeros_like(rigid)
     if seg.nonrigid_coef.size:
         pick = rng.integers(0, seg.nonrigid_coef.shape[0], size=points.shape[0])

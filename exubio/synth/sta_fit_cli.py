@@ -7,6 +7,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import numpy as np
+
 from exubio.errors import InputError
 
 __all__ = ["add_parser", "cmd_sta_fit"]
@@ -45,6 +47,11 @@ def cmd_sta_fit(args: argparse.Namespace) -> int:
     for s, m in model.segments.items():
         print(f"{s}: {m.fit['frames']} frames; rigid rotation {m.fit['rms_rotation_deg']:.1f} deg RMS, translation "
               f"{m.fit['rms_translation_mm']:.1f} mm RMS; non-rigid rest {1e3 * m.nonrigid_sd_m:.1f} mm RMS")
+        if m.residual is not None:
+            sd = m.residual.sd_per_rad
+            print(f"  held-out residual per rad of humerus rotation: rotation {np.degrees(np.linalg.norm(sd[:3])):.1f} deg, "
+                  f"translation {1e3 * np.linalg.norm(sd[3:]):.1f} mm; correlation time "
+                  f"{m.residual.correlation_time_s:.2f} s")
     if len(args.trials) > 1:
         print("leave one trial out (RMS data / RMS residual, R^2):")
         for h in leave_one_task_out(args.trials, rate_hz=args.rate):

@@ -6,7 +6,9 @@ where the artefact is zero) and the model's drivers from the simulated truth (HT
 thorax Y axis, the scapula's rotation from the first frame, the GH angles) give the cluster's rigid
 motion over the bone (rotation about the centroid of the simulation's markers of that segment, and
 translation of that centroid) plus each marker's non-rigid motion (the regression of a data marker
-drawn at random, seeded). Markers of the other segments keep the per-marker artefact they were given
+drawn at random, seeded), and the cluster's rigid motion also carries a draw of what the regression
+leaves on held-out tasks (the model's ``residual``, a smooth random process seeded by the trial's
+seed: ``exubio.synth.sta_residual``). Markers of the other segments keep the per-marker artefact they were given
 (clavicle, forearm, hand: ``sta_mm``; thorax: none): the data hold no other bone.
 """
 from __future__ import annotations
@@ -35,11 +37,13 @@ def resolve_sta_model(value: "str | Path | BoneStaModel | None", /) -> BoneStaMo
 
 
 def apply_bone_sta(model, kin, q: np.ndarray, R_seg: np.ndarray, points_thorax: np.ndarray, segs: Sequence[str],
-                   sta_model: BoneStaModel, per_marker: np.ndarray, rng: np.random.Generator
+                   sta_model: BoneStaModel, per_marker: np.ndarray, rng: np.random.Generator, /, *,
+                   residual_rng: np.random.Generator | None = None, rate_hz: float | None = None,
                    ) -> tuple[np.ndarray, tuple[str, ...], np.ndarray]:
     """The artefact (n, k, 3) in the thorax frame: ``per_marker`` with the markers of the model's
-    segments replaced by the bone model's. Returns (artefact, the segments replaced, the rigid part
-    alone (n, k, 3), zero elsewhere)."""
+    segments replaced by the bone model's (with ``residual_rng`` and ``rate_hz``: its rigid part
+    includes a draw of the held-out residual, where the model has one). Returns (artefact, the
+    segments replaced, the rigid part alone (n, k, 3), zero elsewhere)."""
     from exubio.model.angles import segment_anatomical_rotations
 
     need = [s for s in ("scapula", "humerus") if s not in model.segment_names]
@@ -56,7 +60,7 @@ def apply_bone_sta(model, kin, q: np.ndarray, R_seg: np.ndarray, points_thorax: 
             continue
         R = Rg[name]
         local0 = points_thorax[0, idx] @ R[0]  # bone-frame coordinates at the start (rows: R0^T p)
-        rigid, nonrigid = segment_displacements(seg, drivers, local0, rng)
+        rigid, nonrigid = segment_displacements(seg, drivers, local0, rng, residual_rng=residual_rng, rate_hz=rate_hz)
         rigid_all[:, idx] = np.einsum("nij,nkj->nki", R, rigid)
         out[:, idx] = np.einsum("nij,nkj->nki", R, rigid + nonrigid)
         done.append(name)
@@ -66,6 +70,8 @@ def apply_bone_sta(model, kin, q: np.ndarray, R_seg: np.ndarray, points_thorax: 
 def describe(sta_model: BoneStaModel, replaced: Sequence[str], sta_mm: float) -> str:
     """One line for a trial's metadata: which model moved which markers."""
     name = sta_model.name or "bone STA model"
+    res = [s for s in replaced if sta_model.segments[s].residual is not None]
+    extra = f" + held-out residual on the {', '.join(res)}" if res else ""
     return (f"bone STA model '{name}' on the {', '.join(replaced) or 'no'} markers (rigid cluster motion over the "
-            f"bone from the simulated angles + non-rigid rest); per-marker STA {sta_mm:g} mm on the other "
+            f"bone from the simulated angles{extra} + non-rigid rest); per-marker STA {sta_mm:g} mm on the other "
             f"segments' markers (none on the thorax)")

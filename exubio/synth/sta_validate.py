@@ -18,9 +18,11 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from exubio.synth.sta_bone import DEFAULT_DRIVERS, DEFAULT_RIDGE, RIDGE, SegmentData, fit_segment, rigid_displacements, segment_data
+from exubio.synth.sta_bone import (DEFAULT_DRIVERS, DEFAULT_RIDGE, RIDGE, SegmentData, fit_segment, held_out_residual,
+                                   rigid_displacements, segment_data)
+from exubio.synth.sta_residual import correlation_time
 
-__all__ = ["HeldOut", "leave_one_task_out", "score_segment"]
+__all__ = ["HeldOut", "HeldOutAmplitude", "held_out_amplitude", "leave_one_task_out", "score_segment"]
 
 
 @dataclass(frozen=True)
@@ -84,3 +86,53 @@ def score_other(seg_models: Mapping, trial, *, rate_hz: float, n_reference: int 
     ``n_reference``: its start posture in frames, where the calibration window does not fit)."""
     return [score_segment(m, segment_data(trial, s, m.drivers, rate_hz=rate_hz, n_reference=n_reference), segment=s)
             for s, m in seg_models.items() if s in trial.segments]
+
+
+@dataclass(frozen=True)
+class HeldOutAmplitude:
+    """One held-out (task, segment): RMS of the cluster's rotation (deg, norm of the rotation
+    vector) and of its centroid's translation (mm, norm), for the data, the regression's mean course
+    alone and the simulated artefact (mean course + residual draws, pooled over the seeds); the
+    residual's correlation time (s) in the data and in the draws (mean)."""
+
+    task: str
+    segment: str
+    rotation_deg: tuple[float, float, float]
+    translation_mm: tuple[float, float, float]
+    correlation_s: tuple[float, float]
+
+
+def _rms_norm(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.sum(x * x, axis=-1))))
+
+
+def held_out_amplitude(paths: Sequence[str | Path], /, *, rate_hz: float, seeds: int = 20) -> list[HeldOutAmplitude]:
+    """For each S2M-like trial and segment: the model built on the OTHER trials as ``fit_sta_model``
+    builds it (the regression, and its residual process measured by leave one out among them),
+    driven by the held-out trial's own drivers; its simulated artefact against the trial's
+    (``seeds`` draws of the residual, seeds 1..seeds)."""
+    from exubio.truth.sta_format import read_sta_trial
+
+    trials = [read_sta_trial(p) for p in paths]
+    if len(trials) < 3:
+        raise ValueError("a held-out amplitude needs at least three trials (two to measure the residual on)")
+    out = []
+    for s, drv in DEFAULT_DRIVERS.items():
+        ridge = DEFAULT_RIDGE.get(s, RIDGE)
+        data = [segment_data(t, s, drv, rate_hz=rate_hz) for t in trials]
+        for i, held in enumerate(data):
+            rest = [d for j, d in enumerate(data) if j != i]
+            seg = fit_segment(rest, drv, ridge=ridge)
+            proc = held_out_residual(rest, drv, ridge=ridge)
+            ok = np.isfinite(held.Y).all(axis=1) & np.isfinite(held.X).all(axis=1)
+            pred = held.X[ok] @ seg.rigid_coef
+            Y = held.Y[ok]
+            draws = [pred + proc.draw(held.theta[ok], rate_hz, np.random.default_rng(k)) for k in range(1, seeds + 1)]
+            sim = np.concatenate(draws)
+            out.append(HeldOutAmplitude(
+                held.task, s,
+                tuple(float(np.degrees(_rms_norm(a[:, :3]))) for a in (Y, pred, sim)),
+                tuple(1e3 * _rms_norm(a[:, 3:]) for a in (Y, pred, sim)),
+                (correlation_time([Y - pred], rate_hz),
+                 float(np.mean([correlation_time([d - pred], rate_hz) for d in draws])))))
+    return out

@@ -19,7 +19,11 @@ move by D dq (D = d angle / d q). The markers' error covariance has two parts:
   markers move together by a rigid rotation about their centroid and a translation (standard
   deviations per ISB axis, proportional to the motion away from the reference posture), plus
   independent non-rigid parts. The rigid part is what averaging over a cluster cannot remove: it is
-  why an angle's error under real skin is far larger than its marker residual suggests.
+  why an angle's error under real skin is far larger than its marker residual suggests. The
+  scapula's and the humerus's clusters move together (both skins are dragged by the same arm): their
+  cross second moment, measured on the same pins, couples the two segments' rigid parts;
+* in a run that assumes the thorax still (no thorax marker: ``exubio truth``), the trunk's unseen
+  motion (``trunk_angle_variance``), added by ``observability.angle_determinacy`` to the variance.
 
 The variance is D K Sigma K^T D^T. It is not the residual of this trial: a trial whose markers fit
 the model well can still carry a large rigid artefact, which no residual shows.
@@ -61,8 +65,9 @@ away from the lock; the ISB GH Y-X'-Y'' plane of elevation and axial rotation er
 
 UNCERTAINTY_DEFINITION = (
     f"standard uncertainty (1 SD, deg): {NOISE_MM:g} mm marker noise and the soft-tissue artefact model fitted on "
-    "bone pins (rigid cluster rotation and translation plus non-rigid parts per segment, growing with the motion "
-    "from the reference posture; exubio.trust.sta_amplitude), carried through the reconstruction's first-order "
+    "bone pins (rigid cluster rotation and translation plus non-rigid parts per segment, the scapula's and humerus's "
+    "correlated, growing with the motion from the reference posture; exubio.trust.sta_amplitude), carried through "
+    "the reconstruction's first-order "
     f"sensitivity; an ST, GH or HT angle is not measured where u > {U_BOUND_DEG:g} deg, any angle within "
     f"{GIMBAL_MARGIN_DEG:g} deg of its sequence's gimbal lock (SC, AC and distal angles: u from coefficients borrowed "
     "from the humerus, no bone data)")
@@ -148,6 +153,7 @@ def marker_covariance(kin: Kinematics, points: PointSet, qf: np.ndarray, present
     names = [s.name for s in model.segments]
     hum = names.index("humerus") if "humerus" in names else None
     theta_hum = _rotation_angle(R[:, hum]) if hum is not None else np.zeros(b)
+    seen: dict[str, tuple] = {}  # measured segments: (rows, B, T, theta) for the cross terms
     for s_idx in np.unique(points.segment_index):
         sel = np.flatnonzero(points.segment_index == s_idx)
         seg = names[s_idx]
@@ -186,6 +192,20 @@ def marker_covariance(kin: Kinematics, points: PointSet, qf: np.ndarray, present
                 C[:, a_i, :, a_i, :] += S_nr
         rows = (3 * sel[:, None] + np.arange(3)[None, :]).reshape(-1)
         sigma[:, rows[:, None], rows[None, :]] += C.reshape(b, 3 * len(sel), 3 * len(sel))
+        if measured and not misfit_only:
+            seen[seg] = (rows, B, T, theta)
+    names_seen = list(seen)
+    for i, a in enumerate(names_seen):  # two bones' clusters move together (both driven by the arm)
+        for c in names_seen[i + 1:]:
+            X = amplitude.cross_of(a, c) if hasattr(amplitude, "cross_of") else None
+            if X is None:
+                continue
+            ra, Ba, Ta, tha = seen[a]
+            rc, Bc, Tc, _ = seen[c]
+            S = Ta @ X[None] @ np.swapaxes(Tc, -1, -2) * (tha ** 2)[:, None, None]
+            Cx = np.einsum("bixk,bkl,bjyl->bixjy", Ba, S, Bc).reshape(b, ra.size, rc.size)
+            sigma[:, ra[:, None], rc[None, :]] += Cx
+            sigma[:, rc[:, None], ra[None, :]] += np.swapaxes(Cx, 1, 2)
     return sigma
 
 
@@ -198,3 +218,53 @@ def expected_residual_ms(J: np.ndarray, K: np.ndarray, sigma: np.ndarray, /) -> 
     R = I_H @ sigma @ np.swapaxes(I_H, -1, -2)
     d = np.einsum("bii->bi", R).reshape(b, n3 // 3, 3)
     return d.sum(axis=2) / 3.0
+
+
+def trunk_angle_variance(kin: Kinematics, points: PointSet, qf: np.ndarray, DK: np.ndarray, trunk: np.ndarray,
+                         /) -> np.ndarray:
+    """(b, a) rad^2: what a trunk that moves unseen, in a run that assumes the thorax still, adds to
+    each anatomical angle's variance at poses qf (b, m). The trunk turns by omega (thorax axes, about
+    IJ: the thorax frame's origin) and IJ moves by t, with second moment ``trunk`` (6, 6) per rad^2
+    of the humerus's rotation (exubio.truth.trunk_amplitude); every marker then moves by
+    omega x (p - IJ) + t in the assumed thorax frame, and the reconstruction follows by DK (b, a, 3k:
+    the angles' change per marker displacement) as far as the model lets it (the sternoclavicular
+    joint and the ellipsoid are fixed in the thorax); the angles relative to the (assumed) thorax
+    (SC, ST, HT) of the bones themselves turn by omega, the relative ones (AC, GH, distal) do not. The
+    error is the difference: E = DK B - G, variance E C E^T theta^2."""
+    from exubio.model.angles import anatomical_frames, angles_of_frames, segment_anatomical_rotations
+
+    model = kin.model
+    b = qf.shape[0]
+    R, p = kin.poses(qf)
+    names = [s.name for s in model.segments]
+    origin = p[:, names.index("thorax")] if "thorax" in names else np.zeros((b, 3))
+    T = R[:, names.index("thorax")] if "thorax" in names else np.broadcast_to(np.eye(3), (b, 3, 3))
+    r = kin.points(qf, points) - origin[:, None, :]  # (b, k, 3)
+    B = np.concatenate([-_skew(r), np.broadcast_to(np.eye(3), r.shape + (3,))], axis=-1)  # (b, k, 3, 6)
+    B = B.reshape(b, -1, 6)
+    T6 = np.zeros((b, 6, 6))
+    T6[:, :3, :3] = T
+    T6[:, 3:, 3:] = T
+    frames = segment_anatomical_rotations(model, qf, kinematics=kin, frames=anatomical_frames(model), rotations=R)
+    sets = list(angles_of_frames(frames))
+
+    def table(fr):
+        a = angles_of_frames(fr)
+        return np.concatenate([a[s] for s in sets], axis=-1)
+
+    base = table(frames)
+    n_a = DK.shape[1]
+    G = np.zeros((b, n_a, 6))
+    eps = 1e-6
+    for i in range(3):
+        w = np.zeros(3)
+        w[i] = eps
+        Q = np.eye(3) + _skew(w)  # first order: the bones turn by w about the thorax's axes
+        moved = {s: (F if s == "thorax" else Q @ F) for s, F in frames.items()}
+        d = (table(moved) - base + np.pi) % (2 * np.pi) - np.pi
+        G[:, : d.shape[1], i] = d / eps
+    E = (DK @ B - G) @ T6  # (b, a, 6): per unit of the trunk's motion in its own axes
+    names_seg = names
+    hum = names_seg.index("humerus") if "humerus" in names_seg else None
+    theta = _rotation_angle(R[:, hum]) if hum is not None else np.zeros(b)
+    return np.einsum("bai,ij,baj->ba", E, np.asarray(trunk, dtype=float), E) * theta[:, None] ** 2

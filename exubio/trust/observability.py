@@ -336,7 +336,7 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
                       *, held: np.ndarray, locked: np.ndarray, every: int = 1,
                       rules: Mapping[str, str] | None = None, amplitude=None,
                       noise_mm: float | None = None, residuals_m: np.ndarray | None = None,
-                      bounded: bool = True) -> AngleDeterminacy:
+                      bounded: bool = True, thorax_assumed_still: bool = False) -> AngleDeterminacy:
     """Measured / modelled / not measured for every anatomical angle (exubio.model.angles.ANATOMICAL_ANGLES)
     in the frames of q (n, m), computed every ``every``-th frame and copied to the frames between.
     held: (m,) bool, coordinates a protocol rule holds; locked: (m,) bool, coordinates of segments
@@ -346,7 +346,9 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
     given) is computed with it; an angle is not measured
     where it exceeds the bound or where its sequence is near its gimbal lock. ``bounded=False``: the
     markers' determinacy alone (what a marker set can see, e.g. whether dropping a marker loses an
-    angle), no uncertainty computed."""
+    angle), no uncertainty computed. ``thorax_assumed_still``: the run has no thorax marker and takes
+    the thorax as fixed (exubio truth): the unseen trunk motion of the amplitude model's ``trunk``
+    (exubio.trust.angle_uncertainty.trunk_angle_variance) is added to every angle's variance."""
     from exubio.model.angles import anatomical_table, segment_anatomical_rotations
     from exubio.trust import angle_uncertainty as AU
     amplitude = amplitude if amplitude is not None else _shipped_amplitude()
@@ -392,6 +394,10 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
                     residual_m=residuals_m[sel[part]], expected_ms=AU.expected_residual_ms(Jm, K, Sigma))
             DK = D @ K
             var_u = np.einsum("bai,bij,baj->ba", DK, Sigma, DK)
+            if thorax_assumed_still:
+                if getattr(amplitude, "trunk", None) is None:
+                    raise ValueError("thorax_assumed_still needs an amplitude model with a trunk second moment")
+                var_u = var_u + AU.trunk_angle_variance(kin, points, qf, DK, amplitude.trunk)
             unc[part] = np.where(unseen, np.inf, np.sqrt(np.maximum(var_u, 0.0)))
         dep_locked[part] = (np.abs(D[:, :, locked]) > 1e-6).any(axis=2) if locked.any() else False
         if held.any():

@@ -38,6 +38,9 @@ class STAAmplitude:
     translation: Mapping[str, np.ndarray]
     nonrigid: Mapping[str, np.ndarray]
     rigid: Mapping[str, np.ndarray] = field(default_factory=dict)  # (6, 6): rotation + translation second moment
+    cross: Mapping[str, np.ndarray] = field(default_factory=dict)  # "a|b" -> (6, 6): a's rigid motion x b's
+    trunk: np.ndarray | None = None  # (6, 6): the unseen trunk's rotation + IJ displacement (thorax axes) per rad^2
+    trunk_source: str = ""
     source: str = ""
     citation: str = ""
     extra: Mapping[str, object] = field(default_factory=dict)
@@ -54,6 +57,15 @@ class STAAmplitude:
             C = np.diag(np.r_[np.asarray(self.rotation[seg]) ** 2, np.asarray(self.translation[seg]) ** 2])
         return C, np.asarray(self.nonrigid[seg]), seg == segment
 
+    def cross_of(self, a: str, b: str) -> np.ndarray | None:
+        """(6, 6) second moment per rad^2 of driver between segment a's rigid cluster motion (rows)
+        and b's (columns), both from bone data in the same frames; None where not measured."""
+        if f"{a}|{b}" in self.cross:
+            return np.asarray(self.cross[f"{a}|{b}"], dtype=float)
+        if f"{b}|{a}" in self.cross:
+            return np.asarray(self.cross[f"{b}|{a}"], dtype=float).T
+        return None
+
     def to_json(self) -> dict:
         r = lambda d: {k: [round(float(x), 6) for x in np.asarray(v)] for k, v in d.items()}
         return {"schema": "exubio sta amplitude 1", "source": self.source,
@@ -64,7 +76,19 @@ class STAAmplitude:
                 "rotation": r(self.rotation), "translation": r(self.translation), "nonrigid": r(self.nonrigid),
                 "rigid_second_moment": {k: [[float(f"{x:.6g}") for x in row] for row in np.asarray(v)]
                                         for k, v in self.rigid.items()},
-                "rigid_second_moment_units": "(rotation vector rad, translation m) x same, per rad^2 of driver"}
+                "rigid_second_moment_units": "(rotation vector rad, translation m) x same, per rad^2 of driver",
+                **({"rigid_cross_second_moment": {k: [[float(f"{x:.6g}") for x in row] for row in np.asarray(v)]
+                                                  for k, v in self.cross.items()},
+                    "rigid_cross_second_moment_units": "'A|B': A's (rotation vector rad, translation m) x B's, per "
+                                                       "rad^2 of driver, pooled over the frames where both bones "
+                                                       "are seen (the two clusters' artefacts move together)"}
+                   if self.cross else {}),
+                **({"trunk_second_moment": [[float(f"{x:.6g}") for x in row] for row in np.asarray(self.trunk)],
+                    "trunk_second_moment_units": "the thorax's rotation vector from its start (rad, its ISB axes) and "
+                                                 "IJ's displacement (m, same axes) x same, per rad^2 of driver: the "
+                                                 "trunk motion a run that assumes the thorax still cannot see "
+                                                 "(exubio.truth.trunk_amplitude)",
+                    "trunk_source": self.trunk_source} if self.trunk is not None else {})}
 
 
 def load_sta_amplitude(path: str | Path | None = None, /) -> STAAmplitude:
@@ -84,8 +108,15 @@ def load_sta_amplitude(path: str | Path | None = None, /) -> STAAmplitude:
         for key in ("rotation", "translation", "nonrigid"):
             out[key] = {seg: np.asarray(v, dtype=float).reshape(3) for seg, v in data[key].items()}
         rigid = {seg: np.asarray(v, dtype=float).reshape(6, 6) for seg, v in data.get("rigid_second_moment", {}).items()}
+        cross = {pair: np.asarray(v, dtype=float).reshape(6, 6)
+                 for pair, v in data.get("rigid_cross_second_moment", {}).items()}
+        trunk = (np.asarray(data["trunk_second_moment"], dtype=float).reshape(6, 6)
+                 if "trunk_second_moment" in data else None)
     except (ValueError, KeyError, TypeError) as exc:
         raise InputError(f"{where}: not an STA amplitude model ({type(exc).__name__}: {exc}); expected the JSON "
                          "that exubio.truth.sta_amplitude.write_sta_amplitude writes") from None
-    return STAAmplitude(out["rotation"], out["translation"], out["nonrigid"], rigid, str(data.get("source", "")),
-                        str(data.get("citation", "")))
+    bad = [pair for pair in cross if pair.count("|") != 1]
+    if bad:
+        raise InputError(f"{where}: 'rigid_cross_second_moment' keys must be 'A|B' (two segments), got {bad}")
+    return STAAmplitude(out["rotation"], out["translation"], out["nonrigid"], rigid, cross, trunk,
+                        str(data.get("trunk_source", "")), str(data.get("source", "")), str(data.get("citation", "")))

@@ -101,6 +101,31 @@ def _protocol(run: BoneLabRun, model):
         return protocol_for_model(model, path)
 
 
+STILL_THORAX_COST = ("each angle's uncertainty carries the cost of that assumption: a trunk moving unseen as much as "
+                     "the trunks of real arm tasks with thorax markers do (exubio.truth.trunk_amplitude), through the "
+                     "reconstruction")
+
+
+def _still_thorax_status(inputs, rec):
+    """The angles' status and uncertainty of ``rec`` as ``exubio reconstruct`` gives them, plus the
+    cost of the still thorax this run assumes (observability.angle_determinacy,
+    ``thorax_assumed_still``)."""
+    from ..methods.common import tracked_points
+    from ..methods.poses import held_mask
+    from ..model.kinematics import Kinematics
+    from ..trust.assess import DETERMINACY_PERIOD_S, not_solved_mask
+    from ..trust.observability import angle_determinacy
+
+    model, protocol, targets = inputs.model, inputs.protocol, inputs.targets
+    kin = Kinematics(model)
+    held = held_mask(model, protocol)
+    dt = float(np.median(np.diff(targets.time_s))) if targets.n_frames > 1 else 1.0
+    return angle_determinacy(kin, tracked_points(kin, protocol), rec.q_rad, targets.present, protocol.weights,
+                             held=held, locked=not_solved_mask(model, protocol, kin) & ~held,
+                             every=max(1, int(round(DETERMINACY_PERIOD_S / dt))), residuals_m=rec.residuals_m,
+                             thorax_assumed_still=True)
+
+
 def compare_bone_trial(run: BoneLabRun, /, *, methods: Sequence[str] = ("pf", "ls")) -> tuple[TruthComparison, dict]:
     """Reconstruct ``run`` with each method (its verdict as ``exubio reconstruct`` gives it) and
     compare its angles with the bone's. Returns the comparison and the reconstructions by method."""
@@ -123,6 +148,7 @@ def compare_bone_trial(run: BoneLabRun, /, *, methods: Sequence[str] = ("pf", "l
         raise ReconstructionError(f"{run.trial.path}: every method failed: "
                                   + "; ".join(f"{m.upper()}: {r}" for m, r in failed.items()))
     assessment = assess_inputs(inputs, list(recs.values()))
+    still = {m: _still_thorax_status(inputs, rec) for m, rec in recs.items()}
     truth = truth_angles(run)
     per_angle: dict[str, dict[str, AngleError]] = {a: {} for a in TRUTH_ANGLES}
     verdicts = {m: f"failed: {reason}" for m, reason in failed.items()}
@@ -130,14 +156,15 @@ def compare_bone_trial(run: BoneLabRun, /, *, methods: Sequence[str] = ("pf", "l
         q = assessment.quality[m]
         verdicts[m] = q.verdict.label if hasattr(q.verdict, "label") else str(q.verdict)
         names, table = anatomical_table(model, rec.q_rad)
-        det = (assessment.angles or {}).get(m)
+        det = still[m]
         for a in TRUTH_ANGLES:
             j = names.index(a)
             measured = (np.ones(rec.n_frames, bool) if det is None
                         else det.status[:, det.names.index(a)] == 0)
             u = None if det is None or det.uncertainty_rad is None else det.uncertainty_rad[:, det.names.index(a)]
             per_angle[a][m] = angle_errors(table[:, j], truth[a], measured, u)
-    comp = TruthComparison(str(run.trial.path), f"{run.trial.lab} {run.trial.task}", run.assumption.text, per_angle,
+    comp = TruthComparison(str(run.trial.path), f"{run.trial.lab} {run.trial.task}",
+                           run.assumption.text + "; " + STILL_THORAX_COST, per_angle,
                            {m: verdicts[m] for m in methods if m in verdicts}, run.trial.n_frames,
                            run.trajectories.rate_hz)
     return comp, recs

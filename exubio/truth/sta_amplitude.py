@@ -113,13 +113,16 @@ def fit_sta_amplitude(trials: Sequence[tuple[BoneTrial, float]], /, *, source: s
     pooled over their frames. Bones fitted: those of ``exubio.trust.sta_amplitude.SEGMENTS_WITH_DATA``
     present in the trials."""
     pooled: dict[str, dict[str, list]] = {}
+    cross_num, cross_den = np.zeros((6, 6)), 0.0
     for trial, rate in trials:
         rest = _rest(trial, rate)
         theta = humerus_driver(trial, rest)
+        both = {}
         for bone in ("scapula", "humerus"):
             if bone not in trial.segments:
                 continue
             s = segment_sta(trial, bone, rest)
+            both[bone] = np.concatenate([s["rotation"], s["translation"]], axis=1)
             p = pooled.setdefault(bone, {"rotation": [], "translation": [], "nonrigid": [], "theta": [], "theta_k": []})
             p["rotation"].append(s["rotation"])
             p["translation"].append(s["translation"])
@@ -127,6 +130,10 @@ def fit_sta_amplitude(trials: Sequence[tuple[BoneTrial, float]], /, *, source: s
             p["nonrigid"].append(s["nonrigid"].reshape(-1, 3))
             p["theta"].append(theta)
             p["theta_k"].append(np.repeat(theta, k))
+        if len(both) == 2:
+            ok = np.isfinite(both["scapula"]).all(axis=1) & np.isfinite(both["humerus"]).all(axis=1) & np.isfinite(theta)
+            cross_num += both["scapula"][ok].T @ both["humerus"][ok]
+            cross_den += float(np.sum(theta[ok] ** 2))
     if not pooled:
         raise InputError("fit_sta_amplitude: no trial with a scapula or a humerus")
     rot, tra, nr, rigid = {}, {}, {}, {}
@@ -139,7 +146,8 @@ def fit_sta_amplitude(trials: Sequence[tuple[BoneTrial, float]], /, *, source: s
         ok = np.isfinite(x).all(axis=1) & np.isfinite(th)
         rigid[bone] = x[ok].T @ x[ok] / max(float(np.sum(th[ok] ** 2)), 1e-300)
     files = ", ".join(t.path.name for t, _ in trials)
-    return STAAmplitude(rotation=rot, translation=tra, nonrigid=nr, rigid=rigid,
+    cross = {"scapula|humerus": cross_num / cross_den} if cross_den > 0 else {}
+    return STAAmplitude(rotation=rot, translation=tra, nonrigid=nr, rigid=rigid, cross=cross,
                         source=source or f"fitted on {files} ({datetime.date.today().isoformat()})")
 
 

@@ -184,3 +184,134 @@ def test_cli_sta_fit_writes_a_model_simulate_can_use(tmp_path):
     assert m.segments["scapula"].fit["tasks"] == ["armAbd", "armFlex"]
     assert main(["simulate", "--motion", "flexion", "--duration", "1", "--rate", "20", "--sta", str(out),
                  "--out", str(tmp_path / "f.c3d")]) == 0
+
+
+# --------------------------------------------------------------------------------------------
+# The held-out residual (exubio.synth.sta_residual): stated amplitude, correlation, seeds
+# --------------------------------------------------------------------------------------------
+def _process(tau_s: float = 0.5):
+    from exubio.synth.sta_residual import ResidualProcess
+
+    A = np.diag([0.03, 0.02, 0.01, 0.004, 0.002, 0.003])
+    A[3, 0] = 0.003  # a rotation and a translation that go together
+    return ResidualProcess(A @ A.T, tau_s, {"tasks": ["synthetic"]})
+
+
+def test_residual_draws_have_the_stated_covariance_and_correlation_time():
+    """A long draw at a constant humerus rotation of 1 rad: its second moment is the stated one and
+    its autocorrelation falls to 1/e at the stated correlation time (both measured here with plain
+    numpy, not with the module's estimator); the same seed gives the same draw; no motion, no residual."""
+    proc = _process(0.5)
+    rate, n = 100.0, 60000  # 1200 correlation times
+    x = proc.draw(np.ones(n), rate, np.random.default_rng(5))
+    C = x.T @ x / n
+    np.testing.assert_allclose(np.diag(C), np.diag(proc.cov_per_rad2), rtol=0.1)
+    assert C[3, 0] / np.sqrt(C[0, 0] * C[3, 3]) == pytest.approx(
+        proc.cov_per_rad2[3, 0] / np.sqrt(proc.cov_per_rad2[0, 0] * proc.cov_per_rad2[3, 3]), abs=0.05)
+    z = x[:, 0] / np.sqrt(np.mean(x[:, 0] ** 2))
+    lag = int(0.5 * rate)
+    assert np.mean(z[:-lag] * z[lag:]) == pytest.approx(np.exp(-1.0), abs=0.06)
+    assert np.mean(z[:-1] * z[1:]) > 0.99  # smooth: no jump from one frame to the next
+    np.testing.assert_array_equal(x, proc.draw(np.ones(n), rate, np.random.default_rng(5)))
+    assert not np.array_equal(x, proc.draw(np.ones(n), rate, np.random.default_rng(6)))
+    theta = np.linspace(0.0, 1.5, 300)
+    assert np.all(proc.draw(theta, rate, np.random.default_rng(1))[0] == 0.0)
+
+
+def test_measure_residual_recovers_a_known_process():
+    """Residuals drawn from a known process under a varying humerus rotation, as held-out tasks:
+    the measured amplitude per rad and correlation time are the known ones."""
+    from exubio.synth.sta_residual import measure_residual
+
+    proc = _process(0.4)
+    rate = 100.0
+    t = np.arange(20000) / rate
+    thetas = [1.2 * (1 - np.cos(2 * np.pi * t / (4.0 + k))) / 2 for k in range(3)]
+    res = [proc.draw(th, rate, np.random.default_rng(10 + k)) for k, th in enumerate(thetas)]
+    got = measure_residual(res, thetas, rate, tasks=["a", "b", "c"])
+    np.testing.assert_allclose(got.sd_per_rad, proc.sd_per_rad, rtol=0.12)
+    # theta varies slowly against 0.4 s, so the residual's own correlation time is the process's
+    assert got.correlation_time_s == pytest.approx(0.4, rel=0.15)
+    assert got.measured["frames"] == 60000 and got.measured["tasks"] == ["a", "b", "c"]
+
+
+def test_a_model_with_a_residual_round_trips_and_a_bad_one_is_refused():
+    m = load_sta_model("bone")
+    assert all(s.residual is not None for s in m.segments.values())
+    back = BoneStaModel.from_json(m.to_json())
+    for s, seg in m.segments.items():
+        np.testing.assert_allclose(back.segments[s].residual.cov_per_rad2, seg.residual.cov_per_rad2, rtol=1e-5)
+        assert back.segments[s].residual.correlation_time_s == pytest.approx(seg.residual.correlation_time_s)
+        assert "leave one task out" in m.to_json()["segments"][s]["residual"]["how"]
+    bad = m.to_json()
+    bad["segments"]["scapula"]["residual"]["cov_per_rad2"] = [[1.0, 0.0], [0.0, 1.0]]
+    with pytest.raises(InputError, match="segment 'scapula'.*cov_per_rad2"):
+        BoneStaModel.from_json(bad)
+    bad = m.to_json()
+    bad["segments"]["humerus"]["residual"]["correlation_time_s"] = -1
+    with pytest.raises(InputError, match="correlation_time_s"):
+        BoneStaModel.from_json(bad)
+
+
+@needs_data
+def test_the_shipped_residual_is_what_the_pins_leave_on_held_out_tasks():
+    """The shipped residual is reproduced from the S2M data by its stated measurement (leave one task
+    out), independently recomputed here: fit on three tasks, residual on the fourth, pooled."""
+    from exubio.synth.sta_bone import DEFAULT_DRIVERS, DEFAULT_RIDGE
+    from exubio.truth.sta_format import read_sta_trial
+
+    shipped = load_sta_model("bone")
+    trials = [read_sta_trial(p) for p in S2M]
+    for s, drv in DEFAULT_DRIVERS.items():
+        data = [segment_data(t, s, drv, rate_hz=300.0) for t in trials]
+        num, den = np.zeros((6, 6)), 0.0
+        for i, held in enumerate(data):
+            seg = fit_segment([d for j, d in enumerate(data) if j != i], drv, ridge=DEFAULT_RIDGE[s])
+            ok = np.isfinite(held.Y).all(axis=1)
+            r = held.Y[ok] - held.X[ok] @ seg.rigid_coef
+            num += r.T @ r
+            den += float(np.sum(held.theta[ok] ** 2))
+        np.testing.assert_allclose(shipped.segments[s].residual.cov_per_rad2, num / den, rtol=1e-4, atol=1e-12)
+        assert 0.1 < shipped.segments[s].residual.correlation_time_s < 3.0
+
+
+def test_simulated_clusters_carry_the_stated_residual(model, kin):
+    """simulate --sta bone: the scapula and humerus clusters' rigid motion over their bones, minus the
+    regression's mean course (computed here from the simulated angles), has the model's stated
+    residual amplitude per rad of humerus rotation (pooled over seeds, within 30 %: about 100
+    correlation times); the same seed gives the same trial."""
+    from exubio.model.angles import segment_anatomical_rotations
+    from exubio.synth.simulate import simulate_trial
+    from exubio.synth.sta_bone import simulation_drivers
+
+    shipped = load_sta_model("bone")
+    segs = {s: SegmentSta(m.drivers, m.rigid_coef, 0.0, np.zeros((0, len(m.feature_names), 3)), {}, m.residual)
+            for s, m in shipped.segments.items()}  # no non-rigid part: the cluster moves rigidly
+    bone = BoneStaModel(segs, dict(shipped.meta), shipped.name)
+    truth = simulate_trial(model, "abduction", duration_s=10.0, rate_hz=30, lab_transform=False)
+    Rg = segment_anatomical_rotations(model, truth.q_true, kinematics=kin)
+    drivers = simulation_drivers(Rg["scapula"], Rg["humerus"])
+    theta2 = np.sum(drivers["humerus_rotation"] ** 2)
+    sums = {s: np.zeros(6) for s in segs}
+    for seed in range(1, 9):
+        sim = simulate_trial(model, "abduction", duration_s=10.0, rate_hz=30, sta_mm=0.0, sta_model=bone,
+                             lab_transform=False, seed=seed)
+        np.testing.assert_array_equal(sim.q_true, truth.q_true)
+        if seed == 1:
+            again = simulate_trial(model, "abduction", duration_s=10.0, rate_hz=30, sta_mm=0.0, sta_model=bone,
+                                   lab_transform=False, seed=seed)
+            np.testing.assert_array_equal(sim.trajectories.positions_m, again.trajectories.positions_m)
+        for s in segs:
+            idx = [i for i, x in enumerate(sim.marker_segments) if x == s]
+            R = Rg[s]
+            p0 = truth.trajectories.positions_m[:, idx]
+            local = p0[0] @ R[0] + np.einsum("nji,nkj->nki", R, sim.trajectories.positions_m[:, idx] - p0)
+            split = rigid_split(local, 1)
+            mean = features(drivers, segs[s].drivers, n_reference=1) @ segs[s].rigid_coef
+            r = np.concatenate([split.rotation, split.translation], axis=1) - mean
+            sums[s] += np.sum(r ** 2, axis=0)
+    for s, seg in segs.items():
+        stated = np.diag(seg.residual.cov_per_rad2)
+        got = sums[s] / (8 * theta2)
+        assert np.sum(got[:3]) == pytest.approx(np.sum(stated[:3]), rel=0.3), s
+        assert np.sum(got[3:]) == pytest.approx(np.sum(stated[3:]), rel=0.3), s

@@ -24,7 +24,8 @@ def _renamed(traj, old, new):
 def test_a_typo_on_a_redundant_marker_is_left_out_with_a_check(tmp_path, trial):
     """SCAP_Cor labelled CAP_Cor: the scapula keeps five markers and every angle stays measured in
     nearly as many frames as with every marker (fewer scapula markers average less of the skin's
-    artefact: near HT 110 deg ST upward rotation's uncertainty passes the bound in a tenth of them)."""
+    artefact: near HT 110 deg ST upward rotation's uncertainty passes the bound in a sixth of them, since
+    the uncertainty carries the scapula and humerus clusters' artefacts moving together)."""
     path = write_c3d(tmp_path / "typo.c3d", _renamed(trial, "SCAP_Cor", "CAP_Cor"))
     out = tmp_path / "out"
     assert main(["-q", "reconstruct", str(path), "--method", "ls", "--no-report", "--out", str(out)]) == 0
@@ -37,8 +38,8 @@ def test_a_typo_on_a_redundant_marker_is_left_out_with_a_check(tmp_path, trial):
                  "--out", str(whole)]) == 0
     full = json.loads((whole / "typo.ls.summary.json").read_text(encoding="utf-8"))["anatomical_angles"]
     for name in ("ST_X_upward_rotation", "ST_Y_internal_rotation", "GH_phadke_X_elevation", "HT_X_elevation"):
-        # measured: 0.9 of the frames for ST upward rotation without SCAP_Cor (1.0 with it), the rest as with it
-        assert summ["anatomical_angles"]["frames_measured_fraction"][name] >= full["frames_measured_fraction"][name] - 0.15
+        # measured: 0.83 of the frames for ST upward rotation without SCAP_Cor (1.0 with it), the rest as with it
+        assert summ["anatomical_angles"]["frames_measured_fraction"][name] >= full["frames_measured_fraction"][name] - 0.2
 
 
 def test_markers_whose_loss_costs_an_angle_are_refused(tmp_path, trial, capsys):
