@@ -240,7 +240,7 @@ def test_the_shipped_cross_term_is_the_pins_and_makes_one_joint_covariance(tmp_p
     assert np.linalg.eigvalsh(J).min() > -1e-12
     back = load_sta_amplitude(write_sta_amplitude(amp, tmp_path / "a.json"))
     np.testing.assert_allclose(back.cross_of("scapula", "humerus"), X, rtol=1e-5)
-    data = Path(__file__).resolve().parents[2] / "shared" / "data" / "truth" / "sta_opendata"
+    data = Path(__file__).resolve().parents[3] / "shared" / "data" / "truth" / "sta_opendata"
     s2m = sorted(data.glob("dataSample_S2M_*.mat"))
     if len(s2m) < 4:
         pytest.skip("../shared/data/truth/sta_opendata absent")

@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 from exubio.errors import InputError
 from exubio.truth.trunk_amplitude import fit_trunk_amplitude, thorax_frames, trunk_motion
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "c3d"
+DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "c3d"
 
 
 def _trial(rotvec, shift, hum_angle):
