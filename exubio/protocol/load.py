@@ -4,7 +4,7 @@ labels to it is exubio.protocol.labels).
 YAML is parsed by :mod:`exubio.io.yaml`, the one place that calls ``yaml.safe_load``. The file format is documented at
 the top of ``protocols/upper_limb_21.yaml``.
 
-Kept whole: one job, every key of the format checked side by side, each error naming its file and key.
+Where the files are: exubio.protocol.files; one marker's keys: exubio.protocol.marker_spec.
 """
 from __future__ import annotations
 
@@ -18,9 +18,13 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from exubio.errors import ProtocolError
-from exubio.io.resources import resolve, shipped_file, shipped_names
 from exubio.io.yaml import _kind, check_keys, finite_float, read_yaml
 from exubio.protocol.analog_loads import parse_analog_loads
+from exubio.protocol.keys import (_DEFAULT_KEYS, _FILTER_KEYS, _FRAME_KEYS, _MARKER_KEYS,  # noqa: F401
+                                  _MIDPOINT_FRAME_KEYS, _TOP_KEYS, SCHEMA_VERSION, THORAX_SEGMENT)
+from exubio.protocol.files import (_find_base, _read_extended, find_other_arm, read_protocol_mapping,  # noqa: F401
+                                   resolve_protocol, shipped_protocols)
+from exubio.protocol.marker_spec import _number, _parse_marker, check_landmarks  # noqa: F401
 from exubio.types import MarkerSpec, Protocol, ThoraxFrameSpec
 
 __all__ = [
@@ -35,27 +39,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-SCHEMA_VERSION = 1
-THORAX_SEGMENT = "thorax"  # the fixed segment: its markers only build the thorax frame
-
-_TOP_KEYS = ("schema_version", "name", "description", "thorax_frame", "filter", "defaults", "markers", "hold",
-             "relabel", "extends", "side", "other_arm", "analog_loads", "signs")
-_FRAME_KEYS = ("ij", "px", "c7", "t8")
-_MIDPOINT_FRAME_KEYS = ("ij", "ij_c7_midpoint", "px_t8_midpoint")
-_FILTER_KEYS = ("cutoff_hz", "order")
-_DEFAULT_KEYS = ("stiffness_n_per_m", "damping_ns_per_m", "pf_inertia_scale")
-_MARKER_KEYS = (
-    "segment",
-    "point",
-    "local_position_mm",
-    "aliases",
-    "stiffness_n_per_m",
-    "damping_ns_per_m",
-    "optional",
-    "landmark",
-    "landmark_offset_mm",
-    "cluster",
-)
 _FALLBACK_STIFFNESS = 1500.0
 _FALLBACK_DAMPING = 300.0
 _FALLBACK_CUTOFF = 2.0
@@ -212,83 +195,6 @@ def load_protocol(
     )
 
 
-def resolve_protocol(value: str | os.PathLike[str], /) -> Path:
-    """A protocol file the user named: a path, or the name of a shipped protocol ("upper_limb_21")."""
-    return resolve(value, "exubio.protocols", "protocols", "upper_limb_21.yaml")
-
-
-def shipped_protocols() -> list[str]:
-    """The names of the shipped protocols."""
-    return shipped_names("exubio.protocols", "protocols", "upper_limb_21.yaml")
-
-
-def find_other_arm(path: str | os.PathLike[str], /) -> Path:
-    """The protocol file a protocol's ``other_arm`` names: next to it, else a shipped one of that name;
-    ProtocolError naming the file when it has no other_arm, or the one named is not found."""
-    src = resolve_protocol(path)
-    ref = read_protocol_mapping(src).get("other_arm")
-    if not isinstance(ref, str) or not ref.strip():
-        raise ProtocolError(f"{src}: no other_arm key; --both-arms needs it (other_arm: <the other arm's protocol "
-                            f"file>), or give --protocol twice, one per arm")
-    return _find_base(ref, Path(src), "other_arm")
-
-
-def read_protocol_mapping(path: str | os.PathLike[str], /) -> dict[str, Any]:
-    """The top-level mapping of a protocol file with its ``extends`` chain merged in (what
-    load_protocol validates): for code that needs the file's own words, such as the ``point:``
-    each marker names. Raises ProtocolError like load_protocol for unreadable files, unknown keys,
-    a wrong schema_version or a broken ``extends``."""
-    return _read_extended(resolve_protocol(path), ())[0]
-
-
-def _read_extended(path: Path, seen: tuple[Path, ...]) -> tuple[dict[str, Any], dict[str, str]]:
-    """The top-level mapping of a protocol file, merged over the file it ``extends`` (whose keys it
-    replaces), and for each key the file it comes from. Every file in the chain is checked for
-    unknown keys and its schema_version."""
-    src = str(path)
-    data = read_yaml(path, error=ProtocolError)
-    check_keys(data, _TOP_KEYS, where="", source=src)
-    if "schema_version" not in data:
-        raise ProtocolError(f"{src}: missing key 'schema_version'; expected 'schema_version: {SCHEMA_VERSION}'")
-    version = data["schema_version"]
-    if isinstance(version, bool) or version != SCHEMA_VERSION:
-        raise ProtocolError(
-            f"{src}: schema_version is {version!r}; this exubio reads schema_version {SCHEMA_VERSION}"
-        )
-    own = {key: src for key in data if key != "extends"}
-    if "extends" not in data:
-        return data, own
-    base = _find_base(data["extends"], path)
-    chain = (*seen, path.resolve())
-    if base.resolve() in chain:
-        names = " -> ".join(str(p) for p in (*chain, base.resolve()))
-        raise ProtocolError(f"{src}: extends: '{data['extends']}' leads back to a file already in the chain ({names})")
-    merged, origin = _read_extended(base, chain)
-    merged = {**merged, **{k: v for k, v in data.items() if k != "extends"}}
-    return merged, {**origin, **own}
-
-
-def _find_base(ref: Any, path: Path, key: str = "extends") -> Path:
-    """The file an ``extends:`` names: relative to the extending file's folder, else a shipped
-    protocol of that name (with or without .yaml)."""
-    src = str(path)
-    if not isinstance(ref, str) or not ref.strip():
-        raise ProtocolError(f"{src}: {key} must be the name of a protocol file, got {_kind(ref)}")
-    ref = ref.strip()
-    local = path.parent / ref
-    if local.is_file():
-        return local
-    shipped_dir = shipped_file("exubio.protocols", "upper_limb_21.yaml", "protocols").parent
-    for name in (ref, f"{ref}.yaml"):
-        candidate = shipped_dir / name
-        if Path(name).name == name and candidate.is_file():
-            return candidate
-    shipped = sorted(p.name for p in shipped_dir.glob("*.yaml"))
-    raise ProtocolError(
-        f"{src}: {key}: '{ref}' not found; looked for {local} and among the shipped protocols {shipped}"
-    )
-
-
 def _parse_relabel(raw: Any, src: str) -> Mapping[str, str]:
     """``relabel: {trial label: label to read it as}``: a renaming of trial labels, applied before
     they are matched; no two labels may be read as the same one."""
@@ -401,172 +307,3 @@ def _parse_defaults(data: Mapping[str, Any], src: str) -> tuple[float, float]:
     c = _number(raw.get("damping_ns_per_m", _FALLBACK_DAMPING), "defaults.damping_ns_per_m", src,
                 minimum=0.0, strict=False)
     return k, c
-
-
-def _parse_marker(
-    name: str,
-    spec: Any,
-    src: str,
-    *,
-    segments: tuple[str, ...],
-    model_points: Mapping[str, Mapping[str, np.ndarray]] | None,
-    stiffness0: float,
-    damping0: float,
-) -> MarkerSpec:
-    where = f"markers.{name}"
-    if not isinstance(spec, dict):
-        raise ProtocolError(
-            f"{src}: {where} must be a mapping with at least 'segment', got {_kind(spec)}"
-        )
-    check_keys(spec, _MARKER_KEYS, where=where, source=src)
-
-    if "segment" not in spec:
-        raise ProtocolError(f"{src}: {where}.segment is missing; valid segments are {list(segments)}")
-    segment = spec["segment"]
-    if not isinstance(segment, str) or segment not in segments:
-        hint = difflib.get_close_matches(str(segment), segments, n=1)
-        did = f" (did you mean '{hint[0]}'?)" if hint else ""
-        raise ProtocolError(
-            f"{src}: {where}.segment is {segment!r}{did}; valid segments are {list(segments)}"
-        )
-
-    has_point, has_local = "point" in spec, "local_position_mm" in spec
-    if has_point and has_local:
-        raise ProtocolError(f"{src}: {where} gives both 'point' and 'local_position_mm'; give exactly one")
-    if has_point:
-        local_m = _model_point(spec["point"], segment, where, src, model_points)
-    elif has_local:
-        local_m = _local_position(spec["local_position_mm"], where, src)
-    elif segment == THORAX_SEGMENT:
-        local_m = np.full(3, np.nan)  # thorax landmarks need no position: they are not tracked
-    else:
-        raise ProtocolError(
-            f"{src}: {where} needs its position on '{segment}': give 'point: <model point name>' or "
-            f"'local_position_mm: [x, y, z]'"
-        )
-
-    aliases = spec.get("aliases", [])
-    if aliases is None:
-        aliases = []
-    if isinstance(aliases, str) or not isinstance(aliases, list) or not all(
-        isinstance(a, str) and a for a in aliases
-    ):
-        raise ProtocolError(f"{src}: {where}.aliases must be a list of trial labels, got {_kind(aliases)}")
-    if len(set(aliases)) != len(aliases) or name in aliases:
-        raise ProtocolError(f"{src}: {where}.aliases repeats a label: {aliases} (marker name '{name}')")
-
-    stiffness = _number(spec.get("stiffness_n_per_m", stiffness0), f"{where}.stiffness_n_per_m", src,
-                        minimum=0.0, strict=True)
-    damping = _number(spec.get("damping_ns_per_m", damping0), f"{where}.damping_ns_per_m", src,
-                      minimum=0.0, strict=False)
-    optional = spec.get("optional", False)
-    if not isinstance(optional, bool):
-        raise ProtocolError(f"{src}: {where}.optional must be true or false, got {_kind(optional)}")
-    landmark = spec.get("landmark")
-    if landmark is not None:
-        if not isinstance(landmark, str) or not landmark:
-            raise ProtocolError(f"{src}: {where}.landmark must name a model point of '{segment}', got {_kind(landmark)}")
-    offset = spec.get("landmark_offset_mm")
-    if offset is not None:
-        if landmark is None:
-            raise ProtocolError(f"{src}: {where}.landmark_offset_mm accepts a distance from the marker's landmark; "
-                                f"give its landmark too")
-        offset = _number(offset, f"{where}.landmark_offset_mm", src, minimum=0.0, strict=True)
-        if offset < METRES_BELOW_MM:
-            raise ProtocolError(f"{src}: {where}.landmark_offset_mm is {offset:g}: that looks like metres (below "
-                                f"{METRES_BELOW_MM:g} mm); write millimetres, e.g. {offset * 1000.0:g}")
-    cluster = spec.get("cluster")
-    if cluster is not None and (not isinstance(cluster, str) or not cluster):
-        raise ProtocolError(f"{src}: {where}.cluster must be a name shared by the markers of one rigid cluster, "
-                            f"got {_kind(cluster)}")
-    if landmark is not None and cluster is not None:
-        raise ProtocolError(f"{src}: {where} is both a landmark and in cluster '{cluster}'; a cluster marker is "
-                            f"not placed over a landmark, give one of them")
-
-    return MarkerSpec(
-        name=name,
-        segment=segment,
-        local_position_m=local_m,
-        aliases=tuple(aliases),
-        stiffness_n_per_m=stiffness,
-        damping_ns_per_m=damping,
-        optional=optional,
-        landmark=landmark,
-        cluster=cluster,
-        landmark_offset_mm=offset,
-        point=spec["point"] if has_point else None,
-    )
-
-
-def check_landmarks(protocol: Protocol, model_points: Mapping[str, Mapping[str, Any]], /) -> None:
-    """ProtocolError naming the file and marker when a marker's ``landmark`` is not a point of its
-    segment in the model (checked against the model a protocol is used with)."""
-    for m in protocol.markers:
-        if m.landmark is not None and m.landmark not in model_points.get(m.segment, {}):
-            raise ProtocolError(f"{protocol.source or protocol.name}: markers.{m.name}.landmark '{m.landmark}' is not a "
-                                f"point of segment '{m.segment}' of the model; its points are "
-                                f"{sorted(model_points.get(m.segment, {}))}")
-
-
-def _model_point(
-    point: Any,
-    segment: str,
-    where: str,
-    src: str,
-    model_points: Mapping[str, Mapping[str, np.ndarray]] | None,
-) -> np.ndarray:
-    if not isinstance(point, str) or not point:
-        raise ProtocolError(f"{src}: {where}.point must be a model point name, got {_kind(point)}")
-    if model_points is None:
-        raise ProtocolError(
-            f"{src}: {where}.point is '{point}', but no model points were given to load_protocol; "
-            f"pass model_points= (from the model) or give 'local_position_mm'"
-        )
-    points = model_points.get(segment, {})
-    if not points:
-        raise ProtocolError(
-            f"{src}: {where}.point is '{point}', but segment '{segment}' has no model points; "
-            f"segments with model points are {sorted(s for s, p in model_points.items() if p)}"
-        )
-    if point not in points:
-        hint = difflib.get_close_matches(point, list(points), n=1)
-        did = f" (did you mean '{hint[0]}'?)" if hint else ""
-        raise ProtocolError(
-            f"{src}: {where}.point '{point}' is not a model point of segment '{segment}'{did}; "
-            f"its points are {sorted(points)}"
-        )
-    value = np.array(points[point], dtype=float)
-    if value.shape != (3,) or not np.all(np.isfinite(value)):
-        raise ProtocolError(
-            f"{src}: {where}.point '{point}' of segment '{segment}' has position {value!r}; expected 3 finite numbers (m)"
-        )
-    return value
-
-
-METRES_BELOW_MM = 1.0
-"""A ``_mm`` value whose largest component is above 0 and below this looks like metres: no marker
-sits within a millimetre of its segment's joint centre, nor is a landmark offset that small."""
-
-
-def _local_position(raw: Any, where: str, src: str) -> np.ndarray:
-    ok = isinstance(raw, list) and len(raw) == 3 and all(finite_float(v) is not None for v in raw)
-    if not ok:
-        raise ProtocolError(
-            f"{src}: {where}.local_position_mm must be a list of 3 numbers [x, y, z] in mm, finite, got "
-            f"{repr(raw) if isinstance(raw, list) else _kind(raw)}"
-        )
-    value = np.array(raw, dtype=float)
-    if 0.0 < np.abs(value).max() < METRES_BELOW_MM:
-        raise ProtocolError(
-            f"{src}: {where}.local_position_mm is {raw}: that looks like metres (every value below {METRES_BELOW_MM:g} "
-            f"mm); write millimetres, e.g. {[round(float(v) * 1000.0, 1) for v in value]}")
-    return value / 1000.0
-
-
-def _number(value: Any, where: str, src: str, *, minimum: float, strict: bool) -> float:
-    if finite_float(value) is None:
-        raise ProtocolError(f"{src}: {where} must be a finite number, got {_kind(value)}")
-    if (strict and value <= minimum) or (not strict and value < minimum):
-        need = f"> {minimum:g}" if strict else f">= {minimum:g}"
-        raise ProtocolError(f"{src}: {where} is {value}; expected a number {need}")
-    return float(value)
