@@ -218,20 +218,10 @@ def test_only_the_pf_engine_needs_exudyn_to_import():
 
 
 MAX_LINES = 500
-SPLIT_PENDING: set[str] = set()
-"""Oversized modules whose split by job is not done yet (issue 19): named here so that no other
-module grows past MAX_LINES unnoticed; each leaves this set when it is split."""
 
 
-def test_no_module_over_500_lines_without_a_stated_reason():
-    """A module longer than MAX_LINES says why it stays whole: a line 'Kept whole: ...' in its
-    docstring (one job whose parts only make sense together)."""
-    long = []
-    for rel, path in _modules().items():
-        text = path.read_text(encoding="utf-8")
-        doc = ast.get_docstring(ast.parse(text)) or ""
-        if text.count("\n") > MAX_LINES and "Kept whole:" not in doc and rel not in SPLIT_PENDING:
-            long.append(f"{rel} ({text.count(chr(10))} lines)")
-        if rel in SPLIT_PENDING and text.count("\n") <= MAX_LINES:
-            long.append(f"{rel} is split now: take it off SPLIT_PENDING")
+def test_no_module_over_500_lines():
+    """Small modules with one job: none over MAX_LINES (issue 34; the last five were split by job)."""
+    long = [f"{rel} ({path.read_text(encoding='utf-8').count(chr(10))} lines)" for rel, path in _modules().items()
+            if path.read_text(encoding="utf-8").count("\n") > MAX_LINES]
     assert not long, long
