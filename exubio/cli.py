@@ -30,6 +30,7 @@ import exubio  # noqa: E402
 from exubio.errors import ExubioError, InputError, ModelError, ProtocolError, ReconstructionError  # noqa: E402
 from exubio.run import interrupt  # noqa: E402 - Ctrl-C noted (small: no pipeline)
 from exubio.truth.locator_cli import add_parser as add_locator_parser  # noqa: E402 - small: its work is imported when it runs
+from exubio.run import bids, fill_run  # noqa: E402 - small: --fill's options and work (its solvers are imported when it runs)
 
 if TYPE_CHECKING:  # the CLI imports the pipeline only when a command runs (fast --help)
     from exubio.run.job import TrialJob, TrialResult
@@ -346,6 +347,7 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
                              f"reconstruct them into different --out folders")
         seen[Path(t).stem] = str(t)
     _check_output_folder(Path(args.out), args.out)
+    fill_run.check_fill(args)
     relabel = parse_relabel(args.relabel, option="--relabel")
     static_relabel = parse_relabel(args.static_relabel, option="--static-relabel")
     if static_relabel and not args.static:
@@ -383,6 +385,8 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
     if len(jobs) == 1 and not args.scheduler:  # errors propagate to main(): one message, one exit code
         result = run_job(jobs[0], progress_factory=_progress_factory(not args.quiet))
         _print_trial(result, args.quiet)
+        if args.fill:
+            fill_run.fill_after_run(args, result, calibration.session if calibration else session)
         return _trial_code(result)
     codes = []
     from exubio.run.executors import run_all
@@ -587,6 +591,7 @@ def cmd_study(args: argparse.Namespace) -> int:
     if args.jobs < 1:
         raise InputError(f"--jobs {args.jobs}: expected a whole number of processes >= 1")
     _check_output_folder(Path(args.out), args.out)
+    bids.check_bids(args)
     outcomes = run_study(spec, args.out, jobs=args.jobs, scheduler=args.scheduler,
                          progress=None if args.quiet else (lambda m: print(m, file=sys.stderr)))
     failed = [o for o in outcomes if o.status == "failed"]
@@ -596,6 +601,8 @@ def cmd_study(args: argparse.Namespace) -> int:
           f"table: {Path(args.out) / 'study.csv'}")
     for o in failed:
         print(f"failed: {o.subject}/{o.session}/{Path(o.trial).name}: {o.error}")
+    if args.bids:
+        bids.bids_after_study(args, spec.name)
     return EXIT_FAILED if failed or fails else EXIT_OK
 
 
@@ -770,6 +777,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "and the static pose (repeatable: postures pooled); not used, with the reason, if the movement cannot determine it")
     r.add_argument("--static-frames", help="A:B frames used for the calibration (of --static, or of each trial "
                    "itself when there is no static trial)")
+    fill_run.add_fill_arguments(r)
     r.add_argument("--gravity", action="store_true",
                    help="PF: apply gravity (-Y of the thorax frame); off by default, the springs then also "
                         "carry the limb's weight and model points sag below their markers")
@@ -819,6 +827,7 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--out", help="output folder: <subject>/<session>/<trial>/, study.csv, study.json")
     st.add_argument("--template", action="store_true", help="print a study file with every key explained, and exit")
     st.add_argument("--jobs", type=int, default=1, help="trials in parallel local processes (default 1)")
+    bids.add_bids_arguments(st)
     st.add_argument("--scheduler", help="run the trials on Dask: local:N (a local cluster of N workers) or "
                                         "tcp://HOST:PORT (a running scheduler)")
     st.set_defaults(func=cmd_study)
