@@ -10,7 +10,8 @@ a table of ~350 reconstructions needs). Against the same trial reconstructed wit
 gap length and angle, over the gap frames: the angle's change |error| (median, 95th percentile),
 the fraction of gap frames measured (and in the uncut run), the median standard uncertainty u (and
 in the uncut run), the fraction of frames where |error| <= 2u; per gap length, the fill error
-(exubio.prep.fill, no length limit here) against the cut-out samples, and for reference a cubic
+(exubio.prep.fill, no length limit here; its offset window of 0.1 s a side and of 0.5 s) against
+the cut-out samples, and for reference a cubic
 spline through the marker's measured samples (what a capture program's spline fill does).
 
 Calibration: martin_* trials on bioptim_exo_martin_statique, kinova_martin_* on
@@ -19,11 +20,13 @@ bioptim_exo_kinova_martin_statique; F0_boire_05 (no static of its subject) and t
 
     python studies/gap_table.py            # writes studies/gap_table.csv, prints the Markdown tables
     python studies/gap_table.py --quick    # one C3D trial, three markers: a smoke run
+    python studies/gap_table.py --cache /tmp/gap_rows   # each trial's rows kept: a run cut short resumes
 """
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import pickle
 import sys
 import time
 from pathlib import Path
@@ -34,6 +37,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data"
 LENGTHS_S = (0.1, 0.25, 0.5, 1.0, 2.0)
 SPACING_S = 1.0
+WIDE_WINDOW_S = 0.5  # the fill's offset averaged over 0.5 s a side too, beside the default (exubio.prep.fill.FILL_WINDOW_S)
 START_S = 0.5
 
 C3D = DATA / "c3d"
@@ -128,15 +132,18 @@ def run_trial(trial: Path, protocol: str | None, static: Path | None, markers_li
             err = np.degrees(np.abs(wrap(ang[gap] - ang0[gap])))
             u = np.degrees(det.uncertainty_rad[gap])
             u0 = np.degrees(det0.uncertainty_rad[gap])
-            fill = fill_gaps(cut, model, prot, rec.q_rad, max_gap_s=np.inf)
+            fill = fill_gaps(cut, model, prot, rec.q_rad, max_gap_s=np.inf)  # the default window (FILL_WINDOW_S)
             fe = np.linalg.norm(fill.positions_m[gap, c] - traj.positions_m[gap, c], axis=1) * 1e3
+            wide = fill_gaps(cut, model, prot, rec.q_rad, max_gap_s=np.inf, window_s=WIDE_WINDOW_S)
+            fe_wide = np.linalg.norm(wide.positions_m[gap, c] - traj.positions_m[gap, c], axis=1) * 1e3
             ok = np.isfinite(pos[:, c]).all(axis=1)
             spline = CubicSpline(t_idx[ok], pos[ok, c])(t_idx[gap])
             se = np.linalg.norm(spline - traj.positions_m[gap, c], axis=1) * 1e3
             for j, a in enumerate(names):
                 rows.append({"trial": trial.name, "marker": nm, "gap_s": L, "angle": a, "frames": int(gap.sum()),
                              "err": err[:, j], "meas": det.status[gap, j] == 0, "meas0": det0.status[gap, j] == 0,
-                             "u": u[:, j], "u0": u0[:, j], "fill_mm": fe, "spline_mm": se})
+                             "u": u[:, j], "u0": u0[:, j], "fill_mm": fe, "fill_wide_mm": fe_wide,
+                             "spline_mm": se})
     return rows
 
 
@@ -163,19 +170,23 @@ def summarise(rows: list[dict]) -> tuple[list[dict], list[dict]]:
         first = [r for r in sub if r["angle"] == sub[0]["angle"]]
         fe = np.concatenate([r["fill_mm"] for r in first])
         se = np.concatenate([r["spline_mm"] for r in first])
+        fw = np.concatenate([r["fill_wide_mm"] for r in first])
         fills.append({"gap_s": L, "frames": int(fe.size), "gaps_cut": len(first),
                       "fill_median_mm": float(np.median(fe)), "fill_p95_mm": float(np.percentile(fe, 95)),
                       "fill_max_mm": float(fe.max()),
+                      "fill_wide_median_mm": float(np.median(fw)), "fill_wide_p95_mm": float(np.percentile(fw, 95)),
                       "spline_median_mm": float(np.median(se)), "spline_p95_mm": float(np.percentile(se, 95))})
     return out, fills
 
 
 def markdown(table: list[dict], fills: list[dict]) -> str:
-    lines = ["| gap (s) | gap frames | fill median (mm) | fill 95th pct (mm) | fill max (mm) | spline median (mm) | "
-             "spline 95th pct (mm) |", "|---|---|---|---|---|---|---|"]
+    lines = ["| gap (s) | gaps cut | gap frames | fill median (mm) | fill 95th pct (mm) | fill max (mm) | "
+             "0.5 s window: median / 95th (mm) | spline median (mm) | spline 95th pct (mm) |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for f in fills:
-        lines.append(f"| {f['gap_s']:g} | {f['frames']} | {f['fill_median_mm']:.1f} | {f['fill_p95_mm']:.1f} | "
-                     f"{f['fill_max_mm']:.1f} | {f['spline_median_mm']:.1f} | {f['spline_p95_mm']:.1f} |")
+        lines.append(f"| {f['gap_s']:g} | {f['gaps_cut']} | {f['frames']} | {f['fill_median_mm']:.1f} | "
+                     f"{f['fill_p95_mm']:.1f} | {f['fill_max_mm']:.1f} | {f['fill_wide_median_mm']:.1f} / "
+                     f"{f['fill_wide_p95_mm']:.1f} | {f['spline_median_mm']:.1f} | {f['spline_p95_mm']:.1f} |")
     lines += ["", "Per angle (all trials and cut markers pooled; each cell: median / 95th percentile |error| in deg "
               "against the uncut run; measured % of gap frames (uncut run); median u in deg (uncut run); % of gap "
               "frames with |error| <= 2u):", ""]
@@ -202,6 +213,8 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="one C3D trial, three markers")
     p.add_argument("--out", default=str(ROOT / "studies" / "gap_table.csv"))
+    p.add_argument("--cache", help="keep each trial's rows in this folder and reuse them (a run cut short resumes)")
+    p.add_argument("--trials", help="only the trials whose file name contains one of these (comma-separated)")
     args = p.parse_args(argv)
     if not DATA.is_dir():
         print(f"{DATA}: not there; the gap table needs the real trials of ../shared/data", file=sys.stderr)
@@ -209,9 +222,20 @@ def main(argv: list[str] | None = None) -> int:
     started = time.perf_counter()
     rows: list[dict] = []
     trials = TRIALS[:1] if args.quick else TRIALS
+    if args.trials:
+        trials = [t for t in trials if any(k in t[0].name for k in args.trials.split(","))]
+    cache = Path(args.cache) if args.cache else None
     for trial, protocol, static in trials:
         t0 = time.perf_counter()
-        rows += run_trial(trial, protocol, static, markers_limit=3 if args.quick else None)
+        saved = cache / f"{trial.stem}.pkl" if cache else None
+        if saved is not None and saved.is_file():
+            part = pickle.loads(saved.read_bytes())
+        else:
+            part = run_trial(trial, protocol, static, markers_limit=3 if args.quick else None)
+            if saved is not None:
+                saved.parent.mkdir(parents=True, exist_ok=True)
+                saved.write_bytes(pickle.dumps(part))
+        rows += part
         print(f"{trial.name}: {time.perf_counter() - t0:.0f} s", file=sys.stderr)
     table, fills = summarise(rows)
     import csv
