@@ -21,16 +21,13 @@ from __future__ import annotations
 import json
 import re
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
 import exubio
 from exubio.errors import InputError
 from exubio.io.results import atomic_write
-
-if TYPE_CHECKING:
-    import pandas
 
 __all__ = ["BIDS_VERSION", "bids_label", "write_bids"]
 
@@ -80,9 +77,10 @@ def _tsv(values: np.ndarray, codes: np.ndarray) -> str:
     return "\n".join(rows) + "\n"
 
 
-def write_bids(table: "pandas.DataFrame", out_dir: str | Path, /, *, overwrite: bool = False,
+def write_bids(table: Any, out_dir: str | Path, /, *, overwrite: bool = False,
                study_name: str = "exubio study") -> list[Path]:
-    """Write the study table (exubio.run.study_table: one row per trial, method, frame and angle) as a
+    """Write the study table (a pandas DataFrame as exubio.run.study_table makes it: one row per trial, method,
+    frame and angle) as a
     BIDS motion derivative dataset into ``out_dir`` (module docstring). Refuses (InputError) a folder
     holding a dataset already unless ``overwrite``. Returns the files written."""
     out = Path(out_dir)
