@@ -79,10 +79,10 @@ def _tsv(values: np.ndarray, codes: np.ndarray) -> str:
 
 def write_bids(table: Any, out_dir: str | Path, /, *, overwrite: bool = False,
                study_name: str = "exubio study") -> list[Path]:
-    """Write the study table (a pandas DataFrame as exubio.run.study_table makes it: one row per trial, method,
-    frame and angle) as a
-    BIDS motion derivative dataset into ``out_dir`` (module docstring). Refuses (InputError) a folder
-    holding a dataset already unless ``overwrite``. Returns the files written."""
+    """Write the study table (a pandas DataFrame as exubio.run.study_table makes it: one row per trial,
+    method, frame and angle) as a BIDS motion derivative dataset into ``out_dir`` (module docstring).
+    Refuses (InputError) a folder holding a dataset already unless ``overwrite``. Returns the files
+    written."""
     out = Path(out_dir)
     desc = out / "dataset_description.json"
     if desc.exists() and not overwrite:
