@@ -86,7 +86,7 @@ def write_bids(table: Any, out_dir: str | Path, /, *, overwrite: bool = False,
     out = Path(out_dir)
     desc = out / "dataset_description.json"
     if desc.exists() and not overwrite:
-        raise InputError(f"--bids {out}: holds a dataset already ({desc.name}); give --overwrite to replace its files")
+        raise InputError(f"--bids {out}: holds a dataset already ({desc.name}); give --overwrite-bids to replace its files")
     if table.empty:
         raise InputError(f"--bids {out}: the study has no reconstructed trial to write")
     subjects = _labels(dict.fromkeys(table["subject"].astype(str)), "subject")
