@@ -1,8 +1,9 @@
 """The gap table: what a marker gap does to the angles, what the angles say about it, and how well the gap is filled.
 
 On every movement trial of ../shared/data (six C3D trials, two TRC trials; the static trials serve
-their sessions' calibrations), two protocol markers per segment (all where a segment has two or fewer;
-else the two farthest apart on it, whose loss costs the segment most) are cut in turn, for gaps of 0.1,
+their sessions' calibrations), up to three protocol markers per segment (all where a segment has
+three or fewer; else the two farthest apart on it and the one farthest from the line through them,
+whose loss costs the segment most) are cut in turn, for gaps of 0.1,
 0.25, 0.5, 1 and 2 s placed every (gap + 1 s) from 0.5 s on (all gaps of one marker and length cut
 together, separated by at least 1 s of measured samples), and the trial is reconstructed with LS
 (per frame, so separated gaps do not interact through the dynamics; about 10x faster than PF, which
@@ -80,18 +81,22 @@ def session_for(trial: Path, protocol: str | None, static: Path | None):
 
 
 def sample_markers(prot, cols: list[tuple[str, int]]) -> list[tuple[str, int]]:
-    """Two markers per segment: all where it has two or fewer, else the two farthest apart on it (the
-    pair that sets its orientation best; losing one of them is the worst case of the segment)."""
+    """Up to three markers per segment: all where it has three or fewer, else the two farthest apart on it
+    and the one farthest from the line through them (the three that set its orientation best; losing one
+    of them is the worst case of the segment, e.g. the TRC set's only humerus marker off its long axis)."""
     by = {m.name: m for m in prot.markers}
     out = []
     for seg in dict.fromkeys(by[nm].segment for nm, _ in cols):
         mine = [(nm, c) for nm, c in cols if by[nm].segment == seg]
-        if len(mine) > 2:
+        if len(mine) > 3:
             pos = {nm: np.asarray(by[nm].local_position_m, dtype=float) for nm, _ in mine}
             pairs = [(np.linalg.norm(pos[a[0]] - pos[b[0]]), i, k) for i, a in enumerate(mine)
                      for k, b in enumerate(mine) if i < k]
             _, i, k = max(pairs)
-            mine = [mine[i], mine[k]]
+            a, b = pos[mine[i][0]], pos[mine[k][0]]
+            axis = (b - a) / np.linalg.norm(b - a)
+            off = [(np.linalg.norm(np.cross(pos[nm] - a, axis)), t) for t, (nm, _) in enumerate(mine) if t not in (i, k)]
+            mine = [mine[i], mine[k], mine[max(off)[1]]]
         out += mine
     return out
 
@@ -100,7 +105,9 @@ def wrap(d: np.ndarray) -> np.ndarray:
     return np.angle(np.exp(1j * d))
 
 
-def run_trial(trial: Path, protocol: str | None, static: Path | None, markers_limit: int | None = None) -> list[dict]:
+def run_trial(trial: Path, protocol: str | None, static: Path | None, markers_limit: int | None = None,
+              skip: frozenset[str] = frozenset()) -> list[dict]:
+    """The rows of every sampled marker of the trial but those in ``skip`` (done already)."""
     import exubio
     from scipy.interpolate import CubicSpline
 
@@ -115,7 +122,7 @@ def run_trial(trial: Path, protocol: str | None, static: Path | None, markers_li
     match = resolve_labels(prot, traj.labels, source=traj.source)
     cols = [(nm, match.columns[nm]) for nm in prot.marker_names if match.columns[nm] is not None]
     cols = [(nm, c) for nm, c in cols if np.isfinite(traj.positions_m[:, c]).all(axis=1).mean() > 0.9]
-    cols = sample_markers(prot, cols)
+    cols = [(nm, c) for nm, c in sample_markers(prot, cols) if nm not in skip]
     rows = []
     t_idx = np.arange(traj.n_frames)
     for nm, c in cols[:markers_limit]:
@@ -179,6 +186,50 @@ def summarise(rows: list[dict]) -> tuple[list[dict], list[dict]]:
     return out, fills
 
 
+JOINT_SEGMENTS = {"SC": ("clavicle",), "AC": ("clavicle", "scapula"), "ST": ("scapula",), "GH": ("scapula", "humerus"),
+                  "HT": ("humerus",), "elbow": ("humerus", "ulna"), "forearm": ("ulna", "radius"),
+                  "wrist": ("radius", "hand")}
+"""The segments whose markers set each joint's angles (the thorax, fixed, aside)."""
+
+
+def marker_segments() -> dict[str, str]:
+    """Marker name -> its segment, over the protocols of the table's trials."""
+    import exubio
+
+    model = exubio.load_model()
+    out = {}
+    for name in ("upper_limb_21", "thoracoscapular_9"):
+        out.update({m.name: m.segment for m in exubio.load_protocol(name, model=model).markers})
+    return out
+
+
+def on_joint(rows: list[dict], segments: dict[str, str]) -> list[dict]:
+    """The rows of gaps cut from a marker on one of the segments of the row's angle's joint."""
+    return [r for r in rows if segments.get(r["marker"]) in JOINT_SEGMENTS[r["angle"].split("_")[0]]]
+
+
+def fill_by_segment(rows: list[dict], segments: dict[str, str]) -> str:
+    """Fill and spline error (median / 95th percentile, mm) per segment of the cut marker and gap length."""
+    first = {(r["trial"], r["marker"], r["gap_s"]): r for r in rows}.values()
+    segs = list(dict.fromkeys(segments[r["marker"]] for r in first))
+    lines = ["| segment (markers cut) | " + " | ".join(f"{L:g} s: fill / spline" for L in LENGTHS_S) + " |",
+             "|---|" + "---|" * len(LENGTHS_S)]
+    for seg in segs:
+        mine = [r for r in first if segments[r["marker"]] == seg]
+        cells = []
+        for L in LENGTHS_S:
+            rr = [r for r in mine if r["gap_s"] == L]
+            if not rr:
+                cells.append("")
+                continue
+            fe = np.concatenate([r["fill_mm"] for r in rr])
+            se = np.concatenate([r["spline_mm"] for r in rr])
+            cells.append(f"{np.median(fe):.1f} / {np.percentile(fe, 95):.0f}; {np.median(se):.1f} / {np.percentile(se, 95):.0f}")
+        names = sorted({r["marker"] for r in mine})
+        lines.append(f"| {seg} ({', '.join(names)}) | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def markdown(table: list[dict], fills: list[dict]) -> str:
     lines = ["| gap (s) | gaps cut | gap frames | fill median (mm) | fill 95th pct (mm) | fill max (mm) | "
              "0.5 s window: median / 95th (mm) | spline median (mm) | spline 95th pct (mm) |",
@@ -227,17 +278,19 @@ def main(argv: list[str] | None = None) -> int:
     cache = Path(args.cache) if args.cache else None
     for trial, protocol, static in trials:
         t0 = time.perf_counter()
-        saved = cache / f"{trial.stem}.pkl" if cache else None
-        if saved is not None and saved.is_file():
-            part = pickle.loads(saved.read_bytes())
-        else:
-            part = run_trial(trial, protocol, static, markers_limit=3 if args.quick else None)
-            if saved is not None:
-                saved.parent.mkdir(parents=True, exist_ok=True)
-                saved.write_bytes(pickle.dumps(part))
-        rows += part
+        part = []
+        for saved in sorted(cache.glob(f"{trial.stem}.*pkl")) if cache and cache.is_dir() else ():
+            part += pickle.loads(saved.read_bytes())
+        new = run_trial(trial, protocol, static, markers_limit=3 if args.quick else None,
+                        skip=frozenset(r["marker"] for r in part))  # the markers not in the cache yet
+        if new and cache is not None:
+            cache.mkdir(parents=True, exist_ok=True)
+            (cache / f"{trial.stem}.{'-'.join(sorted({r['marker'] for r in new}))}.pkl").write_bytes(pickle.dumps(new))
+        rows += part + new
         print(f"{trial.name}: {time.perf_counter() - t0:.0f} s", file=sys.stderr)
     table, fills = summarise(rows)
+    segments = marker_segments()
+    joint_table, _ = summarise(on_joint(rows, segments))
     import csv
 
     with open(args.out, "w", newline="") as fh:
@@ -252,6 +305,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{len(trials)} trials, {n_markers} (trial, marker) pairs cut, {len(LENGTHS_S)} gap lengths; "
           f"{time.perf_counter() - started:.0f} s\n")
     print(markdown(table, fills))
+    print("\nOnly the gaps of a marker on one of the segments of the angle's joint (JOINT_SEGMENTS):\n")
+    print(markdown(joint_table, fills).split("\n\n", 2)[-1])
+    print("\nFill and spline error by the cut marker's segment (median / 95th percentile, mm):\n")
+    print(fill_by_segment(rows, segments))
     return 0
 
 
