@@ -19,7 +19,7 @@ Calibration: martin_* trials on bioptim_exo_martin_statique, kinova_martin_* on
 bioptim_exo_kinova_martin_statique; F0_boire_05 (no static of its subject) and the TRC trials
 (thoracoscapular_9 protocol) on their first 0.5 s (as ``--static-frames 0:50``).
 
-    python studies/gap_table.py            # writes studies/gap_table.csv, prints the Markdown tables
+    python studies/gap_table.py            # prints the Markdown tables (--out FILE.csv: the table as CSV too)
     python studies/gap_table.py --quick    # one C3D trial, three markers: a smoke run
     python studies/gap_table.py --cache /tmp/gap_rows   # each trial's rows kept: a run cut short resumes
 """
@@ -260,10 +260,23 @@ def markdown(table: list[dict], fills: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def write_csv(path: str, table: list[dict], fills: list[dict]) -> None:
+    import csv
+
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(table[0]))
+        w.writeheader()
+        w.writerows(table)
+    with open(Path(path).with_suffix(".fill.csv"), "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(fills[0]))
+        w.writeheader()
+        w.writerows(fills)
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="one C3D trial, three markers")
-    p.add_argument("--out", default=str(ROOT / "studies" / "gap_table.csv"))
+    p.add_argument("--out", help="also write the per-angle table to this CSV (and the fill table beside it)")
     p.add_argument("--cache", help="keep each trial's rows in this folder and reuse them (a run cut short resumes)")
     p.add_argument("--trials", help="only the trials whose file name contains one of these (comma-separated)")
     args = p.parse_args(argv)
@@ -291,16 +304,8 @@ def main(argv: list[str] | None = None) -> int:
     table, fills = summarise(rows)
     segments = marker_segments()
     joint_table, _ = summarise(on_joint(rows, segments))
-    import csv
-
-    with open(args.out, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(table[0]))
-        w.writeheader()
-        w.writerows(table)
-    with open(Path(args.out).with_suffix(".fill.csv"), "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(fills[0]))
-        w.writeheader()
-        w.writerows(fills)
+    if args.out:
+        write_csv(args.out, table, fills)
     n_markers = len({(r["trial"], r["marker"]) for r in rows})
     print(f"{len(trials)} trials, {n_markers} (trial, marker) pairs cut, {len(LENGTHS_S)} gap lengths; "
           f"{time.perf_counter() - started:.0f} s\n")
