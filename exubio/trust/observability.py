@@ -424,7 +424,7 @@ GAP_FLOOR = ("in a frame where a marker the trial has is missing (a gap), each a
 """Why a floor: the uncertainty propagates the artefact model through the protocol's fixed least-squares
 weights, which are not the model's optimal (inverse-covariance) weights, so leaving out a marker the
 model gives a large non-rigid artefact (e.g. ARM on the upper arm) can lower the propagated value by
-10-20 % (measured on bioptim_exo_martin_dynamique, docs/gaps.md). Leaving a marker out is not how a
+up to a quarter (measured on bioptim_exo_martin_dynamique, docs/gaps.md). Leaving a marker out is not how a
 lab would make an angle surer, and the artefact model's per-marker parts were not fitted for it: a
 gap frame says at least what the full set says."""
 
