@@ -21,6 +21,7 @@ from exubio.method_registry import REGISTRY, method_names
 from exubio.errors import ExubioError, InputError, ModelError, ProtocolError
 from exubio.prep.moment_options import add_moment_arguments  # small: argparse options only
 from exubio.model.signs import add_signs_arguments  # small: the --signs option
+from exubio.run import fill_run  # small: --fill's options and work (its solvers are imported when it runs)
 
 if TYPE_CHECKING:  # the CLI imports the pipeline only when a command runs (fast --help)
     from exubio.run.job import TrialJob, TrialResult
@@ -128,6 +129,7 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
                              f"reconstruct them into different --out folders")
         seen[Path(t).stem] = str(t)
     check_output_folder(Path(args.out), args.out)
+    fill_run.check_fill(args)
     relabel = parse_relabel(args.relabel, option="--relabel")
     static_relabel = parse_relabel(args.static_relabel, option="--static-relabel")
     if static_relabel and not args.static:
@@ -168,6 +170,8 @@ def _reconstruct_one_protocol(args: argparse.Namespace) -> int:
     if len(jobs) == 1 and not args.scheduler:  # errors propagate to main(): one message, one exit code
         result = run_job(jobs[0], progress_factory=progress_factory(not args.quiet))
         print_trial(result, args.quiet)
+        if args.fill:
+            fill_run.fill_after_run(args, result, calibration.session if calibration else session)
         return trial_code(result)
     codes = []
     from exubio.run.executors import run_all
@@ -243,6 +247,7 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, /) -> None:
                         "and the static pose (repeatable: postures pooled); not used, with the reason, if the movement cannot determine it")
     r.add_argument("--static-frames", help="A:B frames used for the calibration (of --static, or of each trial "
                    "itself when there is no static trial)")
+    fill_run.add_fill_arguments(r)
     r.add_argument("--gravity", action="store_true",
                    help="PF: apply gravity (-Y of the thorax frame); off by default, the springs then also "
                         "carry the limb's weight and model points sag below their markers")

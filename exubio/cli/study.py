@@ -9,6 +9,7 @@ from typing import Any
 from exubio.cli.common import EXIT_CODES_HELP, EXIT_FAILED, EXIT_OK, check_output_folder, epilog
 from exubio.errors import InputError
 from exubio.model.signs import add_signs_arguments  # small: the --signs option
+from exubio.run import bids  # small: --bids's options and work
 
 
 def cmd_study(args: argparse.Namespace) -> int:
@@ -24,6 +25,7 @@ def cmd_study(args: argparse.Namespace) -> int:
     if args.jobs < 1:
         raise InputError(f"--jobs {args.jobs}: expected a whole number of processes >= 1")
     check_output_folder(Path(args.out), args.out)
+    bids.check_bids(args)
     outcomes = run_study(spec, args.out, jobs=args.jobs, scheduler=args.scheduler,
                          progress=None if args.quiet else (lambda m: print(m, file=sys.stderr)))
     failed = [o for o in outcomes if o.status == "failed"]
@@ -33,6 +35,8 @@ def cmd_study(args: argparse.Namespace) -> int:
           f"table: {Path(args.out) / 'study.csv'}")
     for o in failed:
         print(f"failed: {o.subject}/{o.session}/{Path(o.trial).name}: {o.error}")
+    if args.bids:
+        bids.bids_after_study(args, spec.name)
     return EXIT_FAILED if failed or fails else EXIT_OK
 
 
@@ -47,6 +51,7 @@ def add_parser(sub: Any, common: argparse.ArgumentParser, /) -> None:
     st.add_argument("--jobs", type=int, default=1, help="trials in parallel local processes (default 1)")
     st.add_argument("--body-mass", type=float, help="body mass, kg, of every session without its own body_mass_kg: "
                     "the joint moments too (moments.parquet; docs: moments)")
+    bids.add_bids_arguments(st)
     st.add_argument("--scheduler", help="run the trials on Dask: local:N (a local cluster of N workers) or "
                                         "tcp://HOST:PORT (a running scheduler)")
     add_signs_arguments(st)

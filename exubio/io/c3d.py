@@ -399,3 +399,53 @@ def _build_c3d(traj: Trajectories, units: str) -> Any:
             name: {"type": swig.INT, "value": np.array(v), "description": "", "is_locked": False}
             for name, v in words.items()}}
     return c3d
+
+
+def write_c3d_samples(source: str | os.PathLike, path: str | os.PathLike, samples: dict[str, tuple[np.ndarray, np.ndarray]],
+                      /, *, group: str = "EXUBIO_FILL") -> Path:
+    """A copy of the C3D ``source`` (every point, label, analog channel, parameter and the frame
+    numbering kept) with the samples of ``samples`` set: label (as read_c3d names it) -> (frames (n,)
+    bool, positions (n, 3) m, used where frames is True; a NaN sample is written missing: residual -1,
+    coordinates 0), stored in the file's POINT:UNITS with residual
+    0 (the C3D's mark of a point "processed, not the original measured value") and listed in the
+    parameter group ``group`` (LABELS, FIRST, LAST: each run of set samples, file frame numbers), since
+    files that store residual 0 on measured samples too (Vicon Nexus exports) cannot tell them apart
+    by the residual. Written atomically."""
+    source, path = Path(source), Path(path)
+    check_raw_header(source)
+    c3d = _open(source)
+    points = c3d["data"]["points"]
+    n_frames = points.shape[2]
+    if _long_frame_count(source, c3d) is not None:
+        raise InputError(f"{source}: more than {_HEADER_CLIPPED} frames; writing its samples back is not supported")
+    params = c3d["parameters"]["POINT"]
+    unit = _units(source, params, [])
+    scale = METRES_PER_UNIT[unit.split()[0]]
+    raw_labels = _labels(source, params, points.shape[1])
+    first = int(c3d["header"]["points"]["first_frame"]) + 1  # the header counts from 0, C3D frames from 1
+    residuals = c3d["data"]["meta_points"]["residuals"]
+    runs: list[tuple[str, int, int]] = []
+    for label, (frames, pos_m) in samples.items():
+        cols = [i for i, raw in enumerate(raw_labels) if strip_prefix(raw) == label]
+        if len(cols) != 1:
+            raise InputError(f"{source}: POINT:LABELS has {len(cols)} points named '{label}'; expected one to write "
+                             f"its samples to")
+        frames = np.asarray(frames, dtype=bool)
+        if frames.shape != (n_frames,):
+            raise InputError(f"{source}: '{label}': {frames.shape[0]} frames to write, the file has {n_frames}")
+        xyz = np.asarray(pos_m, dtype=float) / scale
+        gone = frames & ~np.isfinite(xyz).all(axis=1)  # a NaN sample is written missing (a gap cut)
+        frames = frames & ~gone
+        points[:3, cols[0], frames] = xyz[frames].T
+        residuals[0, cols[0], frames] = 0.0
+        points[:3, cols[0], gone] = 0.0
+        residuals[0, cols[0], gone] = -1.0
+        edges = np.flatnonzero(np.diff(np.r_[0, frames.astype(int), 0]))
+        runs += [(label, int(a) + first, int(b) - 1 + first) for a, b in zip(edges[::2], edges[1::2])]
+    c3d["data"]["points"] = points
+    c3d["data"]["meta_points"]["residuals"] = residuals
+    if runs:
+        c3d.add_parameter(group, "LABELS", [r[0] for r in runs])
+        c3d.add_parameter(group, "FIRST", np.array([float(r[1]) for r in runs]))
+        c3d.add_parameter(group, "LAST", np.array([float(r[2]) for r in runs]))
+    return atomic_write(path, lambda tmp: c3d.write(str(tmp)), temp_suffix=".c3d")

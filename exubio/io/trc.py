@@ -272,3 +272,43 @@ def _rows_text(traj: Trajectories, units: str) -> str:
         cells = ["" if math.isnan(v) else fmt.format(v) for v in row.tolist()]
         lines.append(f"{i + 1}\t{t:.10g}\t" + "\t".join(cells) + "\n")
     return "".join(lines)
+
+
+def write_trc_samples(source: str | os.PathLike, path: str | os.PathLike,
+                      samples: dict[str, tuple[np.ndarray, np.ndarray]], /) -> Path:
+    """A copy of the TRC ``source`` with the samples of ``samples`` set: label -> (frames (n,) bool over
+    its data rows, positions (n, 3) m, used where frames is True; NaN: written as empty cells), printed in the file's Units at
+    1e-9 m resolution; every other line and cell is copied byte for byte (header, frame numbers,
+    times, the other markers). Which samples were set is not marked in a TRC (its format has no
+    place for it): the caller writes that beside it. Written atomically."""
+    source, path = Path(source), Path(path)
+    lines = _read_lines(source)
+    unit, _, _, n_declared = _header_values(source, _header(source, lines))
+    raw_labels = _marker_labels(source, lines, n_declared, [])
+    text = source.read_text(encoding="utf-8")
+    raw_lines = text.splitlines(keepends=True)
+    rows = [i for i in range(_FIRST_DATA_LINE - 1, len(raw_lines)) if raw_lines[i].strip()]
+    fmt = f"{{:.{_DECIMALS[unit]}f}}"
+    for label, (frames, pos_m) in samples.items():
+        cols = [k for k, lab in enumerate(raw_labels) if lab == label]
+        if len(cols) != 1:
+            raise InputError(f"{source}: line 4 names '{label}' {len(cols)} times; expected once to write its samples")
+        frames = np.asarray(frames, dtype=bool)
+        if frames.shape != (len(rows),):
+            raise InputError(f"{source}: '{label}': {frames.shape[0]} frames to write, the file has {len(rows)} rows")
+        xyz = np.asarray(pos_m, dtype=float) / METRES_PER_UNIT[unit]
+        for r in np.flatnonzero(frames):
+            line = raw_lines[rows[r]]
+            body = line.rstrip("\r\n")
+            cells = body.split("\t")
+            c = 2 + 3 * cols[0]
+            finite = np.isfinite(xyz[r]).all()  # a NaN sample is written missing (empty cells: a gap cut)
+            cells[c:c + 3] = [fmt.format(v) if finite else "" for v in xyz[r]]
+            raw_lines[rows[r]] = "\t".join(cells) + line[len(body):]
+    out = "".join(raw_lines)
+
+    def writer(tmp: Path) -> None:
+        with open(tmp, "w", encoding="utf-8", newline="") as fh:
+            fh.write(out)
+
+    return atomic_write(path, writer)

@@ -26,6 +26,7 @@ import numpy as np
 
 from exubio.model.kinematics import Kinematics, PointSet
 from exubio.trust.design import constrained_design
+from exubio.trust.gap_frames import computed_frames, nearest_sample
 
 UNDETERMINED_DEG_PER_MM = 2.0
 """Noise gain above which a coordinate counts as undetermined. Skin-marker errors on the shoulder
@@ -102,16 +103,15 @@ def determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present: np.nd
     names = kin.model.coordinate_names
     excl = np.zeros(m, dtype=bool) if excluded is None else np.asarray(excluded, dtype=bool)
     free = np.flatnonzero(~excl)
-    sel = np.arange(0, n, max(int(every), 1))
+    sel, idx = computed_frames(np.asarray(present, dtype=bool), every)  # gap edges computed, not copied across
     qs = q[sel]
     ok = np.isfinite(qs).all(axis=1)
     gain = np.full((len(sel), m), np.nan)
     for a in range(0, len(sel), BLOCK_FRAMES):  # blocks bound the per-frame matrices on long trials
         part = slice(a, a + BLOCK_FRAMES)
         gain[part] = _gains(kin, points, qs[part], ok[part], present[sel[part]], weights, free, m)
-    # spread to every frame (nearest computed frame)
-    idx = np.clip(np.round(np.arange(n) / max(int(every), 1)).astype(int), 0, len(sel) - 1)
-    gain_all = gain[idx]
+    gain_all = gain[idx]  # every frame: the nearest computed frame with the same markers
+
     with np.errstate(invalid="ignore"):
         und = gain_all > UNDETERMINED_DEG_PER_MM
     und[:, excl] = False
@@ -349,10 +349,12 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
     angle), no uncertainty computed. ``thorax_assumed_still``: the run has no thorax marker and takes
     the thorax as fixed (exubio truth): the unseen trunk motion of the amplitude model's ``trunk``
     (exubio.trust.angle_uncertainty.trunk_angle_variance) is added to every angle's variance."""
-    from exubio.model.angles import anatomical_table, segment_anatomical_rotations
+    from exubio.model.angles import anatomical_table
     from exubio.trust import angle_uncertainty as AU
     amplitude = amplitude if amplitude is not None else _shipped_amplitude()
     noise_mm = AU.NOISE_MM if noise_mm is None else float(noise_mm)
+    if thorax_assumed_still and getattr(amplitude, "trunk", None) is None:
+        raise ValueError("thorax_assumed_still needs an amplitude model with a trunk second moment")
 
     model = kin.model
     n, m = q.shape
@@ -361,56 +363,40 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
     table = lambda qq: anatomical_table(model, qq, kinematics=kin, unwrap=False)[1]
     names = anatomical_table(model, np.zeros(m), kinematics=kin)[0]
     a = len(names)
-    sel = np.arange(0, n, max(int(every), 1))
-    qs = q[sel]
-    ok = np.isfinite(qs).all(axis=1)
+    free_actual = np.flatnonzero(~held & ~locked)
+    free_released = np.flatnonzero(~locked)
+    present = np.asarray(present, dtype=bool)
+    sel, idx = computed_frames(present, every)
+    trial_markers = present.any(axis=0)  # the markers the trial has: a frame lacking one is in a gap
+    ok = np.isfinite(q[sel]).all(axis=1)
+
+    res_floor = None if residuals_m is None else nearest_sample(residuals_m)  # a hidden marker's misfit: its edges'
+
+    def block(frames: np.ndarray, pres: np.ndarray, res: np.ndarray | None):
+        return _angle_block(kin, points, q[frames], pres, weights, table, held=held, locked=locked,
+                            free_actual=free_actual, free_released=free_released, bounded=bounded,
+                            amplitude=amplitude, noise_mm=noise_mm, residuals=None if res is None else res[frames],
+                            trunk=amplitude.trunk if thorax_assumed_still else None)
+
     gain = np.full((len(sel), a), np.inf)
     unc = np.full((len(sel), a), np.inf)
     share = np.zeros((len(sel), a))
     dep_locked = np.zeros((len(sel), a), dtype=bool)
-    free_actual = np.flatnonzero(~held & ~locked)
-    free_released = np.flatnonzero(~locked)
     for s0 in range(0, len(sel), BLOCK_FRAMES):
         part = np.arange(s0, min(s0 + BLOCK_FRAMES, len(sel)))
         part = part[ok[part]]
         if not part.size:
             continue
-        qf, pres = qs[part], present[sel[part]]
-        D = _angle_jacobian(table, qf)  # (b, a, m)
-        N, M, S = _marker_information(kin, points, qf, pres, weights, free_actual)
-        cov, blind = _covariance(N, M, S, m, free_actual, None)
-        var = np.einsum("bam,bmn,ban->ba", D, cov, D)
-        g = np.degrees(np.sqrt(np.maximum(var, 0.0))) / 1000.0
-        unseen = (np.abs(np.einsum("bam,bmr->bar", D, blind)) > 1e-6).any(axis=2) if blind.shape[-1] else False
-        gain[part] = np.where(unseen, np.inf, g)
-        if bounded:
-            K, Jm = AU.sensitivity(kin, points, qf, pres, weights, free_actual, with_jacobian=True)
-            frames_isb = segment_anatomical_rotations(model, qf, kinematics=kin)
-            anat = {s_: frames_isb[s_] for s_ in ("scapula", "humerus") if s_ in frames_isb}
-            Sigma = AU.marker_covariance(kin, points, qf, pres, amplitude, noise_mm=noise_mm, anatomical=anat)
-            if residuals_m is not None:
-                Sigma = Sigma + AU.marker_covariance(
-                    kin, points, qf, pres, amplitude, noise_mm=noise_mm, anatomical=anat,
-                    residual_m=residuals_m[sel[part]], expected_ms=AU.expected_residual_ms(Jm, K, Sigma))
-            DK = D @ K
-            var_u = np.einsum("bai,bij,baj->ba", DK, Sigma, DK)
-            if thorax_assumed_still:
-                if getattr(amplitude, "trunk", None) is None:
-                    raise ValueError("thorax_assumed_still needs an amplitude model with a trunk second moment")
-                var_u = var_u + AU.trunk_angle_variance(kin, points, qf, DK, amplitude.trunk)
-            unc[part] = np.where(unseen, np.inf, np.sqrt(np.maximum(var_u, 0.0)))
-        dep_locked[part] = (np.abs(D[:, :, locked]) > 1e-6).any(axis=2) if locked.any() else False
-        if held.any():
-            N, M, S = _marker_information(kin, points, qf, pres, weights, free_released)
-            cov_r, _ = _covariance(N, M, S, m, free_released, RELEASE_PRIOR)
-            h = np.flatnonzero(held)
-            c_ah = np.einsum("bam,bmh->bah", D, cov_r[:, :, h])  # cov(angle, q_held)
-            C_hh = cov_r[:, h[:, None], h[None, :]]
-            var_r = np.einsum("bam,bmn,ban->ba", D, cov_r, D)
-            explained = np.einsum("bah,bhk,bak->ba", c_ah, np.linalg.inv(C_hh), c_ah)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                share[part] = np.where(var_r > 0, np.clip(explained / var_r, 0.0, 1.0), 0.0)
-    idx = np.clip(np.round(np.arange(n) / max(int(every), 1)).astype(int), 0, len(sel) - 1)
+        frames = sel[part]
+        gain[part], unc[part], share[part], dep_locked[part] = block(frames, present[frames], residuals_m)
+        gap = (present[frames] != trial_markers[None, :]).any(axis=1)
+        if gap.any():  # a gap never makes an angle surer than the trial's markers make it (GAP_FLOOR)
+            g_full, u_full, _, _ = block(frames[gap], np.broadcast_to(trial_markers, (int(gap.sum()), len(trial_markers))),
+                                         res_floor)
+            rows = part[gap]
+            with np.errstate(invalid="ignore"):
+                gain[rows] = np.fmax(gain[rows], g_full)
+                unc[rows] = np.fmax(unc[rows], u_full)
     gain, share, dep_locked, unc = gain[idx], share[idx], dep_locked[idx], unc[idx]
     with np.errstate(invalid="ignore"):
         gimbal = (AU.gimbal_mask(table(np.where(np.isfinite(q), q, 0.0))) & np.isfinite(q).all(axis=1)[:, None]
@@ -435,6 +421,67 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
             rule_of[nm] = "; ".join(rules.get(h, f"hold: {h} fixed at its reference value") for h in held_names)
     return AngleDeterminacy(tuple(names), gain, share, status, rule_of, unc if bounded else None,
                             gimbal if bounded else None)
+
+
+GAP_FLOOR = ("in a frame where a marker the trial has is missing (a gap), each angle's noise gain and "
+             "uncertainty are at least those the trial's full marker set gives at the same pose, with each hidden "
+             "marker's residual taken from the nearest frame where it was seen")
+"""Why a floor: the uncertainty propagates the artefact model through the protocol's fixed least-squares
+weights, which are not the model's optimal (inverse-covariance) weights, so leaving out a marker the
+model gives a large non-rigid artefact (e.g. ARM on the upper arm) can lower the propagated value by
+up to a quarter (measured on bioptim_exo_martin_dynamique, docs/gaps.md). Leaving a marker out is not how a
+lab would make an angle surer, and the artefact model's per-marker parts were not fitted for it: a
+gap frame says at least what the full set says."""
+
+
+def _angle_block(kin: Kinematics, points: PointSet, qf: np.ndarray, pres: np.ndarray, weights: np.ndarray, table, /,
+                 *, held: np.ndarray, locked: np.ndarray, free_actual: np.ndarray, free_released: np.ndarray,
+                 bounded: bool, amplitude, noise_mm: float, residuals: np.ndarray | None, trunk=None):
+    """For the poses qf (b, m) with the markers pres (b, k): the angles' noise gains (deg/mm), standard
+    uncertainties (rad; inf where unseen, where not ``bounded``), held shares and whether they depend
+    on a locked coordinate, each (b, a). ``trunk``: the amplitude model's unseen trunk motion, added to
+    every angle's variance (a run that assumes the thorax still)."""
+    from exubio.model.angles import segment_anatomical_rotations
+    from exubio.trust import angle_uncertainty as AU
+
+    model = kin.model
+    m = qf.shape[1]
+    D = _angle_jacobian(table, qf)  # (b, a, m)
+    b, a = D.shape[:2]
+    N, M, S = _marker_information(kin, points, qf, pres, weights, free_actual)
+    cov, blind = _covariance(N, M, S, m, free_actual, None)
+    var = np.einsum("bam,bmn,ban->ba", D, cov, D)
+    g = np.degrees(np.sqrt(np.maximum(var, 0.0))) / 1000.0
+    unseen = (np.abs(np.einsum("bam,bmr->bar", D, blind)) > 1e-6).any(axis=2) if blind.shape[-1] else False
+    gain = np.where(unseen, np.inf, g)
+    unc = np.full((b, a), np.inf)
+    share = np.zeros((b, a))
+    if bounded:
+        K, Jm = AU.sensitivity(kin, points, qf, pres, weights, free_actual, with_jacobian=True)
+        frames_isb = segment_anatomical_rotations(model, qf, kinematics=kin)
+        anat = {s_: frames_isb[s_] for s_ in ("scapula", "humerus") if s_ in frames_isb}
+        Sigma = AU.marker_covariance(kin, points, qf, pres, amplitude, noise_mm=noise_mm, anatomical=anat)
+        if residuals is not None:
+            Sigma = Sigma + AU.marker_covariance(
+                kin, points, qf, pres, amplitude, noise_mm=noise_mm, anatomical=anat,
+                residual_m=residuals, expected_ms=AU.expected_residual_ms(Jm, K, Sigma))
+        DK = D @ K
+        var_u = np.einsum("bai,bij,baj->ba", DK, Sigma, DK)
+        if trunk is not None:
+            var_u = var_u + AU.trunk_angle_variance(kin, points, qf, DK, trunk)
+        unc = np.where(unseen, np.inf, np.sqrt(np.maximum(var_u, 0.0)))
+    dep_locked = (np.abs(D[:, :, locked]) > 1e-6).any(axis=2) if locked.any() else np.zeros((b, a), dtype=bool)
+    if held.any():
+        N, M, S = _marker_information(kin, points, qf, pres, weights, free_released)
+        cov_r, _ = _covariance(N, M, S, m, free_released, RELEASE_PRIOR)
+        h = np.flatnonzero(held)
+        c_ah = np.einsum("bam,bmh->bah", D, cov_r[:, :, h])  # cov(angle, q_held)
+        C_hh = cov_r[:, h[:, None], h[None, :]]
+        var_r = np.einsum("bam,bmn,ban->ba", D, cov_r, D)
+        explained = np.einsum("bah,bhk,bak->ba", c_ah, np.linalg.inv(C_hh), c_ah)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            share = np.where(var_r > 0, np.clip(explained / var_r, 0.0, 1.0), 0.0)
+    return gain, unc, share, dep_locked
 
 
 _AMPLITUDE: list = []
