@@ -363,6 +363,8 @@ class _Frames:
         if self.last_raw is None:
             q = np.unwrap(raw, axis=0)
             self.shift = 2.0 * np.pi * np.round((q[0] - self.q0) / (2.0 * np.pi))  # same branch as the start posture
+        elif raw.shape[0] == 1:  # one frame (live): np.unwrap's arithmetic on the one difference, without its set-up
+            q = (raw + _unwrap_correction(raw - self.last_raw)) + (self.last_unwrapped - self.last_raw)
         else:  # continue the unwrapping of the frames before
             q = np.unwrap(np.vstack([self.last_raw[None], raw]), axis=0)[1:] + (self.last_unwrapped - self.last_raw)
         self.last_raw, self.last_unwrapped = raw[-1], q[-1]
@@ -394,6 +396,16 @@ class _Frames:
 
     def mean_deflection_m(self) -> float:
         return self.sum_res / self.n_res if self.n_res else float("nan")
+
+
+def _unwrap_correction(dd: np.ndarray) -> np.ndarray:
+    """What np.unwrap (period 2 pi) adds to a sample whose difference from the one before is ``dd``
+    (the same operations, so the same bits)."""
+    ddmod = np.mod(dd + np.pi, 2.0 * np.pi) - np.pi
+    ddmod[(ddmod == -np.pi) & (dd > 0)] = np.pi
+    correction = ddmod - dd
+    correction[np.abs(dd) < np.pi] = 0.0
+    return correction
 
 
 def _nanmax(a: float, b: float) -> float:
