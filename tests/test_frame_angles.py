@@ -1,0 +1,32 @@
+"""exubio.model.frame_angles.FrameAngles (the live loop's ISB angles of one frame) gives bitwise the
+angles of exubio.model.angles.isb_table, whose arithmetic it repeats with its set-up done once: at
+random postures over the whole range of every coordinate, at the range limits and near the gimbal
+locks of the GH and HT sequences."""
+import numpy as np
+
+from exubio.model.angles import anatomical_frames, isb_table
+from exubio.model.frame_angles import FrameAngles
+from exubio.model.kinematics import Kinematics
+from exubio.model.load import load_model
+
+
+def test_frame_angles_are_isb_tables_bitwise():
+    model = load_model()
+    kin = Kinematics(model)
+    frames = anatomical_frames(model)
+    angles = FrameAngles(model, frames)
+    lo, hi = model.coordinate_ranges_rad.T
+    rng = np.random.default_rng(7)
+    qs = [np.zeros(len(lo)), lo, hi] + list(rng.uniform(lo, hi, size=(300, len(lo))))
+    qs += list(rng.uniform(-np.pi, np.pi, size=(100, len(lo))))  # beyond the ranges too
+    gh = [model.coordinate_names.index(n) for n in ("gh_abduction", "gh_flexion")]
+    for q in qs[:20]:  # the humerus along the thorax Y axis: HT near its gimbal lock
+        locked = q.copy()
+        locked[gh] = 0.0
+        qs.append(locked)
+    for q in qs:
+        R = kin.frames(q).R
+        want = isb_table(model, q, kinematics=kin, frames=frames, rotations=R)[1]
+        got = angles(R)
+        assert got.shape == want.shape == (15,)
+        assert np.array_equal(got, want), np.abs(got - want).max()
