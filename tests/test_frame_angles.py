@@ -36,7 +36,7 @@ def test_frame_inverse_is_coordinates_from_rotations():
     """FrameInverse (the live loop's inverse map of one frame) gives coordinates_from_rotations'
     coordinates: postures inside and beyond the ranges, at a spherical joint's gimbal lock, with
     and without the previous frame's coordinates."""
-    from exubio.model.frame_inverse import FrameInverse
+    from exubio.model.frame_kinematics import FrameInverse
 
     model = load_model()
     kin = Kinematics(model)
@@ -61,3 +61,16 @@ def test_frame_inverse_is_coordinates_from_rotations():
             same += np.array_equal(got, want)
     assert worst < 1e-12, worst
     assert same > 0.9 * 2 * len(qs)  # mostly bitwise the same (a batched einsum may sum in another order)
+
+
+def test_frame_forward_is_kinematics_frames_bitwise():
+    from exubio.model.frame_kinematics import FrameForward
+
+    model = load_model()
+    kin = Kinematics(model)
+    forward = FrameForward(kin)
+    lo, hi = model.coordinate_ranges_rad.T
+    for q in np.random.default_rng(5).uniform(lo - 1, hi + 1, size=(200, len(lo))):
+        R, p = forward(q)
+        fr = kin.frames(q)
+        assert np.array_equal(R, fr.R) and np.array_equal(p, fr.p)

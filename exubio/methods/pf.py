@@ -52,7 +52,7 @@ from exubio.errors import InputError, ReconstructionError
 from exubio.model.kinematics import Kinematics
 from exubio.methods.common import CHUNK_FRAMES, ChunkSink, Collector, assemble, target_chunk, tracked_points, unobserved_segments
 from exubio.methods.constraints import project_on_constraints
-from exubio.model.frame_inverse import FrameInverse
+from exubio.model.frame_kinematics import FrameInverse
 from exubio.methods.pf_time import integration_step, lead_in_frames, with_lead_in
 from exubio.types import StopReason
 from exubio.methods.poses import RATES_REGULARISATION, Limits, LSOptions, held_mask, solve_positions, solve_rates

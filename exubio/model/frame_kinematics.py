@@ -1,5 +1,7 @@
-"""The joint coordinates of one frame from its segment rotations (the live loop's inverse map):
-``FrameInverse``, the rule of exubio.model.kinematics.Kinematics.coordinates_from_rotations for one
+"""The kinematics of one frame at a time (the live loop's): ``FrameForward``, the segment rotations
+and origins of one posture (Kinematics.frames' products without the joint axes and pivots, bitwise
+the same R and p), and ``FrameInverse``, the joint coordinates of one frame from its segment
+rotations, the rule of exubio.model.kinematics.Kinematics.coordinates_from_rotations for one
 frame in fewer array operations (both revolute joints in one, the two angle triples of the spherical
 joints wrapped into their ranges in one call, the range constants computed once). A frame costs the
 number of operations, not of joints; the angles agree with coordinates_from_rotations to round-off
@@ -11,10 +13,35 @@ import numpy as np
 from exubio.model.kinematics import Kinematics
 from exubio.model.ranges import violation, wrap_into_range
 
-__all__ = ["FrameInverse"]
+__all__ = ["FrameForward", "FrameInverse"]
 
 _VEE_I = np.array([2, 0, 1])
 _VEE_J = np.array([1, 2, 0])  # vee(R) = R[_VEE_I, _VEE_J] - R[_VEE_J, _VEE_I]
+
+
+class FrameForward:
+    """``forward(q)``: (R (n_seg, 3, 3), p (n_seg, 3)) of one posture q (m,), as Kinematics.frames."""
+
+    def __init__(self, kin: Kinematics, /):
+        self.kin = kin
+        self.n_seg = kin.n_segments
+        self.chain = [(i, par, [int(j) for j in idx], np.asarray(centre, dtype=float)) for i, par, idx, centre, _ in kin._chain]
+        self.eye = np.eye(3)
+
+    def __call__(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        kin = self.kin
+        elem = self.eye + np.sin(q)[:, None, None] * kin._sk + (1.0 - np.cos(q))[:, None, None] * kin._sk2
+        R = np.empty((self.n_seg, 3, 3))
+        p = np.empty((self.n_seg, 3))
+        R[0] = self.eye
+        p[0] = 0.0
+        for i, par, idx, centre in self.chain:
+            Rc = R[par]
+            p[i] = p[par] + Rc @ centre
+            for j in idx:
+                Rc = Rc @ elem[j]
+            R[i] = Rc
+        return R, p
 
 
 class FrameInverse:
