@@ -90,6 +90,10 @@ class CausalTargets:
         self.mirror = protocol.side == "left"
         self.max_thorax_gap = int(round(options.max_thorax_gap_s * rate_hz))
         self._held = {key: (None, 0) for key in self.thorax}  # last valid landmark and frames since
+        self._have = self.columns >= 0
+        self._have_columns = self.columns[self._have]
+        self._thorax_keys = tuple(self.thorax)
+        self._thorax_columns = np.array([self.thorax[key] for key in self._thorax_keys], dtype=int)
         if options.cutoff_hz is not None:
             self.sos = butter(int(options.order), float(options.cutoff_hz), fs=rate_hz, output="sos")
             self.zi_unit = sosfilt_zi(self.sos)  # (sections, 2): steady state for a unit input
@@ -123,11 +127,16 @@ class CausalTargets:
         """The protocol markers of one raw frame in the thorax frame (k, 3), NaN where missing."""
         raw = np.asarray(raw, dtype=float)
         pos = np.full((self.k, 3), np.nan)
-        have = self.columns >= 0
-        pos[have] = raw[self.columns[have]]
+        pos[self._have] = raw[self._have_columns]
         pos[~np.isfinite(pos).all(axis=1)] = np.nan
         if self.thorax:
-            lm = {key: self._landmark(key, raw) for key in self.thorax}
+            found = raw[self._thorax_columns]  # every landmark at once; held ones only where one is missing
+            if np.isfinite(found).all():
+                lm = dict(zip(self._thorax_keys, found))
+                for key, value in lm.items():
+                    self._held[key] = (value, 0)
+            else:
+                lm = {key: self._landmark(key, raw) for key in self.thorax}
             if any(v is None for v in lm.values()):
                 return np.full((self.k, 3), np.nan)
             try:
