@@ -1,7 +1,9 @@
-"""exubio.model.frame_angles.FrameAngles (the live loop's ISB angles of one frame) gives bitwise the
-angles of exubio.model.angles.isb_table, whose arithmetic it repeats with its set-up done once: at
-random postures over the whole range of every coordinate, at the range limits and near the gimbal
-locks of the GH and HT sequences."""
+"""The live loop's one-frame kernels against the batch functions they stand in for: FrameAngles
+(exubio.model.frame_angles) gives bitwise exubio.model.angles.isb_table's angles, FrameForward
+(exubio.model.frame_kinematics) bitwise Kinematics.frames' R and p, FrameInverse
+coordinates_from_rotations' coordinates to round-off, the causal thorax frame of one frame
+exubio.prep.thorax.thorax_frame's to round-off: random postures over and beyond every range, at the
+range limits and at the gimbal locks."""
 import numpy as np
 
 from exubio.model.angles import anatomical_frames, isb_table
@@ -74,3 +76,26 @@ def test_frame_forward_is_kinematics_frames_bitwise():
         R, p = forward(q)
         fr = kin.frames(q)
         assert np.array_equal(R, fr.R) and np.array_equal(p, fr.p)
+
+
+def test_thorax_frame_of_one_frame_is_thorax_frame():
+    """The live loop's thorax frame of one frame (plain floats) is exubio.prep.thorax.thorax_frame's
+    to round-off, and it refuses the same degenerate landmarks."""
+    import pytest
+
+    from exubio.errors import InputError
+    from exubio.prep.thorax import thorax_frame
+    from exubio.run.live.causal import thorax_frame_one
+
+    rng = np.random.default_rng(11)
+    base = np.array([[0.0, 0.0, 0.0], [0.02, -0.18, 0.0], [-0.12, 0.02, 0.0], [-0.14, -0.16, 0.0]])  # IJ PX C7 T8
+    for _ in range(300):
+        rot = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+        lm = (base + rng.normal(scale=0.02, size=base.shape)) @ rot.T + rng.normal(size=3)
+        R, origin = thorax_frame(*lm)
+        R1, origin1 = thorax_frame_one(*lm)
+        assert np.abs(R1 - R).max() < 1e-14 and np.array_equal(origin1, origin)
+    collinear = np.array([[0.0, 0.0, 0.0], [0.0, -0.2, 0.0], [0.0, 0.1, 0.0], [0.0, -0.3, 0.0]])
+    with pytest.raises(InputError):
+        thorax_frame(*collinear)
+    assert thorax_frame_one(*collinear) is None
