@@ -2,10 +2,9 @@
 live frame call.
 
 Each stage is a set of functions wrapped (for this process only) by a timer that counts its own
-time, the time of the stages it calls excluded; "other" is what no stage holds (the loop's own
-Python). The timers cost about 0.2 us per call: the table gives each stage's share of the timed
-run, applied to the CPU time per frame of an untimed run of the same work (the steadier figure on a
-shared machine). The live frame is the live loop run on an in-process replay (``reconstruct_causal``,
+CPU time (the thread's), the time of the stages it calls excluded; "other" is what no stage holds
+(the loop's own Python). The timers cost about 1 us per call: the table gives each stage's share
+of the timed run, applied to the CPU time per frame of untimed runs of the same work (median). The live frame is the live loop run on an in-process replay (``reconstruct_causal``,
 exubio.run.live.offline: no LSL); what LSL adds is the live process's CPU per frame in
 ``bench_live.py`` minus this loop's.
 
@@ -86,7 +85,7 @@ class Timers:
         self.stack: list[list] = []  # [stage, start, time of the stages called]
 
     def wrap(self, fn, stage: str):
-        clock = time.perf_counter
+        clock = time.thread_time  # CPU time of this thread: a shared machine's other jobs do not count
 
         def timed(*args, **kwargs):
             entry = [stage, clock(), 0.0]
@@ -175,9 +174,9 @@ def profile(mode: str, args) -> dict:
     timers = Timers()
     undo = install(mode, timers)
     try:
-        t0 = time.perf_counter()
+        t0 = time.thread_time()
         work()
-        timed = time.perf_counter() - t0
+        timed = time.thread_time() - t0
     finally:
         uninstall(undo)
     cpu_ms = 1e3 * statistics.median(cpu) / n
