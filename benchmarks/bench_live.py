@@ -59,7 +59,7 @@ def run_once(trial, *, core: int | None, out: Path, tag: str) -> dict:
     push = np.full(n, np.nan)
     arrive = np.full(n, np.nan)
     cmd = [sys.executable, "-m", "exubio.cli", "live", "--stream", name, "--publish", pub, "--out", str(out),
-           "--name", tag, "--no-report", "--end-after", "3", "-q"]
+           "--name", tag, "--no-report", "--end-after", "3", "--timeout", "60", "-q"]  # (a loaded machine resolves slowly)
     if core is not None and shutil.which("taskset"):
         cmd = ["taskset", "-c", str(core)] + cmd
     env = dict(os.environ, LSLAPICFG=os.environ["LSLAPICFG"])

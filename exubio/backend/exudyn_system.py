@@ -45,7 +45,7 @@ from exudyn.rigidBodyUtilities import RotationMatrix2EulerParameters
 from exubio.backend.exudyn_integrate import BuiltSystem, SpringTargets, integrate_trial
 from exubio.backend.exudyn_live import integrate_live
 from exubio.backend.exudyn_limits import DEFAULT_LIMIT_MAX_RATE_RAD_S, add_limit_elements
-from exubio.backend.pf_numerics import LimitElement, ep_G, ep_rotation, frame_with_z
+from exubio.backend.pf_numerics import LimitElement, ep_G, ep_rotation_unit, frame_with_z
 from exubio.backend.pf_types import IntegratorOptions, PFRun, SpringSet
 from exubio.errors import ModelError
 from exubio.model.kinematics import axis_rotation, Kinematics, PointSet
@@ -244,6 +244,7 @@ class PFSystem:
         self._ltg_all = np.array(self._ltg[1:], dtype=int).reshape(len(self._ltg) - 1, -1)
         self._aux_ltg = [np.asarray(sd.GetNodeLTGODE2(n), dtype=int) for n in self._aux_nodes]
         self._n_ode2 = sd.ODE2Size()
+        self._eye = np.eye(3)
         self._built = BuiltSystem(mbs, SpringTargets(mbs, self._spring_objects, self._targets, self._native, springs),
                                   self._limits, self.limit_max_rate_rad_s, self._n_ode2, n_seg, self._decode)
         self.build_time_s = time.perf_counter() - t_build
@@ -412,10 +413,11 @@ class PFSystem:
         L = self._ltg_all  # (n_seg - 1, 7): each movable segment's node coordinates
         x, xt, xtt = X[:, L], Xt[:, L], Xtt[:, L]  # (n, n_seg - 1, 7)
         ep = x[..., 3:] + self._ep_ref[1:]
-        G = ep_G(ep / np.linalg.norm(ep, axis=-1, keepdims=True))
+        unit = ep / np.linalg.norm(ep, axis=-1, keepdims=True)
+        G = ep_G(unit)
         R = np.empty((n, n_seg, 3, 3))
-        R[:, 0] = np.eye(3)
-        R[:, 1:] = ep_rotation(ep)
+        R[:, 0] = self._eye
+        R[:, 1:] = ep_rotation_unit(unit)
         p, v, a, w, al = (np.zeros((n, n_seg, 3)) for _ in range(5))
         p[:, 1:] = x[..., :3] + self._p_ref[1:]
         v[:, 1:], a[:, 1:] = xt[..., :3], xtt[..., :3]

@@ -21,23 +21,34 @@ def wrap_pi(x: float) -> float:
 # --------------------------------------------------------------------------------------------
 def ep_rotation(ep: np.ndarray) -> np.ndarray:
     """Rotation matrices (..., 3, 3) of Euler parameters (..., 4) = [e0, e1, e2, e3] (normalised here)."""
-    ep = ep / np.linalg.norm(ep, axis=-1, keepdims=True)
-    e0, e1, e2, e3 = np.moveaxis(ep, -1, 0)
-    return np.stack([
-        np.stack([1 - 2 * (e2 * e2 + e3 * e3), 2 * (e1 * e2 - e0 * e3), 2 * (e1 * e3 + e0 * e2)], -1),
-        np.stack([2 * (e1 * e2 + e0 * e3), 1 - 2 * (e1 * e1 + e3 * e3), 2 * (e2 * e3 - e0 * e1)], -1),
-        np.stack([2 * (e1 * e3 - e0 * e2), 2 * (e2 * e3 + e0 * e1), 1 - 2 * (e1 * e1 + e2 * e2)], -1),
-    ], -2)  # fmt: skip
+    return ep_rotation_unit(ep / np.linalg.norm(ep, axis=-1, keepdims=True))
+
+
+# R[r, c] = 1 - 2 (e_i e_j + e_k e_l) on the diagonal, 2 (e_i e_j +- e_k e_l) off it (row-major r, c)
+_R_I, _R_J = np.array([2, 1, 1, 1, 1, 2, 1, 2, 1]), np.array([2, 2, 3, 2, 1, 3, 3, 3, 1])
+_R_K, _R_L = np.array([3, 0, 0, 0, 3, 0, 0, 0, 2]), np.array([3, 3, 2, 3, 3, 1, 2, 1, 2])
+_R_SIGN = np.array([1.0, -1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0])
+_R_DIAG = np.array([True, False, False, False, True, False, False, False, True])
+
+
+def ep_rotation_unit(ep: np.ndarray) -> np.ndarray:
+    """``ep_rotation`` of Euler parameters already of unit norm, its nine entries in a few array
+    operations (a live run decodes one frame at a time, where every numpy call counts); the same
+    products and sums as the textbook entries (a product by +-1 is exact: the same bits)."""
+    s = ep[..., _R_I] * ep[..., _R_J] + ep[..., _R_K] * ep[..., _R_L] * _R_SIGN
+    return np.where(_R_DIAG, 1 - 2 * s, 2 * s).reshape(ep.shape[:-1] + (3, 3))
+
+
+_G_INDEX = np.array([(1, 0, 3, 2), (2, 3, 0, 1), (3, 2, 1, 0)])
+_G_SIGN = np.array([(-2.0, 2.0, -2.0, 2.0), (-2.0, 2.0, 2.0, -2.0), (-2.0, -2.0, 2.0, 2.0)])
 
 
 def ep_G(ep: np.ndarray) -> np.ndarray:
-    """G (..., 3, 4) with omega_global = G ep_t (and alpha_global = G ep_tt, since G_t ep_t = 0)."""
-    e0, e1, e2, e3 = np.moveaxis(ep, -1, 0)
-    return 2.0 * np.stack([
-        np.stack([-e1, e0, -e3, e2], -1),
-        np.stack([-e2, e3, e0, -e1], -1),
-        np.stack([-e3, -e2, e1, e0], -1),
-    ], -2)  # fmt: skip
+    """G (..., 3, 4) with omega_global = G ep_t (and alpha_global = G ep_tt, since G_t ep_t = 0):
+    2 [[-e1, e0, -e3, e2], [-e2, e3, e0, -e1], [-e3, -e2, e1, e0]] (a product by +-2 is exact)."""
+    ep = np.asarray(ep)
+    # C order: einsum sums in the order of its operands' layout (the bits of omega depend on it)
+    return np.multiply(ep[..., _G_INDEX], _G_SIGN, out=np.empty(ep.shape[:-1] + (3, 4)))
 
 
 def frame_with_z(axis: np.ndarray) -> np.ndarray:

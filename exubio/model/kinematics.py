@@ -24,7 +24,11 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Cross product over the last axis (broadcasting); faster than np.cross for small batches."""
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
     b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+    out = np.empty(np.broadcast_shapes(np.shape(a), np.shape(b)))  # written in place: no stacking copy
+    np.subtract(a1 * b2, a2 * b1, out=out[..., 0])
+    np.subtract(a2 * b0, a0 * b2, out=out[..., 1])
+    np.subtract(a0 * b1, a1 * b0, out=out[..., 2])
+    return out
 
 
 def axis_rotation(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
@@ -193,11 +197,14 @@ class Kinematics:
         cols = cols * self._affects_f[points.segment_index][..., :, None]
         return np.swapaxes(cols, -1, -2)
 
-    def point_bias_acceleration(self, q: np.ndarray, qd: np.ndarray, points: PointSet) -> np.ndarray:
-        """(dJ/dt) q̇ of each point: its acceleration when q̈ = 0, (..., k, 3)."""
-        fr = self.frames(q)
-        r = self.points(q, points, frames=fr)
-        J = self.point_jacobian(q, points, frames=fr, positions=r)
+    def point_bias_acceleration(self, q: np.ndarray, qd: np.ndarray, points: PointSet, *,
+                                frames: Frames | None = None, positions: np.ndarray | None = None,
+                                jacobian: np.ndarray | None = None) -> np.ndarray:
+        """(dJ/dt) q̇ of each point: its acceleration when q̈ = 0, (..., k, 3); ``frames``, ``positions``
+        and ``jacobian``: those of q and the points where the caller has them."""
+        fr = self.frames(q) if frames is None else frames
+        r = self.points(q, points, frames=fr) if positions is None else positions
+        J = self.point_jacobian(q, points, frames=fr, positions=r) if jacobian is None else jacobian
         qd = np.asarray(qd, dtype=float)
         rd = np.einsum("...kim,...m->...ki", J, qd)
         wq = fr.axes * qd[..., None]  # (..., m, 3)
@@ -223,13 +230,13 @@ class Kinematics:
         J = self.point_jacobian(q, self.contacts, frames=fr, positions=r)
         return 2.0 * np.einsum("...kc,...kcm->...km", (r - self.centre) * self.a_diag, J)
 
-    def eta(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    def eta(self, q: np.ndarray, qd: np.ndarray, *, frames: Frames | None = None) -> np.ndarray:
         """Velocity term of the constraint acceleration: g̈ = G q̈ + eta (..., 2) (paper Eq. 3)."""
-        fr = self.frames(q)
+        fr = self.frames(q) if frames is None else frames
         r = self.points(q, self.contacts, frames=fr)
         J = self.point_jacobian(q, self.contacts, frames=fr, positions=r)
         v = np.einsum("...kcm,...m->...kc", J, np.asarray(qd, dtype=float))
-        bias = self.point_bias_acceleration(q, qd, self.contacts)
+        bias = self.point_bias_acceleration(q, qd, self.contacts, frames=fr, positions=r, jacobian=J)
         e = r - self.centre
         return 2.0 * np.einsum("...kc,c->...k", v * v + e * bias, self.a_diag)
 

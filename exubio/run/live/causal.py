@@ -29,7 +29,7 @@ import numpy as np
 from scipy.signal import butter, sosfilt_zi
 
 from exubio.errors import InputError
-from exubio.prep.thorax import MAX_THORAX_GAP_S, isb_landmarks, thorax_frame
+from exubio.prep.thorax import MAX_THORAX_GAP_S, isb_landmarks
 from exubio.protocol.labels import resolve_labels
 from exubio.types import Protocol
 
@@ -90,6 +90,10 @@ class CausalTargets:
         self.mirror = protocol.side == "left"
         self.max_thorax_gap = int(round(options.max_thorax_gap_s * rate_hz))
         self._held = {key: (None, 0) for key in self.thorax}  # last valid landmark and frames since
+        self._have = self.columns >= 0
+        self._have_columns = self.columns[self._have]
+        self._thorax_keys = tuple(self.thorax)
+        self._thorax_columns = np.array([self.thorax[key] for key in self._thorax_keys], dtype=int)
         if options.cutoff_hz is not None:
             self.sos = butter(int(options.order), float(options.cutoff_hz), fs=rate_hz, output="sos")
             self.zi_unit = sosfilt_zi(self.sos)  # (sections, 2): steady state for a unit input
@@ -123,17 +127,22 @@ class CausalTargets:
         """The protocol markers of one raw frame in the thorax frame (k, 3), NaN where missing."""
         raw = np.asarray(raw, dtype=float)
         pos = np.full((self.k, 3), np.nan)
-        have = self.columns >= 0
-        pos[have] = raw[self.columns[have]]
+        pos[self._have] = raw[self._have_columns]
         pos[~np.isfinite(pos).all(axis=1)] = np.nan
         if self.thorax:
-            lm = {key: self._landmark(key, raw) for key in self.thorax}
+            found = raw[self._thorax_columns]  # every landmark at once; held ones only where one is missing
+            if np.isfinite(found).all():
+                lm = dict(zip(self._thorax_keys, found))
+                for key, value in lm.items():
+                    self._held[key] = (value, 0)
+            else:
+                lm = {key: self._landmark(key, raw) for key in self.thorax}
             if any(v is None for v in lm.values()):
                 return np.full((self.k, 3), np.nan)
-            try:
-                rot, origin = thorax_frame(*isb_landmarks(lm))
-            except InputError:  # landmarks collinear in this frame: no frame, no markers
+            frame = thorax_frame_one(*isb_landmarks(lm))
+            if frame is None:  # landmarks collinear in this frame: no frame, no markers
                 return np.full((self.k, 3), np.nan)
+            rot, origin = frame
             pos = (pos - origin) @ rot
         if self.mirror:
             pos = pos * np.array([1.0, 1.0, -1.0])
@@ -178,6 +187,29 @@ class CausalTargets:
         self.z[idx] = z
         out[idx] = x
         return out
+
+
+def thorax_frame_one(ij: np.ndarray, px: np.ndarray, c7: np.ndarray, t8: np.ndarray, /
+                     ) -> tuple[np.ndarray, np.ndarray] | None:
+    """exubio.prep.thorax.thorax_frame of one frame's four landmarks (3,) in plain floats (a frame
+    at a time, numpy's per-call cost would be most of it): (R (3, 3), origin (3,)), or None where the
+    landmarks are coincident or collinear (thorax_frame's test). The same formulas; the norms are
+    summed in Python's order, so R may differ from thorax_frame's in the last bit
+    (tests/model/test_frame_angles.py)."""
+    (a0, a1, a2), (p0, p1, p2), (c0, c1, c2), (t0, t1, t2) = ij.tolist(), px.tolist(), c7.tolist(), t8.tolist()
+    u0, u1, u2 = 0.5 * (a0 + c0), 0.5 * (a1 + c1), 0.5 * (a2 + c2)  # IJ-C7 midpoint
+    y0, y1, y2 = u0 - 0.5 * (p0 + t0), u1 - 0.5 * (p1 + t1), u2 - 0.5 * (p2 + t2)  # up, from the PX-T8 midpoint
+    d0, d1, d2 = a0 - c0, a1 - c1, a2 - c2
+    z0, z1, z2 = d1 * y2 - d2 * y1, d2 * y0 - d0 * y2, d0 * y1 - d1 * y0
+    ny = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
+    nz = math.sqrt(z0 * z0 + z1 * z1 + z2 * z2)
+    scale = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) * ny
+    if ny <= 1e-12 or nz <= 1e-9 * max(scale, 1e-300):
+        return None
+    y0, y1, y2, z0, z1, z2 = y0 / ny, y1 / ny, y2 / ny, z0 / nz, z1 / nz, z2 / nz
+    x0, x1, x2 = y1 * z2 - y2 * z1, y2 * z0 - y0 * z2, y0 * z1 - y1 * z0
+    z0, z1, z2 = x1 * y2 - x2 * y1, x2 * y0 - x0 * y2, x0 * y1 - x1 * y0  # exactly orthonormal despite rounding
+    return np.array([[x0, y0, z0], [x1, y1, z1], [x2, y2, z2]]), np.array([a0, a1, a2])
 
 
 def frame_index(timestamp_s: float, first_timestamp_s: float, rate_hz: float, /) -> int:

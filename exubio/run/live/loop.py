@@ -47,6 +47,7 @@ from exubio.run.live.options import LiveOptions
 from exubio.run.live.outputs import VERDICT_CODES, Event, FrameRecord, LiveRecording, PublishedAngles
 from exubio.run.live.sources import MarkerSource
 from exubio.methods.pf import _Frames, pf_setup
+from exubio.model.kinematics import Frames
 from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Trajectories
 
 log = logging.getLogger(__name__)
@@ -159,9 +160,9 @@ class LiveSession:
         published angles), the measured flags, the residuals, the running verdict."""
         k = len(self.marker_names)
         if q is not None:
-            fr = self.kin.frames(q)  # once, for the angles and the model points
-            isb, rate = self.angles.of(q, fr.R)
-            pts = self.kin.points(q, self.points, frames=fr)
+            R, p = self.forward(q)  # once, for the angles and the model points (Kinematics.frames' R and p)
+            isb, rate = self.angles.of(q, R)
+            pts = self.kin.points(q, self.points, frames=Frames(R, p, None, None))
             res = np.linalg.norm(pts - measured_m, axis=1)
         else:
             isb, rate = self.angles.none()
@@ -381,6 +382,7 @@ class LiveSession:
         self.n_stepped = 0
 
     def _bind(self) -> None:
+        from exubio.model.frame_kinematics import FrameForward
         from exubio.model.kinematics import Kinematics
         from exubio.methods.common import tracked_points
 
@@ -390,6 +392,7 @@ class LiveSession:
             log.info("%s: labels not used by protocol '%s': %s", self.info.name, self.protocol.name, list(self.causal.unused))
         self.marker_names = self.protocol.marker_names
         self.kin = Kinematics(self.model)
+        self.forward = FrameForward(self.kin)
         self.points = tracked_points(self.kin, self.protocol)
         self.monitor = LiveMonitor(self.model, self.protocol, self.kin, self.points, self.rate, self.options,
                                    self.causal.columns >= 0,  # optional markers the stream does not carry: no gap events

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 import numpy as np
 
 from exubio.trust import quality as Q
-from exubio.model.angles import ISB_COLUMNS, isb_table, measured_isb_joints
+from exubio.model.angles import ISB_COLUMNS, measured_isb_joints
 from exubio.run.live.sources import StreamInfo
 from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Reconstruction, Trajectories
 
@@ -195,9 +195,11 @@ class PublishedAngles:
 
     def __init__(self, model: Model, kin, rate: float):
         from exubio.model.angles import anatomical_frames
+        from exubio.model.frame_angles import FrameAngles
 
         self.model, self.kin, self.rate = model, kin, rate
         self.anatomical = anatomical_frames(model)
+        self.frame_angles = FrameAngles(model, self.anatomical)
         self.last_isb = None
         self.last_isb_row = None
 
@@ -217,8 +219,9 @@ class PublishedAngles:
 
     def _isb(self, q: np.ndarray, rotations: np.ndarray | None = None) -> np.ndarray:
         """The ISB angles of q (15,), unwrapped against the previous frame."""
-        _, table = isb_table(self.model, q, kinematics=self.kin, frames=self.anatomical, rotations=rotations)
-        ang = table
+        if rotations is None:
+            rotations = self.kin.frames(q).R
+        ang = self.frame_angles(rotations)  # isb_table's angles of one frame (bitwise), its set-up done once
         if self.last_isb is not None:
             ang = self.last_isb + (ang - self.last_isb + np.pi) % (2 * np.pi) - np.pi
         self.last_isb = ang

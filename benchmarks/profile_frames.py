@@ -1,0 +1,225 @@
+"""Where the time of a frame goes: per-stage timers around the functions a batch PF, a batch LS and a
+live frame call.
+
+Each stage is a set of functions wrapped (for this process only) by a timer that counts its own
+CPU time (the thread's), the time of the stages it calls excluded; "other" is what no stage holds
+(the loop's own Python). The timers cost about 1 us per call: the table gives each stage's share
+of the timed run, applied to the CPU time per frame of untimed runs of the same work (median). The live frame is the live loop run on an in-process replay (``reconstruct_causal``,
+exubio.run.live.offline: no LSL); what LSL adds is the live process's CPU per frame in
+``bench_live.py`` minus this loop's.
+
+    python benchmarks/profile_frames.py                  # PF, LS and live on 25 s / 10 s at 200 Hz
+    python benchmarks/profile_frames.py --modes live --rate 1000 --duration 5
+    python benchmarks/profile_frames.py --json out.json
+
+The process pins itself to one core and sets BLAS threads to 1 (as bench_reconstruction.py).
+"""
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")  # one core: before numpy is imported
+
+import argparse  # noqa: E402
+import importlib  # noqa: E402
+import json  # noqa: E402
+import statistics  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from collections import defaultdict  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+# (module, attribute path, stage) per mode; a stage's time excludes the stages it calls
+STAGES = {
+    "pf": [
+        ("exubio.methods.pf", "pf_setup", "start: LS pose, build the Exudyn system"),
+        ("exubio.backend.exudyn_integrate", "Integration.solve", "Exudyn's steps (native)"),
+        ("exubio.backend.exudyn_integrate", "_TrialRun.pre_step", "prestep (spring targets, limits)"),
+        ("exubio.backend.exudyn_integrate", "_TrialRun.post_step", "post-step (state record)"),
+        ("exubio.backend.exudyn_integrate", "frames_from_steps", "frames from the steps (quintic)"),
+        ("exubio.backend.exudyn_system", "PFSystem._decode", "decode the segment motion"),
+        ("exubio.methods.pf", "_Frames.coordinates", "inverse map to q"),
+        ("exubio.methods.pf", "_Frames.rates", "rates and the projection"),
+        ("exubio.model.kinematics", "Kinematics.coordinate_rates", "rates and the projection"),
+        ("exubio.methods.pf", "_Frames._project", "rates and the projection"),
+        ("exubio.methods.pf", "_Frames.finish", "model points, residuals, g, checks"),
+    ],
+    "ls": [
+        ("exubio.methods.poses", "_linearise", "LS: residuals and Jacobians"),
+        ("exubio.methods.lsq", "damped_step", "LS: the damped step (solve)"),
+        ("exubio.methods.poses", "project_on_constraints", "projection on the constraints"),
+        ("exubio.methods.ls", "solve_rates", "rates (q̇, q̈)"),
+        ("exubio.methods.ls", "assemble", "model points, residuals, g"),
+    ],
+    "live": [
+        ("exubio.run.live.intake", "SampleIntake.next_raw", "sample intake (replay source)"),
+        ("exubio.run.live.causal", "CausalTargets.push", "causal targets (thorax frame, rates)"),
+        ("exubio.backend.exudyn_integrate", "Integration.solve", "Exudyn's step (native)"),
+        ("exubio.backend.exudyn_live", "_LiveRun.pre_step", "prestep (spring targets, limits)"),
+        ("exubio.backend.exudyn_live", "_LiveRun.fetch", "prestep (spring targets, limits)"),
+        ("exubio.backend.exudyn_live", "_LiveRun.post_step", "post-step (state, interpolation)"),
+        ("exubio.backend.exudyn_system", "PFSystem._decode", "decode the segment motion"),
+        ("exubio.methods.pf", "_Frames.coordinates", "inverse map to q"),
+        ("exubio.run.live.outputs", "PublishedAngles.of", "ISB angles and their rates"),
+        ("exubio.run.live.loop", "LiveSession._publish", "outputs (model points, residuals, row)"),
+        ("exubio.run.live.monitor", "LiveMonitor.diverged", "checks (per frame)"),
+        ("exubio.run.live.monitor", "LiveMonitor.label_check", "checks (per frame)"),
+        ("exubio.run.live.monitor", "LiveMonitor.track_gaps", "checks (per frame)"),
+        ("exubio.run.live.monitor", "LiveMonitor.determinacy", "checks (deferred: determinacy, running)"),
+        ("exubio.run.live.monitor", "LiveMonitor.running", "checks (deferred: determinacy, running)"),
+        ("exubio.run.live.monitor", "LiveMonitor.verdict", "checks (deferred: determinacy, running)"),
+        ("exubio.run.live.loop", "LiveSession._flush", "deferred: rates, g, model points (16 frames)"),
+        ("exubio.run.live.loop", "LiveSession._record_output", "record"),
+        ("exubio.run.live.loop", "LiveSession._record_input", "record"),
+    ],
+}
+
+
+class Timers:
+    def __init__(self):
+        self.own = defaultdict(float)
+        self.calls = defaultdict(int)
+        self.stack: list[list] = []  # [stage, start, time of the stages called]
+
+    def wrap(self, fn, stage: str):
+        clock = time.thread_time  # CPU time of this thread: a shared machine's other jobs do not count
+
+        def timed(*args, **kwargs):
+            entry = [stage, clock(), 0.0]
+            self.stack.append(entry)
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                self.stack.pop()
+                total = clock() - entry[1]
+                self.own[stage] += total - entry[2]
+                self.calls[stage] += 1
+                if self.stack:
+                    self.stack[-1][2] += total
+
+        timed.__wrapped__ = fn
+        return timed
+
+
+def install(mode: str, timers: Timers) -> list:
+    undo = []
+    for module, path, stage in STAGES[mode]:
+        mod = importlib.import_module(module)
+        *owners, name = path.split(".")
+        obj = mod
+        for o in owners:
+            obj = getattr(obj, o)
+        fn = obj.__dict__[name] if isinstance(obj, type) else getattr(obj, name)
+        setattr(obj, name, timers.wrap(fn, stage))
+        undo.append((obj, name, fn))
+    return undo
+
+
+def uninstall(undo: list) -> None:
+    for obj, name, fn in reversed(undo):
+        setattr(obj, name, fn)
+
+
+def batch_inputs(duration_s: float, rate_hz: float, noise_mm: float):
+    from exubio.prep.targets import prepare_targets
+    from exubio.run.inputs import load_model_and_protocol
+    from exubio.synth.simulate import Motion, simulate_trial
+
+    model, protocol = load_model_and_protocol()
+    trial = simulate_trial(model, Motion.parse("abduction"), duration_s=duration_s, rate_hz=rate_hz,
+                           noise_mm=noise_mm, sta_mm=0.0, seed=1)
+    return model, protocol, prepare_targets(trial.trajectories, protocol)
+
+
+def live_inputs(duration_s: float, rate_hz: float):
+    from exubio.run.inputs import load_model_and_protocol
+    from exubio.synth.simulate import Motion, simulate_trial
+    from exubio.types import Trajectories
+
+    model, protocol = load_model_and_protocol()
+    trial = simulate_trial(model, Motion.parse("abduction"), duration_s=duration_s, rate_hz=rate_hz, noise_mm=0.5,
+                           sta_mm=0.0, seed=1)
+    t = trial.trajectories
+    keep = [i for i, lab in enumerate(t.labels) if lab != "ELB"]  # the 21-marker set of bench_live.py
+    return model, protocol, Trajectories(labels=tuple(t.labels[i] for i in keep), positions_m=t.positions_m[:, keep],
+                                         rate_hz=t.rate_hz, time_s=t.time_s, source="profile")
+
+
+def profile(mode: str, args) -> dict:
+    if mode == "live":
+        from exubio.run.live.offline import reconstruct_causal
+
+        model, protocol, trial = live_inputs(args.live_duration, args.rate)
+        n = trial.n_frames
+
+        def work():
+            reconstruct_causal(trial, model, protocol)
+    else:
+        from exubio.run.pipeline import reconstruct
+
+        model, protocol, targets = batch_inputs(args.duration, args.rate, args.noise_mm)
+        n = targets.n_frames
+
+        def work():
+            reconstruct(model, protocol, targets, method=mode)
+    work()  # warm: caches, imports
+    cpu = []
+    for _ in range(args.runs):
+        c0 = time.process_time()
+        work()
+        cpu.append(time.process_time() - c0)
+    timers = Timers()
+    undo = install(mode, timers)
+    try:
+        t0 = time.thread_time()
+        work()
+        timed = time.thread_time() - t0
+    finally:
+        uninstall(undo)
+    cpu_ms = 1e3 * statistics.median(cpu) / n
+    held = sum(timers.own.values())
+    rows = {stage: timers.own[stage] / timed for stage in timers.own}
+    rows["other (the loop's own Python)"] = max(timed - held, 0.0) / timed
+    return {"mode": mode, "frames": n, "cpu_ms_per_frame": cpu_ms, "cpu_ms_per_frame_runs": [1e3 * c / n for c in cpu],
+            "timed_ms_per_frame": 1e3 * timed / n,
+            "stages": {s: {"share": f, "us_per_frame": 1e3 * f * cpu_ms, "calls_per_frame": timers.calls.get(s, 0) / n}
+                       for s, f in sorted(rows.items(), key=lambda kv: -kv[1])}}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--modes", nargs="+", default=["pf", "ls", "live"], choices=["pf", "ls", "live"])
+    ap.add_argument("--duration", type=float, default=25.0, help="batch trial length (s), default 25")
+    ap.add_argument("--live-duration", type=float, default=10.0, help="live trial length (s), default 10")
+    ap.add_argument("--rate", type=float, default=200.0, help="frame rate (Hz), default 200")
+    ap.add_argument("--noise-mm", type=float, default=1.5)
+    ap.add_argument("--runs", type=int, default=3, help="untimed runs for the CPU per frame (median)")
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args(argv)
+    try:
+        cpu = min(os.sched_getaffinity(0))
+        os.sched_setaffinity(0, {cpu})
+    except (AttributeError, OSError):
+        cpu = None
+    out = []
+    for mode in args.modes:
+        res = profile(mode, args)
+        res["load_average"] = os.getloadavg()
+        out.append(res)
+        print(f"\n{mode}: {res['frames']} frames at {args.rate:g} Hz, CPU {res['cpu_ms_per_frame'] * 1e3:.1f} us/frame "
+              f"(median of {args.runs}; runs {', '.join(f'{x * 1e3:.1f}' for x in res['cpu_ms_per_frame_runs'])}), "
+              f"timed run {res['timed_ms_per_frame'] * 1e3:.1f} us/frame; core {cpu}; "
+              f"load {' '.join(f'{x:.2f}' for x in res['load_average'])}")
+        print(f"  {'stage':<52} {'us/frame':>9} {'share':>7} {'calls/frame':>12}")
+        for stage, row in res["stages"].items():
+            print(f"  {stage:<52} {row['us_per_frame']:9.1f} {100 * row['share']:6.1f}% {row['calls_per_frame']:12.2f}")
+    if args.json:
+        args.json.write_text(json.dumps(out, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
