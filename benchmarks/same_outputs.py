@@ -105,28 +105,19 @@ PATH_PLACEHOLDERS = {
     "<DATA>": "the folder of the real trials (../shared/data), the same for both unless a kept base run "
               "was made elsewhere",
 }
-KNOWN_CHANGES: tuple = (
-    ("base", r"benchmarks/README\.md", "studies/README.md",
-     "the scientific studies and their results moved from benchmarks/ to studies/ (issue 34): the notes "
-     "and the CSV headers that point to a measurement name studies/README.md"),
-    ("head", r"# signs: isb \(the raw ISB decompositions[^\n]*\n", "",
-     "issue 37: the angles CSV names its sign convention (one added header line)"),
-    ("head", r"exubio_signs=isb \(raw ISB decompositions[^\n]*\n", "",
-     "issue 37: the .mot names its sign convention (one added header line)"),
-    ("head", r'\n\s*"signs": "isb",', "", "issue 37: summary.json's signs key (not the last key)"),
-    ("head", r',\n\s*"signs": "isb"(?=\n)', "", "issue 37: summary.json's signs key (the last key)"),
-    ("head", r', "signs": "isb"', "", "issue 37: the .npz metadata's signs key"),
-)
+KNOWN_CHANGES: tuple = ()
 """Changes made on purpose since the base the tests compare with (tests/project/test_same_outputs.py BASE),
-each a (side, pattern, replacement, why) undone before the comparison: since f64e71d, the sign
-convention each output names (issue 37 item 4: a CSV header line, a .mot header line, summary.json's
-and the .npz metadata's ``signs``; the .npz's ``angle_signs`` is NEW_NPZ_ARRAYS). The base moved to
-f64e71d (issue 33), after the changes of issues 33, 35, 36 and 37 that change every output on
-purpose (each angle's uncertainty column, per-frame statuses from the gimbal margin and the
-uncertainty bound, the verdict's notes and advice, the study's reasons and angles table, the
-readers' findings); the ones since 336130f (issue 19) are in this file's history. Not undone: the
-study's angles.parquet and angles.csv.gz gain a ``signs`` column, and page 1 of the trial report
-draws the key angles with the CSV's (ISB) sign instead of their negation."""
+each a (side, pattern, replacement, why) undone before the comparison. Empty: the base moved to
+2acf5d1 (December 2026), after this session's changes made on purpose, each checked before the move:
+the studies' move (notes name studies/README.md), the sign convention each output names (issue 37:
+a CSV and a .mot header line, summary.json's and the .npz's ``signs``, the .npz's ``angle_signs``,
+the study table's ``signs`` column), the .mot's six thorax columns and summary.json's
+``pf_inertia_scale`` (issue 36), and the uncertainty's scapula-humerus cross term (issue 33: every
+``*_u_deg``, and ST upward rotation not measured in some frames of the demo). The refactors of
+issue 34 (the CLI per command, the lists of methods and checks, the tests' layout, the splits of
+synth/simulate, io/results, run/pipeline, run/study, report/trial_report and protocol/load) were
+compared with the commits before them: identical (demo and study; the CLI and the lists also the
+real trials). The earlier entries are in this file's history."""
 HEAD_BEHAVIOUR: tuple = ()
 """Changes of behaviour since the base, undone in the head's runs (code its sitecustomize runs
 before the command): none since f64e71d (PF's inertia scale is the same in both)."""
