@@ -4,6 +4,7 @@ cycles. Read from the source (ast), so a stray import anywhere fails here."""
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 import pytest
@@ -30,10 +31,12 @@ SOLVERS = ("exubio.methods", "exubio.backend", "exudyn", "exubio.run.pipeline", 
            *VALIDATION_STUDY)
 
 
+@functools.lru_cache(maxsize=None)  # the tree does not change during a run: read it once
 def _modules() -> dict[str, Path]:
     return {str(p.relative_to(PACKAGE)): p for p in sorted(PACKAGE.rglob("*.py"))}
 
 
+@functools.lru_cache(maxsize=None)
 def _imports(path: Path, *, top_level_only: bool = False) -> set[str]:
     tree = ast.parse(path.read_text(encoding="utf-8"))
     nodes = tree.body if top_level_only else list(ast.walk(tree))
@@ -91,6 +94,7 @@ LAYERS = (
 )
 
 
+@functools.lru_cache(maxsize=None)
 def _graph() -> dict[str, set[str]]:
     """exubio module -> the exubio modules it imports, at module level or inside functions alike."""
     mods = _modules()
