@@ -43,44 +43,6 @@ RHYTHM_MAP = {
     "sc_posterior_rotation": ("SC_rotation", +1.0),
 }
 ST_COLUMNS = ("ST_protraction", "ST_medRotation", "ST_tilt")  # same convention as scapula_isb_angles
-
-DEFAULT_MARKERS: tuple[str, ...] = (
-    "MAN", "XYP", "C7", "T10",
-    "CLAV_SC", "CLAV_AC",
-    "SCAP_Cor", "SCAP_AA", "SCAP_AC", "SCAP_IA", "SCAP_BACK", "SCAP_FRONT",
-    "ARM", "DELT", "EPI_lat", "EPI_med",
-    "ULNA", "ELB", "RADIUS",
-    "MET2", "MET5", "SEML",
-)  # fmt: skip
-STA_SCALE = {"thorax": 0.0, "clavicle": 0.3, "scapula": 0.6, "humerus": 1.0, "ulna": 0.25, "radius": 0.25, "hand": 0.25}
-LAB_ORIGIN_M = np.array([0.3, 0.5, 1.4])
-LAB_YAW_DEG = 20.0
-
-CYCLE_S = 5.0
-ELEVATION_RANGE_DEG = (10.0, 120.0)
-SIER_ELEVATION_DEG = 25.0
-SIER_AMPLITUDE_DEG = 40.0
-SIER_FREQUENCY_HZ = 0.5
-SIER_ELBOW_DEG = 90.0
-PRONATION_MEAN_DEG = 40.0  # forearm midway from full supination (the reference posture): inside its range
-_NEWTON_TOL = 1e-13
-FREE = ("ac_protraction", "ac_upward_rotation")  # solved from g(q) = 0 in every frame
-FITTED = "ac_posterior_tilt"  # the scapular rotation the constraints leave free: fitted to the rhythm
-LUDEWIG_HT_DEG = (30.0, 45.0, 60.0, 75.0, 90.0, 105.0, 120.0)
-LUDEWIG_2009: dict[str, dict[str, tuple[float, ...]]] = ludewig2009_at(
-    LUDEWIG_HT_DEG, ("SC_protraction", "SC_elevation", "SC_rotation", "ST_protraction", "ST_medRotation", "ST_tilt"),
-    planes=("frontal", "scapular", "sagittal"))
-# frontal = coronal-plane abduction, scapular = scapular-plane abduction (Ludewig: 40 deg anterior
-# to the coronal plane), sagittal = flexion; read from exubio/data/ludewig2009.csv
-SCAPULAR_PLANE_DEG = 40.0
-PLANE_OF = {"abduction": "frontal", "scaption": "scapular", "flexion": "sagittal", "sier": "frontal"}
-# model SC coordinate <- (Ludewig column, sign)
-RHYTHM_MAP = {
-    "sc_protraction": ("SC_protraction", +1.0),
-    "sc_elevation": ("SC_elevation", -1.0),
-    "sc_posterior_rotation": ("SC_rotation", +1.0),
-}
-ST_COLUMNS = ("ST_protraction", "ST_medRotation", "ST_tilt")  # same convention as scapula_isb_angles
 _NEWTON_TOL = 1e-13
 FREE = ("ac_protraction", "ac_upward_rotation")  # solved from g(q) = 0 in every frame
 FITTED = "ac_posterior_tilt"  # the scapular rotation the constraints leave free: fitted to the rhythm
