@@ -220,17 +220,18 @@ def expected_residual_ms(J: np.ndarray, K: np.ndarray, sigma: np.ndarray, /) -> 
     return d.sum(axis=2) / 3.0
 
 
-def trunk_angle_variance(kin: Kinematics, points: PointSet, qf: np.ndarray, DK: np.ndarray, trunk: np.ndarray,
+def trunk_angle_variance(kin: Kinematics, points: PointSet, qf: np.ndarray, DK: np.ndarray, amplitude: STAAmplitude,
                          /) -> np.ndarray:
     """(b, a) rad^2: what a trunk that moves unseen, in a run that assumes the thorax still, adds to
     each anatomical angle's variance at poses qf (b, m). The trunk turns by omega (thorax axes, about
-    IJ: the thorax frame's origin) and IJ moves by t, with second moment ``trunk`` (6, 6) per rad^2
-    of the humerus's rotation (exubio.truth.trunk_amplitude); every marker then moves by
+    IJ: the thorax frame's origin) and IJ moves by t, with the second moment C (6, 6) the amplitude
+    model gives at the humerus's rotation theta (``STAAmplitude.trunk_at``: a constant as shipped,
+    exubio.truth.trunk_amplitude); every marker then moves by
     omega x (p - IJ) + t in the assumed thorax frame, and the reconstruction follows by DK (b, a, 3k:
     the angles' change per marker displacement) as far as the model lets it (the sternoclavicular
     joint and the ellipsoid are fixed in the thorax); the angles relative to the (assumed) thorax
     (SC, ST, HT) of the bones themselves turn by omega, the relative ones (AC, GH, distal) do not. The
-    error is the difference: E = DK B - G, variance E C E^T theta^2."""
+    error is the difference: E = DK B - G, variance E C E^T."""
     from exubio.model.angles import anatomical_frames, angles_of_frames, segment_anatomical_rotations
 
     model = kin.model
@@ -267,4 +268,4 @@ def trunk_angle_variance(kin: Kinematics, points: PointSet, qf: np.ndarray, DK: 
     names_seg = names
     hum = names_seg.index("humerus") if "humerus" in names_seg else None
     theta = _rotation_angle(R[:, hum]) if hum is not None else np.zeros(b)
-    return np.einsum("bai,ij,baj->ba", E, np.asarray(trunk, dtype=float), E) * theta[:, None] ** 2
+    return np.einsum("bai,bij,baj->ba", E, amplitude.trunk_at(theta), E)

@@ -353,8 +353,8 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
     from exubio.trust import angle_uncertainty as AU
     amplitude = amplitude if amplitude is not None else _shipped_amplitude()
     noise_mm = AU.NOISE_MM if noise_mm is None else float(noise_mm)
-    if thorax_assumed_still and getattr(amplitude, "trunk", None) is None:
-        raise ValueError("thorax_assumed_still needs an amplitude model with a trunk second moment")
+    if thorax_assumed_still and not amplitude.has_trunk:
+        raise ValueError("thorax_assumed_still needs an amplitude model with the trunk's motion")
 
     model = kin.model
     n, m = q.shape
@@ -376,7 +376,7 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
         return _angle_block(kin, points, q[frames], pres, weights, table, held=held, locked=locked,
                             free_actual=free_actual, free_released=free_released, bounded=bounded,
                             amplitude=amplitude, noise_mm=noise_mm, residuals=None if res is None else res[frames],
-                            trunk=amplitude.trunk if thorax_assumed_still else None)
+                            trunk=amplitude if thorax_assumed_still else None)
 
     gain = np.full((len(sel), a), np.inf)
     unc = np.full((len(sel), a), np.inf)
@@ -439,7 +439,7 @@ def _angle_block(kin: Kinematics, points: PointSet, qf: np.ndarray, pres: np.nda
                  bounded: bool, amplitude, noise_mm: float, residuals: np.ndarray | None, trunk=None):
     """For the poses qf (b, m) with the markers pres (b, k): the angles' noise gains (deg/mm), standard
     uncertainties (rad; inf where unseen, where not ``bounded``), held shares and whether they depend
-    on a locked coordinate, each (b, a). ``trunk``: the amplitude model's unseen trunk motion, added to
+    on a locked coordinate, each (b, a). ``trunk``: the amplitude model whose unseen trunk motion is added to
     every angle's variance (a run that assumes the thorax still)."""
     from exubio.model.angles import segment_anatomical_rotations
     from exubio.trust import angle_uncertainty as AU

@@ -1,10 +1,16 @@
 """The soft-tissue-artefact amplitude model behind every angle's uncertainty: per segment, the
 standard deviation per unit of motion of its markers' rigid cluster rotation (rad per rad, about the
 segment's ISB axes), of the cluster's translation (m per rad) and of what no rigid motion explains
-(m per rad, per coordinate of each marker). Fitted on bone-referenced trials by
-``exubio.truth.sta_amplitude`` (how, and the driver of the motion, there); the shipped coefficients
-are those of the S2M intracortical-pin trials (``exubio/data/sta_amplitude_s2m.json``, with its
-citation).
+(m per rad, per coordinate of each marker), with their 6 x 6 second moment per rad^2 and the
+scapula's and humerus's cross moment. Fitted
+on bone-referenced trials by ``exubio.truth.sta_amplitude`` (how, and the driver of the motion,
+there); the shipped coefficients are those of the S2M intracortical-pin trials
+(``exubio/data/sta_amplitude_s2m.json``, with its citation).
+
+The unseen trunk's motion (what a run that assumes the thorax still cannot see,
+``exubio.truth.trunk_amplitude``) is a table against the driver (``trunk_at``; one node: a
+constant, as shipped), interpolated by ``exubio.synth.driver_table.interpolate``; a file from
+before carries a second moment per rad^2 (``trunk``), used where no table is.
 
 Segments without bone data take the humerus's coefficients: the clavicle driven like the scapula by
 the humerus's rotation, the ulna, radius and hand by their own joint's rotation (from their parent
@@ -21,6 +27,7 @@ from typing import Mapping
 import numpy as np
 
 from exubio.errors import InputError
+from exubio.synth.driver_table import interpolate
 
 __all__ = ["STAAmplitude", "load_sta_amplitude", "SEGMENTS_WITH_DATA", "BORROWED_FROM", "SHIPPED"]
 
@@ -44,6 +51,22 @@ class STAAmplitude:
     source: str = ""
     citation: str = ""
     extra: Mapping[str, object] = field(default_factory=dict)
+    trunk_nodes: np.ndarray | None = None  # (nt,) rad: the driver at the trunk table's nodes
+    trunk_table: np.ndarray | None = None  # (nt, 6, 6): the unseen trunk's rotation + IJ displacement second moment
+
+    @property
+    def has_trunk(self) -> bool:
+        return self.trunk_table is not None or self.trunk is not None
+
+    def trunk_at(self, theta: np.ndarray, /) -> np.ndarray:
+        """(b, 6, 6): the unseen trunk's rotation vector (rad) and IJ displacement (m) second moment at
+        ``theta`` (ValueError where the model has none)."""
+        t = np.asarray(theta, dtype=float)
+        if self.trunk_table is not None and self.trunk_nodes is not None:
+            return interpolate(self.trunk_nodes, self.trunk_table, t)
+        if self.trunk is None:
+            raise ValueError("the STA amplitude model has no trunk motion")
+        return np.asarray(self.trunk, dtype=float)[None] * (t ** 2)[:, None, None]
 
     def of(self, segment: str) -> tuple[np.ndarray, np.ndarray, bool]:
         """(rigid 6 x 6 second moment per rad^2 of driver, nonrigid SD per axis, from bone data) of
@@ -88,7 +111,15 @@ class STAAmplitude:
                                                  "IJ's displacement (m, same axes) x same, per rad^2 of driver: the "
                                                  "trunk motion a run that assumes the thorax still cannot see "
                                                  "(exubio.truth.trunk_amplitude)",
-                    "trunk_source": self.trunk_source} if self.trunk is not None else {})}
+                    "trunk_source": self.trunk_source} if self.trunk is not None else {}),
+                **({"trunk_table_nodes_rad": [float(f"{x:.6g}") for x in self.trunk_nodes],
+                    "trunk_table": _nested(self.trunk_table), "trunk_source": self.trunk_source}
+                   if self.trunk_table is not None else {})}
+
+
+def _nested(a) -> list:
+    a = np.asarray(a, dtype=float)
+    return [float(f"{x:.6g}") for x in a] if a.ndim == 1 else [_nested(x) for x in a]
 
 
 def load_sta_amplitude(path: str | Path | None = None, /) -> STAAmplitude:
@@ -112,6 +143,12 @@ def load_sta_amplitude(path: str | Path | None = None, /) -> STAAmplitude:
                  for pair, v in data.get("rigid_cross_second_moment", {}).items()}
         trunk = (np.asarray(data["trunk_second_moment"], dtype=float).reshape(6, 6)
                  if "trunk_second_moment" in data else None)
+        tables: dict = {}
+        if "trunk_table_nodes_rad" in data:
+            tn = np.asarray(data["trunk_table_nodes_rad"], dtype=float).reshape(-1)
+            if tn.size == 0 or np.any(np.diff(tn) <= 0):
+                raise ValueError("trunk_table_nodes_rad must be one or more increasing values")
+            tables.update(trunk_nodes=tn, trunk_table=np.asarray(data["trunk_table"], dtype=float).reshape(tn.size, 6, 6))
     except (ValueError, KeyError, TypeError) as exc:
         raise InputError(f"{where}: not an STA amplitude model ({type(exc).__name__}: {exc}); expected the JSON "
                          "that exubio.truth.sta_amplitude.write_sta_amplitude writes") from None
@@ -119,4 +156,5 @@ def load_sta_amplitude(path: str | Path | None = None, /) -> STAAmplitude:
     if bad:
         raise InputError(f"{where}: 'rigid_cross_second_moment' keys must be 'A|B' (two segments), got {bad}")
     return STAAmplitude(out["rotation"], out["translation"], out["nonrigid"], rigid, cross, trunk,
-                        str(data.get("trunk_source", "")), str(data.get("source", "")), str(data.get("citation", "")))
+                        str(data.get("trunk_source", "")), str(data.get("source", "")), str(data.get("citation", "")),
+                        **tables)

@@ -8,8 +8,13 @@ IJ-C7 midpoint, Z normal to that plane to the right, X = Y x Z) in every frame; 
 its mean over the first ``REST_S`` s as a rotation vector in the start frame's axes (rad), and IJ's
 displacement in the same axes (m): xi (n, 6). The driver is the one of the artefact amplitude model
 (``exubio.truth.sta_amplitude``): theta, the humerus's rotation angle from its start orientation in
-the lab (a rigid fit of the humerus's markers). Pooled over trials, the second moment per rad^2
-C = sum_t xi xi^T / sum_t theta^2 (6 x 6), zero at the start by construction.
+the lab (a rigid fit of the humerus's markers). Pooled over trials, the second moment of xi over
+every frame after the rest window, one constant: the trunk of arm tasks moves with the task (a lean
+to the mouth, a turn), about as much with the arm near its start as raised (on the six movement
+trials of ../shared/data/c3d, 2-7 deg with the humerus within 10 deg of its start, 3-13 deg at 20-40
+deg), and of three forms fitted on five of those trials and judged on the sixth (a constant, a
+table in bins of theta, a second moment per rad^2 of theta), the constant predicts the held-out
+trial best (``python studies/trunk_motion.py``: mean held-out Gaussian log-likelihood per frame).
 """
 from __future__ import annotations
 
@@ -80,14 +85,22 @@ def trunk_motion(positions: np.ndarray, labels: Sequence[str], rate_hz: float, /
     return xi, theta
 
 
-def fit_trunk_amplitude(motions: Sequence[tuple[np.ndarray, np.ndarray]], /) -> tuple[np.ndarray, int]:
-    """(C (6, 6) per rad^2, frames used) pooled over (xi, theta) pairs of ``trunk_motion``."""
-    num, den, frames = np.zeros((6, 6)), 0.0, 0
-    for xi, theta in motions:
-        ok = np.isfinite(xi).all(axis=1) & np.isfinite(theta)
-        num += xi[ok].T @ xi[ok]
-        den += float(np.sum(theta[ok] ** 2))
-        frames += int(ok.sum())
-    if den <= 0:
-        raise InputError("the trials hold no motion of the humerus from its start: no trunk amplitude")
-    return num / den, frames
+def fit_trunk_amplitude(motions: Sequence[tuple[np.ndarray, np.ndarray]], /, *, rest_frames: Sequence[int] | None = None
+                        ) -> tuple[np.ndarray, np.ndarray, int]:
+    """(nodes (1,) rad, table (1, 6, 6), frames used) pooled over (xi, theta) pairs of
+    ``trunk_motion``: the second moment of xi over every frame after each trial's first
+    ``rest_frames`` (its rest window, where xi is zero by construction), one node (the frames' mean
+    theta): constant in theta (module docstring), in the artefact table's form
+    (``exubio.synth.driver_table``)."""
+    xs, ts = [], []
+    for i, (xi, theta) in enumerate(motions):
+        x, th = np.asarray(xi, dtype=float), np.array(theta, dtype=float)
+        n0 = 0 if rest_frames is None else int(rest_frames[i])
+        ok = np.isfinite(x).all(axis=1) & np.isfinite(th)
+        ok[:n0] = False
+        xs.append(x[ok])
+        ts.append(th[ok])
+    x, th = np.concatenate(xs), np.concatenate(ts)
+    if x.shape[0] < 2 or not np.any(th > 0):
+        raise InputError("the trials hold no motion after their start: no trunk amplitude")
+    return np.array([float(th.mean())]), (x.T @ x / x.shape[0])[None], int(x.shape[0])

@@ -74,7 +74,8 @@ def test_a_bone_trial_of_a_known_motion_gives_the_bones_angles_back(side):
         e = per["ls"]
         if e.measured_fraction > 0:
             assert e.rmse_deg < 0.02 and e.max_deg < 0.15, (angle, e)
-    assert comp.angles["GH_phadke_X_elevation"]["ls"].measured_fraction > 0.5
+    # measured where its u (with the still thorax's cost: a trunk moving 3-6 deg unseen) is within the bound
+    assert comp.angles["GH_phadke_X_elevation"]["ls"].measured_fraction > 0.4
 
 
 def test_the_reader_carries_markers_and_landmarks_into_the_lab(tmp_path):
