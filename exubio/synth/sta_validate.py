@@ -18,7 +18,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from exubio.synth.sta_bone import (DEFAULT_DRIVERS, DEFAULT_RIDGE, RIDGE, SegmentData, fit_segment, held_out_residual,
+from exubio.synth.sta_bone import (DEFAULT_DRIVERS, DEFAULT_RIDGE, RIDGE, ROTATION_COURSE, SegmentData, fit_segment, held_out_residual,
                                    rigid_displacements, segment_data)
 from exubio.synth.sta_residual import correlation_time
 
@@ -76,7 +76,8 @@ def leave_one_task_out(paths: Sequence[str | Path], /, *, rate_hz: float,
         data = [segment_data(t, s, drv, rate_hz=rate_hz) for t in trials]
         for i, held in enumerate(data):
             r = ridge.get(s, RIDGE) if isinstance(ridge, Mapping) else (DEFAULT_RIDGE.get(s, RIDGE) if ridge is None else ridge)
-            seg = fit_segment([d for j, d in enumerate(data) if j != i], drv, ridge=r)
+            seg = fit_segment([d for j, d in enumerate(data) if j != i], drv, ridge=r,
+                              rotation_course=ROTATION_COURSE.get(s, True))
             out.append(score_segment(seg, held, segment=s))
     return out
 
@@ -122,8 +123,9 @@ def held_out_amplitude(paths: Sequence[str | Path], /, *, rate_hz: float, seeds:
         data = [segment_data(t, s, drv, rate_hz=rate_hz) for t in trials]
         for i, held in enumerate(data):
             rest = [d for j, d in enumerate(data) if j != i]
-            seg = fit_segment(rest, drv, ridge=ridge)
-            proc = held_out_residual(rest, drv, ridge=ridge)
+            kw = dict(ridge=ridge, rotation_course=ROTATION_COURSE.get(s, True))
+            seg = fit_segment(rest, drv, **kw)
+            proc = held_out_residual(rest, drv, **kw)
             ok = np.isfinite(held.Y).all(axis=1) & np.isfinite(held.X).all(axis=1)
             pred = held.X[ok] @ seg.rigid_coef
             Y = held.Y[ok]

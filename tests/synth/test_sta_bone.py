@@ -97,18 +97,21 @@ def test_left_arm_is_mirrored_onto_the_right_convention():
 @needs_data
 def test_fitted_model_reproduces_held_out_tasks():
     """Leave one task out on the four S2M tasks: measured scapula R^2 0.78-0.88 (marker displacement)
-    and 0.83-0.98 (cluster rotation); humerus displacement R^2 0.10-0.58 (studies/README.md)."""
+    and 0.83-0.98 (cluster rotation); the humerus's translation R^2 0.71-0.92 but punching's, its
+    rotation given no mean course (R^2 0: ROTATION_COURSE), its displacement R^2 0.01-0.60
+    (studies/README.md)."""
     from exubio.synth.sta_validate import leave_one_task_out
 
     res = leave_one_task_out(S2M, rate_hz=300.0)
     assert len(res) == 8
     for h in res:
         rms_data, rms_resid, r2 = h.stats["displacement_mm"]
-        assert rms_resid < rms_data, (h.segment, h.task)  # the model reduces every held-out task's artefact
+        assert rms_resid <= rms_data * 1.001, (h.segment, h.task)  # the model never adds to a held-out task's artefact
         if h.segment == "scapula":
             assert r2 > 0.75 and h.stats["rotation_deg"][2] > 0.8 and h.stats["translation_mm"][2] > 0.8, h
         else:
-            assert r2 > 0.05, h
+            assert h.stats["rotation_deg"][2] == pytest.approx(0.0, abs=1e-12), h
+            assert h.stats["translation_mm"][2] > (0.0 if h.task == "punching" else 0.7), h
 
 
 def _rigid_only(model: BoneStaModel) -> BoneStaModel:
@@ -257,7 +260,7 @@ def test_a_model_with_a_residual_round_trips_and_a_bad_one_is_refused():
 def test_the_shipped_residual_is_what_the_pins_leave_on_held_out_tasks():
     """The shipped residual is reproduced from the S2M data by its stated measurement (leave one task
     out), independently recomputed here: fit on three tasks, residual on the fourth, pooled."""
-    from exubio.synth.sta_bone import DEFAULT_DRIVERS, DEFAULT_RIDGE
+    from exubio.synth.sta_bone import DEFAULT_DRIVERS, DEFAULT_RIDGE, ROTATION_COURSE
     from exubio.truth.sta_format import read_sta_trial
 
     shipped = load_sta_model("bone")
@@ -266,7 +269,8 @@ def test_the_shipped_residual_is_what_the_pins_leave_on_held_out_tasks():
         data = [segment_data(t, s, drv, rate_hz=300.0) for t in trials]
         num, den = np.zeros((6, 6)), 0.0
         for i, held in enumerate(data):
-            seg = fit_segment([d for j, d in enumerate(data) if j != i], drv, ridge=DEFAULT_RIDGE[s])
+            seg = fit_segment([d for j, d in enumerate(data) if j != i], drv, ridge=DEFAULT_RIDGE[s],
+                              rotation_course=ROTATION_COURSE[s])
             ok = np.isfinite(held.Y).all(axis=1)
             r = held.Y[ok] - held.X[ok] @ seg.rigid_coef
             num += r.T @ r
