@@ -215,19 +215,19 @@ def _solve_rates_block(kin: Kinematics, points: PointSet, q: np.ndarray, vel: np
     J = kin.point_jacobian(q, points, frames=fr)
     Jw = J * w[..., None, None]
     K = np.zeros((n, m + 2, m + 2))
-    K[:, :m, :m] = np.einsum("nkcm,nkcl->nml", Jw, J) + mu * np.eye(m)
+    K[:, :m, :m] = np.swapaxes(Jw.reshape(n, -1, m), 1, 2) @ J.reshape(n, -1, m) + mu * np.eye(m)
     if limits is not None:
         K[:, :m, :m] += limits.kappa * (violation(q, limits.ranges_rad) != 0)[..., :, None] * np.eye(m)
     G = kin.G(q, frames=fr)
     K[:, :m, m:] = np.swapaxes(G, 1, 2)
     K[:, m:, :m] = G
     v = np.where(present[..., None], vel, 0.0)
-    rhs = np.concatenate([np.einsum("nkcm,nkc->nm", Jw, v), np.zeros((n, 2))], axis=1)
+    rhs = np.concatenate([(v.reshape(n, 1, -1) @ Jw.reshape(n, -1, m))[:, 0], np.zeros((n, 2))], axis=1)
     fix_variables(K, rhs, held)
     qd = np.linalg.solve(K, rhs[..., None])[..., 0][:, :m]
     bias = kin.point_bias_acceleration(q, qd, points, frames=fr, jacobian=J)
     a = np.where(present[..., None], acc - bias, 0.0)
-    rhs = np.concatenate([np.einsum("nkcm,nkc->nm", Jw, a), -kin.eta(q, qd, frames=fr)], axis=1)
+    rhs = np.concatenate([(a.reshape(n, 1, -1) @ Jw.reshape(n, -1, m))[:, 0], -kin.eta(q, qd, frames=fr)], axis=1)
     fix_variables(K, rhs, held)
     qdd = np.linalg.solve(K, rhs[..., None])[..., 0][:, :m]
     return qd, qdd

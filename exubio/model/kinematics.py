@@ -122,6 +122,7 @@ class Kinematics:
             self.precedes[j] = self.affects[s] & (np.arange(self.n_coordinates) < j)
             own = self._joint_coords[s]
             self.precedes[j, own[own >= j]] = False
+        self._precedes_f = self.precedes.astype(float)
         ell = model.ellipsoid
         self.contacts = self.point_set([(seg, pt) for seg, pt in ell.contact_points])
         self.a_diag = ell.a_diag
@@ -185,37 +186,50 @@ class Kinematics:
         """Global positions (..., k, 3) of the model points."""
         fr = self.frames(q) if frames is None else frames
         Rs = fr.R[..., points.segment_index, :, :]
-        return np.einsum("...kij,kj->...ki", Rs, points.local_m) + fr.p[..., points.segment_index, :]
+        return (Rs @ points.local_m[:, :, None])[..., 0] + fr.p[..., points.segment_index, :]
 
     def point_jacobian(self, q: np.ndarray, points: PointSet, *, frames: Frames | None = None,
                        positions: np.ndarray | None = None) -> np.ndarray:
-        """d r_k / d q: (..., k, 3, m). Column j is w_j x (r_k - c_j) where coordinate j moves r_k."""
+        """d r_k / d q: (..., k, 3, m), C-contiguous. Column j is w_j x (r_k - c_j) = w_j x r_k - w_j x c_j
+        where coordinate j moves r_k (the second term is the same for every point: computed once)."""
         fr = self.frames(q) if frames is None else frames
         r = self.points(q, points, frames=fr) if positions is None else positions
-        diff = r[..., :, None, :] - fr.pivots[..., None, :, :]  # (..., k, m, 3)
-        cols = cross(fr.axes[..., None, :, :], diff)  # (..., k, m, 3)
-        cols = cols * self._affects_f[points.segment_index][..., :, None]
-        return np.swapaxes(cols, -1, -2)
+        wc = np.swapaxes(cross(fr.axes, fr.pivots), -1, -2)[..., None, :, :]  # (..., 1, 3, m)
+        w = np.swapaxes(fr.axes, -1, -2)[..., None, :, :]  # (..., 1, 3, m)
+        x, y, z = r[..., 0:1], r[..., 1:2], r[..., 2:3]  # (..., k, 1)
+        out = np.empty(r.shape[:-1] + (3, self.n_coordinates))
+        np.subtract(w[..., 1, :] * z - w[..., 2, :] * y, wc[..., 0, :], out=out[..., 0, :])
+        np.subtract(w[..., 2, :] * x - w[..., 0, :] * z, wc[..., 1, :], out=out[..., 1, :])
+        np.subtract(w[..., 0, :] * y - w[..., 1, :] * x, wc[..., 2, :], out=out[..., 2, :])
+        out *= self._affects_f[points.segment_index][..., None, :]
+        return out
 
     def point_bias_acceleration(self, q: np.ndarray, qd: np.ndarray, points: PointSet, *,
                                 frames: Frames | None = None, positions: np.ndarray | None = None,
                                 jacobian: np.ndarray | None = None) -> np.ndarray:
-        """(dJ/dt) q̇ of each point: its acceleration when q̈ = 0, (..., k, 3); ``frames``, ``positions``
-        and ``jacobian``: those of q and the points where the caller has them."""
+        """(dJ/dt) q̇ of each point: its acceleration when q̈ = 0, (..., k, 3); ``frames`` and ``positions``:
+        those of q and the points where the caller has them (``jacobian`` is accepted and not needed).
+
+        With a_j the axis, c_j the pivot of coordinate j, Omega_j the angular velocity of the frame
+        that carries axis j, adot_j = Omega_j x a_j and cdot_j the pivot's velocity, a point moved
+        by the coordinates j in S_k has (dJ/dt q̇)_k = sum_{j in S_k} q̇_j [adot_j x (r_k - c_j) +
+        a_j x (ṙ_k - cdot_j)]; the sums over j split into per-segment sums (S_k is the set of
+        its segment), so the cost is one pass over the coordinates plus one over the points."""
         fr = self.frames(q) if frames is None else frames
         r = self.points(q, points, frames=fr) if positions is None else positions
-        J = self.point_jacobian(q, points, frames=fr, positions=r) if jacobian is None else jacobian
         qd = np.asarray(qd, dtype=float)
-        rd = np.einsum("...kim,...m->...ki", J, qd)
-        wq = fr.axes * qd[..., None]  # (..., m, 3)
-        omega = np.einsum("jk,...kc->...jc", self.precedes.astype(float), wq)  # frame rate of axis j
-        wdot = cross(omega, fr.axes)
-        cdot = cross(omega, fr.pivots) - np.einsum(
-            "jk,...kc->...jc", self.precedes.astype(float), cross(wq, fr.pivots))
-        diff = r[..., :, None, :] - fr.pivots[..., None, :, :]
-        term = cross(wdot[..., None, :, :], diff) + cross(fr.axes[..., None, :, :], rd[..., :, None, :] - cdot[..., None, :, :])
-        mask = self.affects[points.segment_index] * qd[..., None, :]
-        return np.einsum("...km,...kmc->...kc", mask, term)
+        prec = self._precedes_f
+        wq = fr.axes * qd[..., None]  # (..., m, 3): q̇_j a_j
+        omega = prec @ wq  # frame rate of axis j
+        u = cross(omega, wq)  # q̇_j adot_j
+        cdot = cross(omega, fr.pivots) - prec @ cross(wq, fr.pivots)
+        wqc = cross(wq, fr.pivots)
+        aff = self._affects_f  # (n_seg, m)
+        seg = points.segment_index
+        om_s = (aff @ wq)[..., seg, :]  # the segment's angular velocity, per point
+        rd = cross(om_s, r) - (aff @ wqc)[..., seg, :]  # the point's velocity J q̇
+        z = cross(u, fr.pivots) + cross(wq, cdot)
+        return cross((aff @ u)[..., seg, :], r) + cross(om_s, rd) - (aff @ z)[..., seg, :]
 
     # ---------------------------------------------------------------- constraints
     def g(self, q: np.ndarray, *, frames: Frames | None = None) -> np.ndarray:
