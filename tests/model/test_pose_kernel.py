@@ -1,0 +1,63 @@
+"""The compiled least-squares terms (exubio.model.pose_kernel) against their numpy reference on random
+poses, markers and weights (to 1e-12), and the reference against finite differences of its cost and
+constraints (a truth that neither computes)."""
+import numpy as np
+import pytest
+
+from exubio.model.kinematics import Kinematics
+from exubio.model.load import load_model
+from exubio.model.pose_kernel import least_squares_terms, least_squares_terms_numpy
+
+NAMES = ("cost", "H", "grad", "g", "G")
+
+
+@pytest.fixture(scope="module")
+def kin():
+    return Kinematics(load_model())
+
+
+@pytest.fixture(scope="module")
+def points(kin):
+    return kin.point_set([(s.name, n) for s in kin.model.segments for n in s.points])
+
+
+def _problem(kin, points, seed, batch=7):
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(-1.5, 1.5, (batch, kin.n_coordinates))
+    k = len(points.names)
+    target = kin.points(q + rng.normal(scale=0.05, size=q.shape), points) + rng.normal(scale=0.01, size=(batch, k, 3))
+    w = rng.uniform(0.2, 3.0, (batch, k))
+    w[rng.random((batch, k)) < 0.2] = 0.0  # missing markers
+    target[w == 0] = 0.0  # as the solve gives them (exubio.methods.poses)
+    return q, target, w
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_compiled_terms_equal_the_numpy_reference(kin, points, seed):
+    q, target, w = _problem(kin, points, seed)
+    for name, a, b in zip(NAMES, least_squares_terms(kin, points, q, target, w),
+                          least_squares_terms_numpy(kin, points, q, target, w)):
+        assert a.shape == b.shape, name
+        assert np.abs(a - b).max() <= 1e-12 * max(1.0, np.abs(b).max()), name
+
+
+def test_a_frame_without_markers_has_zero_cost_and_curvature(kin, points):
+    q, target, w = _problem(kin, points, 9, batch=2)
+    w[1] = 0.0
+    cost, H, grad, g, G = least_squares_terms(kin, points, q, target, w)
+    assert cost[1] == 0.0 and not H[1].any() and not grad[1].any()
+    assert cost[0] > 0.0 and np.isfinite(g).all() and np.abs(G).max() > 0
+
+
+def test_reference_gradient_and_constraint_jacobian_match_finite_differences(kin, points):
+    q, target, w = _problem(kin, points, 11, batch=1)
+    cost, H, grad, g, G = least_squares_terms_numpy(kin, points, q, target, w)
+    h = 1e-6
+    for j in range(kin.n_coordinates):
+        dq = np.zeros_like(q)
+        dq[0, j] = h
+        cp, _, _, gp, _ = least_squares_terms_numpy(kin, points, q + dq, target, w)
+        cm, _, _, gm, _ = least_squares_terms_numpy(kin, points, q - dq, target, w)
+        assert (cp - cm)[0] / (2 * h) / 2 == pytest.approx(grad[0, j], abs=1e-7)  # grad = J^T W e = d(cost/2)/dq
+        assert (gp - gm)[0] / (2 * h) == pytest.approx(G[0, :, j], abs=1e-7)
+    assert np.allclose(H, np.swapaxes(H, 1, 2)) and np.linalg.eigvalsh(H[0]).min() > -1e-12
