@@ -20,28 +20,21 @@ _VEE_J = np.array([1, 2, 0])  # vee(R) = R[_VEE_I, _VEE_J] - R[_VEE_J, _VEE_I]
 
 
 class FrameForward:
-    """``forward(q)``: (R (n_seg, 3, 3), p (n_seg, 3)) of one posture q (m,), as Kinematics.frames."""
+    """``forward(q)``: (R (n_seg, 3, 3), p (n_seg, 3)) of one posture q (m,), as Kinematics.frames
+    (the same compiled kernel, exubio.model.kernels.forward, without the batch's reshaping)."""
 
     def __init__(self, kin: Kinematics, /):
-        self.kin = kin
-        self.n_seg = kin.n_segments
-        self.chain = [(i, par, [int(j) for j in idx], np.asarray(centre, dtype=float)) for i, par, idx, centre, _ in kin._chain]
-        self.eye = np.eye(3)
+        from exubio.model import kernels  # numba: imported where used
+
+        self.forward = kernels.forward
+        self.tables = kin.kernel_tables()
+        self.n_seg, self.m = kin.n_segments, kin.n_coordinates
 
     def __call__(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        kin = self.kin
-        elem = self.eye + np.sin(q)[:, None, None] * kin._sk + (1.0 - np.cos(q))[:, None, None] * kin._sk2
-        R = np.empty((self.n_seg, 3, 3))
-        p = np.empty((self.n_seg, 3))
-        R[0] = self.eye
-        p[0] = 0.0
-        for i, par, idx, centre in self.chain:
-            Rc = R[par]
-            p[i] = p[par] + Rc @ centre
-            for j in idx:
-                Rc = Rc @ elem[j]
-            R[i] = Rc
-        return R, p
+        R, p = np.empty((1, self.n_seg, 3, 3)), np.empty((1, self.n_seg, 3))
+        ax = np.empty((1, self.m, 3))
+        self.forward(np.ascontiguousarray(q, dtype=float).reshape(1, -1), *self.tables, R, p, ax, np.empty_like(ax))
+        return R[0], p[0]
 
 
 class FrameInverse:

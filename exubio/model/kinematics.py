@@ -153,8 +153,39 @@ class Kinematics:
         return PointSet(np.array(seg_idx, dtype=int), np.array(local, dtype=float).reshape(-1, 3), tuple(names))
 
     # ---------------------------------------------------------------- forward
+    def kernel_tables(self) -> tuple[np.ndarray, ...]:
+        """The chain as flat arrays for the compiled kernels (exubio.model.kernels): parent of each
+        segment, joint centre in the parent (m), first coordinate and number of coordinates of each
+        joint, each coordinate's axis, and its Rodrigues skew matrices K and K^2."""
+        t = self.__dict__.get("_kernel_tables")
+        if t is None:
+            n_seg = self.n_segments
+            centre, axes = np.zeros((n_seg, 3)), np.zeros((self.n_coordinates, 3))
+            first, count = np.zeros(n_seg, dtype=np.int64), np.zeros(n_seg, dtype=np.int64)
+            for i, _, idx, c, ax in self._chain:  # a joint's coordinates are consecutive (see __init__)
+                centre[i], first[i], count[i] = c, idx[0], len(idx)
+                axes[idx] = np.asarray(ax, dtype=float).reshape(-1, 3)
+            t = self.__dict__["_kernel_tables"] = (np.asarray(self.parent_index, dtype=np.int64), centre, first, count,
+                                                   axes, np.ascontiguousarray(self._sk), np.ascontiguousarray(self._sk2))
+        return t
+
     def frames(self, q: np.ndarray) -> Frames:
-        """Forward kinematics for q (..., m)."""
+        """Forward kinematics for q (..., m): the compiled kernel (exubio.model.kernels.forward,
+        a frame at a time; imported here, on first use), equal to ``frames_numpy`` to round-off."""
+        from exubio.model import kernels  # numba: imported where used
+
+        q = np.asarray(q, dtype=float)
+        batch = q.shape[:-1]
+        flat = np.ascontiguousarray(q.reshape(-1, self.n_coordinates))
+        B, n_seg, m = flat.shape[0], self.n_segments, self.n_coordinates
+        R, p = np.empty((B, n_seg, 3, 3)), np.empty((B, n_seg, 3))
+        axes, pivots = np.empty((B, m, 3)), np.empty((B, m, 3))
+        kernels.forward(flat, *self.kernel_tables(), R, p, axes, pivots)
+        return Frames(R.reshape(batch + (n_seg, 3, 3)), p.reshape(batch + (n_seg, 3)), axes.reshape(batch + (m, 3)),
+                      pivots.reshape(batch + (m, 3)))
+
+    def frames_numpy(self, q: np.ndarray) -> Frames:
+        """Forward kinematics for q (..., m) in numpy: the reference of the compiled ``frames``."""
         q = np.asarray(q, dtype=float)
         batch = q.shape[:-1]
         R = np.empty(batch + (self.n_segments, 3, 3))
