@@ -141,3 +141,54 @@ def _columns(ax, piv, moves, r, J):
             J[0, j] = 0.0
             J[1, j] = 0.0
             J[2, j] = 0.0
+
+
+@numba.njit(cache=True, nogil=True)
+def euler_parameter_motion(X, Xt, Xtt, ltg, ep_ref, p_ref, R, p, v, a, w, al):
+    """The motion of rigid bodies on Euler-parameter nodes, frame by frame: X, Xt, Xtt (n, N) the
+    system coordinates and their rates; ltg (s, 7) each body's node coordinates in them (3 of
+    position, 4 Euler parameters, both as displacements from ep_ref (s, 4), p_ref (s, 3)).
+    Into R (n, s + 1, 3, 3), p, v, a, w (angular velocity), al (angular acceleration) (n, s + 1, 3),
+    index 0 the fixed root (identity, zeros). With e the unit Euler parameters,
+    omega = G(e) ė and alpha = G(e) ë (G_t ė = 0), G = 2 [[-e1, e0, -e3, e2], [-e2, e3, e0, -e1],
+    [-e3, -e2, e1, e0]]; R the textbook matrix of e."""
+    e = np.zeros(4)
+    G = np.zeros((3, 4))
+    for f in range(X.shape[0]):
+        for i in range(3):
+            for j in range(3):
+                R[f, 0, i, j] = 1.0 if i == j else 0.0
+            p[f, 0, i] = v[f, 0, i] = a[f, 0, i] = w[f, 0, i] = al[f, 0, i] = 0.0
+        for s in range(ltg.shape[0]):
+            b = s + 1
+            norm = 0.0
+            for i in range(4):
+                e[i] = X[f, ltg[s, 3 + i]] + ep_ref[s, i]
+                norm += e[i] * e[i]
+            norm = np.sqrt(norm)
+            for i in range(4):
+                e[i] = e[i] / norm
+            e0, e1, e2, e3 = e[0], e[1], e[2], e[3]
+            R[f, b, 0, 0] = 1 - 2 * (e2 * e2 + e3 * e3)
+            R[f, b, 0, 1] = 2 * (e1 * e2 - e0 * e3)
+            R[f, b, 0, 2] = 2 * (e1 * e3 + e0 * e2)
+            R[f, b, 1, 0] = 2 * (e1 * e2 + e0 * e3)
+            R[f, b, 1, 1] = 1 - 2 * (e1 * e1 + e3 * e3)
+            R[f, b, 1, 2] = 2 * (e2 * e3 - e0 * e1)
+            R[f, b, 2, 0] = 2 * (e1 * e3 - e0 * e2)
+            R[f, b, 2, 1] = 2 * (e2 * e3 + e0 * e1)
+            R[f, b, 2, 2] = 1 - 2 * (e1 * e1 + e2 * e2)
+            G[0, 0], G[0, 1], G[0, 2], G[0, 3] = -2 * e1, 2 * e0, -2 * e3, 2 * e2
+            G[1, 0], G[1, 1], G[1, 2], G[1, 3] = -2 * e2, 2 * e3, 2 * e0, -2 * e1
+            G[2, 0], G[2, 1], G[2, 2], G[2, 3] = -2 * e3, -2 * e2, 2 * e1, 2 * e0
+            for i in range(3):
+                p[f, b, i] = X[f, ltg[s, i]] + p_ref[s, i]
+                v[f, b, i] = Xt[f, ltg[s, i]]
+                a[f, b, i] = Xtt[f, ltg[s, i]]
+                wi = 0.0
+                ali = 0.0
+                for j in range(4):
+                    wi += G[i, j] * Xt[f, ltg[s, 3 + j]]
+                    ali += G[i, j] * Xtt[f, ltg[s, 3 + j]]
+                w[f, b, i] = wi
+                al[f, b, i] = ali

@@ -74,3 +74,26 @@ def test_reference_gradient_and_constraint_jacobian_match_finite_differences(kin
         assert (cp - cm)[0] / (2 * h) / 2 == pytest.approx(grad[0, j], abs=1e-7)  # grad = J^T W e = d(cost/2)/dq
         assert (gp - gm)[0] / (2 * h) == pytest.approx(G[0, :, j], abs=1e-7)
     assert np.allclose(H, np.swapaxes(H, 1, 2)) and np.linalg.eigvalsh(H[0]).min() > -1e-12
+
+
+def test_compiled_euler_parameter_motion_equals_the_numpy_reference():
+    from exubio.backend.pf_numerics import ep_G, ep_rotation
+    from exubio.model.kernels import euler_parameter_motion
+
+    rng = np.random.default_rng(3)
+    n, s = 6, 5
+    ltg = rng.permutation(7 * s + 4)[:7 * s].reshape(s, 7).astype(np.int64)  # nodes scattered in the system vector
+    X, Xt, Xtt = (rng.normal(scale=0.3, size=(n, 7 * s + 4)) for _ in range(3))
+    ep_ref, p_ref = rng.normal(size=(s, 4)), rng.normal(size=(s, 3))
+    R = np.empty((n, s + 1, 3, 3))
+    p, v, a, w, al = (np.empty((n, s + 1, 3)) for _ in range(5))
+    euler_parameter_motion(X, Xt, Xtt, ltg, ep_ref, p_ref, R, p, v, a, w, al)
+    ep = X[:, ltg[:, 3:]] + ep_ref
+    unit = ep / np.linalg.norm(ep, axis=-1, keepdims=True)
+    G = ep_G(unit)
+    assert np.array_equal(R[:, 0], np.broadcast_to(np.eye(3), (n, 3, 3))) and not p[:, 0].any() and not w[:, 0].any()
+    assert np.abs(R[:, 1:] - ep_rotation(ep)).max() <= 1e-14
+    assert np.abs(p[:, 1:] - (X[:, ltg[:, :3]] + p_ref)).max() == 0.0
+    assert np.array_equal(v[:, 1:], Xt[:, ltg[:, :3]]) and np.array_equal(a[:, 1:], Xtt[:, ltg[:, :3]])
+    assert np.abs(w[:, 1:] - (G @ Xt[:, ltg[:, 3:], None])[..., 0]).max() <= 1e-14
+    assert np.abs(al[:, 1:] - (G @ Xtt[:, ltg[:, 3:], None])[..., 0]).max() <= 1e-14
