@@ -192,3 +192,90 @@ def euler_parameter_motion(X, Xt, Xtt, ltg, ep_ref, p_ref, R, p, v, a, w, al):
                     ali += G[i, j] * Xtt[f, ltg[s, 3 + j]]
                 w[f, b, i] = wi
                 al[f, b, i] = ali
+
+
+@numba.njit(cache=True, nogil=True)
+def _wrap(q, lo, hi, ref):
+    """ranges.wrap_into_range for one angle: q + 2 pi k, k nearest (ref - q) / 2 pi or one either
+    side, whichever is inside the range [lo, hi] or nearest to it."""
+    two_pi = 2.0 * np.pi
+    k0 = np.rint((ref - q) / two_pi)
+    best = q + two_pi * k0
+    best_cost = abs(max(best - hi, 0.0) - max(lo - best, 0.0))
+    for dk in (-1.0, 1.0):
+        cand = q + two_pi * (k0 + dk)
+        cost = abs(max(cand - hi, 0.0) - max(lo - cand, 0.0))
+        if cost < best_cost - 1e-12:
+            best, best_cost = cand, cost
+    return best
+
+
+@numba.njit(cache=True, nogil=True)
+def coordinates_from_rotations(R, ref, has_previous, parents, children, B, rev, rev_q, rev_axes, rev_proj, card,
+                               card_q, sph, sph_q, sph_sign, ranges, out):
+    """Kinematics.coordinates_from_rotations of one frame (its docstring says the rule): segment
+    rotations R (n_seg, 3, 3) -> coordinates ``out`` (m,); ``ref`` the previous coordinates
+    (``has_previous``) or the middles of the ranges. The joint tables are those of
+    exubio.model.kinematics._InverseTable (B the joints' axis bases, rev_proj I - a a^T)."""
+    n_joints = parents.shape[0]
+    Rrel = np.empty((n_joints, 3, 3))
+    Rs = np.empty((n_joints, 3, 3))
+    T = np.empty((3, 3))
+    for n in range(n_joints):
+        par, ch = parents[n], children[n]
+        for i in range(3):
+            for j in range(3):
+                Rrel[n, i, j] = R[par, 0, i] * R[ch, 0, j] + R[par, 1, i] * R[ch, 1, j] + R[par, 2, i] * R[ch, 2, j]
+        for i in range(3):  # B^T Rrel
+            for j in range(3):
+                T[i, j] = B[n, 0, i] * Rrel[n, 0, j] + B[n, 1, i] * Rrel[n, 1, j] + B[n, 2, i] * Rrel[n, 2, j]
+        for i in range(3):  # (B^T Rrel) B
+            for j in range(3):
+                Rs[n, i, j] = T[i, 0] * B[n, 0, j] + T[i, 1] * B[n, 1, j] + T[i, 2] * B[n, 2, j]
+    m = out.shape[0]
+    qa = np.empty(m)
+    for r in range(rev.shape[0]):  # revolute: the angle about the axis, cos from R orthogonal to it
+        Rr = Rrel[rev[r]]
+        a = rev_axes[r]
+        s = (Rr[2, 1] - Rr[1, 2]) * a[0] + (Rr[0, 2] - Rr[2, 0]) * a[1] + (Rr[1, 0] - Rr[0, 1]) * a[2]
+        P = rev_proj[r]
+        c = 0.0
+        for i in range(3):  # trace(P Rr P)
+            for j in range(3):
+                for k in range(3):
+                    c += P[i, j] * Rr[j, k] * P[k, i]
+        qa[rev_q[r]] = np.arctan2(0.5 * s, 0.5 * c)
+    for r in range(card.shape[0]):  # cardan: Rx(q1) Ry(q2)
+        Rc = Rs[card[r]]
+        qa[card_q[r, 0]] = np.arctan2(Rc[2, 1], Rc[1, 1])
+        qa[card_q[r, 1]] = np.arctan2(Rc[0, 2], Rc[0, 0])
+    lo, hi = ranges[:, 0], ranges[:, 1]
+    for j in range(m):
+        out[j] = _wrap(qa[j], lo[j], hi[j], ref[j])
+    for r in range(sph.shape[0]):  # spherical: Rx(q1) Ry(q2) Rz(sign q3), two angle triples
+        Rp = Rs[sph[r]]
+        j1, j2, j3 = sph_q[r, 0], sph_q[r, 1], sph_q[r, 2]
+        q2 = np.arctan2(Rp[0, 2], np.hypot(Rp[0, 0], Rp[0, 1]))
+        q1 = np.arctan2(-Rp[1, 2], Rp[2, 2])
+        q3 = np.arctan2(-Rp[0, 1], Rp[0, 0])
+        if np.cos(q2) < 1e-6:  # Rx(q1) Ry(+-90) Rz(q3): keep q1 (the previous one, or 0), solve q3
+            q1 = ref[j1] if has_previous else 0.0
+            q3 = np.arctan2(Rp[1, 0], Rp[1, 1]) - np.sign(Rp[0, 2]) * q1
+        sg = sph_sign[r]
+        a1, a2, a3 = _wrap(q1, lo[j1], hi[j1], ref[j1]), _wrap(q2, lo[j2], hi[j2], ref[j2]), _wrap(sg * q3, lo[j3], hi[j3], ref[j3])
+        b1 = _wrap(q1 + np.pi, lo[j1], hi[j1], ref[j1])
+        b2 = _wrap(np.pi - q2, lo[j2], hi[j2], ref[j2])
+        b3 = _wrap(sg * (q3 + np.pi), lo[j3], hi[j3], ref[j3])
+        cost_a = (abs(max(a1 - hi[j1], 0.0) - max(lo[j1] - a1, 0.0)) + abs(max(a2 - hi[j2], 0.0) - max(lo[j2] - a2, 0.0))
+                  + abs(max(a3 - hi[j3], 0.0) - max(lo[j3] - a3, 0.0)))
+        cost_b = (abs(max(b1 - hi[j1], 0.0) - max(lo[j1] - b1, 0.0)) + abs(max(b2 - hi[j2], 0.0) - max(lo[j2] - b2, 0.0))
+                  + abs(max(b3 - hi[j3], 0.0) - max(lo[j3] - b3, 0.0)))
+        take_b = cost_b < cost_a - 1e-12
+        if has_previous and abs(cost_b - cost_a) <= 1e-12:
+            near_a = abs(a1 - ref[j1]) + abs(a2 - ref[j2]) + abs(a3 - ref[j3])
+            near_b = abs(b1 - ref[j1]) + abs(b2 - ref[j2]) + abs(b3 - ref[j3])
+            take_b = take_b or near_b < near_a
+        if take_b:
+            out[j1], out[j2], out[j3] = b1, b2, b3
+        else:
+            out[j1], out[j2], out[j3] = a1, a2, a3

@@ -53,16 +53,17 @@ def test_frame_inverse_is_coordinates_from_rotations():
             locked = q.copy()
             locked[names.index(name)] = rng.choice([-1, 1]) * np.pi / 2
             qs.append(locked)
-    worst, same = 0.0, 0
+    middle = [names.index(n) for n in ("sc_elevation", "ac_upward_rotation", "gh_internal_rotation")]
     for q in qs:
         R = kin.frames(q).R
+        # FrameInverse is a compiled kernel (exubio.model.kernels) that sums in its own order: R's
+        # round-off (1e-16) reaches the first and last angle of a spherical joint times 1 / cos of
+        # its middle angle (a random posture 5e-4 deg from the lock: 2e-11 rad)
+        tol = 1e-12 + 1e-15 / max(np.abs(np.cos(q[middle])).min(), 1e-5)  # at the lock both take its branch
         for prev in (None, q + rng.normal(scale=0.05, size=q.shape)):
             want = kin.coordinates_from_rotations(R, q_previous=prev)
             got = inverse(R, prev)
-            worst = max(worst, float(np.abs(got - want).max()))
-            same += np.array_equal(got, want)
-    assert worst < 1e-12, worst
-    assert same > 0.9 * 2 * len(qs)  # mostly bitwise the same (a batched einsum may sum in another order)
+            assert np.abs(got - want).max() <= tol, (np.degrees(q), got - want)
 
 
 def test_frame_forward_is_kinematics_frames_bitwise():
