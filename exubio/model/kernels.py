@@ -279,3 +279,74 @@ def coordinates_from_rotations(R, ref, has_previous, parents, children, B, rev, 
             out[j1], out[j2], out[j3] = b1, b2, b3
         else:
             out[j1], out[j2], out[j3] = a1, a2, a3
+
+
+@numba.njit(cache=True, nogil=True)
+def _basic(axis, angle, out):
+    """angles._basic_rotation: the rotation about coordinate axis ``axis`` by ``angle``."""
+    c, s = np.cos(angle), np.sin(angle)
+    u, v = (axis + 1) % 3, (axis + 2) % 3
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = 0.0
+    out[axis, axis] = 1.0
+    out[u, u] = c
+    out[v, v] = c
+    out[v, u] = s
+    out[u, v] = -s
+
+
+@numba.njit(cache=True, nogil=True)
+def isb_angles(R, segments, A, prox, dist, seq, negative, out):
+    """exubio.model.angles.isb_table's angles of one frame: segment rotations R (n_seg, 3, 3), the
+    anatomical frames A (f, 3, 3) of the segments ``segments`` (f,), each joint's proximal and
+    distal frame (prox, dist (n,)), its sequence's axes seq (n, 3) and whether its middle angle is
+    negative (HT); into out (n, 3), wrapped into (-pi, pi] (euler_angles' rule, gimbal tolerance
+    1e-9: the first angle 0 at the lock)."""
+    f = segments.shape[0]
+    Rg = np.empty((f, 3, 3))
+    for n in range(f):
+        s = segments[n]
+        for i in range(3):
+            for j in range(3):
+                Rg[n, i, j] = R[s, i, 0] * A[n, 0, j] + R[s, i, 1] * A[n, 1, j] + R[s, i, 2] * A[n, 2, j]
+    Rr = np.empty((3, 3))
+    Ra = np.empty((3, 3))
+    Rb = np.empty((3, 3))
+    P = np.empty((3, 3))
+    M = np.empty((3, 3))
+    two_pi = 2.0 * np.pi
+    for r in range(prox.shape[0]):
+        pa, da = prox[r], dist[r]
+        for i in range(3):
+            for j in range(3):
+                Rr[i, j] = Rg[pa, 0, i] * Rg[da, 0, j] + Rg[pa, 1, i] * Rg[da, 1, j] + Rg[pa, 2, i] * Rg[da, 2, j]
+        i, j, k = seq[r, 0], seq[r, 1], seq[r, 2]
+        s = 1.0 if (j - i) % 3 == 1 else -1.0
+        if i != k:  # Tait-Bryan
+            b = np.arctan2(s * Rr[i, k], np.hypot(Rr[i, i], Rr[i, j]))
+            a = np.arctan2(-s * Rr[j, k], Rr[k, k])
+            locked = np.cos(b) < 1e-9
+        else:  # proper Euler
+            mm = 3 - i - j
+            sb = np.hypot(Rr[i, j], Rr[i, mm])
+            b = np.arctan2(sb, Rr[i, i])
+            a = np.arctan2(Rr[j, i], -s * Rr[mm, i])
+            if negative[r]:
+                b, a = -b, a + np.pi
+            locked = sb < 1e-9
+        if locked:
+            a = 0.0
+        _basic(i, a, Ra)
+        _basic(j, b, Rb)
+        for x in range(3):  # P = Ra Rb
+            for y in range(3):
+                P[x, y] = Ra[x, 0] * Rb[0, y] + Ra[x, 1] * Rb[1, y] + Ra[x, 2] * Rb[2, y]
+        for x in range(3):  # M = P^T Rr
+            for y in range(3):
+                M[x, y] = P[0, x] * Rr[0, y] + P[1, x] * Rr[1, y] + P[2, x] * Rr[2, y]
+        u, v = (k + 1) % 3, (k + 2) % 3
+        c = np.arctan2(M[v, u] - M[u, v], M[u, u] + M[v, v])
+        out[r, 0] = np.pi - (np.pi - a) % two_pi
+        out[r, 1] = np.pi - (np.pi - b) % two_pi
+        out[r, 2] = np.pi - (np.pi - c) % two_pi
