@@ -350,3 +350,88 @@ def isb_angles(R, segments, A, prox, dist, seq, negative, out):
         out[r, 0] = np.pi - (np.pi - a) % two_pi
         out[r, 1] = np.pi - (np.pi - b) % two_pi
         out[r, 2] = np.pi - (np.pi - c) % two_pi
+
+
+@numba.njit(cache=True, nogil=True)
+def _invert_small(N, k, out):
+    """out = N^-1 for the leading k x k block of N (k = 1, 2, 3; closed form: the joints' axis Gram
+    matrices, near the identity)."""
+    if k == 1:
+        out[0, 0] = 1.0 / N[0, 0]
+    elif k == 2:
+        det = N[0, 0] * N[1, 1] - N[0, 1] * N[1, 0]
+        out[0, 0], out[0, 1] = N[1, 1] / det, -N[0, 1] / det
+        out[1, 0], out[1, 1] = -N[1, 0] / det, N[0, 0] / det
+    else:
+        c00 = N[1, 1] * N[2, 2] - N[1, 2] * N[2, 1]
+        c01 = N[1, 2] * N[2, 0] - N[1, 0] * N[2, 2]
+        c02 = N[1, 0] * N[2, 1] - N[1, 1] * N[2, 0]
+        det = N[0, 0] * c00 + N[0, 1] * c01 + N[0, 2] * c02
+        out[0, 0] = c00 / det
+        out[1, 0] = c01 / det
+        out[2, 0] = c02 / det
+        out[0, 1] = (N[0, 2] * N[2, 1] - N[0, 1] * N[2, 2]) / det
+        out[1, 1] = (N[0, 0] * N[2, 2] - N[0, 2] * N[2, 0]) / det
+        out[2, 1] = (N[0, 1] * N[2, 0] - N[0, 0] * N[2, 1]) / det
+        out[0, 2] = (N[0, 1] * N[1, 2] - N[0, 2] * N[1, 1]) / det
+        out[1, 2] = (N[0, 2] * N[1, 0] - N[0, 0] * N[1, 2]) / det
+        out[2, 2] = (N[0, 0] * N[1, 1] - N[0, 1] * N[1, 0]) / det
+
+
+@numba.njit(cache=True, nogil=True)
+def coordinate_rates(q, omega, alpha, with_alpha, parent, centre, first, count, axes, sk, sk2, qd, qdd):
+    """Kinematics.coordinate_rates frame by frame: per joint, W q̇_joint = omega_child - omega_parent
+    (least squares, W the joint's world axes as columns: q̇ = (W^T W)^-1 W^T dw) and, with
+    ``with_alpha``, W q̈_joint = alpha_child - alpha_parent - sum_n (Omega_n x w_n) q̇_n (Omega_n the
+    angular velocity of the frame that carries axis n). q (B, m), omega and alpha (B, n_seg, 3);
+    into qd, qdd (B, m)."""
+    B, m = q.shape
+    n_seg = parent.shape[0]
+    R = np.zeros((n_seg, 3, 3))
+    p = np.zeros((n_seg, 3))
+    ax = np.zeros((m, 3))
+    piv = np.zeros((m, 3))
+    Rc = np.zeros((3, 3))
+    T = np.zeros((3, 3))
+    E = np.zeros((3, 3))
+    N = np.zeros((3, 3))
+    Ni = np.zeros((3, 3))
+    P = np.zeros((3, 3))
+    d = np.zeros(3)
+    om = np.zeros(3)
+    bias = np.zeros(3)
+    for b in range(B):
+        _forward_one(q[b], parent, centre, first, count, axes, sk, sk2, R, p, ax, piv, Rc, T, E)
+        for s in range(1, n_seg):
+            k, f0, par = count[s], first[s], parent[s]
+            for u in range(k):
+                for v in range(k):
+                    N[u, v] = ax[f0 + u, 0] * ax[f0 + v, 0] + ax[f0 + u, 1] * ax[f0 + v, 1] + ax[f0 + u, 2] * ax[f0 + v, 2]
+            _invert_small(N, k, Ni)
+            for u in range(k):  # the pseudo-inverse (W^T W)^-1 W^T, k x 3
+                for c in range(3):
+                    acc = 0.0
+                    for v in range(k):
+                        acc += Ni[u, v] * ax[f0 + v, c]
+                    P[u, c] = acc
+            for c in range(3):
+                d[c] = omega[b, s, c] - omega[b, par, c]
+            for u in range(k):
+                qd[b, f0 + u] = P[u, 0] * d[0] + P[u, 1] * d[1] + P[u, 2] * d[2]
+            if not with_alpha:
+                continue
+            for c in range(3):
+                om[c] = omega[b, par, c]
+                bias[c] = 0.0
+            for n in range(k):
+                j = f0 + n
+                if n > 0:
+                    for c in range(3):
+                        om[c] += ax[j - 1, c] * qd[b, j - 1]
+                bias[0] += (om[1] * ax[j, 2] - om[2] * ax[j, 1]) * qd[b, j]
+                bias[1] += (om[2] * ax[j, 0] - om[0] * ax[j, 2]) * qd[b, j]
+                bias[2] += (om[0] * ax[j, 1] - om[1] * ax[j, 0]) * qd[b, j]
+            for c in range(3):
+                d[c] = alpha[b, s, c] - alpha[b, par, c] - bias[c]
+            for u in range(k):
+                qdd[b, f0 + u] = P[u, 0] * d[0] + P[u, 1] * d[1] + P[u, 2] * d[2]

@@ -367,7 +367,23 @@ class Kinematics:
     def coordinate_rates(self, q: np.ndarray, omega: np.ndarray, alpha: np.ndarray | None = None):
         """q̇ (and q̈) from segment angular velocities omega and accelerations alpha (..., n_seg, 3),
         global frame, at coordinates q (..., m). Solves, per joint, the relative angular velocity
-        W q̇_joint = omega_child - omega_parent (least squares for k < 3 coordinates)."""
+        W q̇_joint = omega_child - omega_parent (least squares for k < 3 coordinates): the compiled
+        kernel (exubio.model.kernels.coordinate_rates); ``coordinate_rates_numpy`` is its reference."""
+        from exubio.model import kernels  # numba: imported where used
+
+        q = np.asarray(q, dtype=float)
+        m, n_seg = self.n_coordinates, self.n_segments
+        flat = np.ascontiguousarray(q.reshape(-1, m))
+        om = np.ascontiguousarray(np.broadcast_to(omega, q.shape[:-1] + (n_seg, 3)), dtype=float).reshape(-1, n_seg, 3)
+        al = om if alpha is None else np.ascontiguousarray(
+            np.broadcast_to(alpha, q.shape[:-1] + (n_seg, 3)), dtype=float).reshape(-1, n_seg, 3)
+        qd, qdd = np.zeros(flat.shape), np.zeros(flat.shape)
+        kernels.coordinate_rates(flat, om, al, alpha is not None, *self.kernel_tables(), qd, qdd)
+        qd = qd.reshape(q.shape)
+        return (qd, qdd.reshape(q.shape)) if alpha is not None else qd
+
+    def coordinate_rates_numpy(self, q: np.ndarray, omega: np.ndarray, alpha: np.ndarray | None = None):
+        """``coordinate_rates`` in numpy: the reference of the compiled kernel."""
         fr = self.frames(q)
         omega = np.asarray(omega, dtype=float)
         qd = np.zeros(q.shape)

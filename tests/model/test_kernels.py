@@ -97,3 +97,18 @@ def test_compiled_euler_parameter_motion_equals_the_numpy_reference():
     assert np.array_equal(v[:, 1:], Xt[:, ltg[:, :3]]) and np.array_equal(a[:, 1:], Xtt[:, ltg[:, :3]])
     assert np.abs(w[:, 1:] - (G @ Xt[:, ltg[:, 3:], None])[..., 0]).max() <= 1e-14
     assert np.abs(al[:, 1:] - (G @ Xtt[:, ltg[:, 3:], None])[..., 0]).max() <= 1e-14
+
+
+@pytest.mark.parametrize("shape", [(), (1,), (8,)])
+def test_compiled_coordinate_rates_equal_the_numpy_reference_and_invert_the_forward_map(kin, shape):
+    rng = np.random.default_rng(20 + len(shape))
+    q = rng.uniform(-1.3, 1.3, shape + (kin.n_coordinates,))
+    qd_true = rng.normal(size=q.shape)
+    omega = kin.segment_angular_velocities(q, qd_true)  # the forward map of the rates: a truth
+    alpha = rng.normal(size=omega.shape)
+    qd, qdd = kin.coordinate_rates(q, omega, alpha)
+    qd_ref, qdd_ref = kin.coordinate_rates_numpy(q, omega, alpha)
+    assert qd.shape == qdd.shape == q.shape
+    assert np.abs(qd - qd_ref).max() <= 1e-12 and np.abs(qdd - qdd_ref).max() <= 1e-12
+    assert np.abs(qd - qd_true).max() <= 1e-12
+    assert np.array_equal(kin.coordinate_rates(q, omega), qd)  # without alpha: q̇ alone
