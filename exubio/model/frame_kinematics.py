@@ -51,16 +51,11 @@ class FrameInverse:
         self.mid = np.where(bounded, 0.5 * (np.where(bounded, lo, 0.0) + np.where(bounded, hi, 0.0)), 0.0)
         from exubio.model import kernels  # numba: imported where used
 
-        self.kernel = kernels.coordinates_from_rotations  # compiled, one frame
-        i64 = np.int64
-        self.tables = (t.parents.astype(i64), t.children.astype(i64), np.ascontiguousarray(t.B), t.rev.astype(i64),
-                       t.rev_q.astype(i64), np.ascontiguousarray(t.rev_axes), np.ascontiguousarray(self.proj),
-                       t.card.astype(i64), np.ascontiguousarray(t.card_q, dtype=i64), t.sph.astype(i64),
-                       np.ascontiguousarray(t.sph_q, dtype=i64), np.ascontiguousarray(t.sph_sign),
-                       np.ascontiguousarray(self.ranges, dtype=float))
+        self.kernel = kernels.coordinates_from_rotations  # compiled
+        self.tables = t.kernel_tables(self.ranges)
 
     def __call__(self, R: np.ndarray, q_previous: np.ndarray | None = None) -> np.ndarray:
-        out = np.empty(self.m)
+        out = np.empty((1, self.m))
         ref = self.mid if q_previous is None else np.asarray(q_previous, dtype=float)
-        self.kernel(np.ascontiguousarray(R, dtype=float), ref, q_previous is not None, *self.tables, out)
-        return out
+        self.kernel(np.ascontiguousarray(R, dtype=float)[None], ref[None], q_previous is not None, *self.tables, out)
+        return out[0]

@@ -213,10 +213,18 @@ def _wrap(q, lo, hi, ref):
 @numba.njit(cache=True, nogil=True)
 def coordinates_from_rotations(R, ref, has_previous, parents, children, B, rev, rev_q, rev_axes, rev_proj, card,
                                card_q, sph, sph_q, sph_sign, ranges, out):
-    """Kinematics.coordinates_from_rotations of one frame (its docstring says the rule): segment
-    rotations R (n_seg, 3, 3) -> coordinates ``out`` (m,); ``ref`` the previous coordinates
-    (``has_previous``) or the middles of the ranges. The joint tables are those of
+    """Kinematics.coordinates_from_rotations frame by frame (its docstring says the rule): segment
+    rotations R (n, n_seg, 3, 3) -> coordinates ``out`` (n, m); ``ref`` (n, m) the previous
+    coordinates (``has_previous``) or the middles of the ranges. The joint tables are those of
     exubio.model.kinematics._InverseTable (B the joints' axis bases, rev_proj I - a a^T)."""
+    for f in range(R.shape[0]):
+        _coordinates_one(R[f], ref[f], has_previous, parents, children, B, rev, rev_q, rev_axes, rev_proj, card,
+                         card_q, sph, sph_q, sph_sign, ranges, out[f])
+
+
+@numba.njit(cache=True, nogil=True)
+def _coordinates_one(R, ref, has_previous, parents, children, B, rev, rev_q, rev_axes, rev_proj, card,
+                     card_q, sph, sph_q, sph_sign, ranges, out):
     n_joints = parents.shape[0]
     Rrel = np.empty((n_joints, 3, 3))
     Rs = np.empty((n_joints, 3, 3))

@@ -310,7 +310,29 @@ class Kinematics:
         nearest the middle of their ranges). Where the middle angle of a spherical joint comes
         within 1e-6 rad of +-90 deg the split between first and last angle is undetermined: the
         first angle then keeps ``q_previous`` (or 0).
+
+        The compiled kernel (exubio.model.kernels.coordinates_from_rotations, frame by frame);
+        ``coordinates_from_rotations_numpy`` is its reference.
         """
+        from exubio.model import kernels  # numba: imported where used
+
+        R = np.asarray(R, dtype=float)
+        batch, m = R.shape[:-3], self.n_coordinates
+        flat = np.ascontiguousarray(R.reshape((-1,) + R.shape[-3:]))
+        if q_previous is None:
+            lo, hi = self.model.coordinate_ranges_rad.T
+            bounded = np.isfinite(lo) & np.isfinite(hi)
+            ref = np.where(bounded, 0.5 * (np.where(bounded, lo, 0.0) + np.where(bounded, hi, 0.0)), 0.0)
+        else:
+            ref = np.asarray(q_previous, dtype=float)
+        ref = np.ascontiguousarray(np.broadcast_to(ref, batch + (m,))).reshape(-1, m)
+        out = np.empty((flat.shape[0], m))
+        kernels.coordinates_from_rotations(flat, ref, q_previous is not None,
+                                           *self._inverse.kernel_tables(self.model.coordinate_ranges_rad), out)
+        return out.reshape(batch + (m,))
+
+    def coordinates_from_rotations_numpy(self, R: np.ndarray, *, q_previous: np.ndarray | None = None) -> np.ndarray:
+        """``coordinates_from_rotations`` in numpy, every frame at once: the kernel's reference."""
         R = np.asarray(R, dtype=float)
         t = self._inverse
         ranges = self.model.coordinate_ranges_rad
@@ -443,3 +465,15 @@ class _InverseTable:
         self.card_q = np.array([joints[n][2] for n in card], dtype=int).reshape(-1, 2)
         self.sph_q = np.array([joints[n][2] for n in sph], dtype=int).reshape(-1, 3)
         self.sph_sign = np.array(signs, dtype=float)
+
+    def kernel_tables(self, ranges_rad: np.ndarray) -> tuple:
+        """The tables of exubio.model.kernels.coordinates_from_rotations (after R and the reference)."""
+        t = self.__dict__.get("_kernel")
+        if t is None:
+            i64, c = np.int64, np.ascontiguousarray
+            t = self.__dict__["_kernel"] = (
+                self.parents.astype(i64), self.children.astype(i64), c(self.B), self.rev.astype(i64), self.rev_q.astype(i64),
+                c(self.rev_axes), c(np.array(self.rev_proj).reshape(-1, 3, 3)), self.card.astype(i64),
+                c(self.card_q, dtype=i64), self.sph.astype(i64), c(self.sph_q, dtype=i64), c(self.sph_sign),
+                c(ranges_rad, dtype=float))
+        return t

@@ -59,13 +59,14 @@ def test_frame_inverse_is_coordinates_from_rotations():
     middle = [names.index(n) for n in ("sc_elevation", "ac_upward_rotation", "gh_internal_rotation")]
     for q in qs:
         R = kin.frames(q).R
-        # FrameInverse is a compiled kernel (exubio.model.kernels) that sums in its own order: R's
+        # FrameInverse is the compiled kernel (exubio.model.kernels) that sums in its own order: R's
         # round-off (1e-16) reaches the first and last angle of a spherical joint times 1 / cos of
         # its middle angle (a random posture 5e-4 deg from the lock: 2e-11 rad)
         tol = 1e-12 + 1e-15 / max(np.abs(np.cos(q[middle])).min(), 1e-5)  # at the lock both take its branch
         for prev in (None, q + rng.normal(scale=0.05, size=q.shape)):
-            want = kin.coordinates_from_rotations(R, q_previous=prev)
+            want = kin.coordinates_from_rotations_numpy(R, q_previous=prev)
             got = inverse(R, prev)
+            assert np.array_equal(kin.coordinates_from_rotations(R, q_previous=prev), got)  # the same kernel
             assert np.abs(got - want).max() <= tol, (np.degrees(q), got - want)
 
 

@@ -112,3 +112,16 @@ def test_compiled_coordinate_rates_equal_the_numpy_reference_and_invert_the_forw
     assert np.abs(qd - qd_ref).max() <= 1e-12 and np.abs(qdd - qdd_ref).max() <= 1e-12
     assert np.abs(qd - qd_true).max() <= 1e-12
     assert np.array_equal(kin.coordinate_rates(q, omega), qd)  # without alpha: q̇ alone
+
+
+def test_compiled_inverse_map_equals_the_numpy_reference_on_a_batch(kin):
+    rng = np.random.default_rng(31)
+    lo, hi = kin.model.coordinate_ranges_rad.T
+    q = rng.uniform(np.maximum(lo, -3.0), np.minimum(hi, 3.0), (40, kin.n_coordinates)).reshape(4, 10, -1)
+    R = kin.frames(q).R
+    for prev in (None, q + rng.normal(scale=0.05, size=q.shape), q[0, 0]):
+        got = kin.coordinates_from_rotations(R, q_previous=prev)
+        want = kin.coordinates_from_rotations_numpy(R, q_previous=prev)
+        assert got.shape == want.shape == q.shape
+        assert np.abs(got - want).max() <= 1e-9  # R's round-off times 1 / cos of a middle angle (random postures)
+    assert np.abs(kin.coordinates_from_rotations(R, q_previous=q) - q).max() <= 1e-9  # the postures themselves
