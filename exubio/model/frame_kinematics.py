@@ -1,10 +1,9 @@
 """The kinematics of one frame at a time (the live loop's): ``FrameForward``, the segment rotations
-and origins of one posture (Kinematics.frames' products without the joint axes and pivots, bitwise
-the same R and p), and ``FrameInverse``, the joint coordinates of one frame from its segment
-rotations, the rule of exubio.model.kinematics.Kinematics.coordinates_from_rotations for one
-frame in fewer array operations (both revolute joints in one, the two angle triples of the spherical
-joints wrapped into their ranges in one call, the range constants computed once). A frame costs the
-number of operations, not of joints; the angles agree with coordinates_from_rotations to round-off
+and origins of one posture (Kinematics.frames' kernel, bitwise the same R and p), and
+``FrameInverse``, the joint coordinates of one frame from its segment rotations
+(Kinematics.coordinates_from_rotations' kernel, exubio.model.kernels). Both call the compiled
+kernel directly with their tables and buffers set up once, so a frame costs a few microseconds; the
+coordinates agree with the numpy reference coordinates_from_rotations_numpy to round-off
 (tests/model/test_frame_angles.py)."""
 from __future__ import annotations
 
@@ -13,9 +12,6 @@ import numpy as np
 from exubio.model.kinematics import Kinematics
 
 __all__ = ["FrameForward", "FrameInverse"]
-
-_VEE_I = np.array([2, 0, 1])
-_VEE_J = np.array([1, 2, 0])  # vee(R) = R[_VEE_I, _VEE_J] - R[_VEE_J, _VEE_I]
 
 
 class FrameForward:
@@ -41,18 +37,15 @@ class FrameInverse:
     ``kin.coordinates_from_rotations(R, q_previous=q_previous)``."""
 
     def __init__(self, kin: Kinematics, /):
-        self.kin = kin
-        t = self.t = kin._inverse
-        self.m = kin.n_coordinates
-        self.ranges = kin.model.coordinate_ranges_rad
-        self.proj = np.array(t.rev_proj).reshape(-1, 3, 3)
-        lo, hi = self.ranges[:, 0], self.ranges[:, 1]
-        bounded = np.isfinite(lo) & np.isfinite(hi)
-        self.mid = np.where(bounded, 0.5 * (np.where(bounded, lo, 0.0) + np.where(bounded, hi, 0.0)), 0.0)
         from exubio.model import kernels  # numba: imported where used
 
+        self.m = kin.n_coordinates
+        ranges = kin.model.coordinate_ranges_rad
+        lo, hi = ranges[:, 0], ranges[:, 1]
+        bounded = np.isfinite(lo) & np.isfinite(hi)
+        self.mid = np.where(bounded, 0.5 * (np.where(bounded, lo, 0.0) + np.where(bounded, hi, 0.0)), 0.0)
         self.kernel = kernels.coordinates_from_rotations  # compiled
-        self.tables = t.kernel_tables(self.ranges)
+        self.tables = kin._inverse.kernel_tables(ranges)
 
     def __call__(self, R: np.ndarray, q_previous: np.ndarray | None = None) -> np.ndarray:
         out = np.empty((1, self.m))
