@@ -443,3 +443,12 @@ def coordinate_rates(q, omega, alpha, with_alpha, parent, centre, first, count, 
                 d[c] = alpha[b, s, c] - alpha[b, par, c] - bias[c]
             for u in range(k):
                 qdd[b, f0 + u] = P[u, 0] * d[0] + P[u, 1] * d[1] + P[u, 2] * d[2]
+
+
+@numba.njit(cache=True, nogil=True)
+def points(R, p, seg, local, out):
+    """Model points of every frame: out[b, n] = R[b, seg[n]] @ local[n] + p[b, seg[n]]; R (B, n_seg,
+    3, 3), p (B, n_seg, 3), out (B, k, 3)."""
+    for b in range(R.shape[0]):
+        for n in range(seg.shape[0]):
+            _point(R[b], p[b], seg[n], local[n], out[b, n])

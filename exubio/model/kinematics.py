@@ -214,7 +214,21 @@ class Kinematics:
         return fr.R, fr.p
 
     def points(self, q: np.ndarray, points: PointSet, *, frames: Frames | None = None) -> np.ndarray:
-        """Global positions (..., k, 3) of the model points."""
+        """Global positions (..., k, 3) of the model points (the compiled kernel, exubio.model.kernels;
+        ``points_numpy`` is its reference)."""
+        from exubio.model import kernels  # numba: imported where used
+
+        fr = self.frames(q) if frames is None else frames
+        batch, n_seg, k = fr.R.shape[:-3], fr.R.shape[-3], len(points.segment_index)
+        B = int(np.prod(batch, dtype=int))
+        out = np.empty((B, k, 3))
+        kernels.points(np.ascontiguousarray(fr.R, dtype=float).reshape(B, n_seg, 3, 3),
+                       np.ascontiguousarray(fr.p, dtype=float).reshape(B, n_seg, 3),
+                       np.asarray(points.segment_index, dtype=np.int64), np.ascontiguousarray(points.local_m, dtype=float), out)
+        return out.reshape(batch + (k, 3))
+
+    def points_numpy(self, q: np.ndarray, points: PointSet, *, frames: Frames | None = None) -> np.ndarray:
+        """``points`` in numpy: the kernel's reference."""
         fr = self.frames(q) if frames is None else frames
         Rs = fr.R[..., points.segment_index, :, :]
         return (Rs @ points.local_m[:, :, None])[..., 0] + fr.p[..., points.segment_index, :]

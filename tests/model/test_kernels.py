@@ -125,3 +125,13 @@ def test_compiled_inverse_map_equals_the_numpy_reference_on_a_batch(kin):
         assert got.shape == want.shape == q.shape
         assert np.abs(got - want).max() <= 1e-9  # R's round-off times 1 / cos of a middle angle (random postures)
     assert np.abs(kin.coordinates_from_rotations(R, q_previous=q) - q).max() <= 1e-9  # the postures themselves
+
+
+@pytest.mark.parametrize("shape", [(), (1,), (6,), (2, 3), (0,)])
+def test_compiled_model_points_equal_the_numpy_reference(kin, points, shape):
+    q = np.random.default_rng(40 + len(shape)).uniform(-2.0, 2.0, shape + (kin.n_coordinates,))
+    got, want = kin.points(q, points), kin.points_numpy(q, points)
+    assert got.shape == want.shape == shape + (len(points.names), 3)
+    assert got.size == 0 or np.abs(got - want).max() <= 1e-14
+    empty = kin.point_set([])
+    assert kin.points(q, empty).shape == shape + (0, 3)
