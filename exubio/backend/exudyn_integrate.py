@@ -14,6 +14,7 @@ before the start), ``exubio.backend.exudyn_live`` has ``PFSystem.run_live`` (fra
 """
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import logging
 import math
@@ -59,7 +60,13 @@ class SpringTargets:
     def rows(self, p: np.ndarray, v: np.ndarray) -> list:
         """What the springs are set to for positions p and velocities v (..., k, 3), as nested lists
         (fast setters)."""
-        return (p + self.d_over_c * v).tolist() if self.native else np.concatenate([p, v], axis=-1).tolist()
+        return self.values(p, v).tolist()
+
+    def values(self, p: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """``rows`` as an array (..., k, 3 or 6): a block of frames is kept as one array and turned
+        into lists a frame at a time (a block's worth of nested lists alive at once made Python's
+        full garbage collection run during the solve, 15 us per frame in every other run)."""
+        return p + self.d_over_c * v if self.native else np.concatenate([p, v], axis=-1)
 
     def set(self, row: list) -> None:
         objects, symbolic, set_parameter = self.objects, self.symbolic, self.set_parameter
@@ -256,7 +263,8 @@ class _TrialRun(Integration):
         # the rows of the frames the steps end on (nested lists: fast setters), made a block at a
         # time; other frames on demand
         self.ends = np.unique(np.r_[np.arange(0, n, max(int(round(per_frame)), 1)), n - 1])
-        self.frame_rows: dict[int, list] = {}
+        self.ends_list = self.ends.tolist()  # for bisect
+        self.block = (0, np.zeros((0, self.targets.k, 3)))  # (index in ends of its first row, the rows)
         # a step uses a spring only if its marker is present in every frame the step touches
         self.cmiss = np.vstack([np.zeros((1, act.shape[1]), dtype=np.int32), np.cumsum(~act, axis=0, dtype=np.int32)])
         self.any_missing = bool(self.cmiss[-1].any())
@@ -282,16 +290,15 @@ class _TrialRun(Integration):
         return np.where(a, self.pos[i], 0.0), np.where(a, self.vel[i], 0.0)
 
     def frame_row(self, i: int) -> list:
-        row = self.frame_rows.get(i)
-        if row is None:
-            e = int(np.searchsorted(self.ends, i))
-            if e == len(self.ends) or self.ends[e] != i:  # a reduced step that ends on another frame
-                return self.targets.rows(*self.measured(i))
-            block = self.ends[e:e + _ROW_BLOCK]
-            self.frame_rows.clear()
-            self.frame_rows.update(zip(block.tolist(), self.targets.rows(*self.measured(block))))
-            row = self.frame_rows[i]
-        return row
+        e = bisect.bisect_left(self.ends_list, i)
+        if e == len(self.ends_list) or self.ends_list[e] != i:  # a reduced step that ends on another frame
+            return self.targets.rows(*self.measured(i))
+        first, rows = self.block
+        if not first <= e < first + len(rows):
+            rows = self.targets.values(*self.measured(self.ends[e:e + _ROW_BLOCK]))
+            first = e
+            self.block = (first, rows)
+        return rows[e - first].tolist()
 
     def rows_between(self, x: float) -> list:
         """A step that ends between frames (sub-steps, reduced steps): cubic Hermite."""

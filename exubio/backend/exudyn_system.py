@@ -45,7 +45,7 @@ from exudyn.rigidBodyUtilities import RotationMatrix2EulerParameters
 from exubio.backend.exudyn_integrate import BuiltSystem, SpringTargets, integrate_trial
 from exubio.backend.exudyn_live import integrate_live
 from exubio.backend.exudyn_limits import DEFAULT_LIMIT_MAX_RATE_RAD_S, add_limit_elements
-from exubio.backend.pf_numerics import LimitElement, ep_G, ep_rotation_unit, frame_with_z
+from exubio.backend.pf_numerics import LimitElement, ep_G, frame_with_z
 from exubio.backend.pf_types import IntegratorOptions, PFRun, SpringSet
 from exubio.errors import ModelError
 from exubio.model.kinematics import axis_rotation, Kinematics, PointSet
@@ -241,7 +241,8 @@ class PFSystem:
         mbs.Assemble()
         sd = mbs.systemData
         self._ltg = [None] + [np.asarray(sd.GetNodeLTGODE2(n), dtype=int) for n in self._nodes[1:]]
-        self._ltg_all = np.array(self._ltg[1:], dtype=int).reshape(len(self._ltg) - 1, -1)
+        self._ltg_all = np.array(self._ltg[1:], dtype=np.int64).reshape(len(self._ltg) - 1, -1)
+        self._ep_ref_moving, self._p_ref_moving = self._ep_ref[1:].copy(), self._p_ref[1:].copy()
         self._aux_ltg = [np.asarray(sd.GetNodeLTGODE2(n), dtype=int) for n in self._aux_nodes]
         self._n_ode2 = sd.ODE2Size()
         self._eye = np.eye(3)
@@ -407,22 +408,15 @@ class PFSystem:
     def _decode(self, X, Xt, Xtt, frame_dt_s, *, first: int = 0) -> PFRun:
         """The segment motion of frames first ... first + len(X) - 1 from the system coordinates
         (vectorised over the segments: a live run decodes one frame at a time)."""
-        X, Xt, Xtt = (np.asarray(a) for a in (X, Xt, Xtt))
+        from exubio.model import kernels  # numba: imported where used
+
+        X, Xt, Xtt = (np.ascontiguousarray(a, dtype=float) for a in (X, Xt, Xtt))
         n = X.shape[0]
         n_seg = len(self.model.segments)
-        L = self._ltg_all  # (n_seg - 1, 7): each movable segment's node coordinates
-        x, xt, xtt = X[:, L], Xt[:, L], Xtt[:, L]  # (n, n_seg - 1, 7)
-        ep = x[..., 3:] + self._ep_ref[1:]
-        unit = ep / np.linalg.norm(ep, axis=-1, keepdims=True)
-        G = ep_G(unit)
         R = np.empty((n, n_seg, 3, 3))
-        R[:, 0] = self._eye
-        R[:, 1:] = ep_rotation_unit(unit)
-        p, v, a, w, al = (np.zeros((n, n_seg, 3)) for _ in range(5))
-        p[:, 1:] = x[..., :3] + self._p_ref[1:]
-        v[:, 1:], a[:, 1:] = xt[..., :3], xtt[..., :3]
-        w[:, 1:] = np.einsum("nsij,nsj->nsi", G, xt[..., 3:])
-        al[:, 1:] = np.einsum("nsij,nsj->nsi", G, xtt[..., 3:])
+        p, v, a, w, al = (np.empty((n, n_seg, 3)) for _ in range(5))
+        kernels.euler_parameter_motion(X, Xt, Xtt, self._ltg_all, self._ep_ref_moving, self._p_ref_moving,
+                                       R, p, v, a, w, al)
         return PFRun(
             time_s=(first + np.arange(n)) * frame_dt_s, rotations=R, origins_m=p, velocities_m_s=v,
             accelerations_m_s2=a, angular_velocities_rad_s=w, angular_accelerations_rad_s2=al, completed_frames=n,

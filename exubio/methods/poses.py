@@ -86,22 +86,10 @@ def _linearise(kin: Kinematics, points: PointSet, q: np.ndarray, target: np.ndar
     """Everything one kinematics evaluation gives at q for a batch of frames (B, ...): the cost
     e^T W e (B,) (m^2, plus the limit potential), H = J^T W J (B, m, m), grad = J^T W e (B, m), the
     constraints g (B, 2) and G (B, 2, m)."""
-    fr = kin.frames(q)
-    B, k = w.shape
-    r = kin.points(q, points, frames=fr)
-    J = kin.point_jacobian(q, points, frames=fr, positions=r).reshape(B, 3 * k, -1)  # (B, 3k, m)
-    e = np.where(w[..., None] > 0, r - target, 0.0).reshape(B, 3 * k, 1)
-    Jw_t = np.swapaxes(J * np.repeat(w, 3, axis=1)[..., None], 1, 2)  # (B, m, 3k)
-    rc = kin.points(q, kin.contacts, frames=fr)
-    Jc = kin.point_jacobian(q, kin.contacts, frames=fr, positions=rc)  # (B, 2, 3, m)
-    ec = rc - kin.centre
-    lin = Evaluation(
-        H=Jw_t @ J,
-        grad=(Jw_t @ e)[..., 0],
-        G=2.0 * ((ec * kin.a_diag)[..., None, :] @ Jc)[..., 0, :],
-        g=(ec * ec) @ kin.a_diag - 1.0,
-        cost=(e[..., 0] ** 2 * np.repeat(w, 3, axis=1)).sum(axis=1),
-    )
+    from exubio.model.pose_kernel import least_squares_terms  # compiled (numba): imported where used
+
+    cost, H, grad, g, G = least_squares_terms(kin, points, q, target, w)
+    lin = Evaluation(cost=cost, H=H, grad=grad, g=g, G=G)
     _add_limits(lin, q, limits)
     return lin
 
@@ -215,19 +203,19 @@ def _solve_rates_block(kin: Kinematics, points: PointSet, q: np.ndarray, vel: np
     J = kin.point_jacobian(q, points, frames=fr)
     Jw = J * w[..., None, None]
     K = np.zeros((n, m + 2, m + 2))
-    K[:, :m, :m] = np.einsum("nkcm,nkcl->nml", Jw, J) + mu * np.eye(m)
+    K[:, :m, :m] = np.swapaxes(Jw.reshape(n, -1, m), 1, 2) @ J.reshape(n, -1, m) + mu * np.eye(m)
     if limits is not None:
         K[:, :m, :m] += limits.kappa * (violation(q, limits.ranges_rad) != 0)[..., :, None] * np.eye(m)
     G = kin.G(q, frames=fr)
     K[:, :m, m:] = np.swapaxes(G, 1, 2)
     K[:, m:, :m] = G
     v = np.where(present[..., None], vel, 0.0)
-    rhs = np.concatenate([np.einsum("nkcm,nkc->nm", Jw, v), np.zeros((n, 2))], axis=1)
+    rhs = np.concatenate([(v.reshape(n, 1, -1) @ Jw.reshape(n, -1, m))[:, 0], np.zeros((n, 2))], axis=1)
     fix_variables(K, rhs, held)
     qd = np.linalg.solve(K, rhs[..., None])[..., 0][:, :m]
     bias = kin.point_bias_acceleration(q, qd, points, frames=fr, jacobian=J)
     a = np.where(present[..., None], acc - bias, 0.0)
-    rhs = np.concatenate([np.einsum("nkcm,nkc->nm", Jw, a), -kin.eta(q, qd, frames=fr)], axis=1)
+    rhs = np.concatenate([(a.reshape(n, 1, -1) @ Jw.reshape(n, -1, m))[:, 0], -kin.eta(q, qd, frames=fr)], axis=1)
     fix_variables(K, rhs, held)
     qdd = np.linalg.solve(K, rhs[..., None])[..., 0][:, :m]
     return qd, qdd

@@ -122,6 +122,7 @@ class Kinematics:
             self.precedes[j] = self.affects[s] & (np.arange(self.n_coordinates) < j)
             own = self._joint_coords[s]
             self.precedes[j, own[own >= j]] = False
+        self._precedes_f = self.precedes.astype(float)
         ell = model.ellipsoid
         self.contacts = self.point_set([(seg, pt) for seg, pt in ell.contact_points])
         self.a_diag = ell.a_diag
@@ -152,8 +153,39 @@ class Kinematics:
         return PointSet(np.array(seg_idx, dtype=int), np.array(local, dtype=float).reshape(-1, 3), tuple(names))
 
     # ---------------------------------------------------------------- forward
+    def kernel_tables(self) -> tuple[np.ndarray, ...]:
+        """The chain as flat arrays for the compiled kernels (exubio.model.kernels): parent of each
+        segment, joint centre in the parent (m), first coordinate and number of coordinates of each
+        joint, each coordinate's axis, and its Rodrigues skew matrices K and K^2."""
+        t = self.__dict__.get("_kernel_tables")
+        if t is None:
+            n_seg = self.n_segments
+            centre, axes = np.zeros((n_seg, 3)), np.zeros((self.n_coordinates, 3))
+            first, count = np.zeros(n_seg, dtype=np.int64), np.zeros(n_seg, dtype=np.int64)
+            for i, _, idx, c, ax in self._chain:  # a joint's coordinates are consecutive (see __init__)
+                centre[i], first[i], count[i] = c, idx[0], len(idx)
+                axes[idx] = np.asarray(ax, dtype=float).reshape(-1, 3)
+            t = self.__dict__["_kernel_tables"] = (np.asarray(self.parent_index, dtype=np.int64), centre, first, count,
+                                                   axes, np.ascontiguousarray(self._sk), np.ascontiguousarray(self._sk2))
+        return t
+
     def frames(self, q: np.ndarray) -> Frames:
-        """Forward kinematics for q (..., m)."""
+        """Forward kinematics for q (..., m): the compiled kernel (exubio.model.kernels.forward,
+        a frame at a time; imported here, on first use), equal to ``frames_numpy`` to round-off."""
+        from exubio.model import kernels  # numba: imported where used
+
+        q = np.asarray(q, dtype=float)
+        batch = q.shape[:-1]
+        flat = np.ascontiguousarray(q.reshape(-1, self.n_coordinates))
+        B, n_seg, m = flat.shape[0], self.n_segments, self.n_coordinates
+        R, p = np.empty((B, n_seg, 3, 3)), np.empty((B, n_seg, 3))
+        axes, pivots = np.empty((B, m, 3)), np.empty((B, m, 3))
+        kernels.forward(flat, *self.kernel_tables(), R, p, axes, pivots)
+        return Frames(R.reshape(batch + (n_seg, 3, 3)), p.reshape(batch + (n_seg, 3)), axes.reshape(batch + (m, 3)),
+                      pivots.reshape(batch + (m, 3)))
+
+    def frames_numpy(self, q: np.ndarray) -> Frames:
+        """Forward kinematics for q (..., m) in numpy: the reference of the compiled ``frames``."""
         q = np.asarray(q, dtype=float)
         batch = q.shape[:-1]
         R = np.empty(batch + (self.n_segments, 3, 3))
@@ -182,40 +214,67 @@ class Kinematics:
         return fr.R, fr.p
 
     def points(self, q: np.ndarray, points: PointSet, *, frames: Frames | None = None) -> np.ndarray:
-        """Global positions (..., k, 3) of the model points."""
+        """Global positions (..., k, 3) of the model points (the compiled kernel, exubio.model.kernels;
+        ``points_numpy`` is its reference)."""
+        from exubio.model import kernels  # numba: imported where used
+
+        fr = self.frames(q) if frames is None else frames
+        batch, n_seg, k = fr.R.shape[:-3], fr.R.shape[-3], len(points.segment_index)
+        B = int(np.prod(batch, dtype=int))
+        out = np.empty((B, k, 3))
+        kernels.points(np.ascontiguousarray(fr.R, dtype=float).reshape(B, n_seg, 3, 3),
+                       np.ascontiguousarray(fr.p, dtype=float).reshape(B, n_seg, 3),
+                       np.asarray(points.segment_index, dtype=np.int64), np.ascontiguousarray(points.local_m, dtype=float), out)
+        return out.reshape(batch + (k, 3))
+
+    def points_numpy(self, q: np.ndarray, points: PointSet, *, frames: Frames | None = None) -> np.ndarray:
+        """``points`` in numpy: the kernel's reference."""
         fr = self.frames(q) if frames is None else frames
         Rs = fr.R[..., points.segment_index, :, :]
-        return np.einsum("...kij,kj->...ki", Rs, points.local_m) + fr.p[..., points.segment_index, :]
+        return (Rs @ points.local_m[:, :, None])[..., 0] + fr.p[..., points.segment_index, :]
 
     def point_jacobian(self, q: np.ndarray, points: PointSet, *, frames: Frames | None = None,
                        positions: np.ndarray | None = None) -> np.ndarray:
-        """d r_k / d q: (..., k, 3, m). Column j is w_j x (r_k - c_j) where coordinate j moves r_k."""
+        """d r_k / d q: (..., k, 3, m), C-contiguous. Column j is w_j x (r_k - c_j) = w_j x r_k - w_j x c_j
+        where coordinate j moves r_k (the second term is the same for every point: computed once)."""
         fr = self.frames(q) if frames is None else frames
         r = self.points(q, points, frames=fr) if positions is None else positions
-        diff = r[..., :, None, :] - fr.pivots[..., None, :, :]  # (..., k, m, 3)
-        cols = cross(fr.axes[..., None, :, :], diff)  # (..., k, m, 3)
-        cols = cols * self._affects_f[points.segment_index][..., :, None]
-        return np.swapaxes(cols, -1, -2)
+        wc = np.swapaxes(cross(fr.axes, fr.pivots), -1, -2)[..., None, :, :]  # (..., 1, 3, m)
+        w = np.swapaxes(fr.axes, -1, -2)[..., None, :, :]  # (..., 1, 3, m)
+        x, y, z = r[..., 0:1], r[..., 1:2], r[..., 2:3]  # (..., k, 1)
+        out = np.empty(r.shape[:-1] + (3, self.n_coordinates))
+        np.subtract(w[..., 1, :] * z - w[..., 2, :] * y, wc[..., 0, :], out=out[..., 0, :])
+        np.subtract(w[..., 2, :] * x - w[..., 0, :] * z, wc[..., 1, :], out=out[..., 1, :])
+        np.subtract(w[..., 0, :] * y - w[..., 1, :] * x, wc[..., 2, :], out=out[..., 2, :])
+        out *= self._affects_f[points.segment_index][..., None, :]
+        return out
 
     def point_bias_acceleration(self, q: np.ndarray, qd: np.ndarray, points: PointSet, *,
                                 frames: Frames | None = None, positions: np.ndarray | None = None,
                                 jacobian: np.ndarray | None = None) -> np.ndarray:
-        """(dJ/dt) q̇ of each point: its acceleration when q̈ = 0, (..., k, 3); ``frames``, ``positions``
-        and ``jacobian``: those of q and the points where the caller has them."""
+        """(dJ/dt) q̇ of each point: its acceleration when q̈ = 0, (..., k, 3); ``frames`` and ``positions``:
+        those of q and the points where the caller has them (``jacobian`` is accepted and not needed).
+
+        With a_j the axis, c_j the pivot of coordinate j, Omega_j the angular velocity of the frame
+        that carries axis j, adot_j = Omega_j x a_j and cdot_j the pivot's velocity, a point moved
+        by the coordinates j in S_k has (dJ/dt q̇)_k = sum_{j in S_k} q̇_j [adot_j x (r_k - c_j) +
+        a_j x (ṙ_k - cdot_j)]; the sums over j split into per-segment sums (S_k is the set of
+        its segment), so the cost is one pass over the coordinates plus one over the points."""
         fr = self.frames(q) if frames is None else frames
         r = self.points(q, points, frames=fr) if positions is None else positions
-        J = self.point_jacobian(q, points, frames=fr, positions=r) if jacobian is None else jacobian
         qd = np.asarray(qd, dtype=float)
-        rd = np.einsum("...kim,...m->...ki", J, qd)
-        wq = fr.axes * qd[..., None]  # (..., m, 3)
-        omega = np.einsum("jk,...kc->...jc", self.precedes.astype(float), wq)  # frame rate of axis j
-        wdot = cross(omega, fr.axes)
-        cdot = cross(omega, fr.pivots) - np.einsum(
-            "jk,...kc->...jc", self.precedes.astype(float), cross(wq, fr.pivots))
-        diff = r[..., :, None, :] - fr.pivots[..., None, :, :]
-        term = cross(wdot[..., None, :, :], diff) + cross(fr.axes[..., None, :, :], rd[..., :, None, :] - cdot[..., None, :, :])
-        mask = self.affects[points.segment_index] * qd[..., None, :]
-        return np.einsum("...km,...kmc->...kc", mask, term)
+        prec = self._precedes_f
+        wq = fr.axes * qd[..., None]  # (..., m, 3): q̇_j a_j
+        omega = prec @ wq  # frame rate of axis j
+        u = cross(omega, wq)  # q̇_j adot_j
+        cdot = cross(omega, fr.pivots) - prec @ cross(wq, fr.pivots)
+        wqc = cross(wq, fr.pivots)
+        aff = self._affects_f  # (n_seg, m)
+        seg = points.segment_index
+        om_s = (aff @ wq)[..., seg, :]  # the segment's angular velocity, per point
+        rd = cross(om_s, r) - (aff @ wqc)[..., seg, :]  # the point's velocity J q̇
+        z = cross(u, fr.pivots) + cross(wq, cdot)
+        return cross((aff @ u)[..., seg, :], r) + cross(om_s, rd) - (aff @ z)[..., seg, :]
 
     # ---------------------------------------------------------------- constraints
     def g(self, q: np.ndarray, *, frames: Frames | None = None) -> np.ndarray:
@@ -265,7 +324,29 @@ class Kinematics:
         nearest the middle of their ranges). Where the middle angle of a spherical joint comes
         within 1e-6 rad of +-90 deg the split between first and last angle is undetermined: the
         first angle then keeps ``q_previous`` (or 0).
+
+        The compiled kernel (exubio.model.kernels.coordinates_from_rotations, frame by frame);
+        ``coordinates_from_rotations_numpy`` is its reference.
         """
+        from exubio.model import kernels  # numba: imported where used
+
+        R = np.asarray(R, dtype=float)
+        batch, m = R.shape[:-3], self.n_coordinates
+        flat = np.ascontiguousarray(R.reshape((-1,) + R.shape[-3:]))
+        if q_previous is None:
+            lo, hi = self.model.coordinate_ranges_rad.T
+            bounded = np.isfinite(lo) & np.isfinite(hi)
+            ref = np.where(bounded, 0.5 * (np.where(bounded, lo, 0.0) + np.where(bounded, hi, 0.0)), 0.0)
+        else:
+            ref = np.asarray(q_previous, dtype=float)
+        ref = np.ascontiguousarray(np.broadcast_to(ref, batch + (m,))).reshape(-1, m)
+        out = np.empty((flat.shape[0], m))
+        kernels.coordinates_from_rotations(flat, ref, q_previous is not None,
+                                           *self._inverse.kernel_tables(self.model.coordinate_ranges_rad), out)
+        return out.reshape(batch + (m,))
+
+    def coordinates_from_rotations_numpy(self, R: np.ndarray, *, q_previous: np.ndarray | None = None) -> np.ndarray:
+        """``coordinates_from_rotations`` in numpy, every frame at once: the kernel's reference."""
         R = np.asarray(R, dtype=float)
         t = self._inverse
         ranges = self.model.coordinate_ranges_rad
@@ -322,7 +403,23 @@ class Kinematics:
     def coordinate_rates(self, q: np.ndarray, omega: np.ndarray, alpha: np.ndarray | None = None):
         """q̇ (and q̈) from segment angular velocities omega and accelerations alpha (..., n_seg, 3),
         global frame, at coordinates q (..., m). Solves, per joint, the relative angular velocity
-        W q̇_joint = omega_child - omega_parent (least squares for k < 3 coordinates)."""
+        W q̇_joint = omega_child - omega_parent (least squares for k < 3 coordinates): the compiled
+        kernel (exubio.model.kernels.coordinate_rates); ``coordinate_rates_numpy`` is its reference."""
+        from exubio.model import kernels  # numba: imported where used
+
+        q = np.asarray(q, dtype=float)
+        m, n_seg = self.n_coordinates, self.n_segments
+        flat = np.ascontiguousarray(q.reshape(-1, m))
+        om = np.ascontiguousarray(np.broadcast_to(omega, q.shape[:-1] + (n_seg, 3)), dtype=float).reshape(-1, n_seg, 3)
+        al = om if alpha is None else np.ascontiguousarray(
+            np.broadcast_to(alpha, q.shape[:-1] + (n_seg, 3)), dtype=float).reshape(-1, n_seg, 3)
+        qd, qdd = np.zeros(flat.shape), np.zeros(flat.shape)
+        kernels.coordinate_rates(flat, om, al, alpha is not None, *self.kernel_tables(), qd, qdd)
+        qd = qd.reshape(q.shape)
+        return (qd, qdd.reshape(q.shape)) if alpha is not None else qd
+
+    def coordinate_rates_numpy(self, q: np.ndarray, omega: np.ndarray, alpha: np.ndarray | None = None):
+        """``coordinate_rates`` in numpy: the reference of the compiled kernel."""
         fr = self.frames(q)
         omega = np.asarray(omega, dtype=float)
         qd = np.zeros(q.shape)
@@ -382,3 +479,15 @@ class _InverseTable:
         self.card_q = np.array([joints[n][2] for n in card], dtype=int).reshape(-1, 2)
         self.sph_q = np.array([joints[n][2] for n in sph], dtype=int).reshape(-1, 3)
         self.sph_sign = np.array(signs, dtype=float)
+
+    def kernel_tables(self, ranges_rad: np.ndarray) -> tuple:
+        """The tables of exubio.model.kernels.coordinates_from_rotations (after R and the reference)."""
+        t = self.__dict__.get("_kernel")
+        if t is None:
+            i64, c = np.int64, np.ascontiguousarray
+            t = self.__dict__["_kernel"] = (
+                self.parents.astype(i64), self.children.astype(i64), c(self.B), self.rev.astype(i64), self.rev_q.astype(i64),
+                c(self.rev_axes), c(np.array(self.rev_proj).reshape(-1, 3, 3)), self.card.astype(i64),
+                c(self.card_q, dtype=i64), self.sph.astype(i64), c(self.sph_q, dtype=i64), c(self.sph_sign),
+                c(ranges_rad, dtype=float))
+        return t

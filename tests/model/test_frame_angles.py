@@ -1,6 +1,7 @@
 """The live loop's one-frame kernels against the batch functions they stand in for: FrameAngles
-(exubio.model.frame_angles) gives bitwise exubio.model.angles.isb_table's angles, FrameForward
-(exubio.model.frame_kinematics) bitwise Kinematics.frames' R and p, FrameInverse
+(exubio.model.frame_angles) gives exubio.model.angles.isb_table's angles (its numpy reference bitwise,
+its compiled kernel to round-off), FrameForward (exubio.model.frame_kinematics) bitwise
+Kinematics.frames' R and p (the same kernel), FrameInverse
 coordinates_from_rotations' coordinates to round-off, the causal thorax frame of one frame
 exubio.prep.thorax.thorax_frame's to round-off: random postures over and beyond every range, at the
 range limits and at the gimbal locks."""
@@ -12,7 +13,7 @@ from exubio.model.kinematics import Kinematics
 from exubio.model.load import load_model
 
 
-def test_frame_angles_are_isb_tables_bitwise():
+def test_frame_angles_are_isb_tables():
     model = load_model()
     kin = Kinematics(model)
     frames = anatomical_frames(model)
@@ -29,9 +30,11 @@ def test_frame_angles_are_isb_tables_bitwise():
     for q in qs:
         R = kin.frames(q).R
         want = isb_table(model, q, kinematics=kin, frames=frames, rotations=R)[1]
-        got = angles(R)
+        assert np.array_equal(angles.numpy(R), want)  # the numpy reference: isb_table's operations
+        got = angles(R)  # the compiled kernel: to round-off (an angle at -pi may come out at +pi)
         assert got.shape == want.shape == (15,)
-        assert np.array_equal(got, want), np.abs(got - want).max()
+        diff = np.abs(got - want)
+        assert np.minimum(diff, 2 * np.pi - diff).max() < 1e-12, diff.max()
 
 
 def test_frame_inverse_is_coordinates_from_rotations():
@@ -53,16 +56,18 @@ def test_frame_inverse_is_coordinates_from_rotations():
             locked = q.copy()
             locked[names.index(name)] = rng.choice([-1, 1]) * np.pi / 2
             qs.append(locked)
-    worst, same = 0.0, 0
+    middle = [names.index(n) for n in ("sc_elevation", "ac_upward_rotation", "gh_internal_rotation")]
     for q in qs:
         R = kin.frames(q).R
+        # FrameInverse is the compiled kernel (exubio.model.kernels) that sums in its own order: R's
+        # round-off (1e-16) reaches the first and last angle of a spherical joint times 1 / cos of
+        # its middle angle (a random posture 5e-4 deg from the lock: 2e-11 rad)
+        tol = 1e-12 + 1e-15 / max(np.abs(np.cos(q[middle])).min(), 1e-5)  # at the lock both take its branch
         for prev in (None, q + rng.normal(scale=0.05, size=q.shape)):
-            want = kin.coordinates_from_rotations(R, q_previous=prev)
+            want = kin.coordinates_from_rotations_numpy(R, q_previous=prev)
             got = inverse(R, prev)
-            worst = max(worst, float(np.abs(got - want).max()))
-            same += np.array_equal(got, want)
-    assert worst < 1e-12, worst
-    assert same > 0.9 * 2 * len(qs)  # mostly bitwise the same (a batched einsum may sum in another order)
+            assert np.array_equal(kin.coordinates_from_rotations(R, q_previous=prev), got)  # the same kernel
+            assert np.abs(got - want).max() <= tol, (np.degrees(q), got - want)
 
 
 def test_frame_forward_is_kinematics_frames_bitwise():

@@ -24,6 +24,7 @@ OWNERS = {
     "dask": {"run/executors.py"},
     "pandas": {"api.py", "run/study_table.py", "run/study_moments.py"},  # the study's angles table (Parquet, CSV) is a DataFrame
     "pylsl": {"run/live/transport.py"},
+    "numba": {"model/kernels.py"},  # the compiled kernels, imported where used (0.2 s to import)
 }
 VALIDATION_STUDY = tuple(f"exubio.validation.{m}" for m in ("run", "trials", "determinacy", "sensitivity", "residuals",
                                                               "sier", "invivo", "c3d_tasks", "agreement", "mismatch"))

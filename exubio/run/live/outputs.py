@@ -221,7 +221,7 @@ class PublishedAngles:
         """The ISB angles of q (15,), unwrapped against the previous frame."""
         if rotations is None:
             rotations = self.kin.frames(q).R
-        ang = self.frame_angles(rotations)  # isb_table's angles of one frame (bitwise), its set-up done once
+        ang = self.frame_angles(rotations)  # isb_table's angles of one frame (compiled kernel, to round-off)
         if self.last_isb is not None:
             ang = self.last_isb + (ang - self.last_isb + np.pi) % (2 * np.pi) - np.pi
         self.last_isb = ang
