@@ -195,20 +195,16 @@ def angle_status(reconstruction: Reconstruction, model: Model | None = None, pro
     """Every anatomical angle's status per frame (exubio.trust.observability.AngleDeterminacy: measured,
     modelled by a named rule, or not measured) for a reconstruction made with ``protocol``; the
     frames where a marker was missing are those whose residual is NaN."""
-    from exubio.trust.assess import not_solved_mask
-    from exubio.model.kinematics import Kinematics
-    from exubio.methods.common import tracked_points
-    from exubio.methods.poses import held_mask
+    from exubio.protocol.bind import bind
     from exubio.trust.observability import angle_determinacy
 
     model = model if model is not None else load_model()
     protocol = protocol if protocol is not None else load_protocol(model=model)
-    kin = Kinematics(model)
-    held = held_mask(model, protocol)
+    b = bind(model, protocol)
     present = np.isfinite(reconstruction.residuals_m)
     dt = float(np.median(np.diff(reconstruction.time_s))) if reconstruction.n_frames > 1 else 1.0
-    return angle_determinacy(kin, tracked_points(kin, protocol), reconstruction.q_rad, present, protocol.weights,
-                             held=held, locked=not_solved_mask(model, protocol, kin) & ~held,
+    return angle_determinacy(b.kin, b.points, reconstruction.q_rad, present, protocol.weights,
+                             held=b.held, locked=b.locked,
                              every=max(1, int(round(0.05 / dt))), residuals_m=reconstruction.residuals_m)
 
 

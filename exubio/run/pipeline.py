@@ -21,6 +21,7 @@ from exubio.errors import InputError, PartialReconstructionError, Reconstruction
 from exubio.io import results
 from exubio.io.trial import read_trial
 from exubio.prep.targets import preparation_key, prepare_targets
+from exubio.protocol.bind import Binding
 from exubio.run.inputs import Session, load_session
 from exubio.run.summary_file import RunNotes, trial_quality, trial_summary
 from exubio.run.trial_files import AngleOutputs, angle_header, mot_thorax, write_outputs  # noqa: F401 - re-exported
@@ -53,15 +54,25 @@ class TrialInputs:
 in part of the trial, ``repaired``: exchanged back before preparing (``--repair-labels``)."""
 
     trial: TrialInfo
-    model: Model
-    protocol: Protocol
+    binding: Binding  # the model and protocol (the session's, or rebound without the dropped markers)
     targets: MarkerTargets
     dropped: tuple[str, ...] = ()
     partial_swaps: tuple = ()  # labels exchanged in part of the trial (exubio.trust.label_ranges)
     repaired: bool = False  # ... and exchanged back (--repair-labels)
-    generic_model: Model | None = None  # what the label checks expect (exubio.run.inputs.Session)
-    generic_protocol: Protocol | None = None
+    expect: Binding | None = None  # what the label checks expect (exubio.run.inputs.Session.generic_binding)
     moment_inputs: Any = None  # the thorax's motion and the loads (exubio.prep.moment_inputs.MomentInputs)
+
+    @property
+    def model(self) -> Model:
+        return self.binding.model
+
+    @property
+    def protocol(self) -> Protocol:
+        return self.binding.protocol
+
+    @property
+    def generic_binding(self) -> Binding:
+        return self.expect if self.expect is not None else self.binding
 
 
 @dataclass(frozen=True)
@@ -105,7 +116,8 @@ def load_inputs(trial: str | Path | Trajectories, session: Session | None = None
     traj = trial if isinstance(trial, Trajectories) else read_trial(trial)
     session = session if session is not None else load_session()
     model = session.model
-    protocol, dropped = drop_missing_markers(traj, session.protocol, model)
+    binding, dropped = drop_missing_markers(traj, session.binding)
+    protocol = binding.protocol
     check_thorax_labels(traj, protocol, model)  # before the thorax frame is built from them
     partial = find_partial_swaps(traj, protocol, model)
     repaired = bool(partial and repair_labels)
@@ -120,8 +132,7 @@ def load_inputs(trial: str | Path | Trajectories, session: Session | None = None
         from exubio.prep.moment_inputs import moment_inputs
 
         extra = moment_inputs(traj, protocol, targets, model, moment_request)
-    return TrialInputs(TrialInfo.of(traj), model, protocol, targets, dropped, partial, repaired,
-                       session.generic_model, session.generic_protocol, extra)
+    return TrialInputs(TrialInfo.of(traj), binding, targets, dropped, partial, repaired, session.generic_binding, extra)
 
 
 def reconstruct(model: Model, protocol: Protocol, targets: MarkerTargets, /, *, method: Method | str = Method.PF,
@@ -141,18 +152,18 @@ def _options(spec: Any, options: Any, values: dict[str, Any]) -> Any:
     return spec.make_options(options if options is not None else values)
 
 
-def stream_reconstruct(model: Model, protocol: Protocol, targets: MarkerTargets, sink: Callable[[Reconstruction], None],
+def stream_reconstruct(binding: Binding, targets: MarkerTargets, sink: Callable[[Reconstruction], None],
                        /, *, method: Method | str = Method.PF, options: Any = None,
                        progress: Callable[[int], None] | None = None,
                        chunk_frames: int | None = None) -> tuple[dict[str, float], dict[str, Any]]:
-    """Run one method handing its result to ``sink`` in chunks (bounded memory on trials of any
-    length: exubio.methods.common); ``options``: the method's options object or a dict of its
+    """Run one method with ``binding`` (the model and protocol: exubio.protocol.bind) handing its result
+    to ``sink`` in chunks (bounded memory on trials of any length: exubio.methods.common); ``options``: the method's options object or a dict of its
     fields (exubio.methods.REGISTRY); returns the method's (timings_s, info)."""
     from exubio.methods import method_spec
     from exubio.methods.common import CHUNK_FRAMES
 
     spec = method_spec(Method.parse(method).value)
-    return spec.load_stream()(model, protocol, targets, sink, options=spec.make_options(options),
+    return spec.load_stream()(binding, targets, sink, options=spec.make_options(options),
                               progress=progress, chunk_frames=chunk_frames or CHUNK_FRAMES)
 
 
@@ -271,7 +282,7 @@ class _Run:
             progress = factory(method.value, inputs.targets.n_frames) if factory else None
             sink = parts.enter_context(sink_type(out_dir, stem, inputs.targets, inputs.model.coordinate_names))
             try:
-                timings, info = stream_reconstruct(inputs.model, inputs.protocol, inputs.targets, sink, method=method,
+                timings, info = stream_reconstruct(inputs.binding, inputs.targets, sink, method=method,
                                                    options=self.settings.method_options.get(method.value),
                                                    progress=progress, chunk_frames=self.settings.chunk_frames)
             except ReconstructionError as exc:  # the other methods still give their results
@@ -310,11 +321,10 @@ def assess_inputs(inputs: TrialInputs, recons: list[Reconstruction], calibration
     """The trial's assessment (exubio.trust.assess.TrialAssessment) as ``exubio reconstruct`` makes
     it: the label checks against the generic model (and, with the session's ``calibration``,
     against its static trial), then determinacy, limits, agreement and the verdicts."""
-    from exubio.trust.assess import assess_trial, trial_label_findings
+    from exubio.trust.assess import TrialContext, assess_trial, trial_label_findings
 
     reference = calibration.reference if calibration is not None else None
-    expect = (inputs.generic_model or inputs.model, inputs.generic_protocol or inputs.protocol)
-    findings = trial_label_findings(inputs.model, inputs.protocol, inputs.targets, reference=reference, expect=expect)
+    findings = trial_label_findings(inputs.generic_binding, inputs.targets, reference=reference)
     session = ()
     if reference is not None:  # does the static belong to this trial's session?
         from exubio.trust.labels import pair_distances
@@ -322,11 +332,12 @@ def assess_inputs(inputs: TrialInputs, recons: list[Reconstruction], calibration
 
         trial_pd = pair_distances(inputs.targets.positions_m, inputs.targets.marker_names)
         session = tuple(placed_anew(static_consistency(reference, trial_pd, inputs.protocol)))
-    return assess_trial(inputs.model, inputs.protocol, inputs.targets, recons, label_findings=findings,
-                        calibration=None if calibration is None else calibration.report,
-                        static_labels=() if calibration is None or calibration.reference is None else calibration.labels, session=session,
-                        dropped=inputs.dropped, partial_swaps=inputs.partial_swaps, repaired=inputs.repaired,
-                        static_name=getattr(reference, "source", "") or "")
+    context = TrialContext(
+        label_findings=tuple(findings), calibration=None if calibration is None else calibration.report,
+        static_labels=() if calibration is None or calibration.reference is None else tuple(calibration.labels),
+        session=session, static_name=getattr(reference, "source", "") or "", dropped=inputs.dropped,
+        partial_swaps=inputs.partial_swaps, repaired=inputs.repaired)
+    return assess_trial(inputs.binding, inputs.targets, recons, context=context)
 
 
 def write_assessed(inputs: TrialInputs, trial_path: str | Path, out_dir: str | Path, done: list[tuple], assessment: Any,

@@ -31,7 +31,7 @@ def inputs():
 
 def _joined(stream, inputs, size, **kw):
     chunks = Collector()
-    timings, info = stream(inputs.model, inputs.protocol, inputs.targets, chunks, chunk_frames=size, **kw)
+    timings, info = stream(inputs.binding, inputs.targets, chunks, chunk_frames=size, **kw)
     return chunks, chunks.reconstruction(inputs.targets, timings_s=timings, info=info)
 
 
@@ -67,7 +67,7 @@ def test_ls_in_chunks_equals_one_pass(inputs, size):
 def test_pf_divergence_stops_the_integration_at_the_chunk_that_shows_it(inputs):
     seen = []
     with pytest.raises(ReconstructionError, match="diverged"):
-        stream_pf(inputs.model, inputs.protocol, inputs.targets, seen.append, chunk_frames=100,
+        stream_pf(inputs.binding, inputs.targets, seen.append, chunk_frames=100,
                   options=PFOptions(divergence_deflection_m=1e-4))
     assert seen == []  # the first chunk already fails: nothing of it was handed on
 
