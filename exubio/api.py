@@ -278,12 +278,13 @@ def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str
     the verdict it carries (exubio.reconstruct). ``signs``: the angles' sign convention in every
     file ("isb" or "clinical", exubio.model.signs; default the protocol's ``signs`` key, else isb)."""
     from exubio.io import results
+    from exubio.io.result_names import method_stem
     from exubio.model.angles import anatomical_table
     from exubio.run.pipeline import AngleOutputs, angle_header, assess_inputs, write_assessed, write_outputs
     from exubio.run.summary_file import RunNotes, reconstruction_summary
     from exubio.types import Method
 
-    full = f"{stem}.{reconstruction.method}"
+    full = method_stem(stem, reconstruction.method)
     if trial is not None:
         session = _session(model, protocol)
         session = session.with_signs(_signs(signs, session.protocol))
@@ -300,7 +301,7 @@ def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str
             key = run_key(trial, session.model, session.protocol, reconstruction.method,
                           options=dict(reconstruction.info["options"]))
         return write_assessed(inputs, source, out_dir, done, assessment, overwrite=overwrite,
-                              notes=RunNotes(cal, inputs_sha256=key))[0][1]
+                              notes=RunNotes(cal, inputs_sha256=key))[0].paths
     model = model if model is not None else load_model()
     protocol = protocol if protocol is not None else load_protocol(model=model)
     signs = _signs(signs, protocol)

@@ -29,6 +29,7 @@ from matplotlib.text import Text
 
 from exubio.trust.evaluate import per_frame_residuals_mm, residual_statistics
 from exubio.errors import InputError
+from exubio.io.result_names import beside
 from exubio.io.results import atomic_write, read_angles_csv, read_npz, read_npz_arrays, read_npz_metadata
 from exubio.model.signs import CLINICAL_FLIPPED, convert, factors, signs_of_file
 from exubio.types import FrameStatus, Reconstruction
@@ -66,7 +67,7 @@ class Angles:
 
 def read_angles(npz_path: Path) -> Angles | None:
     """The anatomical angles of a result (None for a result written before they existed)."""
-    csv = Path(str(npz_path)[: -len(".npz")] + ".csv")
+    csv = beside(npz_path, "csv")
     try:
         status = read_npz_arrays(npz_path, ("angle_status",))["angle_status"]
     except InputError:
@@ -432,7 +433,7 @@ def build_trial_report(npz_paths: Sequence[str | Path], pdf_path: str | Path, /,
     meta = read_npz_metadata(npz_paths[0])
     summaries = {}
     for p, r in zip(npz_paths, recons):
-        summary = Path(str(p)[: -len(".npz")] + ".summary.json")
+        summary = beside(p, "summary")
         if summary.is_file():
             summaries[r.method] = json.loads(summary.read_text(encoding="utf-8"))
     angles = {r.method: a for r, a in ((r, read_angles(p)) for p, r in zip(npz_paths, recons)) if a is not None}

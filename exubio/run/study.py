@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
 
+from exubio.io.result_names import SUFFIXES
 from exubio.errors import ExubioError, InputError
 from exubio.method_registry import method_names
 from exubio.run import interrupt, study_table
@@ -226,7 +227,7 @@ def _same_signs(folder: Path, signs: str | None) -> None:
     run asks for (``signs``; None: whatever its protocol said): else InputError naming it."""
     if signs is None:
         return
-    for summary in sorted(folder.glob("*.summary.json")):
+    for summary in sorted(folder.glob("*" + SUFFIXES["summary"])):
         try:
             had = json.loads(summary.read_text(encoding="utf-8")).get("signs", "isb")
         except (OSError, ValueError):

@@ -72,7 +72,7 @@ def write_recording(rec: LiveRecording, out_dir: str | os.PathLike, name: str, /
         if report:
             from exubio.report.trial_report import build_trial_report
 
-            build_trial_report([outputs[0][1]["npz"]], tmp / f"{name}.report.pdf")
+            build_trial_report([outputs[0].paths["npz"]], tmp / f"{name}.report.pdf")
         if final.exists():  # overwrite: the old folder goes only once the new one is complete
             old = out / f".{name}.{os.getpid()}.{secrets.token_hex(4)}.old"
             os.replace(final, old)
