@@ -54,9 +54,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
     agree = outputs[0].agreement_deg
     worst = max(agree, key=agree.get)
     print(f"PF-LS agreement (measured anatomical angles): max RMSE {agree[worst]:.3f} deg ({worst})")
-    from exubio.report.trial_report import Truth, build_trial_report
+    from exubio.report.trial_report import Truth, draw_trial_report
+    from exubio.run.outcome import reported
 
-    pdf, png = build_trial_report([o.paths["npz"] for o in outputs], out / "example_abduction.report.pdf",
+    pdf, png = draw_trial_report([reported(o) for o in outputs], out / "example_abduction.report.pdf",
                                   truth=Truth(t_true, angle_names, true_angles))
     print(f"report: {pdf} and {png}")
     print(f"results are in {out.resolve()}")

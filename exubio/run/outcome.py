@@ -12,13 +12,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
+import numpy as np
+
 from exubio.run.summary_file import RunNotes, agreement_entry, trial_summary
 from exubio.run.trial_files import AngleOutputs, write_outputs
 from exubio.trust.assess import TrialAssessment
 from exubio.trust.quality import Quality
 from exubio.types import Reconstruction
 
-__all__ = ["MethodOutcome", "run_metadata", "write_outcome"]
+__all__ = ["MethodOutcome", "reported", "run_metadata", "write_outcome"]
 
 
 @dataclass(frozen=True)
@@ -28,7 +30,8 @@ class MethodOutcome:
     the trial's (every method's; None for a kept set: its summary.json says it); ``angles``: the
     anatomical angles with their status and uncertainty, and the joint moments, as the files give
     them (None for a kept set); ``paths``: the result set's files by kind
-    (exubio.io.result_names.SUFFIXES); ``summary``: the summary.json written from this outcome."""
+    (exubio.io.result_names.SUFFIXES); ``summary``: the summary.json written from this outcome;
+    ``metadata``: what the .npz records of the run (``run_metadata``)."""
 
     method: str
     stem: str
@@ -37,6 +40,7 @@ class MethodOutcome:
     angles: AngleOutputs | None = None
     paths: Mapping[str, Path] = field(default_factory=dict)
     summary: Mapping[str, Any] = field(default_factory=dict)
+    metadata: Mapping[str, Any] = field(default_factory=dict)  # the run's, as the .npz records it
 
     @property
     def quality(self) -> Quality | None:
@@ -100,7 +104,31 @@ def write_outcome(outcome: MethodOutcome, inputs: Any, trial_path: str | Path, o
         summ["pf_inertia_scale"] = pf_inertia
     if outcome.moments is not None:
         summ["moments"] = moments_entry(outcome.moments, moments_summary(outcome.moments), stem)
-    paths = write_outputs(recon, out_dir, stem, metadata=run_metadata(inputs, trial_path, outcome.method),
-                          summary_data=summ, angles=outcome.angles, streamed=None if streamed is None else dict(streamed),
-                          overwrite=overwrite)
-    return dataclasses.replace(outcome, paths=paths, summary=summ)
+    meta = run_metadata(inputs, trial_path, outcome.method)
+    paths = write_outputs(recon, out_dir, stem, metadata=meta, summary_data=summ, angles=outcome.angles,
+                          streamed=None if streamed is None else dict(streamed), overwrite=overwrite)
+    return dataclasses.replace(outcome, paths=paths, summary=summ, metadata={**meta, "signs": outcome.angles.signs})
+
+
+def reported(outcome: MethodOutcome, /) -> Any:
+    """The outcome as the trial report draws it (exubio.report.trial_report.ReportedResult), from
+    memory: its reconstruction, metadata and summary (as their files hold them: the same JSON), its
+    angles at the precision of the CSV (what a report of the files draws, so the two are the same
+    picture). A set kept from an earlier run: read from its files."""
+    from exubio.io.results import as_in_json, as_in_table
+    from exubio.model.signs import convert
+    from exubio.report.trial_report import Angles, ReportedResult, read_result
+
+    if outcome.resumed or outcome.angles is None:
+        return read_result(outcome.paths["npz"])
+    a, recon = outcome.angles, outcome.reconstruction
+
+    def as_read(rad):  # radians -> the CSV's degrees -> radians, as read_angles_csv gives them
+        return np.radians(as_in_table(np.degrees(rad)))
+
+    values = convert(a.names, as_read(convert(a.names, a.values_rad, "isb", a.signs)), a.signs, "isb")
+    u = None if a.uncertainty_rad is None else as_read(np.asarray(a.uncertainty_rad, dtype=float))
+    angles = Angles(as_in_table(recon.time_s), tuple(a.names), values, np.asarray(a.status, dtype=np.int8),
+                    None if u is None or np.isnan(u).all() else u, a.signs)
+    return ReportedResult(Path(outcome.paths["npz"]), recon, as_in_json(outcome.metadata, strict=False),
+                          as_in_json(outcome.summary), angles)

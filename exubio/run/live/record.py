@@ -70,9 +70,10 @@ def write_recording(rec: LiveRecording, out_dir: str | os.PathLike, name: str, /
                                  notes=RunNotes(live=live))
         write_json(tmp / f"{name}.live.json", {**live, "offline_verdict": assessment.quality["pf"].to_dict()})
         if report:
-            from exubio.report.trial_report import build_trial_report
+            from exubio.report.trial_report import draw_trial_report
+            from exubio.run.outcome import reported
 
-            build_trial_report([outputs[0].paths["npz"]], tmp / f"{name}.report.pdf")
+            draw_trial_report([reported(outputs[0])], tmp / f"{name}.report.pdf")
         if final.exists():  # overwrite: the old folder goes only once the new one is complete
             old = out / f".{name}.{os.getpid()}.{secrets.token_hex(4)}.old"
             os.replace(final, old)
