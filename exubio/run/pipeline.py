@@ -340,7 +340,7 @@ def write_assessed(inputs: TrialInputs, trial_path: str | Path, out_dir: str | P
             moments = reconstruction_moments(inputs.model, recon, hand_load_kg=hand_load_kg,
                                              thorax=None if extra is None else extra.thorax,
                                              loads=() if extra is None else extra.loads)
-        names, values = anatomical_table(inputs.model, recon.q_rad)
+        names, values = anatomical_table(inputs.model, recon.q_rad, kinematics=inputs.binding.kin)
         det = assessment.angles[recon.method]
         signs = inputs.protocol.signs
         angles = AngleOutputs(names, values, det.status,

@@ -81,13 +81,13 @@ def _same_finding(f: Any, findings: Sequence) -> bool:
 
 
 def agreement_on_measured(model: Model, a: Reconstruction, da: AngleDeterminacy, b: Reconstruction,
-                          db: AngleDeterminacy, /) -> dict[str, float]:
+                          db: AngleDeterminacy, /, *, kinematics: Any = None) -> dict[str, float]:
     """PF-LS RMSE (deg) of every anatomical angle over the frames where both measure it (NaN where
     none does)."""
     from exubio.model.angles import anatomical_table
 
-    _, ta = anatomical_table(model, a.q_rad)
-    _, tb = anatomical_table(model, b.q_rad)
+    _, ta = anatomical_table(model, a.q_rad, kinematics=kinematics)
+    _, tb = anatomical_table(model, b.q_rad, kinematics=kinematics)
     d = np.degrees(np.angle(np.exp(1j * (ta - tb))))
     ok = (da.status == AngleStatus.MEASURED) & (db.status == AngleStatus.MEASURED) & np.isfinite(d)
     return {n: (float(np.sqrt(np.mean(d[ok[:, j], j] ** 2))) if ok[:, j].any() else float("nan"))
@@ -210,7 +210,7 @@ def assess_trial(binding: Binding, targets: MarkerTargets, recons: Sequence[Reco
     agreement = None
     by = {r.method: r for r in recons}
     if "pf" in by and "ls" in by:
-        agreement = agreement_on_measured(model, by["pf"], angles["pf"], by["ls"], angles["ls"])
+        agreement = agreement_on_measured(model, by["pf"], angles["pf"], by["ls"], angles["ls"], kinematics=kin)
     off = Q.off_segment_markers(model, protocol) if calibration is not None else {}
     repeated = [f for f in c.static_labels if _same_finding(f, label_findings)]
     static_labels = [f for f in c.static_labels if not _same_finding(f, label_findings)]
