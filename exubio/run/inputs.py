@@ -53,7 +53,15 @@ class Session:
     def with_model(self, model: Model, /) -> "Session":
         """This session with ``model``, calibrated from its generic model: the protocol rebound to
         the points the calibration registered (exubio.calibration.calibrated_protocol)."""
-        return dataclasses.replace(self, model=model, protocol=calibrated_protocol(self.generic_protocol, model))
+        return self.replaced(model=model, protocol=calibrated_protocol(self.generic_protocol, model))
+
+    def replaced(self, **changes) -> "Session":
+        """dataclasses.replace of this session; when the generic model and protocol stay, the new
+        session keeps this one's generic binding and what it holds (the label expectations)."""
+        out = dataclasses.replace(self, **changes)
+        if not {"generic_model", "generic_protocol"} & set(changes) and "generic_binding" in self.__dict__:
+            out.__dict__["generic_binding"] = self.__dict__["generic_binding"]  # a cached_property's slot
+        return out
 
     def with_signs(self, signs: str | None, /) -> "Session":
         """This session writing its angles in ``signs`` (exubio.model.signs; None: the protocol's own

@@ -59,7 +59,7 @@ class SessionCalibration:
         """The same calibration, its model file moved (a study renames its calibration folder): the
         model's ``source`` names the file where it is now, as a model read from there would."""
         model = dataclasses.replace(self.session.model, source=str(model_file))
-        session = dataclasses.replace(self.session, model=model)
+        session = self.session.replaced(model=model)
         return dataclasses.replace(self, session=session, model_file=Path(model_file))
 
 

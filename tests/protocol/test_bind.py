@@ -3,6 +3,7 @@ computed from, each is computed once and held, it travels pickled with what it h
 takes the session's binding instead of building its own."""
 from __future__ import annotations
 
+import dataclasses
 import pickle
 
 import numpy as np
@@ -97,3 +98,9 @@ def test_a_session_carries_one_binding_and_its_trials_take_it(tmp_path):
     assert inputs.binding is session.binding  # no marker dropped: the session's own
     copy = pickle.loads(pickle.dumps(session))
     assert copy.generic_binding is copy.binding
+    # a calibrated model: its own binding; the label checks' generic one (and what it holds) is kept
+    model = dataclasses.replace(session.model, metadata={**session.model.metadata, "calibration": {"generic_model": ""}})
+    calibrated = session.with_model(model)
+    assert calibrated.binding.model is model and calibrated.binding is not session.binding
+    assert calibrated.generic_binding is session.generic_binding
+    assert calibrated.replaced(model=model).generic_binding is session.generic_binding
