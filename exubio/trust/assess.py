@@ -105,7 +105,7 @@ def _reference_postures(binding: Binding) -> np.ndarray:
     from exubio.synth.simulate import reference_postures
 
     try:
-        q = reference_postures(binding.model)
+        q = reference_postures(binding.model, kinematics=binding.kin)
     except Exception:  # noqa: BLE001 - a model whose girdle the rhythm cannot drive: judge the reference posture
         q = np.zeros((1, binding.model.n_coordinates))
     q.setflags(write=False)

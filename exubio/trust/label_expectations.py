@@ -172,13 +172,14 @@ def _subtree(model: Model, root: str) -> tuple[str, ...]:
 
 
 def model_expectations(model: Model, protocol: Protocol, ranges_rad: np.ndarray | None = None, /, *,
-                       n_postures: int = N_POSTURES, seed: int = POSTURE_SEED) -> LabelExpectations:
+                       n_postures: int = N_POSTURES, seed: int = POSTURE_SEED,
+                       kinematics: Kinematics | None = None) -> LabelExpectations:
     """Side relations, rigid pairs and chains of ``protocol`` on ``model`` (see the module
     docstring), from ``n_postures`` postures sampled within ``ranges_rad`` (m, 2) (default: the
     model's coordinate ranges). ``protocol`` must be bound to ``model`` (its markers' local
-    positions are the model's points)."""
+    positions are the model's points); ``kinematics``: the model's, where the caller has it."""
     ranges_rad = _ranges_of(model, ranges_rad)
-    kin = Kinematics(model)
+    kin = kinematics if kinematics is not None else Kinematics(model)
     fin = finite_ranges(ranges_rad, model.n_coordinates)
     names = protocol.marker_names
     segs = tuple(m.segment for m in protocol.markers)
@@ -256,7 +257,7 @@ def expectations_of(binding: Binding, /) -> LabelExpectations:
 
 
 def _expectations(binding: Binding) -> LabelExpectations:
-    exp = model_expectations(binding.model, binding.protocol)
+    exp = model_expectations(binding.model, binding.protocol, kinematics=binding.kin)
     for value in (exp.relations, exp.min_ratio, exp.rigid, exp.rigid_model_m, exp.model_median_m, exp.ranges_rad,
                   *(a for c in exp.chains for a in (c.coordinates, c.markers))):
         value.setflags(write=False)
