@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import pickle
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -104,3 +105,27 @@ def test_a_session_carries_one_binding_and_its_trials_take_it(tmp_path):
     assert calibrated.binding.model is model and calibrated.binding is not session.binding
     assert calibrated.generic_binding is session.generic_binding
     assert calibrated.replaced(model=model).generic_binding is session.generic_binding
+
+
+def test_a_run_takes_the_sessions_kinematics(monkeypatch, tmp_path):
+    """With the session's binding built, a trial's run (LS, its checks, its files) builds the session
+    model's kinematics again only in the two checks that take a model rather than the binding."""
+    import traceback
+
+    from exubio.io.resources import shipped_file
+    from exubio.run.pipeline import reconstruct_file
+
+    session = load_session()
+    assert session.binding.kin.model is session.model
+    callers = []
+    init = Kinematics.__init__
+
+    def spy(self, model, *args, **kwargs):
+        if model is session.model:
+            callers.append(Path(traceback.extract_stack(limit=2)[0].filename).name)
+        return init(self, model, *args, **kwargs)
+
+    monkeypatch.setattr(Kinematics, "__init__", spy)
+    reconstruct_file(shipped_file("exubio.data", "example_abduction.c3d", "exubio/data"), tmp_path, methods=["ls"],
+                     session=session)
+    assert sorted(callers) == ["label_chains.py", "thorax_check.py"]
