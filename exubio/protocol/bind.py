@@ -4,9 +4,10 @@ check: the model's kinematics, the tracked model points of the protocol's marker
 the protocol holds, the segments no marker observes and the coordinates neither method solves.
 
 The facts an upper layer derives from the pair alone (the reference postures of exubio.synth, the
-structural angle status and the label expectations of exubio.trust) are kept on the binding too,
-through :meth:`Binding.once`: computed by their own module on first use, then held by this binding
-for its life (no content-hash cache: the object that carries them is the one they belong to).
+structural angle status and the label expectations of exubio.trust) are kept on the binding too
+(:meth:`Binding.fact`, :meth:`Binding.keep`): computed by their own module on first use, which
+then leaves them on this binding for its life (no content-hash cache: the object that carries
+them is the one they belong to; and the binding never calls up into the module that computes them).
 
 It sits in the protocol layer, the lowest that holds both a Model and a Protocol, so that the
 Exudyn backend and the methods below the trust layer take it (exubio.backend.exudyn_system.PFSystem,
@@ -18,7 +19,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Any, Callable, TypeVar
+from typing import Any, Hashable, TypeVar
 
 import numpy as np
 
@@ -114,20 +115,21 @@ class Binding:
     def not_solved_names(self) -> tuple[str, ...]:
         return tuple(n for n, e in zip(self.model.coordinate_names, self.not_solved) if e)
 
-    def once(self, compute: Callable[..., T], /, *args: Any, of_model: bool = False) -> T:
-        """``compute(self, *args)``, computed on the first call and held by this binding after it
-        (an upper layer's fact of the model and protocol alone: exubio.trust.assess, .label_expectations).
-        ``of_model``: the fact depends on the model alone (the reference postures), shared with the
-        bindings of the same model to other protocols (:meth:`rebound`). ``args``: hashable."""
-        facts = self._model_facts if of_model else self._facts
-        key = (compute.__module__, compute.__qualname__, args)
-        if key not in facts:
-            facts[key] = compute(self, *args)
-        return facts[key]
+    def fact(self, key: Hashable, /, *, of_model: bool = False) -> Any:
+        """The fact ``key`` an upper layer left on this binding (:meth:`keep`), or None (not yet).
+        ``of_model``: a fact of the model alone (the reference postures), shared with the bindings of
+        the same model to other protocols (:meth:`rebound`)."""
+        return (self._model_facts if of_model else self._facts).get(key)
+
+    def keep(self, key: Hashable, value: T, /, *, of_model: bool = False) -> T:
+        """Leave ``value``, a fact of the model and protocol alone that an upper layer computed
+        (exubio.trust.assess, .label_expectations), on this binding under ``key``; returns it."""
+        (self._model_facts if of_model else self._facts)[key] = value
+        return value
 
     def rebound(self, protocol: Protocol, /) -> "Binding":
         """The same model bound to ``protocol`` (e.g. with a marker the trial lacks made optional):
-        it shares the facts of the model alone (:meth:`once` with ``of_model``)."""
+        it shares the facts of the model alone (:meth:`keep` with ``of_model``)."""
         if protocol is self.protocol:
             return self
         out = Binding(self.model, protocol)

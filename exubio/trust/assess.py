@@ -94,11 +94,19 @@ def agreement_on_measured(model: Model, a: Reconstruction, da: AngleDeterminacy,
             for j, n in enumerate(da.names)}
 
 
+def _held(binding: Binding, key: tuple, compute: Any, /, *args: Any, of_model: bool = False) -> Any:
+    """The fact ``key`` of the binding: computed here (``compute(binding, *args)``) on first use and
+    left on the binding (exubio.protocol.bind.Binding.keep), read from it after."""
+    key = (__name__, *key)
+    value = binding.fact(key, of_model=of_model)
+    return value if value is not None else binding.keep(key, compute(binding, *args), of_model=of_model)
+
+
 def reference_postures_of(binding: Binding, /) -> np.ndarray:
     """exubio.synth.simulate.reference_postures of the binding's model (the q = 0 posture where its
     girdle cannot be driven on the rhythm), computed once and held by the binding (~0.15 s), shared
     with its model's other bindings (exubio.protocol.bind.Binding.rebound). Read-only."""
-    return binding.once(_reference_postures, of_model=True)
+    return _held(binding, ("reference_postures",), _reference_postures, of_model=True)
 
 
 def _reference_postures(binding: Binding) -> np.ndarray:
@@ -124,7 +132,7 @@ def angle_determinacy_of_protocol(binding: Binding, /, *, bounded: bool = True) 
     """(the AngleDeterminacy over the reference postures with every non-optional marker present,
     those postures' humerothoracic elevation (rad)): what angle_status_of_protocol summarises;
     computed once and held by the binding."""
-    return binding.once(_angle_determinacy_of_protocol, bool(bounded))
+    return _held(binding, ("angle_determinacy", bool(bounded)), _angle_determinacy_of_protocol, bool(bounded))
 
 
 def _angle_determinacy_of_protocol(binding: Binding, bounded: bool) -> tuple[AngleDeterminacy, np.ndarray]:
@@ -144,7 +152,7 @@ def angle_status_of_protocol(binding: Binding, /, *, bounded: bool = True) -> di
     planes, HT 10-120 deg) with every non-optional marker present: 'measured' (in every posture),
     'modelled', 'not measured', or 'partly ...' (in some postures). ``bounded=False``: what the markers
     determine alone, without the uncertainty bound and the gimbal margin (observability.angle_determinacy)."""
-    return dict(binding.once(_angle_status, bool(bounded)))
+    return dict(_held(binding, ("angle_status", bool(bounded)), _angle_status, bool(bounded)))
 
 
 def _angle_status(binding: Binding, bounded: bool) -> dict[str, str]:
@@ -155,7 +163,7 @@ def coordinates_not_measured_by_protocol(binding: Binding, /) -> tuple[str, ...]
     """The model coordinates the protocol's markers leave undetermined (noise gain above the
     threshold) in most reference postures (exubio.synth.simulate.reference_postures), known before any
     trial: e.g. the clavicle's axial rotation seen by two markers near its axis. Held by the binding."""
-    return binding.once(_not_measured)
+    return _held(binding, ("not_measured",), _not_measured)
 
 
 def _not_measured(binding: Binding) -> tuple[str, ...]:

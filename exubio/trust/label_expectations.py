@@ -253,7 +253,9 @@ def expectations_of(binding: Binding, /) -> LabelExpectations:
     """:func:`model_expectations` of the binding's model and protocol (default postures, seed and the
     model's ranges), computed on first use and held by the binding (exubio.protocol.bind): every
     trial of a session checks against the same generic binding. Its arrays are read-only."""
-    return binding.once(_expectations)
+    key = (__name__, "expectations")
+    exp = binding.fact(key)
+    return exp if exp is not None else binding.keep(key, _expectations(binding))
 
 
 def _expectations(binding: Binding) -> LabelExpectations:

@@ -47,25 +47,19 @@ def test_facts_equal_what_they_are_computed_from(model, thoracoscapular):
     np.testing.assert_array_equal(b.kin.points(q, b.points), kin.points(q, pts))
 
 
-def test_a_fact_is_computed_once_and_rebinding_shares_only_the_models(model, thoracoscapular):
-    calls = []
-
-    def of_pair(binding):
-        calls.append(("pair", binding.protocol.name))
-        return len(binding.protocol.markers)
-
-    def of_model(binding):
-        calls.append(("model", binding.model.name))
-        return binding.model.n_coordinates
+def test_a_fact_is_kept_and_rebinding_shares_only_the_models(model, thoracoscapular):
+    from exubio.trust.assess import angle_status_of_protocol, reference_postures_of
 
     full = bind(model, protocol_for_model(model))
-    assert full.once(of_pair) == full.once(of_pair) == len(full.protocol.markers)
-    assert full.once(of_model, of_model=True) == full.once(of_model, of_model=True) == 13
-    assert len(calls) == 2
+    assert full.fact("pair") is None and full.keep("pair", 1) == 1 and full.fact("pair") == 1
+    assert full.keep("model", 2, of_model=True) == 2 and full.fact("model", of_model=True) == 2
     other = full.rebound(thoracoscapular)
     assert other.model is full.model and other.protocol is thoracoscapular
-    assert other.once(of_model, of_model=True) == 13 and len(calls) == 2  # the model's fact: shared
-    assert other.once(of_pair) == len(thoracoscapular.markers) and len(calls) == 3  # the pair's: its own
+    assert other.fact("model", of_model=True) == 2 and other.fact("pair") is None  # the model's: shared
+    q = reference_postures_of(full)
+    assert reference_postures_of(full) is q and reference_postures_of(other) is q  # computed once, of the model
+    status = angle_status_of_protocol(full)
+    assert angle_status_of_protocol(other) != status  # the pair's: its own (no forearm markers)
     assert full.rebound(full.protocol) is full
     assert bind(model, full.protocol) != full  # equal only to itself: no content comparison
 
