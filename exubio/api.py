@@ -195,20 +195,16 @@ def angle_status(reconstruction: Reconstruction, model: Model | None = None, pro
     """Every anatomical angle's status per frame (exubio.trust.observability.AngleDeterminacy: measured,
     modelled by a named rule, or not measured) for a reconstruction made with ``protocol``; the
     frames where a marker was missing are those whose residual is NaN."""
-    from exubio.trust.assess import not_solved_mask
-    from exubio.model.kinematics import Kinematics
-    from exubio.methods.common import tracked_points
-    from exubio.methods.poses import held_mask
+    from exubio.protocol.bind import bind
     from exubio.trust.observability import angle_determinacy
 
     model = model if model is not None else load_model()
     protocol = protocol if protocol is not None else load_protocol(model=model)
-    kin = Kinematics(model)
-    held = held_mask(model, protocol)
+    b = bind(model, protocol)
     present = np.isfinite(reconstruction.residuals_m)
     dt = float(np.median(np.diff(reconstruction.time_s))) if reconstruction.n_frames > 1 else 1.0
-    return angle_determinacy(kin, tracked_points(kin, protocol), reconstruction.q_rad, present, protocol.weights,
-                             held=held, locked=not_solved_mask(model, protocol, kin) & ~held,
+    return angle_determinacy(b.kin, b.points, reconstruction.q_rad, present, protocol.weights,
+                             held=b.held, locked=b.locked,
                              every=max(1, int(round(0.05 / dt))), residuals_m=reconstruction.residuals_m)
 
 
@@ -282,12 +278,13 @@ def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str
     the verdict it carries (exubio.reconstruct). ``signs``: the angles' sign convention in every
     file ("isb" or "clinical", exubio.model.signs; default the protocol's ``signs`` key, else isb)."""
     from exubio.io import results
+    from exubio.io.result_names import method_stem
     from exubio.model.angles import anatomical_table
     from exubio.run.pipeline import AngleOutputs, angle_header, assess_inputs, write_assessed, write_outputs
     from exubio.run.summary_file import RunNotes, reconstruction_summary
     from exubio.types import Method
 
-    full = f"{stem}.{reconstruction.method}"
+    full = method_stem(stem, reconstruction.method)
     if trial is not None:
         session = _session(model, protocol)
         session = session.with_signs(_signs(signs, session.protocol))
@@ -304,7 +301,7 @@ def write_results(reconstruction: Reconstruction, out_dir: str | Path, stem: str
             key = run_key(trial, session.model, session.protocol, reconstruction.method,
                           options=dict(reconstruction.info["options"]))
         return write_assessed(inputs, source, out_dir, done, assessment, overwrite=overwrite,
-                              notes=RunNotes(cal, inputs_sha256=key))[0][1]
+                              notes=RunNotes(cal, inputs_sha256=key))[0].paths
     model = model if model is not None else load_model()
     protocol = protocol if protocol is not None else load_protocol(model=model)
     signs = _signs(signs, protocol)

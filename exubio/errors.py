@@ -29,7 +29,7 @@ class ReconstructionError(ExubioError):
 
 class PartialReconstructionError(ReconstructionError):
     """Some of the methods asked for failed, the others' results were written: ``outputs`` holds the
-    written ones (exubio.run.pipeline.reconstruct_file's (reconstruction, paths, summary) per method),
+    written ones (exubio.run.pipeline.reconstruct_file's outcome per method, exubio.run.outcome.MethodOutcome),
     ``failures`` each failed method's reason ({"pf": "..."})."""
 
     def __init__(self, message: str, /, *, outputs: list, failures: dict[str, str]) -> None:

@@ -64,6 +64,7 @@ def gap_mask(n: int, rate: float, length_s: float) -> np.ndarray:
 def session_for(trial: Path, protocol: str | None, static: Path | None):
     import exubio
     from exubio.calibration import parse_frames  # noqa: F401 - the same frames syntax as the CLI
+    from exubio.protocol.bind import bind
     from exubio.trust.missing_markers import drop_missing_markers
 
     model = exubio.load_model()
@@ -73,10 +74,10 @@ def session_for(trial: Path, protocol: str | None, static: Path | None):
         cal_traj = exubio.read_trial(static)
     else:
         cal_traj = dataclasses.replace(traj, positions_m=traj.positions_m[:50], time_s=traj.time_s[:50])
-    cal_prot, _ = drop_missing_markers(cal_traj, prot, model)
+    cal_prot = drop_missing_markers(cal_traj, bind(model, prot))[0].protocol
     model, prot_c, _ = exubio.calibrate(cal_traj, model, cal_prot)
-    prot_t, _ = drop_missing_markers(traj, exubio.load_protocol(protocol, model=model) if protocol
-                                     else exubio.load_protocol(model=model), model)
+    prot_t = drop_missing_markers(traj, bind(model, exubio.load_protocol(protocol, model=model) if protocol
+                                              else exubio.load_protocol(model=model)))[0].protocol
     return traj, model, prot_t
 
 

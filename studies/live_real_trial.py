@@ -65,7 +65,7 @@ def main(argv=None) -> int:
     if not Path(args.trial).is_file():
         print(f"no trial {args.trial} (../shared/data absent?)")
         return 2
-    from exubio.trust.assess import not_solved_mask
+    from exubio.protocol.bind import bind
     from exubio.io.results import read_npz
     from exubio.io.trial import read_trial
     from exubio.run.live.causal import CausalOptions
@@ -84,7 +84,7 @@ def main(argv=None) -> int:
         model, protocol = load_model_and_protocol(model_path=model_file)
         trial = read_trial(args.trial)
         names = model.coordinate_names
-        solved = [j for j, e in enumerate(not_solved_mask(model, protocol)) if not e]
+        solved = [j for j, e in enumerate(bind(model, protocol).not_solved) if not e]
 
         # 1. exubio stream | exubio live, on 127.0.0.1
         cfg = use_config("loopback")
@@ -133,7 +133,7 @@ def main(argv=None) -> int:
         gm, gp = load_model_and_protocol()
         q_true = q_true[:, [list(tnames).index(n) for n in gm.coordinate_names]]
         ex_trial = read_trial(example)
-        ex_solved = [j for j, e in enumerate(not_solved_mask(gm, gp)) if not e]
+        ex_solved = [j for j, e in enumerate(bind(gm, gp).not_solved) if not e]
         ex_zl = reconstruct(*_inputs(example, load_inputs), method="pf")
         rows = []
         for cutoff in (None, 12.0, 8.0, 6.0, 4.0):

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from exubio.protocol.bind import bind
 from exubio.cli import main as exubio
 from exubio.io.results import read_npz_arrays
 from exubio.model.angles import anatomical_table
@@ -57,7 +58,7 @@ def run(right: str, motion: str, duration: float, method: str, folder: Path) -> 
     _, _, q_true = read_angles_csv(c3d.with_name(c3d.stem + ".truth.csv"))  # radians
     result = {"exit": code}
     for side, name in (("right", right), ("left", left)):
-        claimed = angle_status_of_protocol(model, protocol_for_model(model, name))
+        claimed = angle_status_of_protocol(bind(model, protocol_for_model(model, name)))
         result[side] = (claimed, errors(out / side, c3d.stem, method, model, q_true, claimed))
     return result
 

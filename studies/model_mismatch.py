@@ -35,9 +35,10 @@ import time
 
 import numpy as np
 
+from exubio.protocol.bind import bind
 from exubio.trust.assess import assess_trial
 from exubio.model.kinematics import Kinematics
-from exubio.methods.common import tracked_points
+from exubio.protocol.bind import tracked_points
 from exubio.trust.mismatch import segment_evidence
 from exubio.synth.perturb import ModelPerturbation
 from exubio.run.pipeline import reconstruct
@@ -89,7 +90,7 @@ def run(name: str, pert: ModelPerturbation, motion: str, artefact: str, *, metho
                                    targets=targets)
         protocol = calibrated_protocol(protocol, model)
     recons = [reconstruct(model, protocol, targets, method=m) for m in methods]
-    assessment = assess_trial(model, protocol, targets, recons)
+    assessment = assess_trial(bind(model, protocol), targets, recons)
     kin = Kinematics(model)
     points = tracked_points(kin, protocol)
     rec = {"perturbation": name, "words": list(pert.words()), "motion": motion, "artefact": artefact, "seed": seed,

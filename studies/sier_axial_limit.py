@@ -44,8 +44,8 @@ import numpy as np
 from scipy.linalg import null_space
 
 from exubio.model.kinematics import Kinematics
-from exubio.methods.common import tracked_points
-from exubio.methods.poses import held_mask
+from exubio.protocol.bind import tracked_points
+from exubio.protocol.bind import held_mask
 from exubio.run.pipeline import reconstruct
 from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets

@@ -67,6 +67,7 @@ def angle_table(*, seeds: int, duration: float, rate: float, noise_mm: float, st
     from exubio.run.inputs import load_model_and_protocol
     from exubio.run.pipeline import reconstruct
     from exubio.synth.simulate import simulate_trial
+    from exubio.protocol.bind import bind
     from exubio.trust.assess import assess_trial
     from exubio.validation.mismatch import measured_angle_errors
 
@@ -81,7 +82,7 @@ def angle_table(*, seeds: int, duration: float, rate: float, noise_mm: float, st
                 targets = prepare_targets(sim.trajectories, protocol)
                 for method in ("pf", "ls"):
                     rec = reconstruct(model, protocol, targets, method=method)
-                    a = assess_trial(model, protocol, targets, [rec])
+                    a = assess_trial(bind(model, protocol), targets, [rec])
                     errs = measured_angle_errors(model, sim.model, rec.q_rad, sim.q_true, a.angles[method].status)
                     for ang in ANGLES:
                         res.setdefault((motion, ang, method, sta), []).append(errs.get(ang, (np.nan,))[0])

@@ -33,7 +33,7 @@ first) and the frozen dataclasses of exubio.backend.pf_types. Segment indices ar
 from __future__ import annotations
 
 import time
-from typing import Callable, Sequence
+from typing import Callable
 
 import numpy as np
 
@@ -48,9 +48,10 @@ from exubio.backend.exudyn_limits import DEFAULT_LIMIT_MAX_RATE_RAD_S, add_limit
 from exubio.backend.pf_numerics import LimitElement, ep_G, frame_with_z
 from exubio.backend.pf_types import IntegratorOptions, PFRun, SpringSet
 from exubio.errors import ModelError
-from exubio.model.kinematics import axis_rotation, Kinematics, PointSet
+from exubio.model.kinematics import axis_rotation, PointSet
+from exubio.protocol.bind import Binding
 from exubio.model.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD  # k_lim, shared with LS
-from exubio.types import JointKind, Model
+from exubio.types import JointKind
 
 __all__ = ["DEFAULT_LIMIT_MAX_RATE_RAD_S", "DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD", "GRAVITY_M_S2", "IntegratorOptions", "PFRun",
            "PFSystem", "SpringSet"]
@@ -95,15 +96,23 @@ class PFSystem:
         before their element switches on.
     """
 
-    def __init__(self, model: Model, springs: SpringSet, /, *, q0: np.ndarray, qd0: np.ndarray | None = None,
-                 gravity: bool = False, kinematics: Kinematics | None = None, locked_segments: Sequence[int] = (),
-                 held_coordinates: Sequence[int] = (), limits_rad: np.ndarray | None = None,
+    def __init__(self, binding: Binding, /, *, q0: np.ndarray, qd0: np.ndarray | None = None,
+                 springs: SpringSet | None = None, gravity: bool = False, limits_rad: np.ndarray | None = None,
                  limit_stiffness_nm_per_rad: float = DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD,
                  limit_max_rate_rad_s: float = DEFAULT_LIMIT_MAX_RATE_RAD_S, inertia_scale: float = 1.0):
+        """``binding``: the model, its kinematics, the coordinates the protocol holds and the segments
+        no marker observes (locked) (exubio.protocol.bind.Binding); ``springs``: default one on the
+        tracked point of every protocol marker with its stiffness and damping."""
+        model = binding.model
         self.model = model
-        self.locked_segments = frozenset(int(i) for i in locked_segments)
-        self.held_coordinates = frozenset(int(i) for i in held_coordinates)
-        self.kin = kinematics if kinematics is not None else Kinematics(model)
+        self.locked_segments = frozenset(int(i) for i in binding.unobserved)
+        self.held_coordinates = frozenset(int(i) for i in np.flatnonzero(binding.held))
+        self.kin = binding.kin
+        if springs is None:
+            markers = binding.protocol.markers
+            springs = SpringSet.from_points(binding.points,
+                                            stiffness_n_per_m=np.array([m.stiffness_n_per_m for m in markers]),
+                                            damping_ns_per_m=np.array([m.damping_ns_per_m for m in markers]))
         self.springs = springs
         n_seg = len(model.segments)
         m = model.n_coordinates

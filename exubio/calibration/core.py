@@ -76,7 +76,7 @@ from exubio.calibration.window import _nanmean, _window
 from exubio.errors import InputError, ReconstructionError
 from exubio.model.kinematics import Kinematics
 from exubio.types import StopReason
-from exubio.methods.common import tracked_points
+from exubio.protocol.bind import tracked_points
 from exubio.methods.poses import Limits, LSOptions, solve_positions
 from exubio.prep.targets import prepare_targets
 from exubio.model.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD

@@ -130,7 +130,9 @@ def print_quality_short(method: str, paths: dict, summ: dict) -> None:
     """-q: the verdict with the result files and the residual on one line, then only the reasons
     that make it a check or a fail (the notes are in summary.json and the report)."""
     q = summ.get("quality")
-    files = str(paths["summary"])[: -len(".summary.json")] + ".*"
+    from exubio.io.result_names import SUFFIXES
+
+    files = str(paths["summary"])[: -len(SUFFIXES["summary"])] + ".*"
     r = summ["residual_mm"]
     verdict = q["verdict"].upper() if q else "NOT ASSESSED"
     print(f"[{method}] QUALITY: {verdict}: {files} ({summ['n_frames']} frames, residual mean {r['mean']:.2f} mm)")

@@ -34,14 +34,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
     outputs = reconstruct_file(c3d, out, methods=["pf", "ls"], session=session,
                                settings=RunSettings(overwrite=True, progress_factory=progress_factory(not args.quiet)))
     t_true, names, q_true = read_angles_csv(truth_csv)
-    from exubio.io.results import read_npz_arrays
     from exubio.model.angles import anatomical_table
 
     angle_names, true_angles = anatomical_table(session.model, q_true)
-    for recon, paths, summ in outputs:
-        print_result(recon, paths, summ)
-        status = read_npz_arrays(paths["npz"], ("angle_status",))["angle_status"]
-        measured = measured_angle_rmse_deg(session.model, recon.q_rad, q_true, status)
+    for o in outputs:  # each method's outcome (exubio.run.outcome.MethodOutcome), written afresh (overwrite)
+        recon, summ = o.reconstruction, o.summary
+        print_result(recon, o.paths, summ)
+        measured = measured_angle_rmse_deg(session.model, recon.q_rad, q_true, o.angles.status)
         print(f"[{recon.method}] anatomical angles against the truth, the {len(measured)} measured ones: RMSE mean "
               f"{np.mean(list(measured.values())):.2f} deg, max {max(measured.values()):.2f} deg "
               f"({max(measured, key=measured.get)}); SC elevation {measured.get('SC_X_elevation', float('nan')):.2f}, "
@@ -52,12 +51,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
             if these:
                 print(f"[{recon.method}] {label} (not compared with the truth): {', '.join(these)}")
         print_quality(recon.method, summ)
-    agree = {k: v for k, v in (outputs[0][2].get("pf_ls_agreement_deg") or {}).items() if isinstance(v, float)}
+    agree = outputs[0].agreement_deg
     worst = max(agree, key=agree.get)
     print(f"PF-LS agreement (measured anatomical angles): max RMSE {agree[worst]:.3f} deg ({worst})")
-    from exubio.report.trial_report import Truth, build_trial_report
+    from exubio.report.trial_report import Truth, draw_trial_report
+    from exubio.run.outcome import reported
 
-    pdf, png = build_trial_report([paths["npz"] for _, paths, _ in outputs], out / "example_abduction.report.pdf",
+    pdf, png = draw_trial_report([reported(o) for o in outputs], out / "example_abduction.report.pdf",
                                   truth=Truth(t_true, angle_names, true_angles))
     print(f"report: {pdf} and {png}")
     print(f"results are in {out.resolve()}")

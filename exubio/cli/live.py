@@ -57,7 +57,9 @@ def cmd_live(args: argparse.Namespace) -> int:
         print(f"live: loop latency p50 {lat['p50']:.2f} ms, p99 {lat['p99']:.2f} ms, max {lat['max']:.2f} ms")
     print(f"live verdict: {q.verdict}" + "".join(f"\n  - [{r.level}] {r.message}" for r in q.reasons))
     print(f"recording: {run.folder}")
-    summ = _json_file(run.folder / f"{name}.pf.summary.json")
+    from exubio.io.result_names import method_stem, set_paths
+
+    summ = _json_file(set_paths(run.folder, method_stem(name, "pf"))["summary"])
     off = summ.get("quality", {})
     print(f"offline assessment of the recording: {off.get('verdict')}"
           + "".join(f"\n  - [{r['level']}] {r['message']}" for r in off.get("reasons", [])))

@@ -143,6 +143,19 @@ def read_angles_csv(path: str | os.PathLike, /, *, uncertainty: bool = False):
     return table[:, 0].copy(), angles, values, u
 
 
+def as_in_table(values: np.ndarray, /) -> np.ndarray:
+    """``values`` as a table of ``write_angles_csv`` gives them back: each printed ``%.6f`` and read
+    (what a reader of the file draws; the report of a result in memory draws the same)."""
+    v = np.asarray(values, dtype=float)
+    return np.array([float(_ANGLE_FORMAT % x) for x in v.ravel()], dtype=float).reshape(v.shape)
+
+
+def as_in_json(data: Mapping[str, Any], /, *, strict: bool = True) -> Any:
+    """``data`` as its JSON file gives it back: ``write_json``'s (strict: NaN/inf -> None) or the
+    .npz's metadata (not strict)."""
+    return json.loads(_dumps(data, strict=strict))
+
+
 def read_angles_comments(path: str | os.PathLike, /) -> list[str]:
     """The ``# comment`` lines at the head of a file of ``write_angles_csv`` (without the '# ')."""
     path = Path(path)

@@ -1,6 +1,5 @@
-"""What every reconstruction method shares: the tracked model points of a protocol, the
-assembly of a Reconstruction (model points, residuals, constraint residuals) from q, q̇, q̈, and
-the chunks a method works through a trial in.
+"""What every reconstruction method shares: the assembly of a Reconstruction (model points,
+residuals, constraint residuals) from q, q̇, q̈, and the chunks a method works through a trial in.
 
 Chunks: a method streams its result as consecutive Reconstructions of ``chunk`` frames to a
 ``sink`` (a callable), so that a trial of any length is reconstructed with the per-marker arrays
@@ -16,16 +15,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from exubio.model.kinematics import Kinematics, PointSet
-from exubio.types import Gap, MarkerTargets, Protocol, Reconstruction
-
-
-def tracked_points(kin: Kinematics, protocol: Protocol, /) -> PointSet:
-    """The segment-fixed model point R_i of every protocol marker, in protocol order."""
-    return PointSet(
-        segment_index=np.array([kin.model.segment_index(m.segment) for m in protocol.markers], dtype=int),
-        local_m=np.array([np.asarray(m.local_position_m, dtype=float) for m in protocol.markers]).reshape(-1, 3),
-        names=protocol.marker_names,
-    )
+from exubio.types import Gap, MarkerTargets, Reconstruction
 
 
 BLOCK_FRAMES = 8192  # frames per block of the per-frame computations
@@ -117,15 +107,3 @@ def assemble(kin: Kinematics, points: PointSet, targets: MarkerTargets, /, *, me
         info=dict(info),
         gaps=tuple(gaps) if gaps else tuple(targets.gaps),
     )
-
-
-def unobserved_segments(kin: Kinematics, points, /) -> tuple[int, ...]:
-    """Segments with no tracked marker on them or on any segment they carry: no spring can move
-    them, so their joints are locked at the start posture (a marker set without forearm or hand
-    markers, e.g. the thoracoscapular TRC set, leaves elbow, forearm and wrist unobserved)."""
-    observed = set()
-    for s in set(int(i) for i in points.segment_index):
-        while s >= 0 and s not in observed:
-            observed.add(s)
-            s = int(kin.parent_index[s])
-    return tuple(i for i in range(1, kin.n_segments) if i not in observed)

@@ -11,12 +11,11 @@ from typing import Callable
 
 import numpy as np
 
-from exubio.model.kinematics import Kinematics
 from exubio.methods.lsq import stop_counts
+from exubio.protocol.bind import Binding, bind
 from exubio.types import StopReason
-from exubio.methods.common import CHUNK_FRAMES, ChunkSink, Collector, assemble, chunk_bounds, target_chunk, tracked_points
-from exubio.methods.poses import (MIN_MARKERS, RATES_REGULARISATION, Limits, LSOptions, held_mask, solve_positions,
-                                  solve_rates)
+from exubio.methods.common import CHUNK_FRAMES, ChunkSink, Collector, assemble, chunk_bounds, target_chunk
+from exubio.methods.poses import MIN_MARKERS, RATES_REGULARISATION, Limits, LSOptions, solve_positions, solve_rates
 from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Reconstruction
 
 __all__ = ["LSOptions", "reconstruct_ls", "stream_ls"]
@@ -27,14 +26,15 @@ log = logging.getLogger(__name__)
 def reconstruct_ls(model: Model, protocol: Protocol, targets: MarkerTargets, /, *,
                    options: LSOptions = LSOptions(), q_start: np.ndarray | None = None,
                    progress: Callable[[int], None] | None = None) -> Reconstruction:
-    """Reconstruct a trial with the constrained least-squares method."""
+    """Reconstruct a trial with the constrained least-squares method (``model`` and ``protocol``
+    bound here: a run takes its session's binding, stream_ls)."""
     chunks = Collector()
-    timings, info = stream_ls(model, protocol, targets, chunks, options=options, q_start=q_start, progress=progress,
+    timings, info = stream_ls(bind(model, protocol), targets, chunks, options=options, q_start=q_start, progress=progress,
                               chunk_frames=max(targets.n_frames, 1))
     return chunks.reconstruction(targets, timings_s=timings, info=info)
 
 
-def stream_ls(model: Model, protocol: Protocol, targets: MarkerTargets, sink: ChunkSink, /, *,
+def stream_ls(binding: Binding, targets: MarkerTargets, sink: ChunkSink, /, *,
               options: LSOptions = LSOptions(), q_start: np.ndarray | None = None,
               progress: Callable[[int], None] | None = None,
               chunk_frames: int = CHUNK_FRAMES) -> tuple[dict[str, float], dict]:
@@ -42,12 +42,11 @@ def stream_ls(model: Model, protocol: Protocol, targets: MarkerTargets, sink: Ch
     in chunks of about ``chunk_frames`` frames (exubio.methods.common); each chunk starts from the
     last solution of the one before (the warm start of one pass). Returns (timings_s, info)."""
     t0 = time.perf_counter()
-    kin = Kinematics(model)
-    points = tracked_points(kin, protocol)
+    model, protocol, kin, points = binding.model, binding.protocol, binding.kin, binding.points
     weights = protocol.weights
     dt = float(np.median(np.diff(targets.time_s))) if targets.n_frames > 1 else 1.0
     q0 = np.zeros(kin.n_coordinates) if q_start is None else np.asarray(q_start, dtype=float)
-    held = held_mask(model, protocol)
+    held = binding.held
     q0[held] = 0.0
     limits = Limits.of(model, protocol, options.limit_stiffness_nm_per_rad)
     block = max(1, int(round(options.block_s / dt)))

@@ -47,15 +47,16 @@ from typing import Callable
 
 import numpy as np
 
-from exubio.backend.exudyn_system import IntegratorOptions, PFSystem, SpringSet
+from exubio.backend.exudyn_system import IntegratorOptions, PFSystem
 from exubio.errors import InputError, ReconstructionError
 from exubio.model.kinematics import Kinematics
-from exubio.methods.common import CHUNK_FRAMES, ChunkSink, Collector, assemble, target_chunk, tracked_points, unobserved_segments
+from exubio.methods.common import CHUNK_FRAMES, ChunkSink, Collector, assemble, target_chunk
 from exubio.methods.constraints import project_on_constraints
 from exubio.model.frame_kinematics import FrameInverse
 from exubio.methods.pf_time import integration_step, lead_in_frames, with_lead_in
 from exubio.types import StopReason
-from exubio.methods.poses import RATES_REGULARISATION, Limits, LSOptions, held_mask, solve_positions, solve_rates
+from exubio.methods.poses import RATES_REGULARISATION, Limits, LSOptions, solve_positions, solve_rates
+from exubio.protocol.bind import Binding, bind
 from exubio.model.ranges import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD
 from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Reconstruction
 
@@ -161,21 +162,21 @@ def initial_state(kin: Kinematics, points, targets: MarkerTargets, stiffness: np
 def reconstruct_pf(model: Model, protocol: Protocol, targets: MarkerTargets, /, *,
                    options: PFOptions = PFOptions(),
                    progress: Callable[[int], None] | None = None) -> Reconstruction:
-    """Reconstruct a trial with the potential-field method."""
+    """Reconstruct a trial with the potential-field method (``model`` and ``protocol`` bound
+    here: a run takes its session's binding, stream_pf)."""
     chunks = Collector()
-    timings, info = stream_pf(model, protocol, targets, chunks, options=options, progress=progress,
+    timings, info = stream_pf(bind(model, protocol), targets, chunks, options=options, progress=progress,
                               chunk_frames=max(targets.n_frames, 1))  # one chunk: every frame at the end
     return chunks.reconstruction(targets, timings_s=timings, info=info)
 
 
 @dataclass(frozen=True)
 class PFSetup:
-    """What a PF run starts from: the kinematics, tracked points, held mask, the start state (q0, qd0)
-    and the Exudyn system built on it (shared by the offline run and the live one, exubio.run.live)."""
+    """What a PF run starts from: the binding (kinematics, tracked points, held mask), the start state
+    (q0, qd0) and the Exudyn system built on it (shared by the offline run and the live one,
+    exubio.run.live)."""
 
-    kin: Kinematics
-    points: object
-    held: np.ndarray
+    binding: Binding
     q0: np.ndarray
     qd0: np.ndarray
     system: PFSystem
@@ -183,33 +184,26 @@ class PFSetup:
     build_s: float
 
 
-def pf_setup(model: Model, protocol: Protocol, targets: MarkerTargets, options: PFOptions = PFOptions(), /, *,
-             kin: Kinematics | None = None) -> PFSetup:
+def pf_setup(binding: Binding, targets: MarkerTargets, options: PFOptions = PFOptions(), /) -> PFSetup:
     """The start of a PF run on ``targets`` (only its first frame is used): the static equilibrium of the
     springs there with its consistent velocity, the locked segments, and the PFSystem."""
     t0 = time.perf_counter()
-    kin = kin or Kinematics(model)
-    points = tracked_points(kin, protocol)
+    model, protocol, kin, points, held = binding.model, binding.protocol, binding.kin, binding.points, binding.held
     stiffness = np.array([m.stiffness_n_per_m for m in protocol.markers])
-    damping = np.array([m.damping_ns_per_m for m in protocol.markers])
-    held = held_mask(model, protocol)
     limits = Limits.of(model, protocol, options.limit_stiffness_nm_per_rad)
     q0, qd0 = initial_state(kin, points, targets, stiffness, held=held, limits=limits)
-    locked = unobserved_segments(kin, points)
-    for i in locked:  # held at their start value, like LS does through its regularisation
+    for i in binding.unobserved:  # held at their start value, like LS does through its regularisation
         qd0[kin.joint_coordinate_indices(i)] = 0.0
     t1 = time.perf_counter()
-    springs = SpringSet.from_points(points, stiffness_n_per_m=stiffness, damping_ns_per_m=damping)
     if not (math.isfinite(options.inertia_scale) and options.inertia_scale > 0):
         raise InputError(f"PFOptions.inertia_scale must be a number > 0, got {options.inertia_scale}")
-    system = PFSystem(model, springs, q0=q0, qd0=qd0, gravity=options.gravity, kinematics=kin,
-                      locked_segments=locked, held_coordinates=np.flatnonzero(held),
+    system = PFSystem(binding, q0=q0, qd0=qd0, gravity=options.gravity,
                       limits_rad=model.coordinate_ranges_rad if limits is not None else None,
                       limit_stiffness_nm_per_rad=limits_stiffness(options), inertia_scale=options.inertia_scale)
-    return PFSetup(kin, points, held, q0, qd0, system, t1 - t0, time.perf_counter() - t1)
+    return PFSetup(binding, q0, qd0, system, t1 - t0, time.perf_counter() - t1)
 
 
-def stream_pf(model: Model, protocol: Protocol, targets: MarkerTargets, sink: ChunkSink, /, *,
+def stream_pf(binding: Binding, targets: MarkerTargets, sink: ChunkSink, /, *,
               options: PFOptions = PFOptions(), progress: Callable[[int], None] | None = None,
               chunk_frames: int = CHUNK_FRAMES) -> tuple[dict[str, float], dict]:
     """Reconstruct a trial with the potential-field method, handing the result to ``sink`` in chunks
@@ -231,7 +225,7 @@ def stream_pf(model: Model, protocol: Protocol, targets: MarkerTargets, sink: Ch
         reported[0] += k
 
     try:
-        return _stream_pf_once(model, protocol, targets, sink, dt, options, counted, chunk_frames, t0)
+        return _stream_pf_once(binding, targets, sink, dt, options, counted, chunk_frames, t0)
     except ReconstructionError as first:
         first_s = time.perf_counter() - t0
         robust = dataclasses.replace(options, fallback=False, **FALLBACK_OPTIONS)
@@ -246,7 +240,7 @@ def stream_pf(model: Model, protocol: Protocol, targets: MarkerTargets, sink: Ch
             if seen[0] > reported[0]:
                 counted(seen[0] - reported[0])
         try:
-            timings, info = _stream_pf_once(model, protocol, targets, sink, dt, robust, beyond, chunk_frames,
+            timings, info = _stream_pf_once(binding, targets, sink, dt, robust, beyond, chunk_frames,
                                             time.perf_counter())
         except ReconstructionError as second:
             raise ReconstructionError(f"{first}; run again with inertia x {FALLBACK_OPTIONS['inertia_scale']:g} and full "
@@ -256,17 +250,18 @@ def stream_pf(model: Model, protocol: Protocol, targets: MarkerTargets, sink: Ch
         return timings, info
 
 
-def _stream_pf_once(model: Model, protocol: Protocol, targets: MarkerTargets, sink: ChunkSink, dt: float,
+def _stream_pf_once(binding: Binding, targets: MarkerTargets, sink: ChunkSink, dt: float,
                     options: PFOptions, progress: Callable[[int], None], chunk_frames: int,
                     t0: float) -> tuple[dict[str, float], dict]:
     """One integration through the trial (stream_pf's first run, or its fallback)."""
+    protocol = binding.protocol
     cutoff_hz = (max(targets.cutoff_hz.values(), default=None) if protocol.cutoff_hz == "auto"  # widest applied
                  else protocol.cutoff_hz)
     step = integration_step(dt, options.step_s, cutoff_hz)
     lead = lead_in_frames(options.lead_in_s, dt, step)
     run_targets = with_lead_in(targets, lead, dt)
-    setup = pf_setup(model, protocol, run_targets, options)  # the start state at the lead-in's first frame
-    kin, points, held, q0, system = setup.kin, setup.points, setup.held, setup.q0, setup.system
+    setup = pf_setup(binding, run_targets, options)  # the start state at the lead-in's first frame
+    kin, points, held, q0, system = binding.kin, binding.points, binding.held, setup.q0, setup.system
     t1, t2 = t0 + setup.equilibrium_s, t0 + setup.equilibrium_s + setup.build_s
     integ = IntegratorOptions(step_s=step,
                               spectral_radius=options.spectral_radius,

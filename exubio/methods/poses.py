@@ -219,11 +219,3 @@ def _solve_rates_block(kin: Kinematics, points: PointSet, q: np.ndarray, vel: np
     fix_variables(K, rhs, held)
     qdd = np.linalg.solve(K, rhs[..., None])[..., 0][:, :m]
     return qd, qdd
-
-
-def held_mask(model: Model, protocol: Protocol, /) -> np.ndarray:
-    """(m,) True for the coordinates the protocol holds at 0 (not observable with its markers)."""
-    names = model.coordinate_names
-    return np.array([n in protocol.held_coordinates for n in names], dtype=bool)
-
-

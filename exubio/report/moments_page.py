@@ -18,6 +18,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from exubio.scapulohumeral.table import phases
+from exubio.io.result_names import beside
 
 __all__ = ["PANELS", "moments_page"]
 
@@ -109,12 +110,11 @@ def trial_moments_figure(npz_path, title: str, method: str, angles, summary: Map
     """The moments page of one method's result set when it has ``<stem>.moments.csv`` beside its
     .npz (written with ``--body-mass``), else None; ``angles``: its anatomical angles with their
     status (exubio.report.trial_report.Angles) or None; ``summary``: its summary.json."""
-    from pathlib import Path
 
     from exubio.dynamics.moments_file import read_moments_csv
     from exubio.scapulohumeral.table import HT_COLUMN
 
-    path = Path(str(npz_path)[: -len(".npz")] + ".moments.csv")
+    path = beside(npz_path, "moments")
     if not path.is_file():
         return None
     t, columns, values = read_moments_csv(path)

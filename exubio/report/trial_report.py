@@ -19,7 +19,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 from matplotlib.backends.backend_pdf import PdfPages
@@ -29,6 +29,7 @@ from matplotlib.text import Text
 
 from exubio.trust.evaluate import per_frame_residuals_mm, residual_statistics
 from exubio.errors import InputError
+from exubio.io.result_names import beside
 from exubio.io.results import atomic_write, read_angles_csv, read_npz, read_npz_arrays, read_npz_metadata
 from exubio.model.signs import CLINICAL_FLIPPED, convert, factors, signs_of_file
 from exubio.types import FrameStatus, Reconstruction
@@ -66,7 +67,7 @@ class Angles:
 
 def read_angles(npz_path: Path) -> Angles | None:
     """The anatomical angles of a result (None for a result written before they existed)."""
-    csv = Path(str(npz_path)[: -len(".npz")] + ".csv")
+    csv = beside(npz_path, "csv")
     try:
         status = read_npz_arrays(npz_path, ("angle_status",))["angle_status"]
     except InputError:
@@ -422,20 +423,47 @@ def residuals_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict
     return _pin_titles(fig)
 
 
+@dataclass(frozen=True)
+class ReportedResult:
+    """One method's result as the report draws it: its reconstruction (no model points), the run's
+    metadata and summary.json as their files hold them, its anatomical angles (None for a result
+    written before they existed), and its .npz (the rhythm and moments pages read their files beside
+    it). From files: ``read_result``; from a run's outcome in memory: exubio.run.outcome.reported."""
+
+    npz: Path
+    reconstruction: Reconstruction
+    metadata: Mapping[str, Any]
+    summary: Mapping[str, Any] | None = None
+    angles: Angles | None = None
+
+
+def read_result(npz_path: str | Path, /) -> ReportedResult:
+    """A written result as the report draws it (``exubio report`` on existing results)."""
+    p = Path(npz_path)
+    summary = beside(p, "summary")
+    return ReportedResult(p, read_npz(p, points=False),  # no page draws the 3-D points: long trials stay light
+                          read_npz_metadata(p),
+                          json.loads(summary.read_text(encoding="utf-8")) if summary.is_file() else None,
+                          read_angles(p))
+
+
 def build_trial_report(npz_paths: Sequence[str | Path], pdf_path: str | Path, /, *,
                        truth: Truth | None = None) -> tuple[Path, Path]:
-    """Write ``pdf_path`` and a PNG of its first page (the verdict) beside it (``.png``), atomically.
-    ``truth``: the known anatomical angles of a simulated trial (exubio.model.angles.anatomical_table of
-    its true coordinates), compared on page 1 (the measured angles) and drawn."""
-    npz_paths = [Path(p) for p in npz_paths]
-    recons = [read_npz(p, points=False) for p in npz_paths]  # no page draws the 3-D points: long trials stay light
-    meta = read_npz_metadata(npz_paths[0])
-    summaries = {}
-    for p, r in zip(npz_paths, recons):
-        summary = Path(str(p)[: -len(".npz")] + ".summary.json")
-        if summary.is_file():
-            summaries[r.method] = json.loads(summary.read_text(encoding="utf-8"))
-    angles = {r.method: a for r, a in ((r, read_angles(p)) for p, r in zip(npz_paths, recons)) if a is not None}
+    """The report of written results (their .npz files): draw_trial_report of read_result."""
+    return draw_trial_report([read_result(p) for p in npz_paths], pdf_path, truth=truth)
+
+
+def draw_trial_report(results: Sequence[ReportedResult], pdf_path: str | Path, /, *,
+                      truth: Truth | None = None) -> tuple[Path, Path]:
+    """Write ``pdf_path`` and a PNG of its first page (the verdict) beside it (``.png``), atomically,
+    from each method's result (a run's in memory, or read from its files). ``truth``: the known
+    anatomical angles of a simulated trial (exubio.model.angles.anatomical_table of its true
+    coordinates), compared on page 1 (the measured angles) and drawn."""
+    npz_paths = [r.npz for r in results]
+    recons = [r.reconstruction for r in results]
+    meta = dict(results[0].metadata)
+    summaries = {r.reconstruction.method: dict(r.summary) for r in results if r.summary is not None}
+    angles = {r.reconstruction.method: r.angles for r in results if r.angles is not None}
     pages = [verdict_page(recons, meta, summaries, truth=truth, angles=angles)]
     if angles:
         pages.append(angles_page(recons, meta, summaries, truth, angles))

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from exubio.errors import ExubioError, InputError
+from exubio.io.result_names import beside
 from exubio.io.results import read_npz, read_npz_metadata
 from exubio.types import Model, Reconstruction
 from exubio.method_registry import method_names
@@ -79,7 +80,7 @@ def _load_result(path: Path) -> _Result:
         raise InputError(f"{path}: not an exubio result ({type(exc).__name__}: {exc})") from exc
     _check_shapes(path, recon)
     res = _Result(path, recon, meta if isinstance(meta, dict) else {})
-    summary_path = path.with_name(path.name[: -len(".npz")] + ".summary.json") if path.name.endswith(".npz") else None
+    summary_path = beside(path, "summary") if path.name.endswith(".npz") else None
     quality = None
     if summary_path is not None and summary_path.is_file():
         try:

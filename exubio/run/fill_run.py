@@ -101,8 +101,8 @@ def fill_from_result(trial_path: str | Path, out: str | Path, npz: str | Path, s
 
     traj = read_trial(trial_path)
     q = read_npz_arrays(npz, ("q_rad",))["q_rad"]
-    protocol, _ = drop_missing_markers(traj, session.protocol, session.model)
-    fill = fill_gaps(traj, session.model, protocol, q)
+    binding, _ = drop_missing_markers(traj, session.binding)
+    fill = fill_gaps(traj, session.model, binding.protocol, q)
     path, csv = write_fill(trial_path, out, fill)
     return fill, path, csv
 

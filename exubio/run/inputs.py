@@ -6,12 +6,14 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 from exubio.calibration import calibrated_protocol
 from exubio.errors import ProtocolError
 from exubio.io.resources import shipped_file
 from exubio.model.load import DEFAULT_MODEL, load_model
+from exubio.protocol.bind import Binding
 from exubio.protocol.load import check_landmarks, load_protocol
 from exubio.types import Model, Protocol
 
@@ -22,12 +24,27 @@ DEFAULT_PROTOCOL = shipped_file("exubio.protocols", "upper_limb_21.yaml", "proto
 class Session:
     """What a session's trials are reconstructed with (``model``, ``protocol``) and what their labels
     are checked against (``generic_model``, ``generic_protocol``; the same objects when the model is
-    not calibrated). Frozen and picklable: it travels to pool and Dask workers whole."""
+    not calibrated). Frozen and picklable: it travels to pool and Dask workers whole, with its
+    bindings (``binding``, ``generic_binding``: exubio.protocol.bind) and what they hold so far."""
 
     model: Model
     protocol: Protocol
     generic_model: Model
     generic_protocol: Protocol
+
+    @cached_property
+    def binding(self) -> Binding:
+        """The model bound to the protocol, built once per session (per calibrated model): every
+        trial, method and check of the session takes it."""
+        return Binding(self.model, self.protocol)
+
+    @cached_property
+    def generic_binding(self) -> Binding:
+        """What the label checks expect: the generic model bound to its protocol (``binding`` itself
+        when the model is not calibrated)."""
+        if self.generic_model is self.model and self.generic_protocol is self.protocol:
+            return self.binding
+        return Binding(self.generic_model, self.generic_protocol)
 
     @property
     def calibrated(self) -> bool:
@@ -36,7 +53,15 @@ class Session:
     def with_model(self, model: Model, /) -> "Session":
         """This session with ``model``, calibrated from its generic model: the protocol rebound to
         the points the calibration registered (exubio.calibration.calibrated_protocol)."""
-        return dataclasses.replace(self, model=model, protocol=calibrated_protocol(self.generic_protocol, model))
+        return self.replaced(model=model, protocol=calibrated_protocol(self.generic_protocol, model))
+
+    def replaced(self, **changes) -> "Session":
+        """dataclasses.replace of this session; when the generic model and protocol stay, the new
+        session keeps this one's generic binding and what it holds (the label expectations)."""
+        out = dataclasses.replace(self, **changes)
+        if not {"generic_model", "generic_protocol"} & set(changes) and "generic_binding" in self.__dict__:
+            out.__dict__["generic_binding"] = self.__dict__["generic_binding"]  # a cached_property's slot
+        return out
 
     def with_signs(self, signs: str | None, /) -> "Session":
         """This session writing its angles in ``signs`` (exubio.model.signs; None: the protocol's own

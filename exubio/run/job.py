@@ -22,7 +22,9 @@ from exubio.io import results
 from exubio.io.trial import read_trial
 from exubio.prep.targets import preparation_key, prepare_targets
 from exubio.protocol.labels import relabel_trajectories
+from exubio.io.result_names import method_stem, set_paths
 from exubio.run.inputs import Session, load_session
+from exubio.run.outcome import MethodOutcome, reported
 from exubio.run.pipeline import Prepared, RunSettings, reconstruct_file
 from exubio.types import Method
 from exubio.run.session import SessionCalibration
@@ -117,7 +119,7 @@ def run_job(job: TrialJob, /, *, progress_factory: Callable[[str, int], Callable
     with results.claim(job.out_dir, [f"{stem}.report"]):  # no other run writes this trial's report meanwhile
         # a report beside complete result sets may be a resumed run's (exubio.run.resume): judged once
         # the sets are found kept or refused; otherwise refused here, before any work
-        sets_there = all((job.out_dir / f"{stem}.{m}.summary.json").is_file() for m in job.methods)
+        sets_there = all(set_paths(job.out_dir, method_stem(stem, m))["summary"].is_file() for m in job.methods)
         results.prepare_output_dir(job.out_dir, [f"{stem}.report.pdf", f"{stem}.report.png"],
                                    overwrite=job.overwrite or sets_there)
         return _run_job(job, progress_factory)
@@ -153,32 +155,30 @@ def _run_job(job: TrialJob, progress_factory: Callable[[str, int], Callable[[int
                                    trajectories=trajectories, calibration=calibration, prepared=prepared)
     except PartialReconstructionError as exc:  # one method failed, the others' results are written
         outputs, failed = exc.outputs, dict(exc.failures)
-    methods = tuple(MethodResult(r.method, {k: str(v) for k, v in paths.items()}, summ, r.quality)
-                    for r, paths, summ in outputs)
-    agreement = None
-    if len(outputs) == 2:
-        agree = outputs[0][2].get("pf_ls_agreement_deg") or {}
-        agreement = {k: v for k, v in agree.items() if isinstance(v, float)}
+    methods = tuple(MethodResult(o.method, {k: str(v) for k, v in o.paths.items()}, o.summary, o.quality)
+                    for o in outputs)
+    agreement = outputs[0].agreement_deg if len(outputs) == 2 else None
     result = TrialResult(str(job.trial), methods, agreement, calibrated, failed=failed,
-                         kept=tuple(r.method for r, _, _ in outputs if r.resumed_from))
+                         kept=tuple(o.method for o in outputs if o.resumed))
     if job.report:
-        report, kept = _report(job, methods, resumed=len(result.kept) == len(methods))
+        report, kept = _report(job, outputs, resumed=len(result.kept) == len(methods))
         result = dataclasses.replace(result, report=report, kept=result.kept + (("report",) if kept else ()))
     return result
 
 
-def _report(job: TrialJob, methods: tuple[MethodResult, ...], /, *, resumed: bool) -> tuple[dict[str, str], bool]:
-    """The trial's report: built, or kept when every result set was kept from an earlier run of the
-    same inputs and the report that run left is not older than them (exubio.run.resume)."""
+def _report(job: TrialJob, outcomes: list[MethodOutcome], /, *, resumed: bool) -> tuple[dict[str, str], bool]:
+    """The trial's report, drawn from the methods' outcomes in memory (exubio.run.outcome.reported), or
+    kept when every result set was kept from an earlier run of the same inputs and the report that run
+    left is not older than them (exubio.run.resume)."""
     from exubio.run.resume import fresh_report
 
     pdf, png = job.out_dir / f"{job.trial.stem}.report.pdf", job.out_dir / f"{job.trial.stem}.report.png"
     there = pdf.exists() or png.exists()
-    if there and resumed and fresh_report([pdf, png], [m.paths for m in methods]):
+    if there and resumed and fresh_report([pdf, png], [o.paths for o in outcomes]):
         return {"pdf": str(pdf), "png": str(png)}, True
     if there and not (job.overwrite or resumed):  # sets computed now beside an earlier run's report
         results.prepare_output_dir(job.out_dir, [pdf.name, png.name], overwrite=False)  # refused, named
-    from exubio.report.trial_report import build_trial_report
+    from exubio.report.trial_report import draw_trial_report
 
-    pdf, png = build_trial_report([m.paths["npz"] for m in methods], pdf)
+    pdf, png = draw_trial_report([reported(o) for o in outcomes], pdf)
     return {"pdf": str(pdf), "png": str(png)}, False

@@ -9,20 +9,20 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import os
-import platform
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
 
-import exubio
 from exubio.errors import InputError, PartialReconstructionError, ReconstructionError
 from exubio.io import results
+from exubio.io.result_names import stem_of
 from exubio.io.trial import read_trial
 from exubio.prep.targets import preparation_key, prepare_targets
+from exubio.protocol.bind import Binding
 from exubio.run.inputs import Session, load_session
-from exubio.run.summary_file import RunNotes, trial_quality, trial_summary
+from exubio.run.outcome import MethodOutcome, run_metadata, write_outcome  # noqa: F401 - run_metadata re-exported
+from exubio.run.summary_file import RunNotes, trial_quality
 from exubio.run.trial_files import AngleOutputs, angle_header, mot_thorax, write_outputs  # noqa: F401 - re-exported
 from exubio.types import MarkerTargets, Method, Model, Protocol, Reconstruction, Trajectories
 
@@ -53,15 +53,25 @@ class TrialInputs:
 in part of the trial, ``repaired``: exchanged back before preparing (``--repair-labels``)."""
 
     trial: TrialInfo
-    model: Model
-    protocol: Protocol
+    binding: Binding  # the model and protocol (the session's, or rebound without the dropped markers)
     targets: MarkerTargets
     dropped: tuple[str, ...] = ()
     partial_swaps: tuple = ()  # labels exchanged in part of the trial (exubio.trust.label_ranges)
     repaired: bool = False  # ... and exchanged back (--repair-labels)
-    generic_model: Model | None = None  # what the label checks expect (exubio.run.inputs.Session)
-    generic_protocol: Protocol | None = None
+    expect: Binding | None = None  # what the label checks expect (exubio.run.inputs.Session.generic_binding)
     moment_inputs: Any = None  # the thorax's motion and the loads (exubio.prep.moment_inputs.MomentInputs)
+
+    @property
+    def model(self) -> Model:
+        return self.binding.model
+
+    @property
+    def protocol(self) -> Protocol:
+        return self.binding.protocol
+
+    @property
+    def generic_binding(self) -> Binding:
+        return self.expect if self.expect is not None else self.binding
 
 
 @dataclass(frozen=True)
@@ -105,7 +115,8 @@ def load_inputs(trial: str | Path | Trajectories, session: Session | None = None
     traj = trial if isinstance(trial, Trajectories) else read_trial(trial)
     session = session if session is not None else load_session()
     model = session.model
-    protocol, dropped = drop_missing_markers(traj, session.protocol, model)
+    binding, dropped = drop_missing_markers(traj, session.binding)
+    protocol = binding.protocol
     check_thorax_labels(traj, protocol, model)  # before the thorax frame is built from them
     partial = find_partial_swaps(traj, protocol, model)
     repaired = bool(partial and repair_labels)
@@ -120,8 +131,7 @@ def load_inputs(trial: str | Path | Trajectories, session: Session | None = None
         from exubio.prep.moment_inputs import moment_inputs
 
         extra = moment_inputs(traj, protocol, targets, model, moment_request)
-    return TrialInputs(TrialInfo.of(traj), model, protocol, targets, dropped, partial, repaired,
-                       session.generic_model, session.generic_protocol, extra)
+    return TrialInputs(TrialInfo.of(traj), binding, targets, dropped, partial, repaired, session.generic_binding, extra)
 
 
 def reconstruct(model: Model, protocol: Protocol, targets: MarkerTargets, /, *, method: Method | str = Method.PF,
@@ -141,23 +151,19 @@ def _options(spec: Any, options: Any, values: dict[str, Any]) -> Any:
     return spec.make_options(options if options is not None else values)
 
 
-def stream_reconstruct(model: Model, protocol: Protocol, targets: MarkerTargets, sink: Callable[[Reconstruction], None],
+def stream_reconstruct(binding: Binding, targets: MarkerTargets, sink: Callable[[Reconstruction], None],
                        /, *, method: Method | str = Method.PF, options: Any = None,
                        progress: Callable[[int], None] | None = None,
                        chunk_frames: int | None = None) -> tuple[dict[str, float], dict[str, Any]]:
-    """Run one method handing its result to ``sink`` in chunks (bounded memory on trials of any
-    length: exubio.methods.common); ``options``: the method's options object or a dict of its
+    """Run one method with ``binding`` (the model and protocol: exubio.protocol.bind) handing its result
+    to ``sink`` in chunks (bounded memory on trials of any length: exubio.methods.common); ``options``: the method's options object or a dict of its
     fields (exubio.methods.REGISTRY); returns the method's (timings_s, info)."""
     from exubio.methods import method_spec
     from exubio.methods.common import CHUNK_FRAMES
 
     spec = method_spec(Method.parse(method).value)
-    return spec.load_stream()(model, protocol, targets, sink, options=spec.make_options(options),
+    return spec.load_stream()(binding, targets, sink, options=spec.make_options(options),
                               progress=progress, chunk_frames=chunk_frames or CHUNK_FRAMES)
-
-
-def output_stem(trial_path: str | Path, method: Method | str) -> str:
-    return f"{Path(trial_path).stem}.{Method.parse(method).value}"
 
 
 def _moments_key(key: str | None, body_mass_kg: float, hand_load_kg: float | None, request: Any = None) -> str | None:
@@ -186,32 +192,12 @@ def _request(settings: RunSettings) -> Any:
     return settings.moment_request if settings.moment_request is not None else MomentRequest()
 
 
-def run_metadata(inputs: TrialInputs, trial_path: str | Path, method: Method) -> dict[str, Any]:
-    return {
-        "exubio_version": exubio.__version__,
-        "python": platform.python_version(),
-        "trial": os.path.abspath(trial_path),
-        "model": inputs.model.source,
-        "model_name": inputs.model.name,
-        "body_mass_kg": inputs.model.body_mass_kg,
-        "protocol": inputs.protocol.source,
-        "protocol_name": inputs.protocol.name,
-        "held_coordinates": list(inputs.protocol.held_coordinates),
-        "protocol_relabel": dict(inputs.protocol.relabel),
-        "method": method.value,
-        "units": {"angles_in_files": "deg", "positions_in_npz": "m", "time": "s"},
-        "ignored_labels": list(inputs.trial.ignored_labels),
-        "units_in_trial_file": inputs.trial.units_in_file,
-        "rate_hz": inputs.trial.rate_hz,
-    }
-
-
 def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods: list[Method | str],
                      session: Session | None = None, settings: RunSettings = RunSettings(),
                      trajectories: Trajectories | None = None, calibration: Any = None, prepared: Prepared | None = None
-                     ) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
-    """Everything ``exubio reconstruct`` does for one trial; returns (reconstruction, paths, summary)
-    per method. Every method runs first (one that fails, ReconstructionError, does not stop the
+                     ) -> list[MethodOutcome]:
+    """Everything ``exubio reconstruct`` does for one trial; returns each method's outcome
+    (exubio.run.outcome.MethodOutcome: reconstruction, assessment, angles, files, summary). Every method runs first (one that fails, ReconstructionError, does not stop the
     others: their results are written, then PartialReconstructionError carries them and each failed
     method's reason; its summary says so, ``failed_methods``); then the trial is assessed (label
     checks, determinacy, range limits, PF-LS agreement, ``calibration``: the session's
@@ -228,7 +214,7 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
     from exubio.run.resume import kept_set, run_key
 
     methods = [Method.parse(m) for m in methods]
-    stems = [output_stem(trial_path, m) for m in methods]
+    stems = [stem_of(trial_path, m.value) for m in methods]
     results.writable_folder(out_dir)
     session = session if session is not None else load_session()
     labels = trajectories.labels if trajectories is not None else ()
@@ -263,7 +249,7 @@ class _Run:
     keys: Mapping[str, str | None] = field(default_factory=dict)  # stem -> its inputs' fingerprint (resume.run_key)
     kept: Mapping[str, tuple] = field(default_factory=dict)  # stem -> a complete set of an earlier run, kept
 
-    def reconstruct(self, methods, stems, parts, sink_type) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
+    def reconstruct(self, methods, stems, parts, sink_type) -> list[MethodOutcome]:
         inputs, out_dir = self.inputs, self.out_dir
         recons, sinks, done, failures = [], [], [], {}
         for method, stem in zip(methods, stems):
@@ -271,7 +257,7 @@ class _Run:
             progress = factory(method.value, inputs.targets.n_frames) if factory else None
             sink = parts.enter_context(sink_type(out_dir, stem, inputs.targets, inputs.model.coordinate_names))
             try:
-                timings, info = stream_reconstruct(inputs.model, inputs.protocol, inputs.targets, sink, method=method,
+                timings, info = stream_reconstruct(inputs.binding, inputs.targets, sink, method=method,
                                                    options=self.settings.method_options.get(method.value),
                                                    progress=progress, chunk_frames=self.settings.chunk_frames)
             except ReconstructionError as exc:  # the other methods still give their results
@@ -299,7 +285,7 @@ class _Run:
         if failures:
             raise PartialReconstructionError(
                 "; ".join(f"{m.upper()} failed: {reason}" for m, reason in failures.items())
-                + f" ({', '.join(r.method.upper() for r, _, _ in out)} written)", outputs=out, failures=failures)
+                + f" ({', '.join(o.method.upper() for o in out)} written)", outputs=out, failures=failures)
         return out
 
     def assess(self, recons: list[Reconstruction]):
@@ -310,11 +296,10 @@ def assess_inputs(inputs: TrialInputs, recons: list[Reconstruction], calibration
     """The trial's assessment (exubio.trust.assess.TrialAssessment) as ``exubio reconstruct`` makes
     it: the label checks against the generic model (and, with the session's ``calibration``,
     against its static trial), then determinacy, limits, agreement and the verdicts."""
-    from exubio.trust.assess import assess_trial, trial_label_findings
+    from exubio.trust.assess import TrialContext, assess_trial, trial_label_findings
 
     reference = calibration.reference if calibration is not None else None
-    expect = (inputs.generic_model or inputs.model, inputs.generic_protocol or inputs.protocol)
-    findings = trial_label_findings(inputs.model, inputs.protocol, inputs.targets, reference=reference, expect=expect)
+    findings = trial_label_findings(inputs.generic_binding, inputs.targets, reference=reference)
     session = ()
     if reference is not None:  # does the static belong to this trial's session?
         from exubio.trust.labels import pair_distances
@@ -322,54 +307,47 @@ def assess_inputs(inputs: TrialInputs, recons: list[Reconstruction], calibration
 
         trial_pd = pair_distances(inputs.targets.positions_m, inputs.targets.marker_names)
         session = tuple(placed_anew(static_consistency(reference, trial_pd, inputs.protocol)))
-    return assess_trial(inputs.model, inputs.protocol, inputs.targets, recons, label_findings=findings,
-                        calibration=None if calibration is None else calibration.report,
-                        static_labels=() if calibration is None or calibration.reference is None else calibration.labels, session=session,
-                        dropped=inputs.dropped, partial_swaps=inputs.partial_swaps, repaired=inputs.repaired,
-                        static_name=getattr(reference, "source", "") or "")
+    context = TrialContext(
+        label_findings=tuple(findings), calibration=None if calibration is None else calibration.report,
+        static_labels=() if calibration is None or calibration.reference is None else tuple(calibration.labels),
+        session=session, static_name=getattr(reference, "source", "") or "", dropped=inputs.dropped,
+        partial_swaps=inputs.partial_swaps, repaired=inputs.repaired)
+    return assess_trial(inputs.binding, inputs.targets, recons, context=context)
 
 
 def write_assessed(inputs: TrialInputs, trial_path: str | Path, out_dir: str | Path, done: list[tuple], assessment: Any,
                    /, *, notes: Any = None, overwrite: bool = True, hand_load_kg: float | None = None
-                   ) -> list[tuple[Reconstruction, dict[str, Path], dict[str, Any]]]:
-    """Write every method's result set (write_outputs: the anatomical angles with their status, the
-    assessment's verdict in summary.json, made by exubio.run.summary_file); ``done``: per method
-    (Method, stem, reconstruction, its streamed model points (exubio.io.streamed) or None when the
-    reconstruction holds them); ``notes``: the run's calibration, live figures and failed methods
-    (exubio.run.summary_file.RunNotes); ``hand_load_kg`` not None: the joint moments too
-    (exubio.dynamics, <stem>.moments.csv and summary.json's "moments"). Returns (reconstruction,
-    paths, summary) per method."""
+                   ) -> list[MethodOutcome]:
+    """Write every method's result set: its outcome (exubio.run.outcome.MethodOutcome: the verdict with
+    the run's notes, the anatomical angles with their status, with ``hand_load_kg`` not None the joint
+    moments (exubio.dynamics)), written by exubio.run.outcome.write_outcome, which makes its
+    summary.json; ``done``: per method (Method, stem, reconstruction, its streamed model points
+    (exubio.io.streamed) or None when the reconstruction holds them); ``notes``: the run's
+    calibration, live figures and failed methods (exubio.run.summary_file.RunNotes). Returns the
+    outcome of each method, with its files and summary."""
     from exubio.model.angles import anatomical_table
 
+    notes = notes or RunNotes()
     out = []
     for method, stem, recon, model_points in done:
-        meta = run_metadata(inputs, trial_path, method)
-        quality = trial_quality(assessment, recon.method, inputs, notes or RunNotes())
+        quality = trial_quality(assessment, recon.method, inputs, notes)
         recon = dataclasses.replace(recon, quality=quality)  # the verdict travels typed, as the file gives it
-        summ = trial_summary(recon, assessment, inputs, source=str(trial_path), stem=stem, notes=notes or RunNotes(),
-                             quality=quality)
         moments = None
-        from exubio.run.moments_outputs import moments_entry, pf_inertia_entry
-
-        if (pf_inertia := pf_inertia_entry(recon.info)) is not None:
-            summ["pf_inertia_scale"] = pf_inertia
         if hand_load_kg is not None:
-            from exubio.dynamics.moments import moments_summary, reconstruction_moments
+            from exubio.dynamics.moments import reconstruction_moments
 
             extra = inputs.moment_inputs
             moments = reconstruction_moments(inputs.model, recon, hand_load_kg=hand_load_kg,
                                              thorax=None if extra is None else extra.thorax,
                                              loads=() if extra is None else extra.loads)
-            summ["moments"] = moments_entry(moments, moments_summary(moments), stem)
-        names, values = anatomical_table(inputs.model, recon.q_rad)
+        names, values = anatomical_table(inputs.model, recon.q_rad, kinematics=inputs.binding.kin)
         det = assessment.angles[recon.method]
         signs = inputs.protocol.signs
         angles = AngleOutputs(names, values, det.status,
                               angle_header(det, Path(trial_path).name, method.value, inputs.protocol.side, signs),
                               assessment.determinacy[recon.method].undetermined, det.uncertainty_rad, moments,
                               thorax_coordinates=mot_thorax(moments), signs=signs)
-        paths = write_outputs(recon, out_dir, stem, metadata=meta, summary_data=summ, angles=angles,
-                              streamed=None if model_points is None else {"model_points_m": model_points},
-                              overwrite=overwrite)
-        out.append((recon, paths, summ))
+        outcome = MethodOutcome(method.value, stem, recon, assessment, angles)
+        out.append(write_outcome(outcome, inputs, trial_path, out_dir, notes=notes, overwrite=overwrite,
+                                 streamed=None if model_points is None else {"model_points_m": model_points}))
     return out

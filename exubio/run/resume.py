@@ -17,7 +17,7 @@ import json
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-SET_SUFFIXES = {"csv": ".csv", "mot": ".mot", "npz": ".npz", "summary": ".summary.json"}
+from exubio.io.result_names import set_paths
 
 
 def run_key(trial_path: str | Path, model: Any, protocol: Any, method: str, /, *, options: Any = None,
@@ -42,16 +42,14 @@ def run_key(trial_path: str | Path, model: Any, protocol: Any, method: str, /, *
     return h.hexdigest()
 
 
-def set_paths(out_dir: str | Path, stem: str, /) -> dict[str, Path]:
-    return {kind: Path(out_dir) / f"{stem}{suffix}" for kind, suffix in SET_SUFFIXES.items()}
-
-
-def kept_set(out_dir: str | Path, stem: str, key: str | None, /) -> tuple[Any, dict[str, Path], dict[str, Any]] | None:
-    """(reconstruction, paths, summary) of the result set ``stem`` in ``out_dir`` when it is complete
-    and was made from the inputs ``key`` fingerprints; None otherwise. The reconstruction is read
-    back without its model points (exubio.io.results.read_npz) and carries the verdict its
-    summary.json gives and ``resumed_from`` (its summary.json)."""
+def kept_set(out_dir: str | Path, stem: str, key: str | None, /) -> Any:
+    """The outcome (exubio.run.outcome.MethodOutcome: reconstruction, files, summary) of the result set
+    ``stem`` in ``out_dir`` when it is complete and was made from the inputs ``key`` fingerprints;
+    None otherwise. The reconstruction is read back without its model points
+    (exubio.io.results.read_npz) and carries the verdict its summary.json gives and
+    ``resumed_from`` (its summary.json)."""
     from exubio.io.results import read_npz
+    from exubio.run.outcome import MethodOutcome
     from exubio.trust.quality import Quality
 
     if key is None:
@@ -67,7 +65,8 @@ def kept_set(out_dir: str | Path, stem: str, key: str | None, /) -> tuple[Any, d
         quality = Quality.from_dict(summ["quality"])
     except (OSError, ValueError, KeyError, TypeError):
         return None
-    return dataclasses.replace(recon, quality=quality, resumed_from=str(paths["summary"])), paths, summ
+    recon = dataclasses.replace(recon, quality=quality, resumed_from=str(paths["summary"]))
+    return MethodOutcome(recon.method, stem, recon, paths=paths, summary=summ)
 
 
 def fresh_report(report_files: Sequence[Path], sets: Sequence[Mapping[str, Path]], /) -> bool:

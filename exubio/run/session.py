@@ -59,7 +59,7 @@ class SessionCalibration:
         """The same calibration, its model file moved (a study renames its calibration folder): the
         model's ``source`` names the file where it is now, as a model read from there would."""
         model = dataclasses.replace(self.session.model, source=str(model_file))
-        session = dataclasses.replace(self.session, model=model)
+        session = self.session.replaced(model=model)
         return dataclasses.replace(self, session=session, model_file=Path(model_file))
 
 
@@ -107,11 +107,11 @@ def calibration_protocol(static: Trajectories, session: Session, /):
     session's own protocol keeps the marker: a trial that lacks it too gets the check naming it."""
     from exubio.trust.missing_markers import drop_missing_markers
 
-    protocol, dropped = drop_missing_markers(static, session.generic_protocol, session.generic_model)
+    binding, dropped = drop_missing_markers(static, session.generic_binding)
     for what in dropped:
         log.warning("%s: marker %s missing: calibrated without it (the other markers still measure every angle)",
                     static.source or "static", what)
-    return protocol
+    return binding.protocol
 
 
 def _without_absent(protocol: Protocol, targets: MarkerTargets, /) -> Protocol:
@@ -157,11 +157,11 @@ def _static_evidence(source: Trajectories, session: Session, spec: StaticSpec, r
     """What the trials' verdicts read of the static besides the calibration: its label findings
     against the generic model, and its pair distances (with ``reference``, else None)."""
     from exubio.calibration import parse_frames
-    from exubio.trust.labels import check_trial, pair_distances
+    from exubio.trust.assess import trial_label_findings
+    from exubio.trust.labels import pair_distances
 
-    gmodel = session.generic_model
     pos = targets.positions_m[slice(*report.frames)] if parse_frames(spec.frames) is not None else targets.positions_m
-    findings = check_trial(targets, model=gmodel, protocol=gprot, ranges_rad=gmodel.coordinate_ranges_rad)
+    findings = trial_label_findings(session.generic_binding.rebound(gprot), targets)
     return tuple(findings), (pair_distances(pos, targets.marker_names, source=source.source) if reference else None)
 
 

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
 
+from exubio.io.result_names import SUFFIXES
 from exubio.errors import ExubioError, InputError
 from exubio.method_registry import method_names
 from exubio.run import interrupt, study_table
@@ -171,6 +172,15 @@ def _write_done(folder: Path, out: TrialOutcome, result: TrialResult) -> None:
 # --------------------------------------------------------------------------------------------
 # The study
 # --------------------------------------------------------------------------------------------
+def _known(session: Any) -> Any:
+    """The session with what its bindings hold computed once here (exubio.trust.assess.known_before_trials):
+    its trials' jobs carry them to the workers."""
+    from exubio.trust.assess import known_before_trials
+
+    known_before_trials(session.binding, expect=session.generic_binding)
+    return session
+
+
 def _calibrate_session(s: SessionSpec, folder: Path, signs: str | None = None) -> tuple[Any, Any, str]:
     """(session, calibration, error) of a session: its model and protocol loaded once and, with a
     static trial, calibrated (exubio.run.session.SessionCalibration, its model file in
@@ -182,7 +192,7 @@ def _calibrate_session(s: SessionSpec, folder: Path, signs: str | None = None) -
     try:
         session = load_session(model_path=s.model, protocol_path=s.protocol, body_mass_kg=s.body_mass_kg, signs=signs)
         if s.static is None:
-            return session, None, ""
+            return _known(session), None, ""
         cal_dir = folder / "calibration"
         shutil.rmtree(tmp, ignore_errors=True)
         tmp.mkdir(parents=True)
@@ -202,7 +212,9 @@ def _calibrate_session(s: SessionSpec, folder: Path, signs: str | None = None) -
         if cal_dir.exists():
             shutil.rmtree(cal_dir)
         tmp.rename(cal_dir)
-        return session, cal.moved_to(cal_dir / cal.model_file.name), ""
+        cal = cal.moved_to(cal_dir / cal.model_file.name)
+        _known(cal.session)
+        return session, cal, ""
     except Exception as exc:  # noqa: BLE001 - the session's trials are reported failed with the reason
         shutil.rmtree(tmp, ignore_errors=True)
         if s.static is None:
@@ -215,7 +227,7 @@ def _same_signs(folder: Path, signs: str | None) -> None:
     run asks for (``signs``; None: whatever its protocol said): else InputError naming it."""
     if signs is None:
         return
-    for summary in sorted(folder.glob("*.summary.json")):
+    for summary in sorted(folder.glob("*" + SUFFIXES["summary"])):
         try:
             had = json.loads(summary.read_text(encoding="utf-8")).get("signs", "isb")
         except (OSError, ValueError):

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any, Iterable, Mapping
 import numpy as np
 
 from exubio.errors import InputError
+from exubio.io.result_names import beside, method_stem, set_paths
 from exubio.io.results import atomic_write
 
 if TYPE_CHECKING:
@@ -91,11 +92,10 @@ def moments_study_table(trials: Iterable[tuple[dict, Path]], /) -> "pandas.DataF
 
     parts = []
     for keys, npz in trials:
-        stem = str(npz)[: -len(".npz")]
-        csv = Path(stem + ".moments.csv")
+        csv = beside(npz, "moments")
         if not csv.is_file():
             continue
-        summary_path = Path(stem + ".summary.json")
+        summary_path = beside(npz, "summary")
         summary = json.loads(summary_path.read_text(encoding="utf-8")) if summary_path.is_file() else {}
         parts.append(_trial_rows(csv, summary, keys))
     cols = {c: (np.concatenate([p[c] for p in parts]) if parts else np.zeros(0, dtype=object)) for c in MOMENT_COLUMNS}
@@ -147,7 +147,7 @@ def moments_as_asked(folder: Path, stem: str, methods: Iterable[str], body_mass_
     if body_mass_kg is None:
         return True
     for m in methods:
-        path = Path(folder) / f"{stem}.{m}.summary.json"
+        path = set_paths(folder, method_stem(stem, m))["summary"]
         if not path.is_file():  # that method failed in the earlier run: nothing of it to keep or redo here
             continue
         try:

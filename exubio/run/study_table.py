@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Iterable
 import numpy as np
 
 from exubio.errors import InputError
+from exubio.io.result_names import beside, method_stem, set_paths
 from exubio.method_registry import method_names
 from exubio.io.results import atomic_write, read_angles_csv, read_npz_arrays
 from exubio.model.signs import SIGNS, signs_of_file
@@ -43,7 +44,7 @@ _VERDICTS = ("ok", "check", "fail", "")
 def trial_rows(npz: Path, /, **keys: str) -> dict[str, np.ndarray]:
     """The long rows of one result (``<trial>.<method>.npz`` and the CSV beside it), with ``keys``
     (subject, session, trial, task, method, verdict) repeated on every row."""
-    csv = Path(str(npz)[: -len(".npz")] + ".csv")
+    csv = beside(npz, "csv")
     t, names, values, u = read_angles_csv(csv, uncertainty=True)
     status = read_npz_arrays(npz, ("angle_status",))["angle_status"]
     if status.shape != values.shape:
@@ -116,7 +117,7 @@ def table_trials(spec, outcomes: Iterable) -> list[tuple[dict, Path]]:
             if o is None or o.status == "failed" and not o.verdicts:
                 continue
             for m in method_names():
-                npz = Path(o.folder) / f"{t.stem}.{m}.npz"
+                npz = set_paths(o.folder, method_stem(t.stem, m))["npz"]
                 if npz.is_file():
                     out.append(({"subject": s.subject, "session": s.session, "trial": t.stem, "task": s.tasks.get(t.name, t.stem),
                                  "method": m, "verdict": o.verdicts.get(m) or ""}, npz))

@@ -10,6 +10,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from exubio.model.angles import ANATOMICAL_ANGLES
+from exubio.io.result_names import set_names
 from exubio.model.signs import meaning
 from exubio.protocol.labels import resolve_labels
 from exubio.trust.assess import TrialAssessment
@@ -89,11 +90,17 @@ def assessment_entries(a: TrialAssessment, method: str, /, *, quality: Quality |
             "determinacy": a.determinacy[method].to_dict(),
             "limits": [lim.to_dict() for lim in a.limits[method]],
             "labels": [finding_entry(f) for f in a.labels],
-            "pf_ls_agreement_deg": None if a.agreement_deg is None else {
-                "definition": AGREEMENT_DEFINITION,
-                **{k: (None if v is None or not np.isfinite(v) else round(float(v), 4))
-                   for k, v in a.agreement_deg.items()}},
+            "pf_ls_agreement_deg": agreement_entry(a.agreement_deg),
             "not_measured": list(a.not_solved)}
+
+
+def agreement_entry(agreement_deg: Mapping[str, float] | None, /) -> dict[str, Any] | None:
+    """The PF-LS agreement as summary.json records it: its definition and each angle's RMSE (deg) to
+    4 decimals, None where no frame is measured by both; None without both methods."""
+    if agreement_deg is None:
+        return None
+    return {"definition": AGREEMENT_DEFINITION,
+            **{k: (None if v is None or not np.isfinite(v) else round(float(v), 4)) for k, v in agreement_deg.items()}}
 
 
 def input_notes(findings: Sequence[str], /) -> list[Reason]:
@@ -164,7 +171,8 @@ def trial_summary(recon: Reconstruction, assessment: TrialAssessment, inputs: An
     if notes.failures:
         out["failed_methods"] = dict(notes.failures)
     signs = inputs.protocol.signs
-    out["angles"] = {"files": [f"{stem}.csv", f"{stem}.mot"], "units": "deg", "side": inputs.protocol.side,
+    names = set_names(stem)
+    out["angles"] = {"files": [names["csv"], names["mot"]], "units": "deg", "side": inputs.protocol.side,
                      "definitions": {n: {"definition": d, "meaning": meaning(n, signs)} for n, d, _ in ANATOMICAL_ANGLES}}
     out["signs"] = signs
     if notes.inputs_sha256:

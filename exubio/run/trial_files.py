@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from exubio.io import results
+from exubio.io.result_names import set_names
 from exubio.types import Reconstruction
 
 
@@ -50,11 +51,7 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
     moments = angles.moments
     written = convert(angles.names, angles.values_rad, "isb", angles.signs)
     out = Path(out_dir)
-    names = {"csv": f"{stem}.csv", "mot": f"{stem}.mot", "npz": f"{stem}.npz", "summary": f"{stem}.summary.json"}
-    if moments is not None:
-        names = {"moments": f"{stem}.moments.csv", "moments_sto": f"{stem}.moments.sto", **names}
-        if getattr(moments, "thorax", None) is not None:
-            names = {"thorax": f"{stem}.thorax.csv", **names}
+    names = set_names(stem, moments=moments is not None, thorax=getattr(moments, "thorax", None) is not None)
     notes = [f"exubio_{line.split(':', 1)[0].replace(' ', '_')}={line.split(':', 1)[1].strip()}"
              for line in angles.comments if line.startswith("status ")]
     if summary_data.get("quality"):

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from exubio.errors import InputError
+from exubio.io.result_names import beside, method_stem, set_paths
 from exubio.io.results import read_angles_csv, read_npz_arrays, read_npz_metadata
 from exubio.model.signs import convert, factors, signs_of_file
 from exubio.scapulohumeral.reference import Reference, reference, trial_plane
@@ -25,7 +26,7 @@ def read_trial_rhythm(npz_path: str | Path, /) -> TrialRhythm:
     """A trial's rhythm from its ``.npz`` and the ``.csv`` beside it (InputError naming the file
     when the result has no angle status or no shoulder angles)."""
     npz_path = Path(npz_path)
-    csv = Path(str(npz_path)[: -len(".npz")] + ".csv")
+    csv = beside(npz_path, "csv")
     status = read_npz_arrays(npz_path, ("angle_status",))["angle_status"]
     t, names, values, u = read_angles_csv(csv, uncertainty=True)
     names = tuple(n.removesuffix("_deg") for n in names)
@@ -86,7 +87,7 @@ def study_trials(study_dir: str | Path, /, *, method: str | None = None) -> list
             folder = study_dir / folder
         stem = Path(row["trial"]).stem
         for m in (method,) if method else ("pf", "ls"):
-            npz = folder / f"{stem}.{m}.npz"
+            npz = set_paths(folder, method_stem(stem, m))["npz"]
             if npz.is_file():
                 out.append(StudyTrial(row["subject"], row["session"], stem, m, npz, row.get(f"{m}_verdict") or ""))
     return out

@@ -12,7 +12,7 @@ from typing import Sequence
 import numpy as np
 
 from exubio.errors import InputError
-from exubio.methods.common import tracked_points
+from exubio.protocol.bind import tracked_points
 from exubio.model.kinematics import Kinematics
 from exubio.types import Protocol
 

@@ -479,11 +479,12 @@ def write_simulated_trial(trial: SimulatedTrial, path_c3d, /) -> tuple[Path, Pat
     return c3d_path, csv_path
 
 
-def reference_postures(model: Model, /, *, per_plane: int = 8) -> np.ndarray:
+def reference_postures(model: Model, /, *, per_plane: int = 8, kinematics: Kinematics | None = None) -> np.ndarray:
     """Postures (3 * per_plane, m) of the simulated elevations in the coronal, scapular and
     sagittal planes (HT 10-120 deg, the girdle on Ludewig et al.'s rhythm, elbow, forearm and wrist
     moving as in the trials): the postures over which a marker set's structural determinacy is
-    judged (exubio.trust.assess: what a protocol can measure, known before any trial)."""
-    kin = Kinematics(model)
+    judged (exubio.trust.assess: what a protocol can measure, known before any trial); ``kinematics``:
+    the model's, where the caller has it (exubio.protocol.bind.Binding.kin)."""
+    kin = kinematics if kinematics is not None else Kinematics(model)
     t = np.linspace(0.0, CYCLE_S / 2.0, per_plane)
     return np.concatenate([_true_motion(kin, mo, t)[0] for mo in (Motion.ABDUCTION, Motion.SCAPTION, Motion.FLEXION)])

@@ -13,13 +13,12 @@ from exubio.trust import quality as Q
 from exubio.trust.checks import Evidence, judge
 from exubio.calibration import SCALE_BOUNDS
 from exubio.trust.evaluate import per_frame_residuals_mm, residual_statistics
-from exubio.model.kinematics import Kinematics
-from exubio.methods.common import tracked_points, unobserved_segments
-from exubio.methods.poses import held_mask
+from exubio.protocol.bind import Binding
+from exubio.trust.label_expectations import expectations_of
 from exubio.trust.mismatch import MismatchAssessment, assess_mismatch
 from exubio.trust.observability import UNDETERMINED_TRIAL_FRACTION, AngleDeterminacy, AngleStatus, Determinacy, angle_determinacy, determinacy
 from exubio.model.ranges import limit_report
-from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Reconstruction
+from exubio.types import FrameStatus, MarkerTargets, Model, Reconstruction
 
 
 @dataclass(frozen=True)
@@ -40,18 +39,39 @@ class TrialAssessment:
     mismatch: Mapping[str, MismatchAssessment] | None = None  # per method: model-mismatch evidence (exubio.trust.mismatch)
 
 
-def trial_label_findings(model: Model, protocol: Protocol, targets: MarkerTargets, /, *, reference: Any = None,
-                         expect: tuple[Model, Protocol] | None = None) -> tuple:
-    """The label checks of exubio.trust.labels on a prepared trial, against what ``expect`` (the
-    generic model and the protocol bound to it: exubio.run.inputs.Session) expects, since a
-    calibration registers every marker where the static trial had it, right or wrong; without it,
-    against ``model`` and ``protocol`` (a model that is not calibrated). ``reference``: the
-    session's static trial's pair distances (exubio.trust.labels.pair_distances)."""
+@dataclass(frozen=True)
+class TrialContext:
+    """What the verdict weighs of a trial beside its reconstructions: ``label_findings`` (the label
+    checks on the trial, trial_label_findings); ``calibration``: the session's CalibrationReport
+    (exubio.calibration), checked as the verdict's calibration reasons, and ``static_labels``: the
+    label findings on its static trial (one the trial repeats is named once); ``session``: the
+    segments whose markers look placed anew since the static (exubio.trust.session_check.placed_anew),
+    named as a check on the static ``static_name``; ``dropped``: protocol markers the trial lacks,
+    left out (exubio.trust.missing_markers): a check naming them; ``partial_swaps``: labels exchanged
+    in part of the trial (exubio.trust.label_ranges): a fail, or with ``repaired`` a check that says
+    where they were exchanged back."""
+
+    label_findings: tuple = ()
+    calibration: Any = None
+    static_labels: tuple = ()
+    session: tuple = ()
+    static_name: str = ""
+    dropped: tuple[str, ...] = ()
+    partial_swaps: tuple = ()
+    repaired: bool = False
+
+
+def trial_label_findings(expect: Binding, targets: MarkerTargets, /, *, reference: Any = None) -> tuple:
+    """The label checks of exubio.trust.labels on a prepared trial, against what ``expect`` expects:
+    the generic model and the protocol bound to it (exubio.run.inputs.Session.generic_binding), since
+    a calibration registers every marker where the static trial had it, right or wrong (a model
+    that is not calibrated: its own binding). ``reference``: the session's static trial's pair
+    distances (exubio.trust.labels.pair_distances)."""
     from exubio.trust.labels import check_trial
 
-    generic, gprot = expect if expect is not None else (model, protocol)
-    return check_trial(targets, model=generic, protocol=gprot, ranges_rad=generic.coordinate_ranges_rad,
-                       reference=reference)
+    return check_trial(targets, model=expect.model, protocol=expect.protocol,
+                       ranges_rad=expect.model.coordinate_ranges_rad, reference=reference,
+                       expectations=expectations_of(expect))
 
 
 def _same_finding(f: Any, findings: Sequence) -> bool:
@@ -60,54 +80,43 @@ def _same_finding(f: Any, findings: Sequence) -> bool:
     return any(Q.finding_field(g, "kind") == kind and set(Q.finding_field(g, "markers", ())) == markers for g in findings)
 
 
-def not_solved_mask(model: Model, protocol: Protocol, kin: Kinematics | None = None) -> np.ndarray:
-    """(m,) True for coordinates neither method solves: held by the protocol, or of a segment no
-    marker observes (locked)."""
-    kin = kin or Kinematics(model)
-    mask = held_mask(model, protocol).copy()
-    for s in unobserved_segments(kin, tracked_points(kin, protocol)):
-        mask[kin.joint_coordinate_indices(s)] = True
-    return mask
-
-
 def agreement_on_measured(model: Model, a: Reconstruction, da: AngleDeterminacy, b: Reconstruction,
-                          db: AngleDeterminacy, /) -> dict[str, float]:
+                          db: AngleDeterminacy, /, *, kinematics: Any = None) -> dict[str, float]:
     """PF-LS RMSE (deg) of every anatomical angle over the frames where both measure it (NaN where
     none does)."""
     from exubio.model.angles import anatomical_table
 
-    _, ta = anatomical_table(model, a.q_rad)
-    _, tb = anatomical_table(model, b.q_rad)
+    _, ta = anatomical_table(model, a.q_rad, kinematics=kinematics)
+    _, tb = anatomical_table(model, b.q_rad, kinematics=kinematics)
     d = np.degrees(np.angle(np.exp(1j * (ta - tb))))
     ok = (da.status == AngleStatus.MEASURED) & (db.status == AngleStatus.MEASURED) & np.isfinite(d)
     return {n: (float(np.sqrt(np.mean(d[ok[:, j], j] ** 2))) if ok[:, j].any() else float("nan"))
             for j, n in enumerate(da.names)}
 
 
-_POSTURES: dict[bytes, np.ndarray] = {}
-_POSTURES_SIZE = 8
+def _held(binding: Binding, key: tuple, compute: Any, /, *args: Any, of_model: bool = False) -> Any:
+    """The fact ``key`` of the binding: computed here (``compute(binding, *args)``) on first use and
+    left on the binding (exubio.protocol.bind.Binding.keep), read from it after."""
+    key = (__name__, *key)
+    value = binding.fact(key, of_model=of_model)
+    return value if value is not None else binding.keep(key, compute(binding, *args), of_model=of_model)
 
 
-def reference_postures_of(model: Model, /) -> np.ndarray:
-    """exubio.synth.simulate.reference_postures of the model (the q = 0 posture where its girdle cannot be
-    driven on the rhythm), computed once per process for a given geometry (it takes ~0.3 s)."""
-    from exubio.trust.digest import content_digest as _content_digest
+def reference_postures_of(binding: Binding, /) -> np.ndarray:
+    """exubio.synth.simulate.reference_postures of the binding's model (the q = 0 posture where its
+    girdle cannot be driven on the rhythm), computed once and held by the binding (~0.15 s), shared
+    with its model's other bindings (exubio.protocol.bind.Binding.rebound). Read-only."""
+    return _held(binding, ("reference_postures",), _reference_postures, of_model=True)
+
+
+def _reference_postures(binding: Binding) -> np.ndarray:
     from exubio.synth.simulate import reference_postures
 
     try:
-        key = _content_digest(model.segments, model.ellipsoid)
-    except TypeError:
-        key = None
-    if key is not None and key in _POSTURES:
-        return _POSTURES[key]
-    try:
-        q = reference_postures(model)
+        q = reference_postures(binding.model, kinematics=binding.kin)
     except Exception:  # noqa: BLE001 - a model whose girdle the rhythm cannot drive: judge the reference posture
-        q = np.zeros((1, model.n_coordinates))
-    if key is not None:
-        if len(_POSTURES) >= _POSTURES_SIZE:
-            _POSTURES.pop(next(iter(_POSTURES)))
-        _POSTURES[key] = q
+        q = np.zeros((1, binding.model.n_coordinates))
+    q.setflags(write=False)
     return q
 
 
@@ -119,43 +128,60 @@ def _scapula_calibrated(calibration: Any) -> bool:
     return bool(sc.get("used")) or len(getattr(calibration, "ellipsoid_poses_mm", ()) or ()) > 1
 
 
-def angle_determinacy_of_protocol(model: Model, protocol: Protocol, /, *, kin: Kinematics | None = None,
-                                  bounded: bool = True) -> tuple[AngleDeterminacy, np.ndarray]:
+def angle_determinacy_of_protocol(binding: Binding, /, *, bounded: bool = True) -> tuple[AngleDeterminacy, np.ndarray]:
     """(the AngleDeterminacy over the reference postures with every non-optional marker present,
-    those postures' humerothoracic elevation (rad)): what angle_status_of_protocol summarises."""
+    those postures' humerothoracic elevation (rad)): what angle_status_of_protocol summarises;
+    computed once and held by the binding."""
+    return _held(binding, ("angle_determinacy", bool(bounded)), _angle_determinacy_of_protocol, bool(bounded))
+
+
+def _angle_determinacy_of_protocol(binding: Binding, bounded: bool) -> tuple[AngleDeterminacy, np.ndarray]:
     from exubio.model.angles import humerothoracic_elevation
 
-    kin = kin or Kinematics(model)
-    q = reference_postures_of(model)
+    kin, protocol = binding.kin, binding.protocol
+    q = reference_postures_of(binding)
     present = np.tile([not m.optional for m in protocol.markers], (q.shape[0], 1))
-    held = held_mask(model, protocol)
-    locked = not_solved_mask(model, protocol, kin) & ~held
-    det = angle_determinacy(kin, tracked_points(kin, protocol), q, present, protocol.weights, held=held, locked=locked,
-                            bounded=bounded)
-    return det, humerothoracic_elevation(model, q, kinematics=kin)
+    det = angle_determinacy(kin, binding.points, q, present, protocol.weights, held=binding.held,
+                            locked=binding.locked, bounded=bounded)
+    return det, humerothoracic_elevation(binding.model, q, kinematics=kin)
 
 
-def angle_status_of_protocol(model: Model, protocol: Protocol, /, *, kin: Kinematics | None = None,
-                             bounded: bool = True) -> dict[str, str]:
+def angle_status_of_protocol(binding: Binding, /, *, bounded: bool = True) -> dict[str, str]:
     """What the protocol's markers can do for each anatomical angle, known before any trial: its
     status over the reference postures (exubio.synth.simulate.reference_postures: elevation in three
     planes, HT 10-120 deg) with every non-optional marker present: 'measured' (in every posture),
     'modelled', 'not measured', or 'partly ...' (in some postures). ``bounded=False``: what the markers
     determine alone, without the uncertainty bound and the gimbal margin (observability.angle_determinacy)."""
-    return angle_determinacy_of_protocol(model, protocol, kin=kin, bounded=bounded)[0].trial_status()
+    return dict(_held(binding, ("angle_status", bool(bounded)), _angle_status, bool(bounded)))
 
 
-def coordinates_not_measured_by_protocol(model: Model, protocol: Protocol, /, *,
-                                         kin: Kinematics | None = None) -> tuple[str, ...]:
+def _angle_status(binding: Binding, bounded: bool) -> dict[str, str]:
+    return angle_determinacy_of_protocol(binding, bounded=bounded)[0].trial_status()
+
+
+def coordinates_not_measured_by_protocol(binding: Binding, /) -> tuple[str, ...]:
     """The model coordinates the protocol's markers leave undetermined (noise gain above the
     threshold) in most reference postures (exubio.synth.simulate.reference_postures), known before any
-    trial: e.g. the clavicle's axial rotation seen by two markers near its axis."""
-    kin = kin or Kinematics(model)
-    q = reference_postures_of(model)
-    present = np.tile([not m.optional for m in protocol.markers], (q.shape[0], 1))
-    det = determinacy(kin, tracked_points(kin, protocol), q, present, protocol.weights,
-                      excluded=not_solved_mask(model, protocol, kin))
+    trial: e.g. the clavicle's axial rotation seen by two markers near its axis. Held by the binding."""
+    return _held(binding, ("not_measured",), _not_measured)
+
+
+def _not_measured(binding: Binding) -> tuple[str, ...]:
+    q = reference_postures_of(binding)
+    present = np.tile([not m.optional for m in binding.protocol.markers], (q.shape[0], 1))
+    det = determinacy(binding.kin, binding.points, q, present, binding.protocol.weights, excluded=binding.not_solved)
     return tuple(det.trial_undetermined())
+
+
+def known_before_trials(binding: Binding, /, *, expect: Binding | None = None) -> None:
+    """Compute what the trials' checks read of the bindings alone: the structural angle status and
+    the coordinates the markers cannot measure (of ``binding``), the label expectations (of
+    ``expect``, the generic binding the labels are checked against; default ``binding``). A study
+    does it once per session before its trials go to the workers, which then get them with the
+    session instead of each computing them again."""
+    angle_status_of_protocol(binding)
+    coordinates_not_measured_by_protocol(binding)
+    expectations_of(expect if expect is not None else binding)
 
 
 DETERMINACY_PERIOD_S = 0.05
@@ -164,45 +190,38 @@ posture changes by a few degrees at most in 50 ms, the gains by less, and it mak
 about 10x cheaper at 200 Hz."""
 
 
-def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recons: Sequence[Reconstruction], /, *,
-                 label_findings: Sequence = (), calibration: Any = None, static_labels: Sequence = (),
-                 determinacy_every: int | None = None, session: Sequence = (),
-                 static_name: str = "", dropped: Sequence[str] = (), partial_swaps: Sequence = (),
-                 repaired: bool = False) -> TrialAssessment:
-    """Assess the reconstructions ``recons`` of one trial (module docstring). ``session``: the
-    segments whose markers look placed anew since the static (exubio.trust.session_check.placed_anew),
-    named as a check on the static; ``static_name``: that static trial; ``dropped``: protocol markers
-    the trial lacks, left out (exubio.trust.missing_markers): a check naming them; ``partial_swaps``: labels
-    exchanged in part of the trial (exubio.trust.label_ranges): a fail, or with ``repaired`` a check that
-    says where they were exchanged back. ``calibration``: the session's CalibrationReport
-    (exubio.calibration), checked as the verdict's calibration reasons; ``static_labels``: the label
-    findings on its static trial (one the trial repeats is named once)."""
-    kin = Kinematics(model)
+def assess_trial(binding: Binding, targets: MarkerTargets, recons: Sequence[Reconstruction], /, *,
+                 context: TrialContext = TrialContext(), determinacy_every: int | None = None) -> TrialAssessment:
+    """Assess the reconstructions ``recons`` of one trial (module docstring) made with ``binding``
+    (the model and protocol: exubio.protocol.bind); ``context``: what else the verdict weighs (the
+    label findings, the session's calibration and static trial, markers dropped, labels exchanged:
+    TrialContext)."""
+    model, protocol, kin = binding.model, binding.protocol, binding.kin
+    c = context
     if determinacy_every is None:
         dt = float(np.median(np.diff(targets.time_s))) if targets.n_frames > 1 else 1.0
         determinacy_every = max(1, int(round(DETERMINACY_PERIOD_S / dt)))
-    points = tracked_points(kin, protocol)
-    excluded = not_solved_mask(model, protocol, kin)
+    points, excluded, held = binding.points, binding.not_solved, binding.held
     names = model.coordinate_names
-    not_solved = tuple(n for n, e in zip(names, excluded) if e)
+    not_solved = binding.not_solved_names
     dets = {r.method: determinacy(kin, points, r.q_rad, targets.present, protocol.weights, excluded=excluded,
                                   every=determinacy_every) for r in recons}
-    held = held_mask(model, protocol)
     angles = {r.method: angle_determinacy(kin, points, r.q_rad, targets.present, protocol.weights, held=held,
-                                          locked=excluded & ~held, every=determinacy_every,
+                                          locked=binding.locked, every=determinacy_every,
                                           residuals_m=r.residuals_m) for r in recons}
-    structural = angle_status_of_protocol(model, protocol, kin=kin)
-    unmeasurable = coordinates_not_measured_by_protocol(model, protocol, kin=kin)
+    structural = angle_status_of_protocol(binding)
+    unmeasurable = coordinates_not_measured_by_protocol(binding)
+    label_findings, calibration = c.label_findings, c.calibration
     lims = {r.method: limit_report(r.q_rad, model.coordinate_ranges_rad, names, exclude=not_solved,
                                    ignore=dets[r.method].undetermined & dets[r.method].near_gimbal_lock)
             for r in recons}
     agreement = None
     by = {r.method: r for r in recons}
     if "pf" in by and "ls" in by:
-        agreement = agreement_on_measured(model, by["pf"], angles["pf"], by["ls"], angles["ls"])
+        agreement = agreement_on_measured(model, by["pf"], angles["pf"], by["ls"], angles["ls"], kinematics=kin)
     off = Q.off_segment_markers(model, protocol) if calibration is not None else {}
-    repeated = [f for f in static_labels if _same_finding(f, label_findings)]
-    static_labels = [f for f in static_labels if not _same_finding(f, label_findings)]
+    repeated = [f for f in c.static_labels if _same_finding(f, label_findings)]
+    static_labels = [f for f in c.static_labels if not _same_finding(f, label_findings)]
     named = sorted({m for f in label_findings if Q.finding_field(f, "severity") not in ("info", "note")
                     for m in Q.finding_field(f, "markers", ())})  # their residuals are the label's, not the model's
     mismatch = {r.method: assess_mismatch(kin, points, r.q_rad, targets.positions_m, targets.time_s, skip_markers=named)
@@ -217,8 +236,8 @@ def assess_trial(model: Model, protocol: Protocol, targets: MarkerTargets, recon
             calibration=calibration, scale_bounds=SCALE_BOUNDS, off_segment=off,
             accepted_offsets_mm={m.name: m.landmark_offset_mm for m in protocol.markers
                                  if m.landmark_offset_mm is not None},
-            not_measured=tuple(unmeasurable), session_shifts=tuple(session), static_name=static_name,
-            dropped_markers=tuple(dropped), partial_swaps=tuple(partial_swaps), repaired=repaired,
+            not_measured=tuple(unmeasurable), session_shifts=tuple(c.session), static_name=c.static_name,
+            dropped_markers=tuple(c.dropped), partial_swaps=tuple(c.partial_swaps), repaired=c.repaired,
             residual_mm=residual_statistics(r), per_frame_residual_mm=per_frame_residuals_mm(r)[0],
             limits=[lim.to_dict() for lim in lims[r.method]], angle_status=angles[r.method].trial_status(),
             structural_status=structural, measured_fraction=angles[r.method].fraction(AngleStatus.MEASURED),

@@ -1,19 +1,17 @@
 """What the model and the protocol say about a trial's markers (exubio.trust.labels, points 1 to 3):
 the model posed in N_POSTURES postures sampled within the coordinate ranges gives the side
-relations, the rigid pairs and the chains to fit; computed once per process for a given content of
-model, protocol and ranges (:func:`cached_expectations`)."""
+relations, the rigid pairs and the chains to fit; computed once per binding of a model and a
+protocol and held by it (:func:`expectations_of`, exubio.protocol.bind)."""
 from __future__ import annotations
 
-import dataclasses
 import itertools
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
 
 from exubio.errors import InputError
 from exubio.model.kinematics import Kinematics, PointSet
-from exubio.trust.digest import content_digest
+from exubio.protocol.bind import Binding
 from exubio.types import Model, Protocol
 
 __all__ = [
@@ -26,7 +24,7 @@ __all__ = [
     "ChainDef",
     "LabelExpectations",
     "SideRelation",
-    "cached_expectations",
+    "expectations_of",
     "finite_ranges",
     "marker_points",
     "model_expectations",
@@ -174,13 +172,14 @@ def _subtree(model: Model, root: str) -> tuple[str, ...]:
 
 
 def model_expectations(model: Model, protocol: Protocol, ranges_rad: np.ndarray | None = None, /, *,
-                       n_postures: int = N_POSTURES, seed: int = POSTURE_SEED) -> LabelExpectations:
+                       n_postures: int = N_POSTURES, seed: int = POSTURE_SEED,
+                       kinematics: Kinematics | None = None) -> LabelExpectations:
     """Side relations, rigid pairs and chains of ``protocol`` on ``model`` (see the module
     docstring), from ``n_postures`` postures sampled within ``ranges_rad`` (m, 2) (default: the
     model's coordinate ranges). ``protocol`` must be bound to ``model`` (its markers' local
-    positions are the model's points)."""
+    positions are the model's points); ``kinematics``: the model's, where the caller has it."""
     ranges_rad = _ranges_of(model, ranges_rad)
-    kin = Kinematics(model)
+    kin = kinematics if kinematics is not None else Kinematics(model)
     fin = finite_ranges(ranges_rad, model.n_coordinates)
     names = protocol.marker_names
     segs = tuple(m.segment for m in protocol.markers)
@@ -250,28 +249,18 @@ def model_expectations(model: Model, protocol: Protocol, ranges_rad: np.ndarray 
     )
 
 
-_EXPECTATIONS_CACHE: OrderedDict[bytes, LabelExpectations] = OrderedDict()
-_EXPECTATIONS_CACHE_SIZE = 8
+def expectations_of(binding: Binding, /) -> LabelExpectations:
+    """:func:`model_expectations` of the binding's model and protocol (default postures, seed and the
+    model's ranges), computed on first use and held by the binding (exubio.protocol.bind): every
+    trial of a session checks against the same generic binding. Its arrays are read-only."""
+    key = (__name__, "expectations")
+    exp = binding.fact(key)
+    return exp if exp is not None else binding.keep(key, _expectations(binding))
 
 
-def cached_expectations(model: Model, protocol: Protocol, ranges_rad: np.ndarray | None) -> LabelExpectations:
-    """:func:`model_expectations` (default postures and seed), computed once per process for a
-    given content of model, protocol and ranges: every trial of a study checks against the same
-    generic model, loaded afresh for each. The result is the one a fresh computation gives (same
-    inputs, fixed seed), bound to the objects passed; its arrays are shared and read-only."""
-    try:
-        key = content_digest(model, protocol, _ranges_of(model, ranges_rad), N_POSTURES, POSTURE_SEED)
-    except TypeError:
-        return model_expectations(model, protocol, ranges_rad)
-    exp = _EXPECTATIONS_CACHE.get(key)
-    if exp is None:
-        exp = model_expectations(model, protocol, ranges_rad)
-        for value in (exp.relations, exp.min_ratio, exp.rigid, exp.rigid_model_m, exp.model_median_m, exp.ranges_rad,
-                      *(a for c in exp.chains for a in (c.coordinates, c.markers))):
-            value.setflags(write=False)
-        _EXPECTATIONS_CACHE[key] = exp
-        while len(_EXPECTATIONS_CACHE) > _EXPECTATIONS_CACHE_SIZE:
-            _EXPECTATIONS_CACHE.popitem(last=False)
-    else:
-        _EXPECTATIONS_CACHE.move_to_end(key)
-    return dataclasses.replace(exp, model=model, protocol=protocol)
+def _expectations(binding: Binding) -> LabelExpectations:
+    exp = model_expectations(binding.model, binding.protocol, kinematics=binding.kin)
+    for value in (exp.relations, exp.min_ratio, exp.rigid, exp.rigid_model_m, exp.model_median_m, exp.ranges_rad,
+                  *(a for c in exp.chains for a in (c.coordinates, c.markers))):
+        value.setflags(write=False)
+    return exp

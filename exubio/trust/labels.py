@@ -78,7 +78,6 @@ from exubio.trust.label_expectations import (
     ChainDef,
     LabelExpectations,
     SideRelation,
-    cached_expectations,
     model_expectations,
     sample_postures,
 )
@@ -264,14 +263,15 @@ def check_trial(
     reference:    :func:`pair_distances` of the session's static trial (or
                   :func:`model_pair_distances` of a calibrated model) for the rigid-pair check.
     expectations: :func:`model_expectations` of the same model, protocol and ranges, to reuse
-                  across trials (``ranges_rad`` is then not used). When None they are computed,
-                  once per process for a given content of model, protocol and ranges.
+                  across trials (``ranges_rad`` is then not used): a session passes its
+                  binding's (exubio.trust.label_expectations.expectations_of). When None they
+                  are computed here.
     chain_fits:   run the chain fits (a few seconds); the distance checks alone cannot tell
                   mirror-image markers apart.
 
     Returns the findings, most serious first; an empty tuple when nothing is wrong.
     """
-    exp = expectations if expectations is not None else cached_expectations(model, protocol, ranges_rad)
+    exp = expectations if expectations is not None else model_expectations(model, protocol, ranges_rad)
     if exp.model is not model:
         raise InputError("check_trial: expectations were computed for another model")
     if exp.names != protocol.marker_names:

@@ -8,7 +8,8 @@ import dataclasses
 import difflib
 
 from exubio.errors import InputError
-from exubio.types import Model, Protocol, Trajectories
+from exubio.protocol.bind import Binding
+from exubio.types import Protocol, Trajectories
 
 __all__ = ["drop_missing_markers", "near_labels"]
 
@@ -26,21 +27,24 @@ def _present(protocol: Protocol, traj: Trajectories) -> dict[str, bool]:
     return out
 
 
-def drop_missing_markers(traj: Trajectories, protocol: Protocol, model: Model, /) -> tuple[Protocol, tuple[str, ...]]:
-    """(the protocol with the trial's missing non-optional markers made optional, their names, each
+def drop_missing_markers(traj: Trajectories, binding: Binding, /) -> tuple[Binding, tuple[str, ...]]:
+    """(the binding (exubio.protocol.bind) of its model and its protocol with the trial's missing
+    non-optional markers made optional (``binding`` itself when none is missing), their names, each
     with the near label the trial has where it has one: ``SCAP_Cor (the trial has 'CAP_Cor' ...)``);
     InputError naming the file, the markers, a near label the trial has and the angles that would
     no longer be measured, when dropping them costs a measured angle."""
     from exubio.trust.assess import angle_status_of_protocol
 
+    protocol = binding.protocol
     present = _present(protocol, traj)
     missing = tuple(m.name for m in protocol.markers if not m.optional and not present[m.name])
     if not missing:
-        return protocol, ()
+        return binding, ()
     reduced = dataclasses.replace(protocol, markers=tuple(
         dataclasses.replace(m, optional=True) if m.name in missing else m for m in protocol.markers))
-    full = angle_status_of_protocol(model, protocol, bounded=False)  # what the markers see: the bound would
-    left = angle_status_of_protocol(model, reduced, bounded=False)   # move with any marker's weight
+    rebound = binding.rebound(reduced)
+    full = angle_status_of_protocol(binding, bounded=False)  # what the markers see: the bound would
+    left = angle_status_of_protocol(rebound, bounded=False)  # move with any marker's weight
     lost = [n for n, s in full.items() if s == "measured" and left.get(n) != "measured"]
     if lost:
         hints = [f"'{near}' for {name}? ({fix})" for name, (near, fix) in near_labels(missing, traj, protocol).items()]
@@ -48,7 +52,7 @@ def drop_missing_markers(traj: Trajectories, protocol: Protocol, model: Model, /
                          f"without them the markers would no longer measure {', '.join(lost)}"
                          + (f"; the trial has {', '.join(hints)}" if hints else f"; the trial has {list(traj.labels)}"))
     near = near_labels(missing, traj, protocol)
-    return reduced, tuple(f"{n} (the trial has '{near[n][0]}': {near[n][1]})" if n in near else n for n in missing)
+    return rebound, tuple(f"{n} (the trial has '{near[n][0]}': {near[n][1]})" if n in near else n for n in missing)
 
 
 def near_labels(missing, traj: Trajectories, protocol: Protocol, /) -> dict[str, tuple[str, str]]:

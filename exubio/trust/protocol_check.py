@@ -71,9 +71,10 @@ def check_protocol(model: Model, protocol: Protocol, /, *, trial: Trajectories |
                    static: Trajectories | None = None) -> ProtocolCheck:
     """Check ``protocol`` (loaded against ``model``) before any trial; with ``trial`` or ``static``
     also against its labels and marker positions (module docstring)."""
+    from exubio.protocol.bind import bind
     from exubio.trust.assess import angle_determinacy_of_protocol
 
-    det, ht = angle_determinacy_of_protocol(model, protocol)
+    det, ht = angle_determinacy_of_protocol(bind(model, protocol))
     status = det.trial_status()
     findings = _unmarked_segments(model, protocol) + _relabel_values(protocol)
     for traj in (t for t in (trial, static) if t is not None):

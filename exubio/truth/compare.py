@@ -110,18 +110,13 @@ def _still_thorax_status(inputs, rec):
     """The angles' status and uncertainty of ``rec`` as ``exubio reconstruct`` gives them, plus the
     cost of the still thorax this run assumes (observability.angle_determinacy,
     ``thorax_assumed_still``)."""
-    from ..methods.common import tracked_points
-    from ..methods.poses import held_mask
-    from ..model.kinematics import Kinematics
-    from ..trust.assess import DETERMINACY_PERIOD_S, not_solved_mask
+    from ..trust.assess import DETERMINACY_PERIOD_S
     from ..trust.observability import angle_determinacy
 
-    model, protocol, targets = inputs.model, inputs.protocol, inputs.targets
-    kin = Kinematics(model)
-    held = held_mask(model, protocol)
+    b, targets = inputs.binding, inputs.targets
     dt = float(np.median(np.diff(targets.time_s))) if targets.n_frames > 1 else 1.0
-    return angle_determinacy(kin, tracked_points(kin, protocol), rec.q_rad, targets.present, protocol.weights,
-                             held=held, locked=not_solved_mask(model, protocol, kin) & ~held,
+    return angle_determinacy(b.kin, b.points, rec.q_rad, targets.present, b.protocol.weights,
+                             held=b.held, locked=b.locked,
                              every=max(1, int(round(DETERMINACY_PERIOD_S / dt))), residuals_m=rec.residuals_m,
                              thorax_assumed_still=True)
 

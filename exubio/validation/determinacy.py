@@ -24,7 +24,7 @@ def undetermined_coordinates(model: Model, protocol: Protocol, q_samples: np.nda
     hand or clavicle markers leaves the distal coordinates and the clavicle's axial rotation (a
     mix of SC and AC coordinates) undetermined; PF and LS then settle in that null space
     differently, so comparing them there says nothing about either."""
-    from exubio.methods.common import tracked_points
+    from exubio.protocol.bind import tracked_points
 
     kin = Kinematics(model)
     pts = tracked_points(kin, protocol)
@@ -59,7 +59,7 @@ def _weakly_determined(tr: Trial, rec: Reconstruction) -> list[str]:
     """Coordinates the trial's own verdict calls undetermined (exubio.trust.observability: noise gain
     above its threshold in most frames), so that Fig. 5 and the PF-LS comparison use the same
     criterion as the quality verdict of a reconstruction."""
-    from exubio.methods.common import tracked_points
+    from exubio.protocol.bind import tracked_points
     from exubio.trust.observability import determinacy
 
     kin = Kinematics(tr.model)

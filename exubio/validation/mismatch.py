@@ -17,6 +17,7 @@ from typing import Callable
 import numpy as np
 
 from exubio.model.angles import anatomical_table
+from exubio.protocol.bind import bind
 from exubio.trust.assess import assess_trial
 from exubio.trust.observability import AngleStatus
 from exubio.synth.perturb import ModelPerturbation
@@ -77,10 +78,11 @@ def run_case(case: str, perturbation: ModelPerturbation, motion: str, *, noise_m
     sim = simulate_trial(model, motion, duration_s=duration_s, rate_hz=rate_hz, noise_mm=noise_mm, sta_mm=sta_mm,
                          seed=seed, perturbation=perturbation)
     targets = prepare_targets(sim.trajectories, protocol)
+    binding = bind(model, protocol)
     out = []
     for method in methods:
         rec = reconstruct(model, protocol, targets, method=method)
-        a = assess_trial(model, protocol, targets, [rec])
+        a = assess_trial(binding, targets, [rec])
         errs = measured_angle_errors(model, sim.model, rec.q_rad, sim.q_true, a.angles[method].status)
         worst = max(errs, key=lambda k: errs[k][0])
         mm = a.mismatch[method]

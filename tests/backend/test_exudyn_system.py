@@ -1,5 +1,7 @@
 """The Exudyn PF system against the numpy kinematics: same model points for any posture, and exact
 marker data tracked back to the motion that made them."""
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -11,6 +13,8 @@ from exubio.backend.exudyn_system import DEFAULT_LIMIT_STIFFNESS_NM_PER_RAD, Int
 from exubio.errors import ModelError  # noqa: E402
 from exubio.model.kinematics import Kinematics  # noqa: E402
 from exubio.model.load import load_model  # noqa: E402
+from exubio.protocol.bind import Binding, bind  # noqa: E402
+from exubio.run.inputs import load_model_and_protocol  # noqa: E402
 
 RATE_HZ = 200.0
 JOINT_CENTRES = {"SC", "AC", "GH", "EJC", "RH", "WJC"}
@@ -19,6 +23,13 @@ JOINT_CENTRES = {"SC", "AC", "GH", "EJC", "RH", "WJC"}
 @pytest.fixture(scope="module")
 def kin():
     return Kinematics(load_model())
+
+
+def bound(kin, held=()) -> Binding:
+    """``kin``'s model bound to the shipped protocol, holding the coordinates ``held`` (indices)."""
+    protocol = load_model_and_protocol()[1]
+    names = kin.model.coordinate_names
+    return bind(kin.model, dataclasses.replace(protocol, held_coordinates=tuple(names[j] for j in held)))
 
 
 @pytest.fixture(scope="module")
@@ -69,12 +80,12 @@ def motion(kin, points):
 @pytest.fixture(scope="module")
 def tracked(kin, springs, motion):
     q, qd, pos, vel = motion
-    system = PFSystem(kin.model, springs, q0=q[0], qd0=qd[0], kinematics=kin)
+    system = PFSystem(bound(kin), springs=springs, q0=q[0], qd0=qd[0])
     return system, system.run(pos, vel, frame_dt_s=1 / RATE_HZ)
 
 
 def test_exudyn_model_points_equal_numpy_kinematics_for_random_postures(kin, springs, points):
-    system = PFSystem(kin.model, springs, q0=np.zeros(13), kinematics=kin)
+    system = PFSystem(bound(kin), springs=springs, q0=np.zeros(13))
     rng = np.random.default_rng(7)
     for q in rng.uniform(-1.5, 1.5, (6, 13)):
         assert np.abs(system.model_points(q) - kin.points(q, points)).max() < 1e-9
@@ -126,7 +137,7 @@ def test_a_missing_marker_switches_its_spring_off(kin, springs, motion):
         p, v = pos[:n].copy(), vel[:n].copy()
         p[~active] = garbage
         v[~active] = garbage
-        system = PFSystem(kin.model, springs, q0=q[0], qd0=qd[0], kinematics=kin)
+        system = PFSystem(bound(kin), springs=springs, q0=q[0], qd0=qd[0])
         runs.append(system.run(p, v, active, frame_dt_s=1 / RATE_HZ))
     assert all(r.success for r in runs)
     assert np.array_equal(runs[0].rotations, runs[1].rotations)  # the gap's values do not act
@@ -137,7 +148,7 @@ def test_a_missing_marker_switches_its_spring_off(kin, springs, motion):
 def test_sub_steps_interpolate_between_frames(kin, springs, motion, tracked):
     q, qd, pos, vel = motion
     n = 100
-    system = PFSystem(kin.model, springs, q0=q[0], qd0=qd[0], kinematics=kin)
+    system = PFSystem(bound(kin), springs=springs, q0=q[0], qd0=qd[0])
     run = system.run(pos[:n], vel[:n], frame_dt_s=1 / RATE_HZ, options=IntegratorOptions(step_s=0.5 / RATE_HZ))
     assert run.success and run.steps == 2 * (n - 1)
     one_step = kin.coordinates_from_rotations(tracked[1].rotations[:n])
@@ -147,7 +158,7 @@ def test_sub_steps_interpolate_between_frames(kin, springs, motion, tracked):
 def test_gravity_pulls_the_arm_down(kin, springs, motion):
     q, qd, pos, vel = motion
     n = 60
-    system = PFSystem(kin.model, springs, q0=q[0], qd0=qd[0], gravity=True, kinematics=kin)
+    system = PFSystem(bound(kin), springs=springs, q0=q[0], qd0=qd[0], gravity=True)
     run = system.run(pos[:n], vel[:n], frame_dt_s=1 / RATE_HZ)
     hand = kin.model.segment_index("hand")
     assert run.success
@@ -156,7 +167,7 @@ def test_gravity_pulls_the_arm_down(kin, springs, motion):
 
 def test_bad_arguments_are_rejected(kin, springs, motion):
     q, qd, pos, vel = motion
-    system = PFSystem(kin.model, springs, q0=q[0], qd0=qd[0], kinematics=kin)
+    system = PFSystem(bound(kin), springs=springs, q0=q[0], qd0=qd[0])
     with pytest.raises(ValueError, match="targets_pos"):
         system.run(pos[:10, :3], vel[:10, :3], frame_dt_s=0.005)
     with pytest.raises(ValueError, match="active but not finite"):
@@ -166,7 +177,7 @@ def test_bad_arguments_are_rejected(kin, springs, motion):
     with pytest.raises(ValueError, match="integer"):
         system.run(pos[:10], vel[:10], frame_dt_s=0.005, options=IntegratorOptions(step_s=0.003))
     with pytest.raises(ModelError, match="movable segments"):
-        PFSystem(kin.model, SpringSet([0], [[0.0, 0.0, 0.0]], 1500.0, 300.0), q0=np.zeros(13), kinematics=kin)
+        PFSystem(bound(kin), springs=SpringSet([0], [[0.0, 0.0, 0.0]], 1500.0, 300.0), q0=np.zeros(13))
     with pytest.raises(ValueError, match="local_m"):
         SpringSet([1, 2], [[0.0, 0.0, 0.0]], 1500.0, 300.0)
 
@@ -176,8 +187,8 @@ def test_a_diverging_run_is_reported_not_raised(kin, motion):
     points = kin.point_set([("hand", "MCP2"), ("humerus", "DELT"), ("scapula", "AA")])
     target = kin.points(q[:40], points)
     target[20:] += 5.0
-    system = PFSystem(kin.model, SpringSet.from_points(points, stiffness_n_per_m=1e9, damping_ns_per_m=300.0),
-                      q0=q[0], qd0=qd[0], kinematics=kin)
+    system = PFSystem(bound(kin), springs=SpringSet.from_points(points, stiffness_n_per_m=1e9, damping_ns_per_m=300.0),
+                      q0=q[0], qd0=qd[0])
     run = system.run(target, np.zeros_like(target), frame_dt_s=1 / RATE_HZ,
                      options=IntegratorOptions(max_newton_iterations=2, adaptive_step=False, newton_relative_tolerance=1e-12))
     assert not run.success and run.message
@@ -216,7 +227,7 @@ def test_limits_outside_the_motion_change_nothing(kin, springs, motion, tracked)
     _, free = tracked
     for pad, switched_on in ((0.5, False), (0.03, True)):
         limits = np.column_stack([q.min(axis=0) - pad, q.max(axis=0) + pad])
-        system = PFSystem(kin.model, springs, q0=q[0], qd0=qd[0], kinematics=kin, limits_rad=limits)
+        system = PFSystem(bound(kin), springs=springs, q0=q[0], qd0=qd[0], limits_rad=limits)
         run = system.run(pos, vel, frame_dt_s=1 / RATE_HZ)
         assert run.success
         assert set(run.limit_active_s) == {"sc", "ac", "gh", "elbow", "forearm", "wrist"}  # one element per joint
@@ -262,7 +273,7 @@ def beyond_limits(request, kin, springs, points):
     q, qd = q_start + w[:, None] * (q_end - q_start), wd[:, None] * (q_end - q_start)
     pos = kin.points(q, points)
     vel = np.einsum("nkcm,nm->nkc", kin.point_jacobian(q, points), qd)
-    system = PFSystem(kin.model, springs, q0=q[0], qd0=qd[0], kinematics=kin, limits_rad=limits, held_coordinates=held)
+    system = PFSystem(bound(kin, held), springs=springs, q0=q[0], qd0=qd[0], limits_rad=limits)
     run = system.run(pos, vel, frame_dt_s=1 / RATE_HZ, options=IntegratorOptions(step_s=0.01, spectral_radius=0.5))
     assert run.success, run.message
     q_pf = kin.coordinates_from_rotations(run.rotations[-1])
@@ -345,15 +356,15 @@ def test_limits_that_cannot_act_build_no_element_and_bad_limits_are_rejected(kin
     limits[names.index("gh_internal_rotation")] = np.radians([-100, 100])  # the middle angle stays within +-90 deg
     limits[names.index("elbow_flexion")] = np.radians([-170, 170])  # a full turn but 20 deg: ends indistinguishable
     limits[names.index("pronation")] = np.radians([-20, 185])  # enforceable: its angle is measured from 82.5 deg
-    system = PFSystem(kin.model, springs, q0=q[0], qd0=qd[0], kinematics=kin, limits_rad=limits)
+    system = PFSystem(bound(kin), springs=springs, q0=q[0], qd0=qd[0], limits_rad=limits)
     assert set(system.run(pos[:5], vel[:5], frame_dt_s=1 / RATE_HZ).limit_active_s) == {"forearm"}
     bad = limits.copy()
     bad[0] = [0.5, -0.5]
     for wrong, match in ((limits[:5], "shape"), (bad, "lower <= upper"), (np.full((13, 2), np.nan), "lower <= upper")):
         with pytest.raises(ValueError, match=match):
-            PFSystem(kin.model, springs, q0=q[0], qd0=qd[0], kinematics=kin, limits_rad=wrong)
+            PFSystem(bound(kin), springs=springs, q0=q[0], qd0=qd[0], limits_rad=wrong)
     with pytest.raises(ValueError, match="limit_stiffness"):
-        PFSystem(kin.model, springs, q0=q[0], qd0=qd[0], kinematics=kin, limits_rad=limits, limit_stiffness_nm_per_rad=0.0)
+        PFSystem(bound(kin), springs=springs, q0=q[0], qd0=qd[0], limits_rad=limits, limit_stiffness_nm_per_rad=0.0)
 
 
 
@@ -379,7 +390,7 @@ def test_a_joint_on_the_other_branch_of_its_sequence_keeps_its_limits_on_that_br
     assert np.all((q >= limits[:, 0]) & (q <= limits[:, 1]))  # inside the ranges on this branch
     runs = []
     for lim in (limits, None):
-        system = PFSystem(kin.model, springs, q0=q[0], qd0=qd[0], kinematics=kin, limits_rad=lim)
+        system = PFSystem(bound(kin), springs=springs, q0=q[0], qd0=qd[0], limits_rad=lim)
         run = system.run(pos, vel, frame_dt_s=1 / RATE_HZ, options=IntegratorOptions(step_s=0.005, spectral_radius=0.5))
         assert run.success, run.message
         runs.append(run)

@@ -288,14 +288,14 @@ def messy_results(tmp_path_factory, generic):
 
 
 def test_extra_and_prefixed_labels(messy_results):
-    for recon, _, summ in messy_results:
+    for recon, summ in ((o.reconstruction, o.summary) for o in messy_results):
         assert set(summ["unused_trial_labels"]) >= {"EXTRA_1", "KNEE", "*12"}
         assert "ARM" in recon.marker_names  # 'Subject:ARM' found as ARM
 
 
 @pytest.mark.parametrize("which", [0, 1], ids=["ls", "pf"])
 def test_gaps_anywhere_are_handled_and_reported(messy_results, which):
-    recon, _, summ = messy_results[which]
+    recon, summ = messy_results[which].reconstruction, messy_results[which].summary
     gaps = {(g["marker"], g["start_frame"], g["stop_frame"]) for g in summ["gaps"]}
     assert gaps == {(m, a, b) for m, (a, b) in GAPS.items()}
     assert np.isfinite(recon.q_rad).all() and np.isfinite(recon.qd_rad_s).all()
@@ -315,7 +315,8 @@ def test_a_protocol_marker_that_never_appears(tmp_path, generic):
     for kind, name in (("drop", "no_seml"), ("never", "nan_seml")):
         trial = tmp_path / f"{name}.c3d"
         _messy_trial(model, trial, **{kind: ("SEML",)})
-        (recon, _, summ), = reconstruct_file(trial, tmp_path / f"out_{name}", methods=["ls"])
+        (outcome,) = reconstruct_file(trial, tmp_path / f"out_{name}", methods=["ls"])
+        recon, summ = outcome.reconstruction, outcome.summary
         reasons = [r for r in summ["quality"]["reasons"] if r["code"] == "missing_marker"]
         assert reasons and "SEML" in reasons[0]["message"] and summ["quality"]["verdict"] != "ok"
         assert np.isnan(recon.residuals_m[:, recon.marker_names.index("SEML")]).all()
@@ -326,7 +327,8 @@ def test_a_protocol_marker_that_never_appears(tmp_path, generic):
     custom.write_text(text, encoding="utf-8")
     trial = tmp_path / "no_seml_elb.c3d"
     _messy_trial(model, trial, drop=("SEML", "ELB"))
-    (recon, _, summ), = reconstruct_file(trial, tmp_path / "out2", methods=["ls"], session=load_session(protocol_path=custom))
+    (outcome,) = reconstruct_file(trial, tmp_path / "out2", methods=["ls"], session=load_session(protocol_path=custom))
+    recon, summ = outcome.reconstruction, outcome.summary
     assert np.isnan(recon.residuals_m[:, recon.marker_names.index("SEML")]).all()
     assert summ["residual_mm"]["per_marker_rmse"]["SEML"] is None
     assert np.abs(recon.constraint).max() < 1e-8

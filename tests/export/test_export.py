@@ -202,7 +202,8 @@ def reconstruction(tmp_path_factory, model_files):
         session = load_session(model_path=path)
         model = session.model
         folder = tmp_path_factory.mktemp(f"recon_{key}")
-        [(_, paths, _)] = reconstruct_file(EXAMPLE, folder, methods=["ls"], session=session)
+        [outcome] = reconstruct_file(EXAMPLE, folder, methods=["ls"], session=session)
+        paths = outcome.paths
         out[model.name] = read_npz(paths["npz"]), paths["mot"]  # with the model points (streamed to the file)
     return out
 

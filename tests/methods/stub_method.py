@@ -19,5 +19,5 @@ def reconstruct_stub(model, protocol, targets, *, options=None, progress=None): 
     raise ReconstructionError(MESSAGE)
 
 
-def stream_stub(model, protocol, targets, sink, *, options=None, progress=None, chunk_frames=None):  # noqa: ARG001
+def stream_stub(binding, targets, sink, *, options=None, progress=None, chunk_frames=None):  # noqa: ARG001
     raise ReconstructionError(MESSAGE)

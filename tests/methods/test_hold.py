@@ -7,7 +7,7 @@ import pytest
 from exubio.backend.exudyn_system import PFSystem, SpringSet
 from exubio.errors import ModelError, ProtocolError
 from exubio.model.kinematics import Kinematics
-from exubio.methods.common import tracked_points
+from exubio.protocol.bind import bind, tracked_points
 from exubio.run.pipeline import reconstruct
 from exubio.run.inputs import DEFAULT_PROTOCOL, load_model_and_protocol
 from exubio.prep.targets import prepare_targets
@@ -53,7 +53,8 @@ def test_exudyn_joints_with_a_held_last_coordinate_match_the_numpy_kinematics(se
     pts = tracked_points(kin, protocol)
     springs = SpringSet.from_points(pts, stiffness_n_per_m=np.full(len(pts.names), 1500.0),
                                     damping_ns_per_m=np.full(len(pts.names), 300.0))
-    system = PFSystem(model, springs, q0=q, held_coordinates=held, kinematics=kin)
+    bound = bind(model, dataclasses.replace(protocol, held_coordinates=tuple(names[j] for j in held)))
+    system = PFSystem(bound, springs=springs, q0=q)
     assert np.abs(system.model_points(q) - kin.points(q, pts)).max() < 1e-9
 
 
@@ -76,4 +77,5 @@ def test_only_the_last_coordinate_of_a_joint_can_be_held(setup):
     springs = SpringSet.from_points(pts, stiffness_n_per_m=np.full(len(pts.names), 1500.0),
                                     damping_ns_per_m=np.full(len(pts.names), 300.0))
     with pytest.raises(ModelError, match="last coordinate"):
-        PFSystem(model, springs, q0=np.zeros(13), held_coordinates=[model.coordinate_names.index("sc_protraction")])
+        PFSystem(bind(model, dataclasses.replace(protocol, held_coordinates=("sc_protraction",))), springs=springs,
+                 q0=np.zeros(13))

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from exubio.model.kinematics import Kinematics
-from exubio.methods.common import tracked_points
+from exubio.protocol.bind import tracked_points
 from exubio.methods.ls import LSOptions, reconstruct_ls
 from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets

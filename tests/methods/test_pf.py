@@ -12,7 +12,7 @@ pytest.importorskip("exudyn")
 
 from exubio.errors import ReconstructionError  # noqa: E402
 from exubio.model.kinematics import Kinematics  # noqa: E402
-from exubio.methods.common import tracked_points  # noqa: E402
+from exubio.protocol.bind import tracked_points  # noqa: E402
 from exubio.methods.constraints import project_on_constraints  # noqa: E402
 from exubio.methods.pf import PFOptions, reconstruct_pf  # noqa: E402
 from exubio.methods.pf_time import integration_step  # noqa: E402

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from exubio.model.kinematics import Kinematics
-from exubio.methods.common import tracked_points
+from exubio.protocol.bind import tracked_points
 from exubio.methods.ls import LSOptions, reconstruct_ls
 from exubio.model.load import load_model, model_to_dict, save_model
 from exubio.run.inputs import load_model_and_protocol

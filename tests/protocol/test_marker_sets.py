@@ -10,6 +10,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from exubio.protocol.bind import bind
 from exubio.cli import main
 from exubio.io.c3d import write_c3d
 from exubio.io.results import read_angles_csv, read_npz_arrays
@@ -51,7 +52,7 @@ def test_both_arms_noise_free_within_a_tenth_of_a_degree(tmp_path, model, right,
     _, _, q_true = read_angles_csv(tmp_path / f"{right}.truth.csv")
     checked = 0
     for side, name in (("right", right), ("left", SETS[right])):
-        claimed = angle_status_of_protocol(model, protocol_for_model(model, name))
+        claimed = angle_status_of_protocol(bind(model, protocol_for_model(model, name)))
         names, err, measured = _errors_deg(out / side, c3d.stem, model, q_true)
         for j, n in enumerate(names):
             if claimed[n] == "measured":

@@ -116,17 +116,19 @@ def test_measured_angles_follow_the_hold_and_the_determinacy(model_protocol):
     clavicle's axial rotation and the AC upward rotation are not measured, SC elevation, ST, GH and
     HT are; a frame where GH's axial rotation is undetermined makes the GH and HT angles not measured."""
     from exubio.model.angles import ISB_COLUMNS
-    from exubio.trust.assess import coordinates_not_measured_by_protocol, not_solved_mask
+    from exubio.protocol.bind import bind
+    from exubio.trust.assess import coordinates_not_measured_by_protocol
 
     model, protocol = model_protocol
     names = model.coordinate_names
-    not_solved = [n for n, e in zip(names, not_solved_mask(model, protocol)) if e]
-    unmeasurable = coordinates_not_measured_by_protocol(model, protocol)
+    binding = bind(model, protocol)
+    not_solved = [n for n, e in zip(names, binding.not_solved) if e]
+    unmeasurable = coordinates_not_measured_by_protocol(binding)
     cols = [c for cs in ISB_COLUMNS.values() for c in cs]
-    m = dict(zip(cols, angles_measured(model, not_solved, protocol=protocol, unmeasurable=unmeasurable)))
+    m = dict(zip(cols, angles_measured(model, not_solved, binding=binding, unmeasurable=unmeasurable)))
     assert not m["SC_Z_posterior_rotation"] and not m["AC_X_upward_rotation"]  # the set cannot see them
     assert m["SC_X_elevation"] and m["ST_X_upward_rotation"] and m["GH_X_elevation"] and m["HT_X_elevation"]
-    m = dict(zip(cols, angles_measured(model, not_solved, ["gh_internal_rotation"], protocol=protocol,
+    m = dict(zip(cols, angles_measured(model, not_solved, ["gh_internal_rotation"], binding=binding,
                                        unmeasurable=unmeasurable)))
     assert not m["GH_Y_internal_rotation"] and not m["HT_X_elevation"] and m["ST_X_upward_rotation"]
 

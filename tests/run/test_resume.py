@@ -54,7 +54,7 @@ def test_ctrl_c_while_the_report_is_drawn_then_the_same_command_keeps_both_sets_
     def interrupted(*args, **kw):
         raise KeyboardInterrupt
     with monkeypatch.context() as m:
-        m.setattr(trial_report, "build_trial_report", interrupted)
+        m.setattr(trial_report, "draw_trial_report", interrupted)  # the drawing, whatever the entry
         assert main(argv) == 130
     assert "the same command again resumes" in capsys.readouterr().err
     assert not (out / "a.report.pdf").exists()

@@ -31,7 +31,7 @@ def inputs():
 
 def _joined(stream, inputs, size, **kw):
     chunks = Collector()
-    timings, info = stream(inputs.model, inputs.protocol, inputs.targets, chunks, chunk_frames=size, **kw)
+    timings, info = stream(inputs.binding, inputs.targets, chunks, chunk_frames=size, **kw)
     return chunks, chunks.reconstruction(inputs.targets, timings_s=timings, info=info)
 
 
@@ -67,7 +67,7 @@ def test_ls_in_chunks_equals_one_pass(inputs, size):
 def test_pf_divergence_stops_the_integration_at_the_chunk_that_shows_it(inputs):
     seen = []
     with pytest.raises(ReconstructionError, match="diverged"):
-        stream_pf(inputs.model, inputs.protocol, inputs.targets, seen.append, chunk_frames=100,
+        stream_pf(inputs.binding, inputs.targets, seen.append, chunk_frames=100,
                   options=PFOptions(divergence_deflection_m=1e-4))
     assert seen == []  # the first chunk already fails: nothing of it was handed on
 
@@ -133,8 +133,8 @@ def test_streamed_npz_equals_the_in_memory_one(inputs, tmp_path):
 def test_pipeline_files_do_not_depend_on_the_chunk_size(tmp_path):
     whole = reconstruct_file(EXAMPLE, tmp_path / "whole", methods=["pf", "ls"], settings=RunSettings(chunk_frames=100000))
     small = reconstruct_file(EXAMPLE, tmp_path / "small", methods=["pf", "ls"], settings=RunSettings(chunk_frames=60))
-    assert all(r.model_points_m is None for r, _, _ in whole + small)  # left on disk, not in memory
-    for (_, pa, sa), (_, pb, sb) in zip(whole, small):
+    assert all(o.reconstruction.model_points_m is None for o in whole + small)  # left on disk, not in memory
+    for (pa, sa), (pb, sb) in zip(((o.paths, o.summary) for o in whole), ((o.paths, o.summary) for o in small)):
         for kind in ("csv", "mot"):
             assert filecmp.cmp(pa[kind], pb[kind], shallow=False), kind
         a, b = read_npz(pa["npz"]), read_npz(pb["npz"])
@@ -176,7 +176,8 @@ def test_a_killed_writers_leftovers_are_removed_by_the_next_run(tmp_path):
 
 def test_a_result_can_be_read_without_its_points(tmp_path):
     """A report of a long trial reads the angles and residuals, not the per-marker 3-D arrays."""
-    [(_, paths, _)] = reconstruct_file(EXAMPLE, tmp_path, methods=["ls"])
+    [outcome] = reconstruct_file(EXAMPLE, tmp_path, methods=["ls"])
+    paths = outcome.paths
     full, light = read_npz(paths["npz"]), read_npz(paths["npz"], points=False)
     assert light.model_points_m is None and light.measured_m is None
     np.testing.assert_array_equal(light.q_rad, full.q_rad)
@@ -199,8 +200,8 @@ def test_a_file_run_that_finishes_on_pfs_fallback_writes_the_second_run_and_says
     session = load_session(protocol_path=shipped_file("exubio.protocols", "thoracoscapular_9.yaml", "protocols"))
     corner = dataclasses.replace(session, protocol=with_springs(session.protocol, 10.0, 0.1))
     trial = shared_data_dir() / "trc" / "tsm_rmr_ABD01.trc"
-    ((_, paths, summary),) = reconstruct_file(trial, tmp_path, methods=["pf"], session=corner,
-                                              settings=RunSettings(chunk_frames=200))
+    (outcome,) = reconstruct_file(trial, tmp_path, methods=["pf"], session=corner, settings=RunSettings(chunk_frames=200))
+    paths, summary = outcome.paths, outcome.summary
     codes = {r["code"]: r["level"] for r in summary["quality"]["reasons"]}
     assert codes.get("solver_fallback") == "note"
     written = read_npz(paths["npz"])

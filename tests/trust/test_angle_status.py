@@ -6,11 +6,12 @@ import dataclasses
 import numpy as np
 import pytest
 
+from exubio.protocol.bind import bind
 from exubio.model.angles import ANATOMICAL_COLUMNS, anatomical_table
-from exubio.trust.assess import angle_status_of_protocol, not_solved_mask
+from exubio.trust.assess import angle_status_of_protocol
 from exubio.model.kinematics import Kinematics
-from exubio.methods.common import tracked_points
-from exubio.methods.poses import held_mask
+from exubio.protocol.bind import tracked_points
+from exubio.protocol.bind import held_mask
 from exubio.trust.angle_uncertainty import U_BOUND_DEG
 from exubio.trust.observability import MODELLED_SHARE, AngleStatus, angle_determinacy
 from exubio.run.inputs import load_model_and_protocol, protocol_for_model
@@ -49,7 +50,7 @@ def _status(model, protocol, kin, pts, q, present=None):
     if present is None:
         present = np.ones((q.shape[0], len(protocol.markers)), dtype=bool)
     return angle_determinacy(kin, pts, q, present, protocol.weights, held=held,
-                             locked=not_solved_mask(model, protocol, kin) & ~held)
+                             locked=bind(model, protocol).locked)
 
 
 def test_two_clavicle_markers_measure_its_direction_not_its_axial_rotation(setup):
@@ -67,7 +68,7 @@ def test_two_clavicle_markers_measure_its_direction_not_its_axial_rotation(setup
     j = det.names.index("SC_Z_posterior_rotation")
     assert det.gain_deg_per_mm[:, j].min() > 2.0  # ~2.7 deg per mm: the markers are ~15 mm off its axis
     assert det.gain_deg_per_mm[:, det.names.index("SC_X_elevation")].max() < 0.3
-    assert angle_status_of_protocol(model, protocol) == status  # known before the trial: the same postures
+    assert angle_status_of_protocol(bind(model, protocol)) == status  # known before the trial: the same postures
 
 
 def test_a_hold_makes_what_it_decides_modelled_and_leaves_the_scapula_measured(setup):
@@ -118,7 +119,7 @@ def test_a_protocol_without_clavicle_markers_models_its_hold():
     model, _ = load_model_and_protocol()
     protocol = protocol_for_model(model, shipped_file("exubio.protocols", "thoracoscapular_9.yaml", "protocols"))
     assert "sc_posterior_rotation" in protocol.held_coordinates
-    status = angle_status_of_protocol(model, protocol)
+    status = angle_status_of_protocol(bind(model, protocol))
     assert status["SC_Z_posterior_rotation"] == "modelled"
     for name in ("ST_Y_internal_rotation", "ST_X_upward_rotation", "ST_Z_posterior_tilt", "HT_X_elevation"):
         assert status[name] in ("measured", "partly not measured"), (name, status[name])

@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 
 import exubio
-from exubio.methods.common import tracked_points
+from exubio.protocol.bind import tracked_points
 from exubio.methods.ls import reconstruct_ls
-from exubio.methods.poses import held_mask
+from exubio.protocol.bind import held_mask
 from exubio.model.angles import anatomical_table, segment_anatomical_rotations
 from exubio.model.kinematics import Kinematics
 from exubio.synth.simulate import simulate_trial
 from exubio.trust import angle_uncertainty as AU
-from exubio.trust.assess import not_solved_mask
+from exubio.protocol.bind import bind
 from exubio.trust.observability import AngleStatus, _shipped_amplitude, angle_determinacy
 from exubio.types import MarkerTargets
 
@@ -57,7 +57,7 @@ def test_the_propagated_uncertainty_is_what_the_solver_does_with_such_errors(set
 
     q0 = reference_postures(model)[3]  # abduction, HT 54 deg
     held = held_mask(model, protocol)
-    excluded = not_solved_mask(model, protocol, kin)
+    excluded = bind(model, protocol).not_solved
     free = np.flatnonzero(~excluded)
     present = np.ones((1, len(protocol.markers)), dtype=bool)
     frames = segment_anatomical_rotations(model, q0[None], kinematics=kin)
@@ -91,7 +91,7 @@ def test_an_angle_beyond_the_bound_or_near_its_lock_is_not_measured(setting):
 
     q = reference_postures(model)
     held = held_mask(model, protocol)
-    excluded = not_solved_mask(model, protocol, kin)
+    excluded = bind(model, protocol).not_solved
     present = np.ones((q.shape[0], len(protocol.markers)), dtype=bool)
     det = angle_determinacy(kin, pts, q, present, protocol.weights, held=held, locked=excluded & ~held)
     names, ang = anatomical_table(model, q, unwrap=False)
@@ -187,7 +187,7 @@ def test_two_clusters_that_move_together_give_the_propagated_uncertainty(setting
 
     q0 = reference_postures(model)[3]  # abduction, HT 54 deg
     held = held_mask(model, protocol)
-    excluded = not_solved_mask(model, protocol, kin)
+    excluded = bind(model, protocol).not_solved
     present = np.ones((1, len(protocol.markers)), dtype=bool)
     kw = dict(held=held, locked=excluded & ~held, noise_mm=1e-6)
     amp, C = _joint_amplitude(True)
@@ -270,7 +270,7 @@ def test_the_still_thorax_cost_is_what_the_solver_does_with_an_unseen_trunk(sett
     from exubio.synth.simulate import reference_postures
 
     q0 = reference_postures(model)[3]  # abduction, HT 54 deg
-    excluded = not_solved_mask(model, protocol, kin)
+    excluded = bind(model, protocol).not_solved
     free = np.flatnonzero(~excluded)
     present = np.ones((1, len(protocol.markers)), dtype=bool)
     C = np.diag([0.03, 0.04, 0.02, 0.004, 0.002, 0.004]) ** 2

@@ -100,10 +100,10 @@ def test_a_gap_frame_is_never_surer_than_the_full_marker_set(session):
     """The floor (exubio.trust.observability.GAP_FLOOR): in every gap frame each angle's uncertainty is at
     least the one the trial's full marker set gives at the same pose."""
     import exubio
-    from exubio.methods.common import tracked_points
-    from exubio.methods.poses import held_mask
+    from exubio.protocol.bind import tracked_points
+    from exubio.protocol.bind import held_mask
     from exubio.model.kinematics import Kinematics
-    from exubio.trust.assess import not_solved_mask
+    from exubio.protocol.bind import bind
     from exubio.trust.observability import angle_determinacy
     from exubio.trust.gap_frames import nearest_sample
 
@@ -115,7 +115,7 @@ def test_a_gap_frame_is_never_surer_than_the_full_marker_set(session):
     present = np.isfinite(rec.residuals_m)
     full = np.broadcast_to(present.any(axis=0), present.shape).copy()
     args = (kin, tracked_points(kin, protocol), rec.q_rad)
-    kw = {"held": held, "locked": not_solved_mask(model, protocol, kin) & ~held, "every": 1}
+    kw = {"held": held, "locked": bind(model, protocol).locked, "every": 1}
     det = angle_determinacy(*args, present, protocol.weights, residuals_m=rec.residuals_m, **kw)
     ref = angle_determinacy(*args, full, protocol.weights, residuals_m=nearest_sample(rec.residuals_m), **kw)
     u, u_full = det.uncertainty_rad[gap], ref.uncertainty_rad[gap]
@@ -128,10 +128,10 @@ def test_a_one_frame_gap_is_said_in_its_frame(session):
     """A gap of one frame between two computed frames: its frame's uncertainty is the one computed with
     the marker missing (every frame computed), not a neighbour's."""
     import exubio
-    from exubio.methods.common import tracked_points
-    from exubio.methods.poses import held_mask
+    from exubio.protocol.bind import tracked_points
+    from exubio.protocol.bind import held_mask
     from exubio.model.kinematics import Kinematics
-    from exubio.trust.assess import not_solved_mask
+    from exubio.protocol.bind import bind
     from exubio.trust.observability import angle_determinacy
 
     trial, model, protocol, _, _ = session
@@ -140,7 +140,7 @@ def test_a_one_frame_gap_is_said_in_its_frame(session):
     kin = Kinematics(model)
     held = held_mask(model, protocol)
     every1 = angle_determinacy(kin, tracked_points(kin, protocol), rec.q_rad, np.isfinite(rec.residuals_m),
-                               protocol.weights, held=held, locked=not_solved_mask(model, protocol, kin) & ~held,
+                               protocol.weights, held=held, locked=bind(model, protocol).locked,
                                every=1, residuals_m=rec.residuals_m)
     assert np.array_equal(det.uncertainty_rad[402], every1.uncertainty_rad[402])
     assert np.array_equal(det.status[402], every1.status[402])

@@ -129,28 +129,26 @@ def test_pair_distances_equal_the_marker_by_marker_computation(sim):
         assert np.array_equal(pd.n_frames, cnt)
 
 
-def test_expectations_are_computed_once_per_content_and_bound_to_the_objects_given(model, protocol, expect):
-    from exubio.model.load import load_model
+def test_expectations_are_held_by_the_binding_and_equal_a_fresh_computation(model, protocol, expect):
+    """The binding computes its expectations once and holds them (the same object on every ask, read-
+    only arrays), equal to model_expectations computed afresh; another binding of the same content
+    computes its own (no process-wide cache), equal to the first; a moved marker changes them."""
+    from exubio.protocol.bind import bind
 
-    other_model = load_model()  # the same file, loaded again: another object, the same content
-    other_protocol = protocol_for_model(other_model)
-    a = LE.cached_expectations(model, protocol, None)
-    b = LE.cached_expectations(other_model, other_protocol, None)
-    assert a.model is model and a.protocol is protocol and b.model is other_model and b.protocol is other_protocol
-    assert b.relations is a.relations and b.model_median_m is a.model_median_m  # computed once
+    binding = bind(model, protocol)
+    a = LE.expectations_of(binding)
+    assert LE.expectations_of(binding) is a  # held: computed once
+    assert a.model is model and a.protocol is protocol
     for name in ("relations", "min_ratio", "rigid", "rigid_model_m", "model_median_m", "ranges_rad"):
-        assert np.array_equal(getattr(b, name), getattr(expect, name)), name
-        assert not getattr(b, name).flags.writeable, name
-    assert [(c.root, c.markers.tolist(), c.coordinates.tolist()) for c in b.chains] == \
+        assert np.array_equal(getattr(a, name), getattr(expect, name)), name
+        assert not getattr(a, name).flags.writeable, name
+    assert [(c.root, c.markers.tolist(), c.coordinates.tolist()) for c in a.chains] == \
         [(c.root, c.markers.tolist(), c.coordinates.tolist()) for c in expect.chains]
-    # other content (ranges, a model point, a protocol marker) is another entry
-    narrow = model.coordinate_ranges_rad * 0.5
-    c = LE.cached_expectations(model, protocol, narrow)
-    assert c.relations is not a.relations
-    assert np.array_equal(c.relations, L.model_expectations(model, protocol, narrow).relations)
+    b = LE.expectations_of(bind(model, protocol))
+    assert b is not a and np.array_equal(b.relations, a.relations)
     moved = dataclasses.replace(protocol, markers=(dataclasses.replace(
         protocol.markers[0], local_position_m=protocol.markers[0].local_position_m + 0.05),) + protocol.markers[1:])
-    assert LE.cached_expectations(model, moved, None).model_median_m is not a.model_median_m
+    assert not np.array_equal(LE.expectations_of(bind(model, moved)).model_median_m, a.model_median_m)
 
 
 def test_side_relations_hold_in_postures_not_sampled(model, protocol, expect):

@@ -9,10 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from exubio.protocol.bind import bind
 from exubio.trust.assess import assess_trial
 from exubio.calibration.ellipsoid import surface_distance
 from exubio.model.kinematics import Kinematics
-from exubio.methods.common import tracked_points
+from exubio.protocol.bind import tracked_points
 from exubio.trust.mismatch import BIAS_MM, CONTACT_OFFSET_MM, assess_mismatch, segment_evidence
 from exubio.synth.perturb import ModelPerturbation
 from exubio.run.pipeline import reconstruct
@@ -95,7 +96,7 @@ def _run(perturbation, *, motion="abduction", noise_mm=0.0, sta_mm=0.0, seed=0):
                          perturbation=perturbation)
     targets = prepare_targets(sim.trajectories, protocol)
     rec = reconstruct(model, protocol, targets, method="ls")
-    a = assess_trial(model, protocol, targets, [rec])
+    a = assess_trial(bind(model, protocol), targets, [rec])
     errs = measured_angle_errors(model, sim.model, rec.q_rad, sim.q_true, a.angles["ls"].status)
     mismatch = [r for r in a.quality["ls"].reasons if r.code == "model_mismatch"]
     return max(v[0] for v in errs.values()), a.quality["ls"], mismatch
@@ -136,7 +137,7 @@ def test_the_skin_sliding_over_the_scapula_is_not_a_mismatch_and_an_ellipsoid_st
                              perturbation=perturbation, sta_model=load_sta_model("bone"))
         targets = prepare_targets(sim.trajectories, protocol)
         rec = reconstruct(model, protocol, targets, method="ls")
-        a = assess_trial(model, protocol, targets, [rec])
+        a = assess_trial(bind(model, protocol), targets, [rec])
         checks = [r for r in a.quality["ls"].reasons if r.code == "model_mismatch" and r.level == "check"]
         assert bool(checks) == expect, (motion, perturbation, [r.message for r in a.quality["ls"].reasons])
         if expect:
@@ -180,6 +181,6 @@ def test_real_trials_with_their_labels_right_raise_no_mismatch(tmp_path, trial, 
     protocol = protocol_for_model(model, session)
     targets = prepare_targets(read_trial(SHARED / "c3d" / trial), protocol)
     rec = reconstruct(model, protocol, targets, method="ls")
-    a = assess_trial(model, protocol, targets, [rec])
+    a = assess_trial(bind(model, protocol), targets, [rec])
     assert not [f for f in a.mismatch["ls"].findings if f.level == "check"], [f.evidence for f in a.mismatch["ls"].findings]
     assert dataclasses.asdict(a.mismatch["ls"].evidence["scapula"])["contact_offset_mean_mm"] is not None

@@ -4,7 +4,7 @@ protocol, against what the marker set can see."""
 import numpy as np
 
 from exubio.model.kinematics import Kinematics
-from exubio.methods.common import tracked_points
+from exubio.protocol.bind import tracked_points
 from exubio.trust.observability import UNDETERMINED_DEG_PER_MM, determinacy
 from exubio.run.inputs import load_model_and_protocol
 

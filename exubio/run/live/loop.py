@@ -258,7 +258,7 @@ class LiveSession:
                                     accelerations_m_s2=frame.accelerations_m_s2[None], source=self.info.name)
             if active.sum() >= self.min_markers:
                 try:
-                    self.setup = pf_setup(self.model, self.protocol, targets, self.options.pf, kin=self.kin)
+                    self.setup = pf_setup(self.binding, targets, self.options.pf)
                     self.start_frame = (frame, active)
                     return g
                 except ReconstructionError as exc:
@@ -280,7 +280,8 @@ class LiveSession:
     def _run_pf(self, g0: int) -> int:
         """One PF run from frame g0 until it must end; returns the next frame to start from."""
         setup = self.setup
-        frames = _Frames(setup.kin, setup.points, None, setup.q0, setup.held, self.options.pf, None, 1.0 / self.rate)
+        b = setup.binding
+        frames = _Frames(b.kin, b.points, None, setup.q0, b.held, self.options.pf, None, 1.0 / self.rate)
         self.run_id += 1
         self.run_started = self.clock()
         self.tracking = True
@@ -383,18 +384,17 @@ class LiveSession:
 
     def _bind(self) -> None:
         from exubio.model.frame_kinematics import FrameForward
-        from exubio.model.kinematics import Kinematics
-        from exubio.methods.common import tracked_points
+        from exubio.protocol.bind import bind
 
         self.causal = CausalTargets(self.protocol, self.labels, self.rate, options=self.options.causal,
                                     source=self.info.name)
         if self.causal.unused:
             log.info("%s: labels not used by protocol '%s': %s", self.info.name, self.protocol.name, list(self.causal.unused))
         self.marker_names = self.protocol.marker_names
-        self.kin = Kinematics(self.model)
+        self.binding = bind(self.model, self.protocol)  # once per session (and again after a calibration)
+        self.kin, self.points = self.binding.kin, self.binding.points
         self.forward = FrameForward(self.kin)
-        self.points = tracked_points(self.kin, self.protocol)
-        self.monitor = LiveMonitor(self.model, self.protocol, self.kin, self.points, self.rate, self.options,
+        self.monitor = LiveMonitor(self.binding, self.rate, self.options,
                                    self.causal.columns >= 0,  # optional markers the stream does not carry: no gap events
                                    self._event)
         self.min_markers = 3

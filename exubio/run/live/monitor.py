@@ -10,13 +10,13 @@ from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 import numpy as np
 
 from exubio.trust import quality as Q
-from exubio.trust.assess import (DETERMINACY_PERIOD_S, angle_status_of_protocol, coordinates_not_measured_by_protocol,
-                                  not_solved_mask)
+from exubio.trust.assess import DETERMINACY_PERIOD_S, angle_status_of_protocol, coordinates_not_measured_by_protocol
 from exubio.trust.checks import Evidence, LiveCounts, judge
 from exubio.trust.observability import determinacy
 from exubio.model.ranges import AT_LIMIT_TOLERANCE_RAD
 from exubio.run.live.outputs import ISB_NAMES, Event, angles_measured
-from exubio.types import Gap, Model, Protocol
+from exubio.protocol.bind import Binding
+from exubio.types import Gap
 
 if TYPE_CHECKING:
     from exubio.run.live.options import LiveOptions
@@ -41,16 +41,18 @@ class LiveMonitor:
     calibration on the stream's first frames (with ``scale_bounds`` and ``off_segment``), checked in
     every verdict."""
 
-    def __init__(self, model: Model, protocol: Protocol, kin, points, rate: float, options: "LiveOptions",
-                 in_stream: np.ndarray, event: Callable[..., None]):
-        self.model, self.protocol, self.kin, self.points, self.rate = model, protocol, kin, points, rate
+    def __init__(self, binding: Binding, rate: float, options: "LiveOptions", in_stream: np.ndarray,
+                 event: Callable[..., None]):
+        model, protocol = binding.model, binding.protocol
+        self.binding, self.model, self.protocol, self.rate = binding, model, protocol, rate
+        self.kin, self.points = binding.kin, binding.points
         self.options, self.in_stream, self._event = options, in_stream, event
         self.marker_names = protocol.marker_names
         k, m = len(self.marker_names), model.n_coordinates
-        self.excluded = not_solved_mask(model, protocol, kin)
-        self.not_solved = tuple(n for n, e in zip(model.coordinate_names, self.excluded) if e)
-        self.unmeasurable = coordinates_not_measured_by_protocol(model, protocol, kin=kin)
-        self.structural = angle_status_of_protocol(model, protocol, kin=kin)  # once, not per frame
+        self.excluded = binding.not_solved
+        self.not_solved = binding.not_solved_names
+        self.unmeasurable = coordinates_not_measured_by_protocol(binding)
+        self.structural = angle_status_of_protocol(binding)  # held by the binding, not computed per frame
         self.measured = angles_measured(model, self.not_solved, unmeasurable=self.unmeasurable,
                                         structural=self.structural)
         self.ranges = model.coordinate_ranges_rad

@@ -12,6 +12,7 @@ import numpy as np
 
 from exubio.trust import quality as Q
 from exubio.model.angles import ISB_COLUMNS, measured_isb_joints
+from exubio.protocol.bind import Binding
 from exubio.run.live.sources import StreamInfo
 from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Reconstruction, Trajectories
 
@@ -44,10 +45,10 @@ _ISB_AS_ANATOMICAL = {"GH_X_elevation": "GH_phadke_X_elevation", "GH_Z_flexion":
 
 
 def angles_measured(model: Model, not_solved: Sequence[str], undetermined: Sequence[str] = (), /, *,
-                    protocol: Protocol | None = None, unmeasurable: Sequence[str] = (),
+                    binding: Binding | None = None, unmeasurable: Sequence[str] = (),
                     structural: Mapping[str, str] | None = None) -> np.ndarray:
     """(15,) bool, per ISB angle (ISB_COLUMNS order): measured by the markers. The one place the
-    live output decides it. With ``protocol``: an angle the marker set cannot measure in any
+    live output decides it. With ``binding`` (the model and protocol): an angle the marker set cannot measure in any
     reference posture (exubio.trust.assess.angle_status_of_protocol, the status the files give) is not
     measured (one it measures in some postures only is judged frame by frame: live applies neither
     the gimbal margin nor the uncertainty bound, which the files do); of the others, a joint's angles are not measured in a frame where one of its own
@@ -56,10 +57,10 @@ def angles_measured(model: Model, not_solved: Sequence[str], undetermined: Seque
     ``structural``: that status, computed once by a caller that asks frame after frame."""
     joints = set(measured_isb_joints(model, set(not_solved) | (set(undetermined) - set(unmeasurable))))
     out = np.array([j in joints for j in ISB_JOINT_OF], dtype=bool)
-    if structural is None and protocol is not None:
+    if structural is None and binding is not None:
         from exubio.trust.assess import angle_status_of_protocol
 
-        structural = angle_status_of_protocol(model, protocol)
+        structural = angle_status_of_protocol(binding)
     if structural is not None:
         status = structural
         for i, name in enumerate(ISB_NAMES):

@@ -29,7 +29,8 @@ __all__ = ["write_recording", "read_recorded_markers"]
 def write_recording(rec: LiveRecording, out_dir: str | os.PathLike, name: str, /, *, overwrite: bool = False,
                     report: bool = True) -> Path:
     """Write the recording into ``out_dir/name`` (see the module docstring); returns that folder."""
-    from exubio.trust.assess import assess_trial, trial_label_findings
+    from exubio.protocol.bind import bind
+    from exubio.trust.assess import TrialContext, assess_trial, trial_label_findings
     from exubio.io.c3d import write_c3d
     from exubio.io.results import atomic_write, write_json, writable_folder
     from exubio.run.pipeline import TrialInfo, TrialInputs, write_assessed
@@ -57,21 +58,22 @@ def write_recording(rec: LiveRecording, out_dir: str | os.PathLike, name: str, /
 
         atomic_write(tmp / f"{name}.markers.npz", markers)
         targets = rec.targets()
+        binding = bind(rec.model, rec.protocol)
         inputs = TrialInputs(TrialInfo(source=f"{name}.c3d", labels=rec.info.labels, ignored_labels=(),
-                                       units_in_file=rec.info.units, rate_hz=rec.info.rate_hz),
-                             rec.model, rec.protocol, targets)
+                                       units_in_file=rec.info.units, rate_hz=rec.info.rate_hz), binding, targets)
         recon = rec.reconstruction()
-        findings = trial_label_findings(rec.model, rec.protocol, targets, expect=generic_of(rec.model, rec.protocol))
-        assessment = assess_trial(rec.model, rec.protocol, targets, [recon], label_findings=findings,
-                                  calibration=rec.calibration)
+        findings = trial_label_findings(bind(*generic_of(rec.model, rec.protocol)), targets)
+        assessment = assess_trial(binding, targets, [recon],
+                                  context=TrialContext(label_findings=tuple(findings), calibration=rec.calibration))
         live = live_summary(rec)
         outputs = write_assessed(inputs, f"{name}.c3d", tmp, [(Method.PF, f"{name}.pf", recon, None)], assessment,
                                  notes=RunNotes(live=live))
         write_json(tmp / f"{name}.live.json", {**live, "offline_verdict": assessment.quality["pf"].to_dict()})
         if report:
-            from exubio.report.trial_report import build_trial_report
+            from exubio.report.trial_report import draw_trial_report
+            from exubio.run.outcome import reported
 
-            build_trial_report([outputs[0][1]["npz"]], tmp / f"{name}.report.pdf")
+            draw_trial_report([reported(outputs[0])], tmp / f"{name}.report.pdf")
         if final.exists():  # overwrite: the old folder goes only once the new one is complete
             old = out / f".{name}.{os.getpid()}.{secrets.token_hex(4)}.old"
             os.replace(final, old)
