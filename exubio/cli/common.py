@@ -107,38 +107,39 @@ def print_trial(result: TrialResult, quiet: bool) -> None:
         print(f"report: {result.report['pdf']} (+ .png){kept}")
     for m in result.methods:
         if quiet:
-            print_quality_short(m.method, m.paths, m.summary)
+            print_quality_short(m.method, m.paths, m.quality, m.summary)
         else:
-            print_quality(m.method, m.summary)
+            print_quality(m.method, m.quality, m.summary.get("not_measured"))
     for method, reason in result.failed.items():
         print(f"[{method}] FAILED, nothing written for it: {reason}")
         print(f"[{method}] the other method's result is written (exit code 1)")
 
 
-def print_quality(method: str, summ: dict) -> None:
-    q = summ.get("quality")
-    if not q:
+def print_quality(method: str, quality, not_measured=None) -> None:
+    """The verdict (exubio.trust.quality.Quality; None: not assessed) and every reason, then the angles
+    not measured (held or not observed)."""
+    if quality is None:
         return
-    print(f"[{method}] QUALITY: {q['verdict'].upper()}")
-    for r in q["reasons"]:
-        print(f"[{method}]   {r['level']}: {r['message']}")
-    if summ.get("not_measured"):
-        print(f"[{method}]   not measured (held or not observed): {', '.join(summ['not_measured'])}")
+    print(f"[{method}] QUALITY: {quality.verdict.value.upper()}")
+    for r in quality.reasons:
+        print(f"[{method}]   {r.level.value}: {r.message}")
+    if not_measured:
+        print(f"[{method}]   not measured (held or not observed): {', '.join(not_measured)}")
 
 
-def print_quality_short(method: str, paths: dict, summ: dict) -> None:
-    """-q: the verdict with the result files and the residual on one line, then only the reasons
-    that make it a check or a fail (the notes are in summary.json and the report)."""
-    q = summ.get("quality")
+def print_quality_short(method: str, paths: dict, quality, summ: dict) -> None:
+    """-q: the verdict (a Quality, or None) with the result files and the residual (as summary.json
+    says them) on one line, then only the reasons that make it a check or a fail (the notes are in
+    summary.json and the report)."""
     from exubio.io.result_names import SUFFIXES
 
     files = str(paths["summary"])[: -len(SUFFIXES["summary"])] + ".*"
     r = summ["residual_mm"]
-    verdict = q["verdict"].upper() if q else "NOT ASSESSED"
+    verdict = quality.verdict.value.upper() if quality is not None else "NOT ASSESSED"
     print(f"[{method}] QUALITY: {verdict}: {files} ({summ['n_frames']} frames, residual mean {r['mean']:.2f} mm)")
-    for reason in (q or {}).get("reasons", ()):
-        if reason["level"] != "note" or reason["code"] in QUIET_NOTES or reason["code"].startswith("live_"):
-            print(f"[{method}]   {reason['level']}: {reason['message']}")
+    for reason in (quality.reasons if quality is not None else ()):
+        if reason.level.value != "note" or reason.code in QUIET_NOTES or reason.code.startswith("live_"):
+            print(f"[{method}]   {reason.level.value}: {reason.message}")
 
 
 QUIET_NOTES = ("gap", "input_file", "method_failed", "label_repaired", "missing_marker")

@@ -50,7 +50,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
             these = [n for n, v in others.items() if v.endswith(label)]
             if these:
                 print(f"[{recon.method}] {label} (not compared with the truth): {', '.join(these)}")
-        print_quality(recon.method, summ)
+        print_quality(recon.method, o.quality, summ.get("not_measured"))
     agree = outputs[0].agreement_deg
     worst = max(agree, key=agree.get)
     print(f"PF-LS agreement (measured anatomical angles): max RMSE {agree[worst]:.3f} deg ({worst})")
