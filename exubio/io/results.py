@@ -74,17 +74,20 @@ def _table_text(time: np.ndarray, q_deg: np.ndarray, sep: str) -> str:
 
 
 def _write_table(path: Path, head: str, time: np.ndarray, q_rad: np.ndarray, sep: str,
-                 as_is: np.ndarray | None = None) -> Path:
+                 as_is: np.ndarray | None = None, *, paired: np.ndarray | None = None) -> Path:
     """``head`` then the rows (time, degrees; the columns ``as_is`` (bool mask) unconverted),
-    formatted a block of rows at a time (a long trial's table is never one string in memory)."""
+    formatted a block of rows at a time (a long trial's table is never one string in memory).
+    ``paired`` (same shape as ``q_rad``): each of its columns right after q_rad's, joined a block
+    at a time (no whole-trial copy of the joined table)."""
     def writer(tmp: Path) -> None:
         with open(tmp, "w", encoding="utf-8", newline="") as fh:
             fh.write(head)
             for a in range(0, time.shape[0], TABLE_BLOCK_ROWS):
                 b = min(a + TABLE_BLOCK_ROWS, time.shape[0])
-                block = np.degrees(q_rad[a:b])
+                rows = q_rad[a:b] if paired is None else np.stack([q_rad[a:b], paired[a:b]], axis=2).reshape(b - a, -1)
+                block = np.degrees(rows)
                 if as_is is not None:
-                    block[:, as_is] = q_rad[a:b][:, as_is]
+                    block[:, as_is] = rows[:, as_is]
                 fh.write(_table_text(time[a:b], block, sep))
 
     return atomic_write(path, writer)
@@ -106,13 +109,13 @@ def write_angles_csv(
     path = Path(path)
     time, names, q = _check_angles(path, time_s, coordinate_names, q_rad)
     head = "".join(f"# {c}\n" for c in comments)
+    u = None
     if uncertainty_rad is not None:
         u = np.asarray(uncertainty_rad, dtype=float)
         if u.shape != q.shape:
             raise InputError(f"{path}: uncertainty has shape {u.shape}, the angles {q.shape}")
         names = tuple(c for n in names for c in (n, n.removesuffix("_deg") + UNCERTAINTY_SUFFIX))
-        q = np.stack([q, u], axis=2).reshape(q.shape[0], -1)
-    return _write_table(path, head + ",".join(("time_s",) + names) + "\n", time, q, ",")
+    return _write_table(path, head + ",".join(("time_s",) + names) + "\n", time, q, ",", paired=u)
 
 
 def read_angles_csv(path: str | os.PathLike, /, *, uncertainty: bool = False):
