@@ -124,7 +124,8 @@ def determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present: np.nd
     return Determinacy(tuple(names), gain_all, und, tuple(names[j] for j in np.flatnonzero(excl)), gimbal)
 
 
-BLOCK_FRAMES = 2048  # frames whose noise gains are computed together (their matrices: ~60 kB per frame)
+BLOCK_FRAMES = 512  # frames whose noise gains and uncertainties are computed together (their per-frame matrices,
+# ~0.12 MB a frame at 18 markers, ~60 MB a block; 2048 took ~250 MB on a long trial; the values do not depend on it)
 
 
 def _gains(kin: Kinematics, points: PointSet, qs: np.ndarray, ok: np.ndarray, present: np.ndarray,
