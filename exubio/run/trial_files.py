@@ -48,7 +48,7 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
     from exubio.model.signs import convert, factors, mot_note
 
     moments = angles.moments
-    written = convert(angles.names, angles.values_rad, "isb", angles.signs)
+    written = angles.values_rad if angles.signs == "isb" else convert(angles.names, angles.values_rad, "isb", angles.signs)
     out = Path(out_dir)
     names = {"csv": f"{stem}.csv", "mot": f"{stem}.mot", "npz": f"{stem}.npz", "summary": f"{stem}.summary.json"}
     if moments is not None:
@@ -101,7 +101,7 @@ def _write_mot(path: Path, recon: Reconstruction, names: tuple[str, ...], writte
         notes = [*notes, "exubio_thorax_columns=0 (the thorax-fixed model: the ground is the thorax frame)"]
     else:
         notes = [*notes, "exubio_thorax_columns=measured (the thorax's pose in the lab, the lab turned so that Y is up)"]
-    results.write_mot(path, recon.time_s, (*names, *thorax_names), np.column_stack([written, values]),
+    results.write_mot(path, recon.time_s, (*names, *thorax_names), written, more=values,
                       name=stem, notes=notes, metres=THORAX_TRANSLATIONS)
 
 

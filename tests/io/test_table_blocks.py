@@ -40,3 +40,20 @@ def test_uncertainty_of_another_shape_is_refused_naming_the_file(tmp_path):
     time, q, u = _table(10, 3)
     with pytest.raises(InputError, match=r"bad\.csv: uncertainty has shape \(10, 2\)"):
         results.write_angles_csv(tmp_path / "bad.csv", time, ["a", "b", "c"], q, uncertainty_rad=u[:, :2])
+
+
+def test_mot_further_columns_are_the_joined_table(tmp_path, monkeypatch):
+    """The .mot's thorax columns given apart (``more``, joined a block at a time) make the file the
+    whole joined table makes, translations (metres) written as they are."""
+    time, q, _ = _table(29, 3)
+    thorax = np.column_stack([np.linspace(-0.2, 0.3, 29), np.linspace(0.9, 1.1, 29)])
+    names = ["a", "b", "c", "pelvis_tilt", "pelvis_tx"]
+    joined = results.write_mot(tmp_path / "joined.mot", time, names, np.column_stack([q, thorax]), metres=["pelvis_tx"])
+    monkeypatch.setattr(results, "TABLE_BLOCK_ROWS", 4)
+    apart = results.write_mot(tmp_path / "apart.mot", time, names, q, more=thorax, metres=["pelvis_tx"])
+    assert apart.read_bytes() == joined.read_bytes()
+    t_back, names_back, q_back = results.read_mot(apart)
+    assert names_back == tuple(names)
+    np.testing.assert_allclose(q_back[:, 3], thorax[:, 0], atol=1e-7)  # degrees in the file, radians back
+    with pytest.raises(InputError, match=r"bad\.mot: the further columns have shape \(28, 2\)"):
+        results.write_mot(tmp_path / "bad.mot", time, names, q, more=thorax[:-1])
