@@ -20,6 +20,7 @@ from typing import Any, Iterator, Mapping
 import numpy as np
 
 from exubio.errors import InputError
+from exubio.io.heap import release_freed_heap
 from exubio.io.results import done_with, in_progress
 from exubio.types import MarkerTargets, Reconstruction
 
@@ -127,6 +128,7 @@ class StreamedReconstruction:
 
     def reconstruction(self, *, timings_s: Mapping[str, float], info: Mapping[str, Any]) -> Reconstruction:
         """The whole run, its model points left in the part file (``model_points_m`` None)."""
+        release_freed_heap()  # the method's run is over: its working arrays go back to the system
         t = self.targets
         if self.first is None or self.filled != t.n_frames:
             raise ValueError(f"{t.source or 'trial'}: the method handed on {self.filled} of {t.n_frames} frames")

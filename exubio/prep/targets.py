@@ -14,6 +14,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from exubio.errors import InputError
+from exubio.io.heap import release_freed_heap
 from exubio.prep.filtering import as_series, detect_gaps, filter_markers, valid_runs
 from exubio.prep.thorax import MAX_THORAX_GAP_S, isb_landmarks, lab_landmarks, thorax_frame, to_thorax_frame
 from exubio.protocol.labels import resolve_labels
@@ -183,6 +184,7 @@ def prepare_targets(
     except InputError as exc:
         raise InputError(f"{src}: {exc}") from None
     time_out = time.copy() if at is None else at
+    release_freed_heap()  # the filter's and the splines' working arrays, freed: back to the system
     return MarkerTargets(
         time_s=time_out,
         marker_names=names,

@@ -24,6 +24,7 @@ from typing import Mapping
 
 import numpy as np
 
+from exubio.io.heap import release_freed_heap
 from exubio.model.kinematics import Kinematics, PointSet
 from exubio.trust.design import constrained_design
 from exubio.trust.gap_frames import computed_frames, nearest_sample
@@ -420,6 +421,7 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
     for j, nm in enumerate(names):
         if (status[:, j] == AngleStatus.MODELLED).any():
             rule_of[nm] = "; ".join(rules.get(h, f"hold: {h} fixed at its reference value") for h in held_names)
+    release_freed_heap()  # the blocks' matrices, freed: back to the system before the files are written
     return AngleDeterminacy(tuple(names), gain, share, status, rule_of, unc if bounded else None,
                             gimbal if bounded else None)
 
