@@ -94,14 +94,16 @@ def read_c3d(path: str | os.PathLike, /) -> Trajectories:
     unit = _units(path, params, findings)
     rate = raw.rate_hz if raw.rate_hz is not None else _rate(path, params, header_rate)
     raw_labels = _labels(path, params, points.shape[1])
-    positions = _positions(points, residuals) * METRES_PER_UNIT[unit.split()[0]]
+    positions = _positions(points, residuals)
+    del points, residuals  # the file's arrays: gone before the positions are scaled and selected
+    positions *= METRES_PER_UNIT[unit.split()[0]]  # in place: no second whole-trial array
     keep, labels, ignored = _select_markers(path, raw_labels, positions, findings)
     for finding in findings:
         logger.warning("%s", finding)
     n_frames = positions.shape[0]
     return Trajectories(
         labels=tuple(labels),
-        positions_m=positions[:, keep, :],
+        positions_m=positions if list(keep) == list(range(positions.shape[1])) else positions[:, keep, :],
         rate_hz=rate,
         time_s=np.arange(n_frames) / rate,
         source=str(path),
