@@ -62,7 +62,7 @@ def _check_angles(path: Path, time_s: np.ndarray, names: Sequence[str], q_rad: n
     return time, names, q
 
 
-TABLE_BLOCK_ROWS = 20000  # text tables are formatted and written this many rows at a time
+TABLE_BLOCK_ROWS = 5000  # text tables are formatted and written this many rows at a time (~3 MB of text a block)
 
 
 def _table_text(time: np.ndarray, q_deg: np.ndarray, sep: str) -> str:
