@@ -2,6 +2,7 @@
 
     python benchmarks/memory_stages.py TRIAL --method pf             # peak RSS per stage
     python benchmarks/memory_stages.py TRIAL --method ls --allocations 8
+    python benchmarks/memory_stages.py TRIAL --method pf --no-trim   # without giving the C heap back
 
 Runs ``exubio reconstruct TRIAL --method M --no-report`` in this process while a thread samples, every
 ``--every`` seconds, the process's resident memory (/proc/self/statm) and the stage the main thread
@@ -86,8 +87,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default="/tmp/exubio_memory_stages", help="output folder (results replaced)")
     ap.add_argument("--every", type=float, default=0.1, help="sampling period, s")
     ap.add_argument("--allocations", type=int, default=0, help="with tracemalloc: the N largest allocations per stage")
+    ap.add_argument("--no-trim", action="store_true", help="the C heap not given back between stages "
+                    "(exubio.io.heap.release_freed_heap made a no-op): what the trimming saves")
     args = ap.parse_args(argv)
     from exubio.cli import main as exubio_main
+
+    if args.no_trim:
+        from exubio.io import heap
+
+        heap._LIBC[:] = [None]  # as where there is no glibc
 
     if args.allocations:
         tracemalloc.start(1)
