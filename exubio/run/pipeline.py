@@ -288,6 +288,7 @@ class _Run:
             raise ReconstructionError("; ".join(f"{m.upper()}: {reason}" for m, reason in failures.items()))
         from exubio.io.streamed import without_rates  # the methods are done: the rest reads the positions
 
+        # (the one field of this frozen run replaced, so that nothing holds the rates from here on)
         object.__setattr__(self, "inputs", dataclasses.replace(inputs, targets=without_rates(inputs.targets)))
         inputs = self.inputs
         assessment = self.assess(recons)
