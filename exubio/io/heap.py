@@ -5,9 +5,9 @@ method's run, the assessment, the files). glibc returns a freed block to the sys
 mapped on its own (above its mmap threshold, which rises to 32 MB as large blocks are freed) or lies
 at the top of the heap; the rest stays in the process, fragmented, counted in its resident memory
 and not always reusable by the next stage's arrays of other sizes. ``malloc_trim`` gives those free
-pages back. On the 20-minute trial of ``benchmarks/bench_memory.py`` this released 110-220 MB at
-each stage boundary (benchmarks/README.md, issue 38's memory bound). Elsewhere than glibc it does
-nothing.
+pages back. Between the stages of the 20-minute trial of ``benchmarks/bench_memory.py`` it lowers
+PF's peak from 940 to 884 MB (``benchmarks/memory_stages.py --no-trim``; benchmarks/README.md, issue
+38's memory bound). Elsewhere than glibc it does nothing.
 """
 from __future__ import annotations
 
