@@ -52,6 +52,7 @@ from exubio.io.c3d_raw import DEC as _DEC
 from exubio.io.c3d_raw import HEADER_CLIPPED as _HEADER_CLIPPED
 from exubio.io.c3d_raw import check_raw_header, declared_frame_count, declared_point_count, header_count_findings
 from exubio.io.c3d_raw import parameter_records
+from exubio.io.heap import release_freed_heap
 from exubio.io.c3d_raw import raw_header as _raw_header
 from exubio.io.c3d_raw import raw_parameters as _raw_parameters  # noqa: F401 (the tests patch files through it)
 from exubio.io.labels import keep_one_per_label
@@ -89,18 +90,20 @@ def read_c3d(path: str | os.PathLike, /) -> Trajectories:
     params = c3d["parameters"]["POINT"]
     header_rate = c3d["header"]["points"]["frame_rate"]
     del c3d  # ezc3d's per-sample C++ objects: gone before the arrays below are made
-    _release_freed_heap()
+    release_freed_heap()  # ezc3d's ~4 kB per frame of 22 markers: 106 MB kept after a 24,000-frame file, 18 MB trimmed
     unit = _units(path, params, findings)
     rate = raw.rate_hz if raw.rate_hz is not None else _rate(path, params, header_rate)
     raw_labels = _labels(path, params, points.shape[1])
-    positions = _positions(points, residuals) * METRES_PER_UNIT[unit.split()[0]]
+    positions = _positions(points, residuals)
+    del points, residuals  # the file's arrays: gone before the positions are scaled and selected
+    positions *= METRES_PER_UNIT[unit.split()[0]]  # in place: no second whole-trial array
     keep, labels, ignored = _select_markers(path, raw_labels, positions, findings)
     for finding in findings:
         logger.warning("%s", finding)
     n_frames = positions.shape[0]
     return Trajectories(
         labels=tuple(labels),
-        positions_m=positions[:, keep, :],
+        positions_m=positions if list(keep) == list(range(positions.shape[1])) else positions[:, keep, :],
         rate_hz=rate,
         time_s=np.arange(n_frames) / rate,
         source=str(path),
@@ -177,21 +180,6 @@ def _no_point_reason(path: Path, c3d: Any) -> str:
     n_analog = c3d["data"]["analogs"].shape[1]
     return (f"{path}: no 3-D point: POINT:USED is 0 (analog channels only: {n_analog}); exubio reads marker "
             f"trajectories, so there is nothing to read")
-
-
-def _release_freed_heap() -> None:
-    """Give the C heap ezc3d freed back to the system. ezc3d holds every sample as a small C++
-    object (~4 kB per frame of 22 markers); freed, they stay in the process's heap (glibc keeps
-    fragmented small blocks), which measured 106 MB after reading a 24,000-frame file and 18 MB
-    after ``malloc_trim``. Elsewhere than glibc this does nothing."""
-    import ctypes
-    import ctypes.util
-
-    try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        libc.malloc_trim(0)
-    except (OSError, AttributeError):  # not glibc
-        pass
 
 
 def _check_not_truncated(path: Path, n_read: int) -> None:

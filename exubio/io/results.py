@@ -39,16 +39,17 @@ _TIME_FORMAT = "%.6f"  # seconds
 # --------------------------------------------------------------------------------------------
 # Angles: CSV and OpenSim .mot
 # --------------------------------------------------------------------------------------------
-def _check_angles(path: Path, time_s: np.ndarray, names: Sequence[str], q_rad: np.ndarray) -> tuple:
+def _check_angles(path: Path, time_s: np.ndarray, names: Sequence[str], q_rad: np.ndarray, *, n_more: int = 0) -> tuple:
+    """(time, names, q) checked: q holds the columns of all ``names`` but the last ``n_more``."""
     time = np.asarray(time_s, dtype=float)
     q = np.asarray(q_rad, dtype=float)
     names = tuple(str(n) for n in names)
     if time.ndim != 1:
         raise InputError(f"{path}: time must be 1-D, got shape {time.shape}")
-    if q.shape != (time.shape[0], len(names)):
+    if q.shape != (time.shape[0], len(names) - n_more):
         raise InputError(
             f"{path}: angles have shape {q.shape}, expected (n_frames, n_coordinates) = "
-            f"({time.shape[0]}, {len(names)})"
+            f"({time.shape[0]}, {len(names) - n_more})"
         )
     if len(set(names)) != len(names):
         raise InputError(f"{path}: duplicate coordinate names in {list(names)}")
@@ -61,7 +62,7 @@ def _check_angles(path: Path, time_s: np.ndarray, names: Sequence[str], q_rad: n
     return time, names, q
 
 
-TABLE_BLOCK_ROWS = 20000  # text tables are formatted and written this many rows at a time
+TABLE_BLOCK_ROWS = 5000  # text tables are formatted and written this many rows at a time (~3 MB of text a block)
 
 
 def _table_text(time: np.ndarray, q_deg: np.ndarray, sep: str) -> str:
@@ -74,17 +75,22 @@ def _table_text(time: np.ndarray, q_deg: np.ndarray, sep: str) -> str:
 
 
 def _write_table(path: Path, head: str, time: np.ndarray, q_rad: np.ndarray, sep: str,
-                 as_is: np.ndarray | None = None) -> Path:
+                 as_is: np.ndarray | None = None, *, paired: np.ndarray | None = None,
+                 after: np.ndarray | None = None) -> Path:
     """``head`` then the rows (time, degrees; the columns ``as_is`` (bool mask) unconverted),
-    formatted a block of rows at a time (a long trial's table is never one string in memory)."""
+    formatted a block of rows at a time (a long trial's table is never one string in memory).
+    ``paired`` (same shape as ``q_rad``): each of its columns right after q_rad's; ``after``: more
+    columns after q_rad's; both joined a block at a time (no whole-trial copy of the joined table)."""
     def writer(tmp: Path) -> None:
         with open(tmp, "w", encoding="utf-8", newline="") as fh:
             fh.write(head)
             for a in range(0, time.shape[0], TABLE_BLOCK_ROWS):
                 b = min(a + TABLE_BLOCK_ROWS, time.shape[0])
-                block = np.degrees(q_rad[a:b])
+                rows = q_rad[a:b] if paired is None else np.stack([q_rad[a:b], paired[a:b]], axis=2).reshape(b - a, -1)
+                rows = rows if after is None else np.column_stack([rows, after[a:b]])
+                block = np.degrees(rows)
                 if as_is is not None:
-                    block[:, as_is] = q_rad[a:b][:, as_is]
+                    block[:, as_is] = rows[:, as_is]
                 fh.write(_table_text(time[a:b], block, sep))
 
     return atomic_write(path, writer)
@@ -106,13 +112,13 @@ def write_angles_csv(
     path = Path(path)
     time, names, q = _check_angles(path, time_s, coordinate_names, q_rad)
     head = "".join(f"# {c}\n" for c in comments)
+    u = None
     if uncertainty_rad is not None:
         u = np.asarray(uncertainty_rad, dtype=float)
         if u.shape != q.shape:
             raise InputError(f"{path}: uncertainty has shape {u.shape}, the angles {q.shape}")
         names = tuple(c for n in names for c in (n, n.removesuffix("_deg") + UNCERTAINTY_SUFFIX))
-        q = np.stack([q, u], axis=2).reshape(q.shape[0], -1)
-    return _write_table(path, head + ",".join(("time_s",) + names) + "\n", time, q, ",")
+    return _write_table(path, head + ",".join(("time_s",) + names) + "\n", time, q, ",", paired=u)
 
 
 def read_angles_csv(path: str | os.PathLike, /, *, uncertainty: bool = False):
@@ -183,14 +189,21 @@ def write_mot(
     name: str = "exubio",
     notes: Sequence[str] = (),
     metres: Sequence[str] = (),
+    more: np.ndarray | None = None,
 ) -> Path:
     """OpenSim motion file (.mot, storage version 1): angles in degrees (``inDegrees=yes``),
     tab-separated, ``time`` then the coordinates. ``notes``: single-line ``key=value`` remarks
     written in the header before ``endheader`` (e.g. coordinates that are not measurements).
     ``metres``: coordinates that are translations (m; e.g. the thorax's free joint,
-    exubio.export.thorax): written as they are (OpenSim converts only rotational coordinates)."""
+    exubio.export.thorax): written as they are (OpenSim converts only rotational coordinates).
+    ``more`` (n, j): the last j coordinates' values, after q_rad's (n, len(names) - j) columns
+    (joined a block of rows at a time: no whole-trial copy of the joined table)."""
     path = Path(path)
-    time, names, q = _check_angles(path, time_s, coordinate_names, q_rad)
+    extra = None if more is None else np.asarray(more, dtype=float)
+    j = 0 if extra is None else extra.shape[-1]
+    time, names, q = _check_angles(path, time_s, coordinate_names, q_rad, n_more=j)
+    if extra is not None and extra.shape != (time.shape[0], j):
+        raise InputError(f"{path}: the further columns have shape {extra.shape}, expected ({time.shape[0]}, {j})")
     if "\n" in name or "\r" in name:
         raise InputError(f"{path}: .mot name must be a single line, got {name!r}")
     if any("\n" in n or "\r" in n or "=" not in n for n in notes):
@@ -203,7 +216,7 @@ def write_mot(
     if unknown:
         raise InputError(f"{path}: metres names {unknown}, which are not columns of the .mot")
     as_is = np.array([n in set(metres) for n in names], dtype=bool) if metres else None
-    return _write_table(path, header, time, q, "\t", as_is)
+    return _write_table(path, header, time, q, "\t", as_is, after=extra)
 
 
 def read_mot(path: str | os.PathLike, /) -> tuple[np.ndarray, tuple[str, ...], np.ndarray]:

@@ -53,7 +53,7 @@ from exubio.model.kinematics import Kinematics
 from exubio.methods.common import CHUNK_FRAMES, ChunkSink, Collector, assemble, target_chunk
 from exubio.methods.constraints import project_on_constraints
 from exubio.model.frame_kinematics import FrameInverse
-from exubio.methods.pf_time import integration_step, lead_in_frames, with_lead_in
+from exubio.methods.pf_time import integration_step, lead_in_frames, lead_in_run
 from exubio.types import StopReason
 from exubio.methods.poses import RATES_REGULARISATION, Limits, LSOptions, solve_positions, solve_rates
 from exubio.protocol.bind import Binding, bind
@@ -259,8 +259,8 @@ def _stream_pf_once(binding: Binding, targets: MarkerTargets, sink: ChunkSink, d
                  else protocol.cutoff_hz)
     step = integration_step(dt, options.step_s, cutoff_hz)
     lead = lead_in_frames(options.lead_in_s, dt, step)
-    run_targets = with_lead_in(targets, lead, dt)
-    setup = pf_setup(binding, run_targets, options)  # the start state at the lead-in's first frame
+    start, run_pos, run_vel = lead_in_run(targets, lead, dt)  # no whole-trial copy beyond what the run reads
+    setup = pf_setup(binding, start, options)  # the start state at the lead-in's first frame
     kin, points, held, q0, system = binding.kin, binding.points, binding.held, setup.q0, setup.system
     t1, t2 = t0 + setup.equilibrium_s, t0 + setup.equilibrium_s + setup.build_s
     integ = IntegratorOptions(step_s=step,
@@ -280,7 +280,7 @@ def _stream_pf_once(binding: Binding, targets: MarkerTargets, sink: ChunkSink, d
                 progress(k)
 
     frames = _Frames(kin, points, targets, q0, held, options, sink, dt, lead=lead)
-    run = system.run(run_targets.positions_m, run_targets.velocities_m_s, run_targets.present, frame_dt_s=dt,
+    run = system.run(run_pos, run_vel, ~np.isnan(run_pos).any(axis=2), frame_dt_s=dt,
                      options=integ, progress=tick, on_frames=frames, chunk_frames=chunk_frames,
                      first_chunk_extra=lead)
     completed = max(run.completed_frames - lead, 0)

@@ -11,7 +11,7 @@ import numpy as np
 
 from exubio.types import MarkerTargets
 
-__all__ = ["LEAD_IN_MAX_BEND_M", "integration_step", "lead_in_frames", "with_lead_in"]
+__all__ = ["LEAD_IN_MAX_BEND_M", "integration_step", "lead_in_frames", "lead_in_run", "with_lead_in"]
 
 log = logging.getLogger("exubio.methods.pf")
 
@@ -59,6 +59,31 @@ def with_lead_in(targets: MarkerTargets, lead: int, frame_dt_s: float, /) -> Mar
     spline values; a marker missing there is missing in the lead-in)."""
     if lead <= 0:
         return targets
+    t, pos, vel, acc = _lead_in(targets, lead, frame_dt_s)
+    return dataclasses.replace(
+        targets, time_s=np.concatenate([t, targets.time_s]),
+        positions_m=np.concatenate([pos, targets.positions_m]), velocities_m_s=np.concatenate([vel, targets.velocities_m_s]),
+        accelerations_m_s2=np.concatenate([acc, targets.accelerations_m_s2]), gaps=())
+
+
+def lead_in_run(targets: MarkerTargets, lead: int, frame_dt_s: float, /
+                ) -> tuple[MarkerTargets, np.ndarray, np.ndarray]:
+    """What a PF run with ``lead`` frames of lead-in reads (the values of :func:`with_lead_in`,
+    without its whole-trial copy of the accelerations, which the run does not read): (the lead-in
+    and the trial's first frame as targets: the start, pf_setup; the positions and velocities of
+    the lead-in then of every frame: the springs, PFSystem.run)."""
+    if lead <= 0:
+        return targets, targets.positions_m, targets.velocities_m_s
+    t, pos, vel, acc = _lead_in(targets, lead, frame_dt_s)
+    start = dataclasses.replace(
+        targets, time_s=np.concatenate([t, targets.time_s[:1]]), positions_m=np.concatenate([pos, targets.positions_m[:1]]),
+        velocities_m_s=np.concatenate([vel, targets.velocities_m_s[:1]]),
+        accelerations_m_s2=np.concatenate([acc, targets.accelerations_m_s2[:1]]), gaps=())
+    return start, np.concatenate([pos, targets.positions_m]), np.concatenate([vel, targets.velocities_m_s])
+
+
+def _lead_in(targets: MarkerTargets, lead: int, frame_dt_s: float, /) -> tuple[np.ndarray, ...]:
+    """The lead-in's times, positions, velocities and accelerations (see with_lead_in)."""
     t = (np.arange(-lead, 0) * frame_dt_s)[:, None, None]
     p0, v0, a0 = (np.nan_to_num(x[:1]) for x in (targets.positions_m, targets.velocities_m_s,
                                                  targets.accelerations_m_s2))
@@ -71,7 +96,4 @@ def with_lead_in(targets: MarkerTargets, lead: int, frame_dt_s: float, /) -> Mar
     pos = np.where(missing, np.nan, p0 + v0 * t + 0.5 * a0 * t**2)
     vel = np.where(missing, np.nan, v0 + a0 * t)
     acc = np.where(missing, np.nan, np.broadcast_to(a0, pos.shape))
-    return dataclasses.replace(
-        targets, time_s=np.concatenate([targets.time_s[0] + t[:, 0, 0], targets.time_s]),
-        positions_m=np.concatenate([pos, targets.positions_m]), velocities_m_s=np.concatenate([vel, targets.velocities_m_s]),
-        accelerations_m_s2=np.concatenate([acc, targets.accelerations_m_s2]), gaps=())
+    return targets.time_s[0] + t[:, 0, 0], pos, vel, acc

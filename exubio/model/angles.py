@@ -420,6 +420,7 @@ def anatomical_table(model: Model, q: np.ndarray, /, *, kinematics: Kinematics |
         cols = angles_of_frames(Rg)
         distal = np.stack([part[:, names.index(c)] for c in _DISTAL.values()], axis=-1)
         out[a:a + ISB_BLOCK_FRAMES] = np.concatenate([cols[j] for j in _FRAME_ANGLE_SETS] + [distal], axis=-1)
-    if unwrap and out.shape[0] > 1:
-        out = np.unwrap(out, axis=0)
+    if unwrap and out.shape[0] > 1:  # a column at a time: np.unwrap makes ~6 temporaries of its input's size
+        for j in range(out.shape[1]):
+            out[:, j] = np.unwrap(out[:, j])
     return ANATOMICAL_COLUMNS, (out[0] if single else out)

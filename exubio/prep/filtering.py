@@ -371,7 +371,8 @@ def _residual_rms(s: np.ndarray, used: np.ndarray, rate_hz: float, cutoffs: np.n
     out = np.full((cutoffs.size, s.shape[1]), np.nan)
     runs = _runs(s)
     for i, c in enumerate(cutoffs):
-        diff = _lowpass_series(s, rate_hz=rate_hz, cutoff_hz=c, order=order, runs=runs)[0] - s
+        diff = _lowpass_series(s, rate_hz=rate_hz, cutoff_hz=c, order=order, runs=runs)[0]
+        diff -= s  # in place: one whole-trial array per cut-off, not two
         diff[~used] = 0.0
         sq = np.einsum("nmd,nmd->m", diff, diff)
         with np.errstate(invalid="ignore", divide="ignore"):

@@ -14,6 +14,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from exubio.errors import InputError
+from exubio.io.heap import release_freed_heap
 from exubio.prep.filtering import as_series, detect_gaps, filter_markers, valid_runs
 from exubio.prep.thorax import MAX_THORAX_GAP_S, isb_landmarks, lab_landmarks, thorax_frame, to_thorax_frame
 from exubio.protocol.labels import resolve_labels
@@ -31,7 +32,7 @@ PLAUSIBLE_MEDIAN_DISTANCE_M = (0.02, 1.5)
 # Spline derivatives
 # --------------------------------------------------------------------------------------------
 def spline_derivatives(
-    time: np.ndarray, positions: np.ndarray, /, *, at: np.ndarray | None = None
+    time: np.ndarray, positions: np.ndarray, /, *, at: np.ndarray | None = None, overwrite_positions: bool = False
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Positions, velocities and accelerations from a cubic spline (scipy ``CubicSpline``,
     not-a-knot ends) through each contiguous run of valid samples of each marker.
@@ -43,6 +44,10 @@ def spline_derivatives(
     Derivatives are analytic derivatives of the spline. A run of 2 samples gives a straight
     line (constant velocity, zero acceleration); an isolated single sample gets zero velocity
     and acceleration.
+
+    ``overwrite_positions`` (with ``at`` None): the positions returned are ``positions`` itself,
+    its samples outside every valid run set to NaN (no whole-trial copy: for a caller that owns
+    the array and drops it, as :func:`prepare_targets` does).
     """
     t = np.asarray(time, dtype=float)
     p = np.asarray(positions, dtype=float)
@@ -53,11 +58,14 @@ def spline_derivatives(
     s = as_series(p)
     t_out = t if at is None else np.asarray(at, dtype=float)
     shape_out = (t_out.shape[0],) + s.shape[1:]
-    pos = np.full(shape_out, np.nan)
+    reuse = overwrite_positions and at is None
+    pos = s if reuse else np.full(shape_out, np.nan)
     vel = np.full(shape_out, np.nan)
     acc = np.full(shape_out, np.nan)
     for j in range(s.shape[1]):
         valid = np.isfinite(s[:, j]).all(axis=1)
+        if reuse:
+            s[~valid, j] = np.nan  # what the copy holds there; the valid runs, the splines' data, stay as they are
         for start, stop in valid_runs(valid):
             t0, t1 = t[start], t[stop - 1]
             if at is None:
@@ -73,7 +81,8 @@ def spline_derivatives(
                 continue
             spline = CubicSpline(t[start:stop], s[start:stop, j], axis=0)
             tt = t_out[sel]
-            pos[sel, j] = s[start:stop, j] if at is None else spline(tt)
+            if not reuse:
+                pos[sel, j] = s[start:stop, j] if at is None else spline(tt)
             vel[sel, j] = spline(tt, 1)
             acc[sel, j] = spline(tt, 2)
     shape = (t_out.shape[0],) + p.shape[1:] if p.ndim > 1 else (t_out.shape[0],)
@@ -179,10 +188,11 @@ def prepare_targets(
         n_new = int(np.floor((time[-1] - time[0]) * resample_hz + 1e-9)) + 1
         at = time[0] + np.arange(n_new) / resample_hz
     try:
-        pos, vel, acc = spline_derivatives(time, pos, at=at)
+        pos, vel, acc = spline_derivatives(time, pos, at=at, overwrite_positions=True)  # pos: this function's own
     except InputError as exc:
         raise InputError(f"{src}: {exc}") from None
     time_out = time.copy() if at is None else at
+    release_freed_heap()  # the filter's and the splines' working arrays, freed: back to the system
     return MarkerTargets(
         time_s=time_out,
         marker_names=names,

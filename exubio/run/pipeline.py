@@ -230,10 +230,10 @@ def reconstruct_file(trial_path: str | Path, out_dir: str | Path, /, *, methods:
             log.info("kept the complete result sets of an earlier run of the same inputs: %s", ", ".join(stems))
             return [kept[s] for s in stems]
         results.prepare_output_dir(out_dir, [s for s in stems if s not in kept], overwrite=settings.overwrite)
-        inputs = load_inputs(trajectories if trajectories is not None else trial_path, session,
-                             repair_labels=settings.repair_labels, prepared=prepared,
-                             moment_request=_request(settings))
-        run = _Run(inputs, Path(trial_path), Path(out_dir), settings, calibration, keys, kept)
+        run = _Run(load_inputs(trajectories if trajectories is not None else trial_path, session,
+                               repair_labels=settings.repair_labels, prepared=prepared,
+                               moment_request=_request(settings)), Path(trial_path), Path(out_dir), settings, calibration,
+                   keys, kept)  # the run alone holds the inputs: their rates go once the methods are done
         return run.reconstruct(methods, stems, parts, StreamedReconstruction)
 
 
@@ -272,6 +272,11 @@ class _Run:
             done.append((method, stem))
         if not recons:
             raise ReconstructionError("; ".join(f"{m.upper()}: {reason}" for m, reason in failures.items()))
+        from exubio.io.streamed import without_rates  # the methods are done: the rest reads the positions
+
+        # (the one field of this frozen run replaced, so that nothing holds the rates from here on)
+        object.__setattr__(self, "inputs", dataclasses.replace(inputs, targets=without_rates(inputs.targets)))
+        inputs = self.inputs
         assessment = self.assess(recons)
         out = []
         for (method, stem), recon, sink in zip(done, recons, sinks):

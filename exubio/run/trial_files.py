@@ -49,7 +49,7 @@ def write_outputs(recon: Reconstruction, out_dir: str | Path, stem: str, /, *,
     from exubio.model.signs import convert, factors, mot_note
 
     moments = angles.moments
-    written = convert(angles.names, angles.values_rad, "isb", angles.signs)
+    written = angles.values_rad if angles.signs == "isb" else convert(angles.names, angles.values_rad, "isb", angles.signs)
     out = Path(out_dir)
     names = set_names(stem, moments=moments is not None, thorax=getattr(moments, "thorax", None) is not None)
     notes = [f"exubio_{line.split(':', 1)[0].replace(' ', '_')}={line.split(':', 1)[1].strip()}"
@@ -98,7 +98,7 @@ def _write_mot(path: Path, recon: Reconstruction, names: tuple[str, ...], writte
         notes = [*notes, "exubio_thorax_columns=0 (the thorax-fixed model: the ground is the thorax frame)"]
     else:
         notes = [*notes, "exubio_thorax_columns=measured (the thorax's pose in the lab, the lab turned so that Y is up)"]
-    results.write_mot(path, recon.time_s, (*names, *thorax_names), np.column_stack([written, values]),
+    results.write_mot(path, recon.time_s, (*names, *thorax_names), written, more=values,
                       name=stem, notes=notes, metres=THORAX_TRANSLATIONS)
 
 

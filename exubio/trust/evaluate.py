@@ -20,8 +20,8 @@ def residual_statistics(recon: Reconstruction, /) -> dict[str, Any]:
         return {"mean": None, "sd": None, "max": None, "max_marker": None}
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # an optional marker may be absent throughout
-        per_frame_mean = np.nanmean(np.where(valid, res, np.nan), axis=1)
-        per_frame_sd = np.nanstd(np.where(valid, res, np.nan), axis=1)
+        per_frame_mean = np.nanmean(res, axis=1)  # res is NaN wherever it is not valid: no masked copy
+        per_frame_sd = np.nanstd(res, axis=1)
         per_marker_rmse = np.sqrt(np.nanmean(res**2, axis=0))
         per_marker_max = np.nanmax(res, axis=0)
     j = int(np.nanargmax(per_frame_mean))

@@ -24,6 +24,7 @@ from typing import Mapping
 
 import numpy as np
 
+from exubio.io.heap import release_freed_heap
 from exubio.model.kinematics import Kinematics, PointSet
 from exubio.trust.design import constrained_design
 from exubio.trust.gap_frames import computed_frames, nearest_sample
@@ -124,7 +125,8 @@ def determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present: np.nd
     return Determinacy(tuple(names), gain_all, und, tuple(names[j] for j in np.flatnonzero(excl)), gimbal)
 
 
-BLOCK_FRAMES = 2048  # frames whose noise gains are computed together (their matrices: ~60 kB per frame)
+BLOCK_FRAMES = 512  # frames whose noise gains and uncertainties are computed together (their per-frame matrices,
+# ~0.12 MB a frame at 18 markers, ~60 MB a block; 2048 took ~250 MB on a long trial; the values do not depend on it)
 
 
 def _gains(kin: Kinematics, points: PointSet, qs: np.ndarray, ok: np.ndarray, present: np.ndarray,
@@ -419,6 +421,7 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
     for j, nm in enumerate(names):
         if (status[:, j] == AngleStatus.MODELLED).any():
             rule_of[nm] = "; ".join(rules.get(h, f"hold: {h} fixed at its reference value") for h in held_names)
+    release_freed_heap()  # the blocks' matrices, freed: back to the system before the files are written
     return AngleDeterminacy(tuple(names), gain, share, status, rule_of, unc if bounded else None,
                             gimbal if bounded else None)
 

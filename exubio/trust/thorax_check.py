@@ -81,6 +81,10 @@ def _model_positions(model: Model, protocol: Protocol, keys, refs) -> np.ndarray
     return np.array(out)
 
 
+BLOCK_FRAMES = 8192
+"""Frames whose landmark distances are computed together (their differences: ~1 kB a frame)."""
+
+
 def thorax_label_fit(traj: Trajectories, protocol: Protocol, model: Model, /) -> ThoraxLabels | None:
     """The fit of every assignment of the trial's thorax labels (None: an identity thorax frame,
     or landmarks the model lacks)."""
@@ -97,8 +101,12 @@ def thorax_label_fit(traj: Trajectories, protocol: Protocol, model: Model, /) ->
         return None
     cols = [match.thorax_columns[k] for k in keys] + [match.columns[m.name] for m in refs]
     P = traj.positions_m[:, cols]
+    dist = np.empty((P.shape[0], len(cols), len(cols)))
+    for a in range(0, P.shape[0], BLOCK_FRAMES):  # a block at a time: no (frames, n, n, 3) array of a long trial
+        Q = P[a:a + BLOCK_FRAMES]
+        dist[a:a + BLOCK_FRAMES] = np.linalg.norm(Q[:, :, None] - Q[:, None], axis=-1)
     with np.errstate(invalid="ignore"):
-        D = np.nanmedian(np.linalg.norm(P[:, :, None] - P[:, None], axis=-1), axis=0)
+        D = np.nanmedian(dist, axis=0)
     DM = np.linalg.norm(M[:, None] - M[None], axis=-1)
     nk, n = len(keys), len(cols)
     pairs = [(i, j) for i in range(nk) for j in range(i + 1, n)]

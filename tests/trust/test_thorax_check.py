@@ -68,3 +68,17 @@ def test_a_simulated_trial_passes_and_its_swap_is_refused(tmp_path):
     load_inputs(sim.trajectories)  # accepted as labelled
     with pytest.raises(InputError, match="C7.*T10|T10.*C7"):
         load_inputs(_swap(sim.trajectories, "C7", "T10"))
+
+
+@needs_data
+def test_the_fit_does_not_depend_on_the_block_of_frames(monkeypatch):
+    """The landmark distances are computed a block of frames at a time (issue 38's memory bound: no
+    (frames, n, n, 3) array of a long trial): the fit is the same to the last bit whatever the block."""
+    import exubio.trust.thorax_check as tc
+
+    model, protocol = load_model_and_protocol()
+    traj = _swap(read_trial(DATA / "c3d" / "bioptim_exo_martin_dynamique.c3d"), "MAN", "XYP")
+    whole = thorax_label_fit(traj, protocol, model)
+    monkeypatch.setattr(tc, "BLOCK_FRAMES", 97)  # many blocks, the last one short
+    blocks = thorax_label_fit(traj, protocol, model)
+    assert blocks == whole and blocks.swapped
