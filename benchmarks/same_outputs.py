@@ -108,16 +108,15 @@ PATH_PLACEHOLDERS = {
 KNOWN_CHANGES: tuple = ()
 """Changes made on purpose since the base the tests compare with (tests/project/test_same_outputs.py BASE),
 each a (side, pattern, replacement, why) undone before the comparison. Empty: the base moved to
-2acf5d1 (December 2026), after this session's changes made on purpose, each checked before the move:
-the studies' move (notes name studies/README.md), the sign convention each output names (issue 37:
-a CSV and a .mot header line, summary.json's and the .npz's ``signs``, the .npz's ``angle_signs``,
-the study table's ``signs`` column), the .mot's six thorax columns and summary.json's
-``pf_inertia_scale`` (issue 36), and the uncertainty's scapula-humerus cross term (issue 33: every
-``*_u_deg``, and ST upward rotation not measured in some frames of the demo). The refactors of
-issue 34 (the CLI per command, the lists of methods and checks, the tests' layout, the splits of
-synth/simulate, io/results, run/pipeline, run/study, report/trial_report and protocol/load) were
-compared with the commits before them: identical (demo and study; the CLI and the lists also the
-real trials). The earlier entries are in this file's history."""
+30ce9ee (5 December 2026), after issue 38's compiled kernels (numba: LS's Gauss-Newton terms and
+rates, forward kinematics, the decode, the inverse map, the ISB angles) moved every output by
+round-off, checked before the move (`--base da435a6`): demo, q 2.3e-9 rad (PF) and 8.8e-10 (LS),
+q-dot 1.3e-8 rad/s, q-ddot 1.1e-7 rad/s^2, model points and residuals 3e-11 m, the angles' CSV and
+.mot in their last printed digit; the study, q 9.3e-9 rad, q-ddot 2.9e-6 rad/s^2, the calibrated
+model and its exports 2.8e-9; accuracy against the truth the same to every printed digit
+(benchmarks/README.md). The binding and the typed outcome (issue 34) and the memory work (issue
+38) were compared with the commits before them: identical (demo and study), and the merge of the
+three with the kernels' branch alone: identical. The earlier entries are in this file's history."""
 HEAD_BEHAVIOUR: tuple = ()
 """Changes of behaviour since the base, undone in the head's runs (code its sitecustomize runs
 before the command): none since f64e71d (PF's inertia scale is the same in both)."""
