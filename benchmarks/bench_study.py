@@ -87,8 +87,8 @@ _STAGES = (("exubio.run.job", "read_trial", "read the trial"),
            ("exubio.run.pipeline", "stream_reconstruct", "reconstruction (PF)"),
            ("exubio.trust.assess", "trial_label_findings", "label checks"),
            ("exubio.trust.assess", "assess_trial", "assessment (determinacy, limits, verdict)"),
-           ("exubio.run.pipeline", "write_outputs", "write the result files"),
-           ("exubio.report.trial_report", "build_trial_report", "report (PDF + PNG)"))
+           ("exubio.run.pipeline", "write_outcome", "write the result files (angles, u, moments)"),
+           ("exubio.report.trial_report", "draw_trial_report", "report (PDF + PNG)"))
 
 
 def breakdown(trials: list[Path], out: Path, methods: tuple[str, ...]) -> None:
