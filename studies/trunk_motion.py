@@ -25,8 +25,10 @@ LABELS = dict(ij="MAN", px="XYP", c7="C7", t8="T10", humerus=("EPI_lat", "EPI_me
 
 
 def _forms(motions, rests, theta):
-    """The three forms fitted on ``motions`` (each (xi, theta)), evaluated at ``theta``: (n, 6, 6) each."""
+    """The three forms fitted on ``motions`` (each (xi, theta), their first ``rests`` frames left out),
+    evaluated at ``theta``: (n, 6, 6) each; the constant is the shipped fit (fit_trunk_amplitude)."""
     from exubio.synth.driver_table import binned_second_moment, driver_bins, interpolate, nearest_psd
+    from exubio.truth.trunk_amplitude import fit_trunk_amplitude
 
     xs, ts = [], []
     for (xi, th), r in zip(motions, rests):
@@ -36,7 +38,8 @@ def _forms(motions, rests, theta):
         ts.append(th[ok])
     x, t = np.concatenate(xs), np.concatenate(ts)
     b, nodes = driver_bins(t)
-    return {"constant": np.broadcast_to(x.T @ x / len(x), (theta.size, 6, 6)),
+    constant = fit_trunk_amplitude(motions, rest_frames=rests)[1][0]
+    return {"constant": np.broadcast_to(constant, (theta.size, 6, 6)),
             "table": interpolate(nodes, nearest_psd(binned_second_moment(x, x, b, nodes.size)), theta),
             "slope": (x.T @ x / np.sum(t ** 2))[None] * (theta ** 2)[:, None, None] + 1e-12 * np.eye(6)}
 

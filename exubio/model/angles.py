@@ -156,20 +156,10 @@ def rotation_from_euler(angles: np.ndarray, sequence: str, /) -> np.ndarray:
     return _basic_rotation(i, angles[..., 0]) @ _basic_rotation(j, angles[..., 1]) @ _basic_rotation(k, angles[..., 2])
 
 
-def euler_angles(R: np.ndarray, sequence: str, /, *, negative_middle: bool = False,
-                 gimbal_tol: float = 1e-9) -> np.ndarray:
-    """Intrinsic angles (..., 3) in radians of rotation matrices R (..., 3, 3) in ``sequence``
-    (see the module docstring for ranges and the gimbal-lock rule).
-
-    negative_middle: proper Euler sequences only: take the branch with the middle angle in
-        [-pi, 0] instead of [0, pi] (both describe the same rotation).
-    gimbal_tol: |cos b| (Tait-Bryan) or |sin b| (proper Euler) below which the sequence is
-        treated as locked: the first angle is then 0.
-    """
-    i, j, k = _parse_sequence(sequence)
-    R = np.asarray(R, dtype=float)
-    if R.shape[-2:] != (3, 3):
-        raise InputError(f"rotation matrices must have shape (..., 3, 3), got {R.shape}")
+def euler_unwrapped(R: np.ndarray, i: int, j: int, k: int, negative_middle: bool, gimbal_tol: float,
+                    /) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The three angles (a, b, c) of R (..., 3, 3) in the parsed sequence (i, j, k), before wrapping
+    (``euler_angles``' rule; exubio.model.frame_angles uses it on one frame's rows)."""
     s = 1.0 if (j - i) % 3 == 1 else -1.0  # parity of the axis order
     if i != k:  # Tait-Bryan
         b = np.arctan2(s * R[..., i, k], np.hypot(R[..., i, i], R[..., i, j]))
@@ -188,6 +178,24 @@ def euler_angles(R: np.ndarray, sequence: str, /, *, negative_middle: bool = Fal
     M = np.swapaxes(_basic_rotation(i, a) @ _basic_rotation(j, b), -1, -2) @ R
     u, v = (k + 1) % 3, (k + 2) % 3
     c = np.arctan2(M[..., v, u] - M[..., u, v], M[..., u, u] + M[..., v, v])
+    return a, b, c
+
+
+def euler_angles(R: np.ndarray, sequence: str, /, *, negative_middle: bool = False,
+                 gimbal_tol: float = 1e-9) -> np.ndarray:
+    """Intrinsic angles (..., 3) in radians of rotation matrices R (..., 3, 3) in ``sequence``
+    (see the module docstring for ranges and the gimbal-lock rule).
+
+    negative_middle: proper Euler sequences only: take the branch with the middle angle in
+        [-pi, 0] instead of [0, pi] (both describe the same rotation).
+    gimbal_tol: |cos b| (Tait-Bryan) or |sin b| (proper Euler) below which the sequence is
+        treated as locked: the first angle is then 0.
+    """
+    i, j, k = _parse_sequence(sequence)
+    R = np.asarray(R, dtype=float)
+    if R.shape[-2:] != (3, 3):
+        raise InputError(f"rotation matrices must have shape (..., 3, 3), got {R.shape}")
+    a, b, c = euler_unwrapped(R, i, j, k, negative_middle, gimbal_tol)
     return np.stack([_wrap(a), _wrap(b), _wrap(c)], axis=-1)
 
 

@@ -9,7 +9,7 @@ from typing import Mapping
 
 import numpy as np
 
-from exubio.model.angles import _JOINTS, _SEQUENCE_GROUPS, _basic_rotation, _parse_sequence
+from exubio.model.angles import _JOINTS, _SEQUENCE_GROUPS, _parse_sequence, euler_unwrapped
 from exubio.types import Model
 
 __all__ = ["FrameAngles"]
@@ -102,21 +102,5 @@ def _euler_rows(R: np.ndarray, i: int, j: int, k: int, negative_middle: bool, ou
                 gimbal_tol: float = 1e-9) -> None:
     """exubio.model.angles.euler_angles of R (n, 3, 3) for the parsed sequence (i, j, k), written
     unwrapped into out[rows] (the same operations in the same order)."""
-    s = 1.0 if (j - i) % 3 == 1 else -1.0
-    if i != k:  # Tait-Bryan
-        b = np.arctan2(s * R[..., i, k], np.hypot(R[..., i, i], R[..., i, j]))
-        a = np.arctan2(-s * R[..., j, k], R[..., k, k])
-        locked = np.cos(b) < gimbal_tol
-    else:  # proper Euler
-        m = 3 - i - j
-        sb = np.hypot(R[..., i, j], R[..., i, m])
-        b = np.arctan2(sb, R[..., i, i])
-        a = np.arctan2(R[..., j, i], -s * R[..., m, i])
-        if negative_middle:
-            b, a = -b, a + np.pi
-        locked = sb < gimbal_tol
-    a = np.where(locked, 0.0, a)
-    M = np.swapaxes(_basic_rotation(i, a) @ _basic_rotation(j, b), -1, -2) @ R
-    u, v = (k + 1) % 3, (k + 2) % 3
-    c = np.arctan2(M[..., v, u] - M[..., u, v], M[..., u, u] + M[..., v, v])
+    a, b, c = euler_unwrapped(R, i, j, k, negative_middle, gimbal_tol)
     out[rows, 0], out[rows, 1], out[rows, 2] = a, b, c  # wrapped by the caller

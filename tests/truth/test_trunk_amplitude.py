@@ -49,15 +49,9 @@ def test_a_known_trunk_motion_and_humerus_rotation_are_recovered():
                      c7="C7", t8="T8", humerus=("H1", "H2", "H3", "H4"))
 
 
-def test_the_shipped_trunk_moment_is_the_real_trials():
-    """The shipped trunk second moment is what the six movement trials give (their first REST_S s left
-    out), and a run's trunk term is that constant at any arm posture."""
-    files = [f for f in sorted(DATA.glob("*.c3d")) if "statique" not in f.name]
-    if len(files) < 6:
-        pytest.skip("../shared/data/c3d absent")
+def _real_motions(files):
+    """(xi, theta) of each movement trial of ../shared/data/c3d and its rest window (frames)."""
     import exubio
-    from exubio.trust.sta_amplitude import load_sta_amplitude
-
     from exubio.truth.trunk_amplitude import REST_S
 
     motions, rests = [], []
@@ -67,6 +61,18 @@ def test_the_shipped_trunk_moment_is_the_real_trials():
         motions.append(trunk_motion(tr.positions_m, labels, tr.rate_hz, ij="MAN", px="XYP", c7="C7", t8="T10",
                                     humerus=("EPI_lat", "EPI_med", "DELT", "ARM")))
         rests.append(int(round(REST_S * tr.rate_hz)))
+    return motions, rests
+
+
+def test_the_shipped_trunk_moment_is_the_real_trials():
+    """The shipped trunk second moment is what the six movement trials give (their first REST_S s left
+    out), and a run's trunk term is that constant at any arm posture."""
+    files = [f for f in sorted(DATA.glob("*.c3d")) if "statique" not in f.name]
+    if len(files) < 6:
+        pytest.skip("../shared/data/c3d absent")
+    from exubio.trust.sta_amplitude import load_sta_amplitude
+
+    motions, rests = _real_motions(files)
     nodes, C, _ = fit_trunk_amplitude(motions, rest_frames=rests)
     shipped = load_sta_amplitude()
     np.testing.assert_allclose(shipped.trunk_table, C, rtol=1e-4, atol=1e-12)
@@ -84,19 +90,10 @@ def test_the_constant_form_predicts_held_out_trials_best():
         pytest.skip("../shared/data/c3d absent")
     import importlib.util
 
-    import exubio
-    from exubio.truth.trunk_amplitude import REST_S
-
     spec = importlib.util.spec_from_file_location("trunk_motion", Path(__file__).resolve().parents[2] / "studies" / "trunk_motion.py")
     study = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(study)
-    motions, rests = [], []
-    for f in files:
-        tr = exubio.read_trial(f)
-        labels = [lab.split(":")[-1] for lab in tr.labels]
-        motions.append(trunk_motion(tr.positions_m, labels, tr.rate_hz, ij="MAN", px="XYP", c7="C7", t8="T10",
-                                    humerus=("EPI_lat", "EPI_med", "DELT", "ARM")))
-        rests.append(int(round(REST_S * tr.rate_hz)))
+    motions, rests = _real_motions(files)
     scores = {"constant": [], "table": [], "slope": []}
     for i, (xi, th) in enumerate(motions):
         ok = np.isfinite(xi).all(axis=1) & np.isfinite(th)
