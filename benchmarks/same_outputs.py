@@ -32,7 +32,7 @@ absolute paths of the checkout, the run folder and the data folder are replaced 
 the values of the timing fields listed in IGNORED_* below are blanked; .npz files array by array
 (names, dtype, shape, values by np.array_equal with equal_nan; strings with the same path
 placeholders; the JSON strings with the same blanked keys), timing arrays excepted; C3D and other
-binary files byte for byte; PNG pixel for pixel (Pillow); PDF by page count only (see
+binary files byte for byte; .gz files by the bytes they hold (the compression is not compared); PNG pixel for pixel (Pillow); PDF by page count only (see
 PDF_REASON). ``--no-ignore`` compares without blanking anything (to see what varies run to run:
 ``--base X --head X`` runs one commit twice).
 
@@ -561,6 +561,11 @@ def compare_file(rel: str, base: Side, head: Side, set_name: str) -> str | None:
         return compare_npz(pa, pb, base, head)
     if suffix == ".png":
         return compare_png(pa, pb)
+    if suffix == ".gz":  # the text inside, byte for byte (the compression level is not an output)
+        import gzip
+
+        ta, tb = gzip.decompress(pa.read_bytes()), gzip.decompress(pb.read_bytes())
+        return None if ta == tb else first_line_difference(ta.decode("utf-8"), tb.decode("utf-8"))
     if suffix == ".pdf" and base.ignore:
         na, nb = pdf_pages(pa), pdf_pages(pb)
         return None if na == nb else f"{na} pages != {nb} pages"

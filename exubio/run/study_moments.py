@@ -23,6 +23,7 @@ import numpy as np
 from exubio.errors import InputError
 from exubio.io.result_names import beside, method_stem, set_paths
 from exubio.io.results import atomic_write
+from exubio.run.study_table import categorical_runs
 
 if TYPE_CHECKING:
     import pandas
@@ -69,18 +70,18 @@ def unit_of(column: str) -> str:
     raise InputError(f"moments column '{column}': expected a name ending in _Nm, _Nm_per_kg or _N")
 
 
-def _trial_rows(csv: Path, summary: Mapping[str, Any], keys: Mapping[str, str]) -> dict[str, np.ndarray]:
+def _trial_part(csv: Path, summary: Mapping[str, Any], keys: Mapping[str, str]) -> dict[str, Any]:
+    """One result's moments as numbers and runs of text (exubio.run.study_table.categorical_runs)."""
     from exubio.dynamics.moments_file import read_moments_csv
 
     t, columns, values = read_moments_csv(csv)
     n, k = values.shape
     m = (summary.get("moments") or {})
-    out = {key: np.full(n * k, v, dtype=object) for key, v in keys.items()}
-    out.update({"time_s": np.tile(t, k), "quantity": np.repeat(np.array(columns, dtype=object), n),
-                "value": values.T.ravel(), "unit": np.repeat(np.array([unit_of(c) for c in columns], dtype=object), n),
-                "body_mass_kg": np.full(n * k, float(m.get("body_mass_kg", np.nan))),
-                "hand_load_kg": np.full(n * k, float(m.get("hand_load_kg", np.nan)))})
-    return out
+    runs = {key: ([v], n * k) for key, v in keys.items()}
+    runs.update({"quantity": (list(columns), n), "unit": ([unit_of(c) for c in columns], n)})
+    return {"runs": runs, "time_s": np.tile(t, k), "value": values.T.ravel(),
+            "body_mass_kg": np.full(n * k, float(m.get("body_mass_kg", np.nan))),
+            "hand_load_kg": np.full(n * k, float(m.get("hand_load_kg", np.nan)))}
 
 
 def moments_study_table(trials: Iterable[tuple[dict, Path]], /) -> "pandas.DataFrame":
@@ -97,15 +98,14 @@ def moments_study_table(trials: Iterable[tuple[dict, Path]], /) -> "pandas.DataF
             continue
         summary_path = beside(npz, "summary")
         summary = json.loads(summary_path.read_text(encoding="utf-8")) if summary_path.is_file() else {}
-        parts.append(_trial_rows(csv, summary, keys))
-    cols = {c: (np.concatenate([p[c] for p in parts]) if parts else np.zeros(0, dtype=object)) for c in MOMENT_COLUMNS}
-    df = pd.DataFrame({c: cols[c] for c in MOMENT_COLUMNS})
-    for c in ("time_s", "value", "body_mass_kg", "hand_load_kg"):
-        df[c] = df[c].astype("float64")
-    for c in _CATEGORICAL:
-        cats = ("ok", "check", "fail", "") if c == "verdict" else list(dict.fromkeys(df[c]))
-        df[c] = pd.Categorical(df[c], categories=cats)
-    return df
+        parts.append(_trial_part(csv, summary, keys))
+    cols = {}
+    for c in MOMENT_COLUMNS:
+        if c in _CATEGORICAL:
+            cols[c] = categorical_runs((p["runs"][c] for p in parts), ("ok", "check", "fail", "") if c == "verdict" else None)
+        else:
+            cols[c] = np.concatenate([p[c] for p in parts]).astype("float64") if parts else np.zeros(0)
+    return pd.DataFrame(cols)
 
 
 def write_moments_table(out_dir: Path, trials: Iterable[tuple[dict, Path]], /) -> tuple[Path, Path] | None:

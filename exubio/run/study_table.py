@@ -11,11 +11,9 @@ exubio.model.signs: isb or clinical; value_deg is in it, as in the per-trial CSV
 pyarrow; the CSV gzip-compressed, the same rows, readable by any statistics tool)."""
 from __future__ import annotations
 
-import gzip
-import io
-
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Iterable
+from typing import TYPE_CHECKING, Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -23,57 +21,105 @@ from exubio.errors import InputError
 from exubio.io.result_names import beside, method_stem, set_paths
 from exubio.method_registry import method_names
 from exubio.io.results import atomic_write, read_angles_csv, read_npz_arrays
+from exubio.run.csv_gz import write_csv_gz
 from exubio.model.signs import SIGNS, signs_of_file
 from exubio.trust.observability import AngleStatus
 
 if TYPE_CHECKING:
     import pandas
 
-__all__ = ["TABLE_COLUMNS", "PARQUET", "CSV_GZ", "trial_rows", "study_table", "write_study_table", "read_study_table",
+__all__ = ["TABLE_COLUMNS", "PARQUET", "CSV_GZ", "trial_rows", "study_table", "categorical_runs", "write_study_table", "read_study_table",
            "table_trials"]
 
 PARQUET = "angles.parquet"
 CSV_GZ = "angles.csv.gz"
 TABLE_COLUMNS = ("subject", "session", "trial", "task", "method", "time_s", "angle", "value_deg", "u_deg", "status",
                  "verdict", "signs")
-_CATEGORICAL = ("subject", "session", "trial", "task", "method", "angle", "status", "verdict", "signs")
 _STATUS = tuple(s.label for s in AngleStatus)
 _VERDICTS = ("ok", "check", "fail", "")
+_FIXED = {"verdict": _VERDICTS, "signs": SIGNS}
+FLOAT_DECIMALS = 6  # the numbers of angles.csv.gz, printed as "%.6f" (as the per-trial CSV)
 
 
 def trial_rows(npz: Path, /, **keys: str) -> dict[str, np.ndarray]:
     """The long rows of one result (``<trial>.<method>.npz`` and the CSV beside it), with ``keys``
     (subject, session, trial, task, method, verdict) repeated on every row."""
+    part = _read_part(npz, keys)
+    n, names = part.time_s.size, part.angles
+    out = {k: np.full(part.rows, v, dtype=object) for k, v in keys.items()}
+    out.update({"time_s": np.tile(part.time_s, len(names)), "angle": np.repeat(names, n).astype(object),
+                "value_deg": part.value_deg, "u_deg": part.u_deg, "status": np.asarray(_STATUS, dtype=object)[part.status],
+                "signs": np.full(part.rows, part.signs, dtype=object)})
+    return out
+
+
+@dataclass(frozen=True)
+class _Part:
+    """One result's rows, held as numbers: its keys are the same on every row, its angles run one
+    after the other (each ``time_s.size`` rows), ``status`` the codes of _STATUS."""
+
+    keys: Mapping[str, str]
+    time_s: np.ndarray
+    angles: tuple[str, ...]
+    value_deg: np.ndarray
+    u_deg: np.ndarray
+    status: np.ndarray
+    signs: str
+
+    @property
+    def rows(self) -> int:
+        return self.time_s.size * len(self.angles)
+
+
+def _read_part(npz: Path, keys: Mapping[str, str]) -> _Part:
     csv = beside(npz, "csv")
     t, names, values, u = read_angles_csv(csv, uncertainty=True)
     status = read_npz_arrays(npz, ("angle_status",))["angle_status"]
     if status.shape != values.shape:
         raise InputError(f"{npz}: angle_status has shape {status.shape}, the angles of {csv.name} {values.shape}")
-    n, a = values.shape
     codes = status.astype(int).T.ravel()
     if codes.size and (codes.min() < 0 or codes.max() >= len(_STATUS)):
         raise InputError(f"{npz}: angle_status holds codes outside 0-{len(_STATUS) - 1}")
-    out = {k: np.full(n * a, v, dtype=object) for k, v in keys.items()}
-    out.update({"time_s": np.tile(t, a), "angle": np.repeat([s.removesuffix("_deg") for s in names], n).astype(object),
-                "value_deg": np.degrees(values.T.ravel()), "u_deg": np.degrees(u.T.ravel()),
-                "status": np.asarray(_STATUS, dtype=object)[codes],
-                "signs": np.full(n * a, signs_of_file(csv), dtype=object)})
-    return out
+    return _Part(dict(keys), t, tuple(s.removesuffix("_deg") for s in names), np.degrees(values.T.ravel()),
+                 np.degrees(u.T.ravel()), codes, signs_of_file(csv))
+
+
+def categorical_runs(runs: Iterable[tuple[Sequence[str], int]], /, fixed: Sequence[str] | None = None
+                     ) -> "pandas.Categorical":
+    """A text column made of runs (values, count): each value on ``count`` rows, one after the
+    other, as a categorical: the categories ``fixed``, else the values in order of first appearance
+    on a row (a value outside ``fixed`` is missing, as pandas makes it). The same as pandas'
+    categorical of the rows' strings, without making them."""
+    import pandas as pd
+
+    runs = [(list(values), int(count)) for values, count in runs]
+    cats = list(fixed) if fixed is not None else list(dict.fromkeys(v for values, n in runs if n for v in values))
+    index = {v: i for i, v in enumerate(cats)}
+    codes = [np.repeat(np.array([index.get(v, -1) for v in values], dtype=np.int64), n) for values, n in runs]
+    return pd.Categorical.from_codes(_joined(codes, np.int64), categories=cats)
 
 
 def study_table(trials: Iterable[tuple[dict, Path]], /) -> "pandas.DataFrame":
-    """The table of ``trials``: (keys, npz path) each (trial_rows), in the order given."""
+    """The table of ``trials``: (keys, npz path) each (trial_rows), in the order given. Built from
+    each part's numbers and one code per part for its text columns (as fast as the numbers; the
+    same frame as categoricals of the rows' strings would give)."""
     import pandas as pd
 
-    parts = [trial_rows(npz, **keys) for keys, npz in trials]
-    cols = {c: (np.concatenate([p[c] for p in parts]) if parts else np.zeros(0, dtype=object)) for c in TABLE_COLUMNS}
-    df = pd.DataFrame({c: cols[c] for c in TABLE_COLUMNS})
-    for c in ("time_s", "value_deg", "u_deg"):
-        df[c] = df[c].astype("float64")
-    for c in _CATEGORICAL:
-        cats = {"status": _STATUS, "verdict": _VERDICTS, "signs": SIGNS}.get(c)
-        df[c] = pd.Categorical(df[c], categories=cats if cats else list(dict.fromkeys(df[c])))
-    return df
+    parts = [_read_part(npz, keys) for keys, npz in trials]
+    sizes = [p.rows for p in parts]
+    text = {c: categorical_runs((([p.keys[c]], n) for p, n in zip(parts, sizes)), _FIXED.get(c))
+            for c in ("subject", "session", "trial", "task", "method", "verdict")}
+    text["signs"] = categorical_runs((([p.signs], n) for p, n in zip(parts, sizes)), _FIXED["signs"])
+    text["angle"] = categorical_runs((p.angles, p.time_s.size) for p in parts)
+    text["status"] = pd.Categorical.from_codes(_joined([p.status for p in parts], np.int64), categories=list(_STATUS))
+    numbers = {"time_s": _joined([np.tile(p.time_s, len(p.angles)) for p in parts], np.float64),
+               "value_deg": _joined([p.value_deg for p in parts], np.float64),
+               "u_deg": _joined([p.u_deg for p in parts], np.float64)}
+    return pd.DataFrame({c: text[c] if c in text else numbers[c] for c in TABLE_COLUMNS})
+
+
+def _joined(arrays: list[np.ndarray], dtype) -> np.ndarray:
+    return np.concatenate(arrays).astype(dtype, copy=False) if arrays else np.zeros(0, dtype=dtype)
 
 
 def write_study_table(out_dir: Path, trials: Iterable[tuple[dict, Path]], /) -> tuple[Path, Path]:
@@ -81,15 +127,7 @@ def write_study_table(out_dir: Path, trials: Iterable[tuple[dict, Path]], /) -> 
     df = study_table(trials)
     df.attrs = {}
     pq = atomic_write(out_dir / PARQUET, lambda tmp: df.to_parquet(tmp, engine="pyarrow", index=False))
-    # no file name and mtime 0 in the gzip header, so the same rows give the same bytes (a study run
-    # twice, or resumed; the temporary file's name would otherwise be in it); streamed, not one string
-
-    def write_gz(tmp) -> None:
-        with open(tmp, "wb") as raw, gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0) as gz_file:
-            with io.TextIOWrapper(gz_file, encoding="utf-8", newline="") as text:
-                df.to_csv(text, index=False, float_format="%.6f")
-
-    gz = atomic_write(out_dir / CSV_GZ, write_gz)
+    gz = atomic_write(out_dir / CSV_GZ, lambda tmp: write_csv_gz(tmp, df, FLOAT_DECIMALS))
     return pq, gz
 
 

@@ -22,7 +22,8 @@ OWNERS = {
     "plotly": {"report/viewer.py", "report/viewer_page.py", "report/viewer_scene.py", "report/viewer_results.py"},
     "distributed": {"run/executors.py"},
     "dask": {"run/executors.py"},
-    "pandas": {"api.py", "run/study_table.py", "run/study_moments.py"},  # the study's angles table (Parquet, CSV) is a DataFrame
+    "pandas": {"api.py", "run/study_table.py", "run/study_moments.py", "run/csv_gz.py"},  # the study's angles table (Parquet, CSV) is a DataFrame
+    "polars": {"run/csv_gz.py"},  # the study table's CSV writer
     "pylsl": {"run/live/transport.py"},
     "numba": {"model/kernels.py"},  # the compiled kernels, imported where used (0.2 s to import)
 }
