@@ -57,7 +57,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from exubio.report.trial_report import Truth, draw_trial_report
     from exubio.run.outcome import reported
 
-    pdf, png = draw_trial_report([reported(o) for o in outputs], out / "example_abduction.report.pdf",
+    pdf, png = draw_trial_report([reported(o, model=session.model) for o in outputs], out / "example_abduction.report.pdf",
                                   truth=Truth(t_true, angle_names, true_angles))
     print(f"report: {pdf} and {png}")
     print(f"results are in {out.resolve()}")

@@ -106,18 +106,23 @@ def moments_page(time_s: np.ndarray, columns: Sequence[str], values: np.ndarray,
     return fig
 
 
-def trial_moments_figure(npz_path, title: str, method: str, angles, summary: Mapping | None) -> Figure | None:
-    """The moments page of one method's result set when it has ``<stem>.moments.csv`` beside its
-    .npz (written with ``--body-mass``), else None; ``angles``: its anatomical angles with their
-    status (exubio.report.trial_report.Angles) or None; ``summary``: its summary.json."""
+def trial_moments_figure(npz_path, title: str, method: str, angles, summary: Mapping | None, /, *,
+                         moments=None) -> Figure | None:
+    """The moments page of one method's result set when it has joint moments (``--body-mass``):
+    ``moments`` in memory (exubio.dynamics.moments.Moments), else its ``<stem>.moments.csv`` beside
+    its .npz; None without; ``angles``: its anatomical angles with their status
+    (exubio.report.trial_report.Angles) or None; ``summary``: its summary.json."""
 
     from exubio.dynamics.moments_file import read_moments_csv
     from exubio.scapulohumeral.table import HT_COLUMN
 
-    path = beside(npz_path, "moments")
-    if not path.is_file():
-        return None
-    t, columns, values = read_moments_csv(path)
+    if moments is not None:
+        t, columns, values = moments.time_s, tuple(moments.columns), moments.values
+    else:
+        path = beside(npz_path, "moments")
+        if not path.is_file():
+            return None
+        t, columns, values = read_moments_csv(path)
     ht = None
     if angles is not None and HT_COLUMN in angles.names and angles.values_rad.shape[0] == t.size:
         j = angles.names.index(HT_COLUMN)

@@ -182,17 +182,26 @@ def study_rhythm_pages(groups: Sequence[StudyRhythm], study: str, /, *, labels: 
     return figs
 
 
-def trial_rhythm_figure(npz_path, title: str, method: str) -> Figure | None:
+def trial_rhythm_figure(npz_path, title: str, method: str, /, *, angles=None, model=None,
+                        metadata=None) -> Figure | None:
     """The rhythm page of one method's result, or None when it has no shoulder angles with a
-    status or no raising or lowering of the arm (no rhythm to draw)."""
+    status or no raising or lowering of the arm (no rhythm to draw). From its files (``npz_path``
+    and the CSV beside it; the model file its metadata names), or from memory: ``angles`` (its
+    exubio.report.trial_report.Angles, as the files hold them), ``model`` (the one it was
+    reconstructed with) and ``metadata`` (the run's)."""
     from exubio.errors import InputError
-    from exubio.scapulohumeral.files import read_trial_rhythm, trial_reference
+    from exubio.scapulohumeral import files
 
     try:
-        r = read_trial_rhythm(npz_path)
+        r = (files.read_trial_rhythm(npz_path) if angles is None else
+             files.rhythm_of(angles.time_s, angles.names, angles.values_rad, angles.uncertainty_rad, angles.status,
+                             angles.signs, where=npz_path))
     except InputError:
         return None
     if not (r.phase > 0).any():
         return None
-    ref, which = trial_reference(npz_path, r)
+    if model is None and metadata is None:
+        ref, which = files.trial_reference(npz_path, r)
+    else:
+        ref, which = files.rhythm_reference(r, *files.model_of(metadata or {}, model=model))
     return trial_rhythm_page(r, ref, title, model_note=which, method=method)

@@ -427,14 +427,16 @@ def residuals_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict
 class ReportedResult:
     """One method's result as the report draws it: its reconstruction (no model points), the run's
     metadata and summary.json as their files hold them, its anatomical angles (None for a result
-    written before they existed), and its .npz (the rhythm and moments pages read their files beside
-    it). From files: ``read_result``; from a run's outcome in memory: exubio.run.outcome.reported."""
+    written before they existed), its .npz, the model (the rhythm page's bones) and the joint moments (None: read
+    from the files). From files: ``read_result``; from a run's outcome in memory: exubio.run.outcome.reported."""
 
     npz: Path
     reconstruction: Reconstruction
     metadata: Mapping[str, Any]
     summary: Mapping[str, Any] | None = None
     angles: Angles | None = None
+    model: Any = None  # the model it was reconstructed with, in memory; None: the file its metadata names
+    moments: Any = None  # its joint moments in memory (exubio.dynamics.moments.Moments); None: the file beside it, if any
 
 
 def read_result(npz_path: str | Path, /) -> ReportedResult:
@@ -459,7 +461,6 @@ def draw_trial_report(results: Sequence[ReportedResult], pdf_path: str | Path, /
     from each method's result (a run's in memory, or read from its files). ``truth``: the known
     anatomical angles of a simulated trial (exubio.model.angles.anatomical_table of its true
     coordinates), compared on page 1 (the measured angles) and drawn."""
-    npz_paths = [r.npz for r in results]
     recons = [r.reconstruction for r in results]
     meta = dict(results[0].metadata)
     summaries = {r.reconstruction.method: dict(r.summary) for r in results if r.summary is not None}
@@ -469,12 +470,13 @@ def draw_trial_report(results: Sequence[ReportedResult], pdf_path: str | Path, /
         pages.append(angles_page(recons, meta, summaries, truth, angles))
         from exubio.report.rhythm_page import trial_rhythm_figure
 
-        pages += [f for f in (trial_rhythm_figure(p, _title(recons, meta), r.method)
-                              for p, r in zip(npz_paths, recons) if r.method in angles) if f is not None]
+        pages += [f for f in (trial_rhythm_figure(r.npz, _title(recons, meta), r.reconstruction.method, angles=r.angles,
+                                                  model=r.model, metadata=r.metadata)
+                              for r in results if r.angles is not None) if f is not None]
     from exubio.report.moments_page import trial_moments_figure  # with --body-mass: the joint moments
 
-    pages += [f for f in (trial_moments_figure(p, _title(recons, meta), r.method, angles.get(r.method),
-                                               summaries.get(r.method)) for p, r in zip(npz_paths, recons)) if f is not None]
+    pages += [f for f in (trial_moments_figure(r.npz, _title(recons, meta), r.reconstruction.method, r.angles, r.summary,
+                                               moments=r.moments) for r in results) if f is not None]
     pages.append(residuals_page(recons, meta, summaries))
     cal_page = calibration_page(meta, summaries)
     if cal_page is not None:

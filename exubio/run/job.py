@@ -161,12 +161,12 @@ def _run_job(job: TrialJob, progress_factory: Callable[[str, int], Callable[[int
     result = TrialResult(str(job.trial), methods, agreement, calibrated, failed=failed,
                          kept=tuple(o.method for o in outputs if o.resumed))
     if job.report:
-        report, kept = _report(job, outputs, resumed=len(result.kept) == len(methods))
+        report, kept = _report(job, outputs, resumed=len(result.kept) == len(methods), model=session.model)
         result = dataclasses.replace(result, report=report, kept=result.kept + (("report",) if kept else ()))
     return result
 
 
-def _report(job: TrialJob, outcomes: list[MethodOutcome], /, *, resumed: bool) -> tuple[dict[str, str], bool]:
+def _report(job: TrialJob, outcomes: list[MethodOutcome], /, *, resumed: bool, model=None) -> tuple[dict[str, str], bool]:
     """The trial's report, drawn from the methods' outcomes in memory (exubio.run.outcome.reported), or
     kept when every result set was kept from an earlier run of the same inputs and the report that run
     left is not older than them (exubio.run.resume)."""
@@ -180,5 +180,5 @@ def _report(job: TrialJob, outcomes: list[MethodOutcome], /, *, resumed: bool) -
         results.prepare_output_dir(job.out_dir, [pdf.name, png.name], overwrite=False)  # refused, named
     from exubio.report.trial_report import draw_trial_report
 
-    pdf, png = draw_trial_report([reported(o) for o in outcomes], pdf)
+    pdf, png = draw_trial_report([reported(o, model=model) for o in outcomes], pdf)
     return {"pdf": str(pdf), "png": str(png)}, False

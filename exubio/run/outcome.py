@@ -110,11 +110,12 @@ def write_outcome(outcome: MethodOutcome, inputs: Any, trial_path: str | Path, o
     return dataclasses.replace(outcome, paths=paths, summary=summ, metadata={**meta, "signs": outcome.angles.signs})
 
 
-def reported(outcome: MethodOutcome, /) -> Any:
+def reported(outcome: MethodOutcome, /, *, model: Any = None) -> Any:
     """The outcome as the trial report draws it (exubio.report.trial_report.ReportedResult), from
     memory: its reconstruction, metadata and summary (as their files hold them: the same JSON), its
     angles at the precision of the CSV (what a report of the files draws, so the two are the same
-    picture). A set kept from an earlier run: read from its files."""
+    picture), the joint moments and ``model`` (the one it was reconstructed with). A set kept from
+    an earlier run: read from its files."""
     from exubio.io.results import as_in_json, as_in_table
     from exubio.model.signs import convert
     from exubio.report.trial_report import Angles, ReportedResult, read_result
@@ -131,4 +132,4 @@ def reported(outcome: MethodOutcome, /) -> Any:
     angles = Angles(as_in_table(recon.time_s), tuple(a.names), values, np.asarray(a.status, dtype=np.int8),
                     None if u is None or np.isnan(u).all() else u, a.signs)
     return ReportedResult(Path(outcome.paths["npz"]), recon, as_in_json(outcome.metadata, strict=False),
-                          as_in_json(outcome.summary), angles)
+                          as_in_json(outcome.summary), angles, model=model, moments=outcome.moments)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -18,7 +19,7 @@ from exubio.scapulohumeral.table import (HT_GRID_DEG, PHASES, RHYTHM_ANGLES, Ave
                                  trial_rhythm)
 from exubio.types import Model
 
-__all__ = ["read_trial_rhythm", "trial_model", "trial_reference", "StudyTrial", "StudyRhythm", "study_trials",
+__all__ = ["read_trial_rhythm", "rhythm_of", "trial_model", "model_of", "trial_reference", "rhythm_reference", "StudyTrial", "StudyRhythm", "study_trials",
            "study_rhythm", "trial_columns", "study_columns", "shown_band"]
 
 
@@ -33,20 +34,35 @@ def read_trial_rhythm(npz_path: str | Path, /) -> TrialRhythm:
     if status.shape != values.shape:
         raise InputError(f"{npz_path}: angle_status has shape {status.shape}, the angles of {csv.name} {values.shape}")
     signs = signs_of_file(csv)  # the rhythm holds ISB values; the table and the page show the file's convention
+    return rhythm_of(t, names, convert(names, values, signs, "isb"), u, status, signs, where=csv)
+
+
+def rhythm_of(time_s: np.ndarray, names: tuple[str, ...], isb_rad: np.ndarray, u_rad: np.ndarray | None,
+              status: np.ndarray, signs: str, /, *, where: str | Path) -> TrialRhythm:
+    """A trial's rhythm from its anatomical angles (ISB, rad; their uncertainty, None or NaN where
+    none; their status codes) as its files hold them, in memory (InputError naming ``where`` without
+    the shoulder angles)."""
+    u = np.full(isb_rad.shape, np.nan) if u_rad is None else u_rad
     try:
-        return trial_rhythm(t, names, np.degrees(convert(names, values, signs, "isb")), np.degrees(u), status == 0,
-                            signs=signs)
+        return trial_rhythm(time_s, names, np.degrees(isb_rad), np.degrees(u), status == 0, signs=signs)
     except KeyError as exc:
-        raise InputError(f"{csv}: {exc.args[0]}") from None
+        raise InputError(f"{where}: {exc.args[0]}") from None
 
 
 def trial_model(npz_path: str | Path, /) -> tuple[Model, str]:
     """(model, which) the trial was reconstructed with (its metadata's model file), else the
     generic model (said in ``which``)."""
+    return model_of(read_npz_metadata(npz_path))
+
+
+def model_of(metadata: Mapping[str, Any], /, *, model: Model | None = None) -> tuple[Model, str]:
+    """(model, which) of a result's metadata: ``model`` when the caller holds the one the trial was
+    reconstructed with, else read from the metadata's model file, else the generic model (said)."""
     from exubio.model.load import load_model
 
-    meta = read_npz_metadata(npz_path)
-    path = meta.get("model")
+    path = metadata.get("model")
+    if model is not None:
+        return model, f"the trial's model {Path(str(path)).name}" if path else "the trial's model"
     if path and Path(str(path)).is_file():
         try:
             return load_model(path), f"the trial's model {Path(str(path)).name}"
@@ -56,7 +72,11 @@ def trial_model(npz_path: str | Path, /) -> tuple[Model, str]:
 
 
 def trial_reference(npz_path: str | Path, r: TrialRhythm, /) -> tuple[Reference, str]:
-    model, which = trial_model(npz_path)
+    return rhythm_reference(r, *trial_model(npz_path))
+
+
+def rhythm_reference(r: TrialRhythm, model: Model, which: str, /) -> tuple[Reference, str]:
+    """(corridor of the trial's plane on ``model``'s bones, ``which`` model it is)."""
     plane, deg, why = trial_plane(r)
     return reference(model, plane, plane_deg=deg, why=why), which
 
