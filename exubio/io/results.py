@@ -132,9 +132,7 @@ def read_angles_csv(path: str | os.PathLike, /, *, uncertainty: bool = False):
         raise InputError(f"{path}: line {skip + 1}: expected a header starting with 'time_s', got {lines[:1]}")
     header = lines[0].split(",")
     names = tuple(h.strip() for h in header[1:])
-    rows = [_parse_row(path, skip + i + 2, line.split(","), len(header)) for i, line in enumerate(lines[1:])
-            if line.strip()]
-    table = np.array(rows, dtype=float).reshape(len(rows), len(header))
+    table = _parse_table(path, lines[1:], len(header), first_line=skip + 2)
     is_u = np.array([n.endswith(UNCERTAINTY_SUFFIX) for n in names], dtype=bool)
     angles = tuple(n for n, u in zip(names, is_u) if not u)
     values = np.radians(table[:, 1:][:, ~is_u])
@@ -268,6 +266,20 @@ def _read_lines(path: Path) -> list[str]:
         raise InputError(f"{path}: file not found") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: cannot read ({exc})") from exc
+
+
+def _parse_table(path: Path, lines: list[str], n_columns: int, /, *, first_line: int) -> np.ndarray:
+    """The numbers of the table's lines (blank ones skipped), (rows, n_columns): numpy's compiled
+    reader (the same doubles as float() of each cell), else, for a line it refuses, the line named."""
+    body = [line for line in lines if line.strip()]
+    try:
+        table = np.loadtxt(body, delimiter=",", dtype=float, ndmin=2, comments=None)
+        if table.shape[1] == n_columns or not body:
+            return table.reshape(len(body), n_columns)
+    except ValueError:
+        pass
+    rows = [_parse_row(path, first_line + i, line.split(","), n_columns) for i, line in enumerate(lines) if line.strip()]
+    return np.array(rows, dtype=float).reshape(len(rows), n_columns)
 
 
 def _parse_row(path: Path, line_no: int, cells: list[str], n_columns: int) -> list[float]:

@@ -309,3 +309,22 @@ def test_write_json_refuses_unknown_types_without_touching_the_file(tmp_path):
         write_json(path, {"x": object()})
     assert path.read_text(encoding="utf-8") == "{}"
     assert os.listdir(tmp_path) == ["summary.json"]
+
+
+def test_read_csv_numbers_are_float_of_each_cell(tmp_path):
+    """The compiled reader gives the doubles float() gives (every digit, sign of zero, nan, inf,
+    subnormals), blank lines skipped; a line it refuses is named by the fallback."""
+    from exubio.io.results import read_angles_csv
+
+    rng = np.random.default_rng(7)
+    cells = [["-0.000000", "nan", "inf", "-inf", "1e-320", "4.9e-324", " 2.5 ", "179.9999995"]]
+    cells += [[f"{x:.6f}" for x in rng.normal(0, 90, 8)] for _ in range(300)]
+    cells += [[repr(float(x)) for x in rng.normal(0, 1e-3, 8)] for _ in range(300)]
+    text = "time_s," + ",".join(f"a{j}" for j in range(7)) + "\n"
+    text += "\n".join(",".join(r) for r in cells[:200]) + "\n\n" + "\n".join(",".join(r) for r in cells[200:]) + "\n"
+    path = tmp_path / "x.csv"
+    path.write_text(text, encoding="utf-8")
+    t, names, values = read_angles_csv(path)
+    want = np.array([[float(c) for c in r] for r in cells])
+    assert np.array_equal(t, want[:, 0], equal_nan=True) and np.array_equal(np.signbit(t), np.signbit(want[:, 0]))
+    assert np.array_equal(values, np.radians(want[:, 1:]), equal_nan=True)
