@@ -3,11 +3,13 @@ artefact; abduction and flexion alternating; 10 subjects x 10 trials), PF with t
 report on, run by ``exubio study`` with the local process pool (--jobs 2) and with Dask
 (--scheduler local:2). Prints the wall time of each run, the per-trial time and the per-trial
 overhead outside the solver (trial wall time minus the PF solve time of its summary), and the CPU
-time of the run (all its processes) per trial.
+time of the run (all its processes) per trial, and the time after the last trial's DONE.json
+(the study's long tables, its report and files). ``--no-trial-reports``: the same study without
+the per-trial reports.
 
 Usage:
     python benchmarks/bench_study.py [--trials 100] [--duration 25] [--rate 200] [--methods pf]
-           [--runs jobs,dask] [--keep DIR] [--breakdown N]
+           [--runs jobs,dask] [--keep DIR] [--no-trial-reports] [--breakdown N]
 
 With --keep DIR the simulated trials are written once into DIR/data and reused by later runs with
 the same --trials, --duration and --rate (writing 100 trials takes about a minute); the results of
@@ -140,6 +142,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--methods", default="pf", help="comma-separated: pf, ls (default pf)")
     ap.add_argument("--runs", default="jobs,dask", help="which runs: jobs (process pool, --jobs 2), dask (local:2)")
     ap.add_argument("--keep", help="write the trials and results here instead of a temporary folder")
+    ap.add_argument("--no-trial-reports", action="store_true",
+                    help="the study without its per-trial reports (the study's own table, report and files stay)")
     ap.add_argument("--breakdown", type=int, metavar="N",
                     help="instead of the study runs: CPU time per stage of N trials run one after the other here")
     args = ap.parse_args(argv)
@@ -157,11 +161,11 @@ def main(argv: list[str] | None = None) -> int:
             shutil.rmtree(data, ignore_errors=True)
             study, sessions = make_trials(data, args.trials, args.duration, args.rate)
             written = f"written in {time.perf_counter() - t0:.0f} s"
-        study.write_text(yaml.safe_dump({"schema_version": 1, "name": "bench", "report": True,
+        study.write_text(yaml.safe_dump({"schema_version": 1, "name": "bench", "report": not args.no_trial_reports,
                                          "methods": args.methods.split(","), "sessions": sessions}), encoding="utf-8")
         marker.write_text(json.dumps(made), encoding="utf-8")
         print(f"{args.trials} trials of {args.duration:g} s at {args.rate:g} Hz {written}; "
-              f"methods {args.methods}, reports on")
+              f"methods {args.methods}, per-trial reports {'off' if args.no_trial_reports else 'on'}")
         if args.breakdown:
             trials = sorted(data.rglob("*.c3d"))[: max(args.breakdown, 3)]
             breakdown(trials, root / "out_breakdown", tuple(args.methods.split(",")))
@@ -172,10 +176,12 @@ def main(argv: list[str] | None = None) -> int:
             shutil.rmtree(out, ignore_errors=True)  # a kept earlier result would be resumed, not run
             wall, cpu = run(study, out, extra)
             walls, over = overheads(out)
+            done = max(p.stat().st_mtime for p in out.rglob("DONE.json"))
+            tail = max(p.stat().st_mtime for p in out.iterdir() if p.is_file()) - done
             print(f"{name:>5} ({' '.join(extra)}): study wall {wall:.1f} s; per trial {statistics.median(walls):.2f} s "
                   f"median (worker time), of which outside the PF solver {statistics.median(over):.2f} s median; "
                   f"throughput {args.trials / wall:.2f} trials/s; CPU {cpu:.0f} s in all, {cpu / args.trials:.2f} s "
-                  f"per trial")
+                  f"per trial; after the last trial (the study's table, report and files) {tail:.1f} s")
     return 0
 
 
