@@ -63,12 +63,15 @@ def _release(fig: Figure) -> None:
 
 def _empty(fig: Figure) -> None:
     """Take out of a drawn plot page what its page function puts in, so that drawing into it again
-    gives what a new figure gives: the data artists, legends, containers, property cycles, data
+    gives what a new figure gives: the data artists, legends, the figure's texts but its suptitle, containers, property cycles, data
     limits (the view limits follow the data again: every axes of a layout gets data, see the page
     keys), the facecolor and the automatic title placement. The axes, their sharing, and their
     tick objects stay (the layout, labels, titles and tick settings are set again by the page)."""
     for legend in list(fig.legends):
         legend.remove()
+    for text in list(fig.texts):  # the page's own text blocks; its suptitle stays, set again by the page
+        if text is not getattr(fig, "_suptitle", None):
+            text.remove()
     for ax in fig.axes:
         for container in list(ax.containers):
             container.remove()

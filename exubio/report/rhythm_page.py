@@ -16,6 +16,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
+from exubio.report.page_figures import _bisect_wrap, _page_figure, _pin_titles
 from exubio.model.signs import factors, meaning
 from exubio.scapulohumeral.files import StudyRhythm, shown_band
 from exubio.scapulohumeral.reference import Reference
@@ -90,7 +91,8 @@ def _notes(ref: Reference | None, lines: Sequence[str]) -> str:
 def trial_rhythm_page(r: TrialRhythm, ref: Reference | None, title: str, /, *, model_note: str = "",
                       method: str = "") -> Figure:
     """The trial's rhythm page (module docstring)."""
-    fig, axes = _figure()
+    fig, _ = _page_figure(("rhythm",), lambda: _figure()[0])  # a free rhythm page of this process, else a new one
+    axes = np.asarray(fig.axes)
     has_u = np.isfinite(r.u_deg).any()
     for k, (ax, name) in enumerate(zip(axes, r.names)):
         _corridor(ax, ref, name, r.signs)
@@ -115,11 +117,11 @@ def trial_rhythm_page(r: TrialRhythm, ref: Reference | None, title: str, /, *, m
     fig.suptitle(f"{title}\nscapulohumeral rhythm{f' ({method.upper()})' if method else ''}: "
                  f"{n_cycles['raising']} raising and {n_cycles['lowering']} lowering cycle(s); "
                  f"{'ISB' if r.signs == 'isb' else 'clinical'} signs (stated under each title)", fontsize=9)
-    fig.text(0.06, 0.015, _notes(ref, [
+    _bisect_wrap(fig.text(0.06, 0.015, _notes(ref, [
         "x: HT elevation, the angle between the humerus and the thorax's vertical axis. Frames: raising or lowering faster "
         "than 5 deg/s over at least 20 deg (exubio.scapulohumeral.table); ST and SC Y-X'-Z'', GH X-Z'-Y'' (Phadke) in ISB frames.",
-        *([f"corridor bones: {model_note}"] if model_note else [])]), fontsize=6.5, va="bottom", wrap=True)
-    return fig
+        *([f"corridor bones: {model_note}"] if model_note else [])]), fontsize=6.5, va="bottom", wrap=True))
+    return _pin_titles(fig)
 
 
 def _average_curves(ax, a: Average, k: int, *, thick: bool, band: bool, f: float = 1.0) -> None:

@@ -193,3 +193,33 @@ def test_a_trial_without_a_raise_has_no_rhythm_page(model, tmp_path):
     assert trial_rhythm_figure(npz, "still", "pf") is None
     with pytest.raises(exubio.InputError, match="study.json"):
         exubio.rhythm(tmp_path / "nothing_here")
+
+
+def test_rhythm_page_drawn_into_a_reused_figure_is_that_of_a_new_figure(model, tmp_path):
+    """The trial report keeps its rhythm page for the next trial of the process (as its other plot
+    pages, exubio.report.page_figures): drawn again, the page is byte for byte a new figure's."""
+    import io
+    import re
+
+    from exubio.report import page_figures
+    from exubio.report.rhythm_page import trial_rhythm_figure
+
+    _study(tmp_path, model, {"A": [0, 1], "B": [2]})
+    npz = {s: tmp_path / p / "s1" / f"abd{s}" / f"abd{s}.pf.npz" for s, p in ((0, "A"), (1, "A"), (2, "B"))}
+
+    def pdf(seed) -> bytes:
+        fig = trial_rhythm_figure(npz[seed], f"abd{seed}", "pf")
+        buf = io.BytesIO()
+        fig.savefig(buf, format="pdf")
+        page_figures._release(fig)
+        return re.sub(rb"/CreationDate \(D:[0-9Z'+-]+\)", b"", buf.getvalue())
+
+    fresh = {}
+    for seed in npz:
+        page_figures._FREE_PAGES.clear()
+        fresh[seed] = pdf(seed)
+    page_figures._FREE_PAGES.clear()
+    for seed in [0, 1, 2, 2, 0, 1]:
+        assert pdf(seed) == fresh[seed], seed
+    assert len(page_figures._FREE_PAGES[("rhythm",)]) == 1  # one figure drawn into again, not one per page
+    assert fresh[0] != fresh[1]  # the pages differ: the comparison can fail
