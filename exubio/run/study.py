@@ -32,6 +32,7 @@ import os
 import shutil
 import time
 import traceback
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
@@ -347,11 +348,22 @@ def run_study(spec: StudySpec, out_dir: str | Path, /, *, jobs: int = 1, schedul
     if removed := clean_leftovers(out):  # of a killed run whose workers were still at work when this one began
         say(f"removed {len(removed)} leftover(s) of an interrupted run")
     write_table(out, spec, outcomes)
-    study_table.write_study_table(out, study_table.table_trials(spec, outcomes))
-    write_moments_table(out, study_table.table_trials(spec, outcomes))  # sessions with a body mass: moments.parquet
-    if spec.report:
-        from exubio.report.study_report import build_study_report
+    trials = study_table.table_trials(spec, outcomes)
+    # the long tables are written on a thread while the study report is drawn: their Parquet and CSV
+    # writers and the compression run outside Python's lock, so the two share the machine's cores
+    with ThreadPoolExecutor(1, thread_name_prefix="exubio-tables") as pool:
+        tables = pool.submit(_write_long_tables, out, trials)
+        try:
+            if spec.report:
+                from exubio.report.study_report import build_study_report
 
-        build_study_report(out / "study.json", out / "study.report.pdf")
+                build_study_report(out / "study.json", out / "study.report.pdf")
+        finally:
+            tables.result()  # its error, if any, is the study's
     return outcomes
+
+
+def _write_long_tables(out: Path, trials) -> None:
+    study_table.write_study_table(out, trials)
+    write_moments_table(out, trials)  # sessions with a body mass: moments.parquet
 
