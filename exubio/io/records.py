@@ -7,8 +7,8 @@ back; ``Mapping`` fields are written as objects and read as dicts.
 
 Field options (``dataclasses.field`` metadata, set with the helpers below):
 
-* ``optional()``: the key is left out of the JSON object when the value is None (a key that is
-  present with the value null is a plain ``X | None`` field);
+* ``optional()``: the key is left out of the JSON object when the value is None (``empty=True``:
+  also when empty); a key that is present with the value null is a plain ``X | None`` field;
 * ``flat()``: a ``dict`` field whose items sit in the parent object beside the other fields (an
   object that mixes fixed keys with, e.g., one key per trial);
 * ``array()``: an ``np.ndarray`` stored in the npz archive (and, with ``json=True``, also as a
@@ -233,7 +233,7 @@ def _collect(value: Any, path: tuple[str, ...], out: dict[str, np.ndarray], temp
         out[key] = value
     elif dataclasses.is_dataclass(value) and not isinstance(value, type) and not hasattr(value, "to_dict"):
         for f in dataclasses.fields(value):
-            if f.metadata.get(_INTERNAL):
+            if f.metadata.get(_INTERNAL) or _CONVERT in f.metadata:  # in memory only; in the JSON
                 continue
             v = getattr(value, f.name)
             if isinstance(v, (Mapping, tuple, list)):

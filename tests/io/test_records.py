@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from exubio.cli import main
-from exubio.io.records import SchemaError, converted, decode, internal, nan_to_none, optional, to_json
+from exubio.io.records import SchemaError, converted, decode, encode_arrays, internal, nan_to_none, optional, to_json
 from exubio.io.results import write_json
 from exubio.model.ranges import LimitReport
 from exubio.run.live.outputs import Event
@@ -64,6 +64,7 @@ def test_field_options_convert_round_omit_and_keep_in_memory():
     pose = _Pose("static", angle_rad=math.radians(30.123456), centre_m=np.array([0.1, -0.02, 0.0031]), scratch=7.0)
     data = to_json(pose)
     assert data == {"name": "static", "angle_rad": 30.1235, "centre_m": [100.0, -20.0, 3.1], "level": "note"}
+    assert encode_arrays(pose) == {}  # a converted array is written in the JSON, not the npz archive
     back = decode(_Pose, json.loads(_text(data)))
     assert back.scratch == 0.0 and back.note is None and back.tags is None  # internal: default; optional: absent
     assert back.angle_rad == pytest.approx(math.radians(30.1235), abs=1e-15)
