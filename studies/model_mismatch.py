@@ -35,6 +35,7 @@ import time
 
 import numpy as np
 
+from exubio.io.records import to_json
 from exubio.protocol.bind import bind
 from exubio.trust.assess import assess_trial
 from exubio.model.kinematics import Kinematics
@@ -107,7 +108,7 @@ def run(name: str, pert: ModelPerturbation, motion: str, artefact: str, *, metho
             "worst_angle": worst, "worst_rmse_deg": round(errs[worst]["rmse"], 2),
             "worst_max_deg": round(max(v["max"] for v in errs.values()), 2),
             "mean_residual_mm": round(float(np.nanmean(r.residuals_m)) * 1e3, 2),
-            "evidence": {k: v.to_dict() for k, v in ev.items()},
+            "evidence": {k: to_json(v) for k, v in ev.items()},
             "verdict": q.verdict, "reasons": [f"{x.level}: {x.message}" for x in q.reasons if x.level != "note"],
             "mismatch_reasons": [x.message for x in q.reasons if x.code == "model_mismatch"],
         }

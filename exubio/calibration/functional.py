@@ -113,7 +113,9 @@ class FunctionalCentre:
     singular_values: np.ndarray
 
     def to_dict(self) -> dict[str, Any]:
-        """Summary for reports (mm, deg); the per-frame centre is left out."""
+        """Summary for reports (mm, deg); the per-frame centre is left out. Kept by hand
+        (exubio.io.records' exception): a fixed method name, a vector with a non-finite value
+        written as null, the condition to 4 significant digits; a summary, not read back."""
         return {
             "method": "SCoRE",
             "centre_local1_mm": _mm(self.centre_local1),
@@ -168,7 +170,8 @@ class FunctionalAxis:
     method: str = "SARA"
 
     def to_dict(self) -> dict[str, Any]:
-        """Summary for reports (mm, deg); per-frame arrays are left out."""
+        """Summary for reports (mm, deg); per-frame arrays are left out. Kept by hand (as
+        FunctionalCentre's): keys in another order than the fields, non-finite values as null."""
 
         def _unit(v: np.ndarray) -> list[float] | None:
             return None if not np.all(np.isfinite(v)) else [round(float(x), 5) for x in v]

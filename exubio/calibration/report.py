@@ -89,7 +89,11 @@ class CalibrationReport:
         return {m.name: m.generic_offset_mm for m in self.markers if m.registered}
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain data (mm, deg) for the model file's ``calibration`` section and JSON."""
+        """Plain data (mm, deg) for the model file's ``calibration`` section and JSON. Kept by hand
+        with ``from_dict`` (exubio.io.records' exception, which writes and reads the report through
+        them): the file groups the fields otherwise (frames, ellipsoid, markers by name), adds
+        summaries computed from them (the residuals' mean and max, the frame count) and fixed
+        definitions."""
         reg = [m for m in self.markers if m.registered]
         res = np.array([m.residual_mm for m in reg])
         off = np.array([m.generic_offset_mm for m in reg])

@@ -130,7 +130,9 @@ class ScapulaMotionFit:
     path_extent_m: dict[str, tuple[float, float]]
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain data (mm, deg) for the calibration report and the model file."""
+        """Plain data (mm, deg) for the calibration report and the model file. Kept by hand
+        (exubio.io.records' exception): fixed keys ("used", the units), fields regrouped and
+        converted per key (the centre's posterior SD in mm, the radii's relative)."""
         def mm(x: float) -> float:
             return round(float(x) * 1000.0, 2)
 

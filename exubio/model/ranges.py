@@ -45,20 +45,15 @@ def penalty_weight(limit_stiffness_nm_per_rad: float, default_stiffness_n_per_m:
 
 @dataclass(frozen=True)
 class LimitReport:
-    """Per coordinate: frames at (within AT_LIMIT_TOLERANCE_RAD of) or beyond a limit, and the
-    largest excursion beyond it (rad)."""
+    """Per coordinate: its range (lower, upper, deg), the frames at (within AT_LIMIT_TOLERANCE_RAD
+    of) or beyond a limit, the first of them, and the largest excursion beyond it (deg). Written
+    and read by exubio.io.records (a summary.json's ``limits``)."""
 
     coordinate: str
-    lower_deg: float
-    upper_deg: float
+    range_deg: tuple[float, float]
     frames_at_limit: int
     first_frame: int
     max_beyond_deg: float
-
-    def to_dict(self) -> dict:
-        return {"coordinate": self.coordinate, "range_deg": [self.lower_deg, self.upper_deg],
-                "frames_at_limit": self.frames_at_limit, "first_frame": self.first_frame,
-                "max_beyond_deg": self.max_beyond_deg}
 
 
 def limit_report(q: np.ndarray, ranges_rad: np.ndarray, names, /, *, exclude=(),
@@ -80,7 +75,7 @@ def limit_report(q: np.ndarray, ranges_rad: np.ndarray, names, /, *, exclude=(),
         at = (qj >= hi[j] - AT_LIMIT_TOLERANCE_RAD) | (qj <= lo[j] + AT_LIMIT_TOLERANCE_RAD)
         if at.any():
             beyond = np.maximum(np.maximum(qj - hi[j], lo[j] - qj), 0.0).max()
-            out.append(LimitReport(name, float(np.degrees(lo[j])), float(np.degrees(hi[j])), int(at.sum()),
+            out.append(LimitReport(name, (float(np.degrees(lo[j])), float(np.degrees(hi[j]))), int(at.sum()),
                                    int(np.flatnonzero(keep)[np.argmax(at)]), float(np.degrees(beyond))))
     return out
 

@@ -17,6 +17,7 @@ import json
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+from exubio.io.records import decode
 from exubio.io.result_names import set_paths
 
 
@@ -62,7 +63,7 @@ def kept_set(out_dir: str | Path, stem: str, key: str | None, /) -> Any:
         if summ.get("inputs_sha256") != key:
             return None
         recon = read_npz(paths["npz"], points=False)
-        quality = Quality.from_dict(summ["quality"])
+        quality = decode(Quality, summ["quality"])
     except (OSError, ValueError, KeyError, TypeError):
         return None
     recon = dataclasses.replace(recon, quality=quality, resumed_from=str(paths["summary"]))

@@ -1,18 +1,22 @@
 """summary.json: the one place where a trial's typed results (its reconstruction, its assessment,
-the session's calibration, the notes on the input files) become the file's plain data (mm, deg,
+the session's calibration, the notes on the input files) fill the file's typed records
+(exubio.run.summary_record), which exubio.io.records turns into the file's plain data (mm, deg,
 strings). Everything above hands this module objects; nothing below it builds the file's dicts."""
 from __future__ import annotations
 
+import dataclasses
 import os
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from exubio.io.records import to_json
 from exubio.model.angles import ANATOMICAL_ANGLES
 from exubio.io.result_names import set_names
 from exubio.model.signs import meaning
 from exubio.protocol.labels import resolve_labels
+from exubio.run.summary_record import CalibrationEntry, Gap, ReconstructionSummary, TrialSummary
 from exubio.trust.assess import TrialAssessment
 from exubio.trust.evaluate import residual_statistics
 from exubio.trust.quality import Quality, Reason
@@ -21,12 +25,13 @@ from exubio.types import FrameStatus, Reconstruction
 AGREEMENT_DEFINITION = "RMSE over the frames where the coordinate is determined in both reconstructions"
 
 
-def finding_entry(f: Any, /) -> dict[str, Any]:
-    """One label or model finding as the file records it."""
+def finding_entry(f: Any, /) -> Any:
+    """One label or model finding as the file records it: a typed finding (a dataclass, written by
+    exubio.io.records) as it is; a dict, or an object with the finding's attributes, as a dict."""
+    if dataclasses.is_dataclass(f) and not isinstance(f, type):
+        return f
     if isinstance(f, Mapping):
         return dict(f)
-    if hasattr(f, "to_dict"):
-        return f.to_dict()
     out = {k: getattr(f, k) for k in ("kind", "markers", "evidence", "severity") if hasattr(f, k)}
     if "markers" in out:
         out["markers"] = list(out["markers"])
@@ -39,59 +44,47 @@ def _absolute(path: Any, /) -> Any:
     return os.path.abspath(path) if path else path
 
 
-def calibration_entry(cal: Any, /) -> dict[str, Any]:
+def calibration_entry(cal: Any, /) -> CalibrationEntry:
     """The session's calibration (exubio.run.session.SessionCalibration) as summary.json records
-    it: the full report under ``report``, the label findings on the static trial under ``labels``."""
+    it: the full report under ``report``, the label findings on the static trial under ``labels``,
+    what the reader read around in the static trial's file (io/trc.py, io/c3d.py)."""
     report = cal.report.to_dict()
-    out = {"static": _absolute(cal.static), "frames": cal.frames, "model_file": _absolute(cal.model_file),
-           "mean_residual_mm": cal.report.mean_residual_mm, "residual_mm": report.get("residual_mm"),
-           "report": report, "labels": [finding_entry(f) for f in cal.labels]}
-    if cal.input_findings:  # what the reader read around in the static trial's file (io/trc.py, io/c3d.py)
-        out["input_findings"] = list(cal.input_findings)
-    return out
+    return CalibrationEntry(static=_absolute(cal.static), frames=cal.frames, model_file=_absolute(cal.model_file),
+                            mean_residual_mm=cal.report.mean_residual_mm, residual_mm=report.get("residual_mm"),
+                            report=report, labels=tuple(finding_entry(f) for f in cal.labels),
+                            input_findings=tuple(cal.input_findings))
 
 
 def reconstruction_entries(recon: Reconstruction, /, *, source: str = "") -> dict[str, Any]:
-    """What summary.json says of the reconstruction itself: frames, timings, residuals, constraint,
-    gaps, the markers and coordinates."""
+    """What summary.json says of the reconstruction itself (the fields of
+    exubio.run.summary_record.ReconstructionEntries): frames, timings, residuals, constraint, gaps,
+    the markers and coordinates."""
     total = float(recon.timings_s.get("total", np.nan))
     status = np.asarray(recon.status)
     rate = 1.0 / float(np.median(np.diff(recon.time_s))) if recon.n_frames > 1 else 1.0
-    return {
-        "method": recon.method,
-        "source": source,
-        "n_frames": recon.n_frames,
-        "duration_s": float(recon.time_s[-1] - recon.time_s[0]) if recon.n_frames else 0.0,
-        "wall_time_s": total,
-        "ms_per_frame": total / max(recon.n_frames, 1) * 1000.0,
-        "timings_s": dict(recon.timings_s),
-        "residual_mm": residual_statistics(recon),
-        "constraint_max_abs": float(np.nanmax(np.abs(recon.constraint))),
-        "constraint_velocity_max_abs_per_s": float(np.nanmax(np.abs(recon.constraint_velocity))),
-        "frames": {s.name.lower(): int((status == s.value).sum()) for s in FrameStatus},
-        "markers": list(recon.marker_names),
-        "coordinates": list(recon.coordinate_names),
-        "gaps": [{"marker": g.marker, "start_frame": g.start, "stop_frame": g.stop,
-                  "start_s": float(recon.time_s[g.start]) if g.start < recon.n_frames else None,
-                  "duration_s": g.n_frames / rate} for g in recon.gaps if g.n_frames < recon.n_frames],
-        "absent_markers": [g.marker for g in recon.gaps if g.n_frames >= recon.n_frames],
-        "info": dict(recon.info),
-    }
+    return dict(
+        method=recon.method, source=source, n_frames=recon.n_frames,
+        duration_s=float(recon.time_s[-1] - recon.time_s[0]) if recon.n_frames else 0.0,
+        wall_time_s=total, ms_per_frame=total / max(recon.n_frames, 1) * 1000.0, timings_s=dict(recon.timings_s),
+        residual_mm=residual_statistics(recon), constraint_max_abs=float(np.nanmax(np.abs(recon.constraint))),
+        constraint_velocity_max_abs_per_s=float(np.nanmax(np.abs(recon.constraint_velocity))),
+        frames={s.name.lower(): int((status == s.value).sum()) for s in FrameStatus},
+        markers=tuple(recon.marker_names), coordinates=tuple(recon.coordinate_names),
+        gaps=tuple(Gap(g.marker, g.start, g.stop, float(recon.time_s[g.start]) if g.start < recon.n_frames else None,
+                       g.n_frames / rate) for g in recon.gaps if g.n_frames < recon.n_frames),
+        absent_markers=tuple(g.marker for g in recon.gaps if g.n_frames >= recon.n_frames),
+        info=dict(recon.info))
 
 
 def assessment_entries(a: TrialAssessment, method: str, /, *, quality: Quality | None = None) -> dict[str, Any]:
-    """That method's assessment as summary.json records it; ``quality``: its verdict with the run's
-    notes added (default: the assessment's own)."""
-    angles = {} if a.angles is None else {"anatomical_angles": {
-        **a.angles[method].to_dict(), "protocol_can": dict(a.structural or {})}}
-    mismatch = {} if not a.mismatch or method not in a.mismatch else {"model_mismatch": a.mismatch[method].to_dict()}
-    return {**angles, **mismatch,
-            "quality": (quality or a.quality[method]).to_dict(),
-            "determinacy": a.determinacy[method].to_dict(),
-            "limits": [lim.to_dict() for lim in a.limits[method]],
-            "labels": [finding_entry(f) for f in a.labels],
-            "pf_ls_agreement_deg": agreement_entry(a.agreement_deg),
-            "not_measured": list(a.not_solved)}
+    """That method's assessment as summary.json records it (fields of
+    exubio.run.summary_record.TrialSummary); ``quality``: its verdict with the run's notes added
+    (default: the assessment's own)."""
+    angles = None if a.angles is None else {**a.angles[method].to_dict(), "protocol_can": dict(a.structural or {})}
+    return dict(anatomical_angles=angles, model_mismatch=(a.mismatch or {}).get(method),
+                quality=quality or a.quality[method], determinacy=a.determinacy[method].to_dict(),
+                limits=tuple(a.limits[method]), labels=tuple(finding_entry(f) for f in a.labels),
+                pf_ls_agreement_deg=agreement_entry(a.agreement_deg), not_measured=tuple(a.not_solved))
 
 
 def agreement_entry(agreement_deg: Mapping[str, float] | None, /) -> dict[str, Any] | None:
@@ -153,40 +146,25 @@ def trial_summary(recon: Reconstruction, assessment: TrialAssessment, inputs: An
     ``source`` the trial file, ``stem`` the result set's, ``notes`` the run's (RunNotes),
     ``quality`` its verdict (default: trial_quality)."""
     cal = notes.calibration
-    out = reconstruction_entries(recon, source=_absolute(source))
-    out["unused_trial_labels"] = unused_labels(inputs)
-    if cal is not None:
-        out["calibration"] = calibration_entry(cal)
-    if notes.live is not None:
-        out["live"] = dict(notes.live)
-    if "mean_spring_deflection_mm" in recon.info:
-        out["mean_spring_deflection_mm"] = recon.info["mean_spring_deflection_mm"]
-    if inputs.targets.cutoff_hz:
-        out["filter_cutoff_hz"] = dict(inputs.targets.cutoff_hz)
-    file_findings = _file_findings(inputs, cal)
     quality = quality if quality is not None else trial_quality(assessment, recon.method, inputs, notes)
-    out.update(assessment_entries(assessment, recon.method, quality=quality))
-    if file_findings:
-        out["input_findings"] = list(file_findings)
-    if notes.failures:
-        out["failed_methods"] = dict(notes.failures)
     signs = inputs.protocol.signs
     names = set_names(stem)
-    out["angles"] = {"files": [names["csv"], names["mot"]], "units": "deg", "side": inputs.protocol.side,
-                     "definitions": {n: {"definition": d, "meaning": meaning(n, signs)} for n, d, _ in ANATOMICAL_ANGLES}}
-    out["signs"] = signs
-    if notes.inputs_sha256:
-        out["inputs_sha256"] = notes.inputs_sha256
-    return out
+    return to_json(TrialSummary(
+        **reconstruction_entries(recon, source=_absolute(source)), unused_trial_labels=tuple(unused_labels(inputs)),
+        calibration=None if cal is None else calibration_entry(cal),
+        live=None if notes.live is None else dict(notes.live),
+        mean_spring_deflection_mm=recon.info.get("mean_spring_deflection_mm"),
+        filter_cutoff_hz=dict(inputs.targets.cutoff_hz or {}),
+        **assessment_entries(assessment, recon.method, quality=quality),
+        input_findings=_file_findings(inputs, cal), failed_methods=dict(notes.failures),
+        angles={"files": [names["csv"], names["mot"]], "units": "deg", "side": inputs.protocol.side,
+                "definitions": {n: {"definition": d, "meaning": meaning(n, signs)} for n, d, _ in ANATOMICAL_ANGLES}},
+        signs=signs, inputs_sha256=notes.inputs_sha256))
 
 
 def reconstruction_summary(recon: Reconstruction, angles: Any, /, *, source: str = "", signs: str = "isb") -> dict[str, Any]:
     """The summary.json of a reconstruction written on its own (exubio.write_results): the
     reconstruction, its anatomical angles' status (``angles``: AngleDeterminacy) and, when the
     reconstruction carries one (exubio.reconstruct), its verdict."""
-    out = reconstruction_entries(recon, source=source)
-    out["anatomical_angles"] = angles.to_dict()
-    if getattr(recon, "quality", None) is not None:
-        out["quality"] = recon.quality.to_dict()
-    out["signs"] = signs
-    return out
+    return to_json(ReconstructionSummary(**reconstruction_entries(recon, source=source), anatomical_angles=angles.to_dict(),
+                                         quality=getattr(recon, "quality", None), signs=signs))

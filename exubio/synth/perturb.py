@@ -30,6 +30,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from exubio.errors import InputError
+from exubio.io.records import to_json
 from exubio.types import Model
 
 __all__ = ["HEADER_PREFIX", "ModelPerturbation"]
@@ -147,13 +148,6 @@ class ModelPerturbation:
                 return cls() if words == ["none"] else cls.parse(words)
         return None
 
-    def to_dict(self) -> dict:
-        return {"ellipsoid_centre_mm": list(self.ellipsoid_centre_mm),
-                "ellipsoid_radii_scale": list(self.ellipsoid_radii_scale),
-                "segment_length_scale": dict(self.segment_length_scale),
-                "joint_centre_mm": {k: list(v) for k, v in self.joint_centre_mm.items()},
-                "marker_offset_mm": {k: list(v) for k, v in self.marker_offset_mm.items()}}
-
     # ---------------------------------------------------------------- the perturbed model
     def apply(self, model: Model, /) -> Model:
         """The perturbed model (``model`` is not changed). Unknown segments or points are an
@@ -197,6 +191,6 @@ class ModelPerturbation:
         ell = dataclasses.replace(ell, centre_m=np.asarray(ell.centre_m, dtype=float) + np.asarray(self.ellipsoid_centre_mm) * 1e-3,
                                   radii_m=np.asarray(ell.radii_m, dtype=float) * np.asarray(self.ellipsoid_radii_scale))
         meta = dict(out.metadata)
-        meta["perturbation"] = self.to_dict()
+        meta["perturbation"] = to_json(self)  # its fields as they are (exubio.io.records)
         return dataclasses.replace(out, segments=tuple(segs), ellipsoid=ell, metadata=meta,
                                    name=f"{model.name} (perturbed: {' '.join(self.words()) or 'none'})")

@@ -9,6 +9,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from exubio.io.records import to_json
 from exubio.trust import quality as Q
 from exubio.trust.checks import Evidence, judge
 from exubio.calibration import SCALE_BOUNDS
@@ -239,7 +240,7 @@ def assess_trial(binding: Binding, targets: MarkerTargets, recons: Sequence[Reco
             not_measured=tuple(unmeasurable), session_shifts=tuple(c.session), static_name=c.static_name,
             dropped_markers=tuple(c.dropped), partial_swaps=tuple(c.partial_swaps), repaired=c.repaired,
             residual_mm=residual_statistics(r), per_frame_residual_mm=per_frame_residuals_mm(r)[0],
-            limits=[lim.to_dict() for lim in lims[r.method]], angle_status=angles[r.method].trial_status(),
+            limits=to_json(lims[r.method]), angle_status=angles[r.method].trial_status(),
             structural_status=structural, measured_fraction=angles[r.method].fraction(AngleStatus.MEASURED),
             undetermined_trial_fraction=UNDETERMINED_TRIAL_FRACTION, angle_causes=angles[r.method].causes(),
             frames={"not_converged": int((status == FrameStatus.NOT_CONVERGED).sum()),

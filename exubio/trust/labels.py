@@ -53,6 +53,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from exubio.errors import InputError
+from exubio.io.records import optional
 from exubio.trust.label_chains import (
     CHAIN_FRAMES,
     CHAIN_GOOD_RMS_M,
@@ -180,25 +181,20 @@ class LabelFinding:
     markers:  the protocol marker names concerned.
     evidence: one sentence with the numbers (mm).
     severity: "error" (the labels must be fixed before reconstruction) or "warning".
-    relabel:  for a swap or permutation: the relabel that undoes it ({file label: read as}).
+    relabel:  for a swap or permutation: the relabel that undoes it ({file label: read as}); left
+              out of the file when there is none (exubio.io.records writes and reads a finding).
     """
 
     kind: str
     markers: tuple[str, ...]
     evidence: str
     severity: str
-    relabel: Mapping[str, str] | None = None
+    relabel: Mapping[str, str] | None = optional(empty=True)
 
     def __post_init__(self) -> None:
         if self.relabel is None and self.kind == "swap" and len(self.markers) == 2:
             a, b = self.markers
             object.__setattr__(self, "relabel", {a: b, b: a})
-
-    def to_dict(self) -> dict:
-        out = {"kind": self.kind, "markers": list(self.markers), "evidence": self.evidence, "severity": self.severity}
-        if self.relabel:
-            out["relabel"] = dict(self.relabel)
-        return out
 
 
 def _finding(kind: str, markers: tuple[str, ...], evidence: str) -> LabelFinding:

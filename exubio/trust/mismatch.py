@@ -33,6 +33,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from exubio.io.records import converted, decode, internal, to_json
 from exubio.model.kinematics import Kinematics, PointSet
 
 __all__ = ["MismatchAssessment", "MismatchFinding", "SegmentEvidence", "assess_mismatch", "mismatch_findings",
@@ -44,31 +45,22 @@ MIN_RIGID_MARKERS = 3
 
 @dataclass(frozen=True)
 class SegmentEvidence:
-    """What the residuals of one segment's markers say (see the module docstring; mm, deg)."""
+    """What the residuals of one segment's markers say (see the module docstring; mm, deg). Written
+    by exubio.io.records with its numbers to 3 decimals."""
 
     segment: str
     markers: tuple[str, ...]
     frames: int
-    residual_rms_mm: float
-    bias_mm: float
+    residual_rms_mm: float = converted(write=float, digits=3)
+    bias_mm: float = converted(write=float, digits=3)
     worst_bias_marker: str
-    worst_bias_mm: float
-    pose_gap_deg: float | None = None
-    pose_gap_p90_deg: float | None = None
-    rigid_rms_mm: float | None = None
-    normal_mm: float | None = None
-    contact_offset_mm: float | None = None
-    contact_offset_mean_mm: float | None = None
-
-    def to_dict(self) -> dict:
-        def r(x):
-            return None if x is None else round(float(x), 3)
-        return {"segment": self.segment, "markers": list(self.markers), "frames": self.frames,
-                "residual_rms_mm": r(self.residual_rms_mm), "bias_mm": r(self.bias_mm),
-                "worst_bias_marker": self.worst_bias_marker, "worst_bias_mm": r(self.worst_bias_mm),
-                "pose_gap_deg": r(self.pose_gap_deg), "pose_gap_p90_deg": r(self.pose_gap_p90_deg),
-                "rigid_rms_mm": r(self.rigid_rms_mm), "normal_mm": r(self.normal_mm),
-                "contact_offset_mm": r(self.contact_offset_mm), "contact_offset_mean_mm": r(self.contact_offset_mean_mm)}
+    worst_bias_mm: float = converted(write=float, digits=3)
+    pose_gap_deg: float | None = converted(write=float, digits=3, default=None)
+    pose_gap_p90_deg: float | None = converted(write=float, digits=3, default=None)
+    rigid_rms_mm: float | None = converted(write=float, digits=3, default=None)
+    normal_mm: float | None = converted(write=float, digits=3, default=None)
+    contact_offset_mm: float | None = converted(write=float, digits=3, default=None)
+    contact_offset_mean_mm: float | None = converted(write=float, digits=3, default=None)
 
 
 def rigid_fit(local: np.ndarray, measured: np.ndarray, /) -> tuple[np.ndarray, np.ndarray]:
@@ -164,7 +156,7 @@ def segment_evidence(kin: Kinematics, points: PointSet, q: np.ndarray, measured_
 
 def evidence_table(evidence: Mapping[str, SegmentEvidence], /) -> list[dict]:
     """The evidence as plain rows (for JSON and tables)."""
-    return [ev.to_dict() for ev in evidence.values()]
+    return to_json(list(evidence.values()))
 
 
 # ----------------------------------------------------------------------------- the decision
@@ -221,20 +213,17 @@ EVIDENCE_EVERY_S = 0.05
 
 @dataclass(frozen=True)
 class MismatchFinding:
-    """One segment the residuals say the model does not fit: what and how much."""
+    """One segment the residuals say the model does not fit: what and how much. Written by
+    exubio.io.records (pose gap and normal offset to 2 decimals; the contact offsets, in the
+    evidence beside it, are not repeated)."""
 
     segment: str
     evidence: str  # the sentence of the verdict's reason
     level: str = "check"  # "note": evidence within what the skin alone gives
-    pose_gap_deg: float | None = None
-    normal_mm: float | None = None
-    contact_offset_mm: float | None = None
-    contact_offset_mean_mm: float | None = None
-
-    def to_dict(self) -> dict:
-        return {"segment": self.segment, "evidence": self.evidence, "level": self.level,
-                "pose_gap_deg": None if self.pose_gap_deg is None else round(self.pose_gap_deg, 2),
-                "normal_mm": None if self.normal_mm is None else round(self.normal_mm, 2)}
+    pose_gap_deg: float | None = converted(digits=2, default=None)
+    normal_mm: float | None = converted(digits=2, default=None)
+    contact_offset_mm: float | None = internal(default=None)
+    contact_offset_mean_mm: float | None = internal(default=None)
 
 
 @dataclass(frozen=True)
@@ -245,12 +234,19 @@ class MismatchAssessment:
     findings: tuple[MismatchFinding, ...]
 
     def to_dict(self) -> dict:
+        """Kept by hand (exubio.io.records' documented exception): the file leads with the
+        detector's definition (its thresholds, not a field) and gives the evidence as a list."""
         return {"definition": (f"check when the scapula's contact points, where its own markers put them, lie more "
                                f"than {CONTACT_OFFSET_MM:g} mm off the thorax ellipsoid on average (or {CONTACT_OFFSET_RMS_MM:g} "
                                f"mm RMS), or the markers of the {', '.join(BIAS_SEGMENTS)} sit more than {BIAS_MM:g} mm "
                                "from their model points on average over the trial (segment frame)"),
-                "findings": [f.to_dict() for f in self.findings],
-                "evidence": evidence_table(self.evidence)}
+                "findings": to_json(self.findings), "evidence": evidence_table(self.evidence)}
+
+    @staticmethod
+    def from_dict(data: Mapping, /) -> "MismatchAssessment":
+        """The assessment ``to_dict`` wrote (its numbers as rounded there)."""
+        evidence = decode(tuple[SegmentEvidence, ...], data["evidence"])
+        return MismatchAssessment({e.segment: e for e in evidence}, decode(tuple[MismatchFinding, ...], data["findings"]))
 
 
 def mismatch_findings(evidence: Mapping[str, SegmentEvidence], /, *, skip_segments: Sequence[str] = ()

@@ -78,6 +78,7 @@ class Determinacy:
         return [n for n, f in self.fraction_by_markers().items() if f > UNDETERMINED_TRIAL_FRACTION]
 
     def to_dict(self) -> dict:
+        """Kept by hand (exubio.io.records' exception): fractions and medians over frames, not fields."""
         frac = self.fraction_undetermined()
         with np.errstate(all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
@@ -250,6 +251,7 @@ class AngleDeterminacy:
         return out
 
     def to_dict(self) -> dict:
+        """Kept by hand (as Determinacy's): per-trial status, fractions and medians over the frames."""
         with np.errstate(all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             med = np.nanmedian(np.where(np.isfinite(self.gain_deg_per_mm), self.gain_deg_per_mm, 1e9), axis=0) \
@@ -283,10 +285,8 @@ class AngleDeterminacy:
             if self.near_gimbal_lock[:, j].any()}
         above = {n: round(float((u[:, j] > U_BOUND_DEG).mean()), 4) for j, n in enumerate(self.names)
                  if (u[:, j] > U_BOUND_DEG).any()}
-        return {"uncertainty_definition": UNCERTAINTY_DEFINITION,
-                "median_uncertainty_deg_measured_frames": med,
-                "frames_near_gimbal_lock_fraction": gimbal,
-                "frames_uncertainty_above_bound_fraction": above}
+        return {"uncertainty_definition": UNCERTAINTY_DEFINITION, "median_uncertainty_deg_measured_frames": med,
+                "frames_near_gimbal_lock_fraction": gimbal, "frames_uncertainty_above_bound_fraction": above}
 
 
 def _angle_jacobian(table, q: np.ndarray) -> np.ndarray:

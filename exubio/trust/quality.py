@@ -87,6 +87,8 @@ LEVELS = tuple(s.value for s in Severity)  # "note", "check", "fail": the order 
 
 @dataclass(frozen=True)
 class Reason:
+    """One reason of a verdict; written and read by exubio.io.records ({"code", "level", "message"})."""
+
     code: str  # e.g. "residual", "marker_residual", "label", "limit", "undetermined", ...
     level: Severity  # given as the enum or its value ("note", "check", "fail")
     message: str
@@ -94,25 +96,17 @@ class Reason:
     def __post_init__(self) -> None:
         object.__setattr__(self, "level", Severity(self.level))
 
-    def to_dict(self) -> dict[str, str]:
-        return {"code": self.code, "level": self.level.value, "message": self.message}
-
 
 @dataclass(frozen=True)
 class Quality:
+    """A verdict and its reasons; a summary.json's ``quality`` is ``records.to_json`` of it and
+    reads back with ``records.decode(Quality, data)``."""
+
     verdict: Verdict
     reasons: tuple[Reason, ...] = field(default_factory=tuple)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "verdict", Verdict(self.verdict))
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"verdict": self.verdict.value, "reasons": [r.to_dict() for r in self.reasons]}
-
-    @staticmethod
-    def from_dict(data: Mapping[str, Any], /) -> "Quality":
-        """The Quality ``to_dict`` gave (a summary.json's ``quality``)."""
-        return Quality(data["verdict"], tuple(Reason(r["code"], r["level"], r["message"]) for r in data["reasons"]))
 
     def with_reasons(self, more: Iterable[Reason], /) -> "Quality":
         """The same judgement with ``more`` reasons added (notes leave the verdict as it is)."""

@@ -10,7 +10,7 @@ from exubio.run.inputs import load_session
 from exubio.run.session import calibrate_file
 from exubio.prep.targets import prepare_targets
 from exubio.io.resources import shipped_file
-from exubio.validation.codec import decode
+from exubio.io.records import decode
 from exubio.validation.determinacy import trial_undetermined, undetermined_isb
 from exubio.validation.paths import shared_data_dir
 from exubio.validation.results import METHODS, C3dTask, C3dTasks, InvivoComparison, Skipped, TrialData

@@ -7,7 +7,7 @@ import numpy as np
 
 from exubio.literature.invivo import compare_elevation, inferred_joints
 from exubio.literature.reference import load_ludewig2009
-from exubio.validation.codec import decode
+from exubio.io.records import decode
 from exubio.validation.determinacy import trial_undetermined, undetermined_isb
 from exubio.validation.results import METHODS, InvivoComparison
 from exubio.validation.trials import LUDEWIG_PLANE, Trial, plot_stride

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from exubio.validation.records_runs import RmsMax, Skipped
-from exubio.validation.codec import (
+from exubio.io.records import (
     Record,
     array,
     flat,

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from exubio.validation.codec import (
+from exubio.io.records import (
     Record,
     array,
     optional,

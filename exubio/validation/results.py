@@ -7,7 +7,7 @@ cannot disagree on a key: ``ValidationResults.save(folder)`` writes
 * ``validation_runs.json``: the whole record (settings, data provenance, every number);
 * ``table1.json``: the paper's Table 1 for exubio (``table1``) beside the paper's row;
 * ``validation_data.npz``: the arrays the figures need (npz names ``<section>__<name>``, from
-  the records' fields, see ``exubio.validation.codec``),
+  the records' fields, see ``exubio.io.records``),
 
 and ``ValidationResults.load(folder)`` reads them back into equal records. Imports no solver.
 
@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from exubio.validation.codec import (
+from exubio.io.records import (
     Record,
     SchemaError,
     array,

@@ -34,7 +34,7 @@ import exubio
 from exubio.validation.agreement import pf_ls_agreement
 from exubio.validation.c3d_tasks import c3d_task_comparison
 from exubio.validation.checks import invivo_aims, paper_checks
-from exubio.validation.codec import decode
+from exubio.io.records import decode
 from exubio.validation.invivo import invivo_comparison, ludewig_means
 from exubio.validation.mismatch import mismatch_study
 from exubio.validation.rates import rates_against_truth, rates_checks

@@ -25,7 +25,7 @@ from exubio.prep.targets import prepare_targets
 from exubio.io.resources import shipped_file
 from exubio.synth.simulate import Motion, SimulatedTrial, simulate_trial
 from exubio.types import MarkerTargets, Model, Protocol, Reconstruction
-from exubio.validation.codec import decode
+from exubio.io.records import decode
 from exubio.validation.paths import shared_data_dir
 from exubio.validation.results import (
     CalibrationFrames,

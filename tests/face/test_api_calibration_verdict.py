@@ -11,6 +11,7 @@ import pytest
 import exubio
 from exubio.cli import main
 from exubio.io.c3d import write_c3d
+from exubio.io.records import to_json
 
 pytestmark = pytest.mark.exudyn
 
@@ -32,7 +33,7 @@ def test_the_api_verdict_after_calibrate_equals_the_clis(tmp_path):
 
     calibrated, protocol, report = exubio.calibrate(exubio.read_trial(tmp_path / "static.c3d"))
     rec = exubio.reconstruct(exubio.read_trial(tmp_path / "task.c3d"), calibrated, protocol, method="ls")
-    api = rec.quality.to_dict()
+    api = to_json(rec.quality)
     assert api["verdict"] == cli["verdict"] == rec.verdict
     assert _reasons(api) == _reasons(cli)
     # the files the API writes for the same trial carry the same verdict and reasons

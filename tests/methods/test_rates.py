@@ -9,7 +9,7 @@ import pytest
 from exubio.run.inputs import load_model_and_protocol
 from exubio.prep.targets import prepare_targets
 from exubio.synth.simulate import simulate_trial
-from exubio.validation.codec import decode
+from exubio.io.records import decode
 from exubio.validation.rates import (PF_AIM_QD_DEG_S, PF_AIM_QDD_DEG_S2, finite_differences, rates_against_truth,
                                      rates_checks, rates_of)
 from exubio.validation.results import Rates

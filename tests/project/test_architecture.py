@@ -61,7 +61,7 @@ def test_each_library_has_one_owner(library):
 
 @pytest.mark.parametrize("module", [*sorted(str(p.relative_to(PACKAGE)) for p in (PACKAGE / "report").glob("*.py")),
                                     "validation/results.py", "validation/records_runs.py",
-                                    "validation/records_comparisons.py", "validation/codec.py",
+                                    "validation/records_comparisons.py", "io/records.py",
                                     "validation/settings.py", "validation/checks.py", "validation/paths.py"])
 def test_what_draws_results_never_imports_a_solver(module):
     bad = sorted(m for m in _imports(PACKAGE / module) if m.startswith(SOLVERS))
@@ -85,7 +85,7 @@ LAYERS = (
     ("exubio.synth",),
     ("exubio.trust",),
     ("exubio.scapulohumeral",),  # the scapulohumeral rhythm from result files (below the report that draws it)
-    tuple(f"exubio.validation.{m}" for m in ("results", "records_runs", "records_comparisons", "codec", "settings",
+    tuple(f"exubio.validation.{m}" for m in ("results", "records_runs", "records_comparisons", "settings",
                                                "checks", "paths")),
     ("exubio.report",),
     ("exubio.run",),

@@ -13,6 +13,7 @@ pytestmark = pytest.mark.exudyn
 
 pytest.importorskip("exudyn")
 
+from exubio.io.records import to_json  # noqa: E402
 from exubio.io.resources import shipped_file  # noqa: E402
 from exubio.io.result_names import set_names  # noqa: E402
 from exubio.report.trial_report import read_result  # noqa: E402
@@ -35,7 +36,7 @@ def test_the_outcome_is_what_its_files_hold(outcomes):
         assert {k: p.name for k, p in o.paths.items()} == set_names(o.stem)
         on_disk = json.loads(o.paths["summary"].read_text(encoding="utf-8"))
         assert json.loads(json.dumps(o.summary, default=str)) == on_disk  # no NaN in this trial's summary
-        assert o.quality.to_dict() == on_disk["quality"]
+        assert to_json(o.quality) == on_disk["quality"]
         assert o.quality is o.reconstruction.quality
     written = {k: v for k, v in on_disk["pf_ls_agreement_deg"].items() if isinstance(v, float)}
     assert written and outcomes[0].agreement_deg == written == outcomes[1].agreement_deg

@@ -17,6 +17,7 @@ from exubio.trust import label_expectations as LE
 from exubio.trust import labels as L
 from exubio.calibration import scale_model
 from exubio.errors import InputError
+from exubio.io.records import decode, to_json
 from exubio.model.kinematics import Kinematics
 from exubio.run.inputs import protocol_for_model
 from exubio.synth.simulate import simulate_trial
@@ -257,8 +258,11 @@ def test_findings_are_typed_and_printable():
     f = L.LabelFinding("swap", ("A", "B"), "A and B look swapped: 107 mm", "error")
     with pytest.raises(dataclasses.FrozenInstanceError):
         f.kind = "side"  # type: ignore[misc]
-    assert f.to_dict() == {"kind": "swap", "markers": ["A", "B"], "evidence": "A and B look swapped: 107 mm",
-                           "severity": "error", "relabel": {"A": "B", "B": "A"}}  # a swap carries the relabel that undoes it
+    assert to_json(f) == {"kind": "swap", "markers": ["A", "B"], "evidence": "A and B look swapped: 107 mm",
+                          "severity": "error", "relabel": {"A": "B", "B": "A"}}  # a swap carries the relabel that undoes it
+    assert decode(L.LabelFinding, to_json(f)) == f
+    side = L.LabelFinding("side", ("A",), "A is on the wrong side", "warning")
+    assert "relabel" not in to_json(side) and decode(L.LabelFinding, to_json(side)) == side  # no relabel: no key
     assert L.format_findings([f], source="t.c3d") == "t.c3d: error [swap] A, B: A and B look swapped: 107 mm"
     assert "no finding" in L.format_findings([])
 

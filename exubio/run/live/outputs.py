@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
+from exubio.io.records import converted
 from exubio.trust import quality as Q
 from exubio.model.angles import ISB_COLUMNS, measured_isb_joints
 from exubio.protocol.bind import Binding
@@ -90,13 +91,9 @@ class Event:
 
     kind: str
     frame: int
-    time_s: float
+    time_s: float = converted(digits=6)  # written (exubio.io.records) to the µs
     message: str
     markers: tuple[str, ...] = ()
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"kind": self.kind, "frame": self.frame, "time_s": round(self.time_s, 6), "message": self.message,
-                "markers": list(self.markers)}
 
 
 class _Growing:

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from exubio.errors import InputError
+from exubio.io.records import to_json
 from exubio.run.live.outputs import LiveRecording
 
 __all__ = ["write_recording", "read_recorded_markers"]
@@ -68,7 +69,7 @@ def write_recording(rec: LiveRecording, out_dir: str | os.PathLike, name: str, /
         live = live_summary(rec)
         outputs = write_assessed(inputs, f"{name}.c3d", tmp, [(Method.PF, f"{name}.pf", recon, None)], assessment,
                                  notes=RunNotes(live=live))
-        write_json(tmp / f"{name}.live.json", {**live, "offline_verdict": assessment.quality["pf"].to_dict()})
+        write_json(tmp / f"{name}.live.json", {**live, "offline_verdict": to_json(assessment.quality["pf"])})
         if report:
             from exubio.report.trial_report import draw_trial_report
             from exubio.run.outcome import reported
@@ -96,8 +97,8 @@ def live_summary(rec: LiveRecording) -> dict[str, Any]:
         "processing": rec.options.causal.describe() + "; PF one step per frame"
                       + ("" if rec.options.pf.project_constraints else ", no final projection on the constraints"),
         "figures": rec.stats,
-        "live_verdict": rec.live_quality.to_dict() if rec.live_quality is not None else None,
-        "events": [e.to_dict() for e in rec.events],
+        "live_verdict": to_json(rec.live_quality),
+        "events": to_json(rec.events),
     }
 
 

@@ -30,6 +30,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from exubio.errors import InputError
+from exubio.io.records import to_json
 from exubio.run.live.sources import StreamInfo
 
 log = logging.getLogger(__name__)
@@ -266,7 +267,7 @@ class LSLPublisher:
             self.outlet.push_sample(row.tolist())
 
     def event(self, event) -> None:
-        self.events.push_sample([json.dumps(event.to_dict())])
+        self.events.push_sample([json.dumps(to_json(event))])
 
     def close(self) -> None:
         self.outlet = self.events = None

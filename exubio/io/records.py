@@ -1,17 +1,29 @@
-"""Frozen dataclasses <-> the validation's files: a record becomes a JSON object (its fields in
-order, as keys of the same name) and its arrays become entries of an npz archive; both are read
-back into the same record. The dataclass fields are the only description of the files: the
-study writes through it, the report reads through it.
+"""Frozen dataclasses <-> JSON objects and npz archives: the one serialisation scheme of exubio.
+A record becomes a JSON object (its fields in order, as keys of the same name) and its arrays
+become entries of an npz archive; both are read back into the same record. The dataclass fields
+are the only description of the files: a trial's summary.json (exubio.run.summary_record) and the
+validation's files are written and read through it. Enums are written as their values and read
+back; ``Mapping`` fields are written as objects and read as dicts.
 
 Field options (``dataclasses.field`` metadata, set with the helpers below):
 
-* ``optional()``: the key is left out of the JSON object when the value is None (a key that is
-  present with the value null is a plain ``X | None`` field);
+* ``optional()``: the key is left out of the JSON object when the value is None (``empty=True``:
+  also when empty); a key that is present with the value null is a plain ``X | None`` field;
 * ``flat()``: a ``dict`` field whose items sit in the parent object beside the other fields (an
   object that mixes fixed keys with, e.g., one key per trial);
 * ``array()``: an ``np.ndarray`` stored in the npz archive (and, with ``json=True``, also as a
   JSON list); a ``dict`` of arrays stores one entry per key;
-* ``npz_name()``: the npz segment (template) of a record, ``dict`` or ``tuple`` field.
+* ``npz_name()``: the npz segment (template) of a record, ``dict`` or ``tuple`` field;
+* ``converted(write=, read=, digits=)``: each number of the field (alone or in a list, tuple,
+  array, dict; None passes) is written as ``round(write(v), digits)`` and read as ``read(v)``
+  (e.g. ``write=np.degrees, read=np.radians, digits=4``: rad in memory, deg to 4 decimals in the
+  file); a rounded file reads back to the rounded value, which writes the same bytes again;
+* ``internal()``: a field kept in memory only (neither written nor read; it takes its default).
+
+A dataclass whose file form is a computation over its fields, not a mapping of them (medians
+over frames, a fixed definition, keys grouped otherwise), keeps a hand-written ``to_dict()``; the
+codec writes it through that and reads it through its static ``from_dict(data)`` if it has one
+(else a field holding it is typed as plain data). Each such ``to_dict`` says why in its docstring.
 
 npz names follow the records' nesting: segments joined by ``__``; a field's segment is its
 ``npz`` name (default: the field name; "" adds none); a ``dict`` or ``tuple`` field's ``npz`` is
@@ -23,20 +35,23 @@ field becomes NaN again. Records compare equal when they would write the same fi
 """
 from __future__ import annotations
 
+import collections.abc
 import dataclasses
+import enum
 import json
 import re
 import types
 import typing
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
-__all__ = ["Record", "SchemaError", "array", "canonical", "decode", "encode_arrays", "flat", "nan_to_none",
-           "npz_name", "optional", "to_json", "write_json"]
+__all__ = ["Record", "SchemaError", "array", "canonical", "converted", "decode", "encode_arrays", "flat", "internal",
+           "nan_to_none", "npz_name", "optional", "to_json", "write_json"]
 
-_OPTIONAL, _FLAT, _NPZ, _JSON = "optional", "flat", "npz", "json"
+_OPTIONAL, _FLAT, _NPZ, _JSON, _CONVERT, _INTERNAL = "optional", "flat", "npz", "json", "convert", "internal"
+_DICTS = (dict, collections.abc.Mapping)
 
 
 class SchemaError(ValueError):
@@ -44,9 +59,49 @@ class SchemaError(ValueError):
     key, a value of the wrong shape, an npz entry no field reads."""
 
 
-def optional(**kw: Any) -> Any:
-    """A field whose key is omitted from the JSON object when the value is None (default None)."""
-    return dataclasses.field(default=None, metadata={_OPTIONAL: True}, **kw)
+def optional(*, empty: bool = False, **kw: Any) -> Any:
+    """A field whose key is omitted from the JSON object when the value is None (default None),
+    or also when it is empty (``empty``: a ``{}`` or ``()``)."""
+    return dataclasses.field(default=None, metadata={_OPTIONAL: "empty" if empty else True}, **kw)
+
+
+@dataclasses.dataclass(frozen=True)
+class Conversion:
+    """How a field's numbers are written (``round(write(v), digits)``) and read (``read(v)``)."""
+
+    write: Callable[[Any], Any] | None = None
+    read: Callable[[Any], Any] | None = None
+    digits: int | None = None
+
+    def to_file(self, v: Any) -> Any:
+        v = _each(v, self.write) if self.write is not None else v
+        return v if self.digits is None else _each(v, lambda x: round(x, self.digits))
+
+    def from_file(self, v: Any) -> Any:
+        return v if self.read is None else _each(v, self.read)
+
+
+def _each(value: Any, fn: Callable[[Any], Any]) -> Any:
+    """``fn`` of every number in ``value`` (containers kept: an array stays an array)."""
+    if value is None or isinstance(value, (str, bool, np.bool_)):
+        return value
+    if isinstance(value, Mapping):
+        return {k: _each(v, fn) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        out = [_each(v, fn) for v in value]
+        return np.asarray(out) if isinstance(value, np.ndarray) else type(value)(out)
+    return fn(value)
+
+
+def converted(*, write: Callable[[Any], Any] | None = None, read: Callable[[Any], Any] | None = None,
+              digits: int | None = None, **kw: Any) -> Any:
+    """A field written as ``round(write(v), digits)``, read as ``read(v)``; ``kw``: a default."""
+    return dataclasses.field(metadata={_CONVERT: Conversion(write, read, digits)}, **kw)
+
+
+def internal(**kw: Any) -> Any:
+    """A field kept in memory only: not written, not read (it takes its default, given in ``kw``)."""
+    return dataclasses.field(metadata={_INTERNAL: True, _JSON: False}, **kw)
 
 
 def npz_name(npz: str) -> Any:
@@ -97,13 +152,18 @@ def to_json(obj: Any, /) -> Any:
     """``obj`` as JSON-ready Python data: records as dicts in field order (npz-only fields left
     out), tuples as lists, arrays as lists, numpy scalars as Python numbers; NaN stays NaN."""
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        if hasattr(obj, "to_dict"):  # a documented exception: its file form is a computation
+            return to_json(obj.to_dict())
         out: dict[str, Any] = {}
         for f in dataclasses.fields(obj):
             if not _in_json(f):
                 continue
             value = getattr(obj, f.name)
-            if value is None and f.metadata.get(_OPTIONAL):
+            omit = f.metadata.get(_OPTIONAL)
+            if omit and (value is None or (omit == "empty" and not value)):
                 continue
+            if _CONVERT in f.metadata:
+                value = f.metadata[_CONVERT].to_file(value)
             if f.metadata.get(_FLAT):
                 for k, v in value.items():
                     if k in out:
@@ -112,6 +172,8 @@ def to_json(obj: Any, /) -> Any:
                 continue
             out[f.name] = to_json(value)
         return out
+    if isinstance(obj, enum.Enum):
+        return obj.value
     if isinstance(obj, Mapping):
         return {k: to_json(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
@@ -169,8 +231,10 @@ def _collect(value: Any, path: tuple[str, ...], out: dict[str, np.ndarray], temp
         if key in out:
             raise SchemaError(f"two arrays named {key}")
         out[key] = value
-    elif dataclasses.is_dataclass(value) and not isinstance(value, type):
+    elif dataclasses.is_dataclass(value) and not isinstance(value, type) and not hasattr(value, "to_dict"):
         for f in dataclasses.fields(value):
+            if f.metadata.get(_INTERNAL) or _CONVERT in f.metadata:  # in memory only; in the JSON
+                continue
             v = getattr(value, f.name)
             if isinstance(v, (Mapping, tuple, list)):
                 _collect(v, path, out, _template(f))
@@ -263,7 +327,7 @@ def _contains_array(tp: Any) -> bool:
     tp, _ = _without_none(tp)
     if tp is np.ndarray:
         return True
-    return typing.get_origin(tp) is dict and _contains_array(typing.get_args(tp)[1])
+    return typing.get_origin(tp) in _DICTS and _contains_array(typing.get_args(tp)[1])
 
 
 class _Reader:
@@ -308,8 +372,13 @@ class _Reader:
             raise SchemaError(f"{where}: fits none of {[a.__name__ for a in alts]}; {_misfit(alts, data)}")
         if dataclasses.is_dataclass(tp):
             return self.record(tp, data, path, where)
+        if isinstance(tp, type) and issubclass(tp, enum.Enum):
+            try:
+                return tp(data)
+            except ValueError:
+                raise SchemaError(f"{where}: expected one of {[e.value for e in tp]}, got {data!r:.80}") from None
         origin = typing.get_origin(tp)
-        if origin is dict:
+        if origin in _DICTS:
             _, vt = typing.get_args(tp)
             if not isinstance(data, Mapping):
                 raise SchemaError(f"{where}: expected an object, got {data!r:.80}")
@@ -351,7 +420,7 @@ class _Reader:
             if got is None and not nullable:
                 raise SchemaError(f"{where}: array {_join(path)} missing")
             return got
-        if typing.get_origin(inner) is dict:
+        if typing.get_origin(inner) in _DICTS:
             _, vt = typing.get_args(inner)
             out = {}
             for k in self.scan(path, template):
@@ -362,18 +431,27 @@ class _Reader:
     def record(self, cls: type, data: Any, path: tuple[str, ...], where: str) -> Any:
         if not isinstance(data, Mapping):
             raise SchemaError(f"{where}: expected an object for {cls.__name__}, got {data!r:.80}")
+        if hasattr(cls, "to_dict"):  # a documented exception (see the module docstring)
+            if not hasattr(cls, "from_dict"):
+                raise SchemaError(f"{where}: {cls.__name__} is written as a summary and cannot be read back")
+            try:
+                return cls.from_dict(data)
+            except (KeyError, TypeError, ValueError) as exc:
+                raise SchemaError(f"{where}: not a {cls.__name__} ({type(exc).__name__}: {exc})") from None
         hints = _hints(cls)
         kwargs: dict[str, Any] = {}
         known: set[str] = set()
         flat_field = None
         later: list[dataclasses.Field] = []  # npz-only dicts scan what the named arrays leave
         for f in dataclasses.fields(cls):
+            if f.metadata.get(_INTERNAL):
+                continue
             tp = hints[f.name]
             sub = f"{where}.{f.name}"
             if f.metadata.get(_FLAT):
                 flat_field = f
                 continue
-            container = typing.get_origin(_without_none(tp)[0]) in (dict, tuple)
+            container = typing.get_origin(_without_none(tp)[0]) in (*_DICTS, tuple)
             seg_path = path if container else path + (f.metadata.get(_NPZ, f.name),)
             template = _template(f) if container else "{}"
             if not _in_json(f):
@@ -392,6 +470,8 @@ class _Reader:
                 kwargs[f.name] = got if got is not None else self.value(tp, data[f.name], seg_path, template, sub)
                 continue
             kwargs[f.name] = self.value(tp, data[f.name], seg_path, template, sub)
+            if _CONVERT in f.metadata:
+                kwargs[f.name] = f.metadata[_CONVERT].from_file(kwargs[f.name])
         if flat_field is not None:
             vt = typing.get_args(_without_none(hints[flat_field.name])[0])[1]
             kwargs[flat_field.name] = {k: self.value(vt, v, path + (_template(flat_field).format(k),), "{}",
