@@ -30,6 +30,7 @@ every frame: the raw samples, the causal targets, the PF result, the events.
 """
 from __future__ import annotations
 
+import gc
 import logging
 import threading
 import time
@@ -44,7 +45,7 @@ from exubio.run.live.causal import CausalFrame, CausalTargets
 from exubio.run.live.intake import EndRun, Sample, SampleIntake
 from exubio.run.live.monitor import LiveMonitor
 from exubio.run.live.options import LiveOptions
-from exubio.run.live.outputs import VERDICT_CODES, Event, FrameRecord, LiveRecording, PublishedAngles
+from exubio.run.live.outputs import ISB_NAMES, VERDICT_CODES, Event, FrameRecord, LiveRecording, PublishedAngles
 from exubio.run.live.sources import MarkerSource
 from exubio.methods.pf import _Frames, pf_setup
 from exubio.model.kinematics import Frames
@@ -60,12 +61,19 @@ is done together, vectorised, after their angles went out (a fixed count: the sa
 offline)."""
 
 
+def _settle_heap() -> None:
+    """Collect, then freeze every object alive so far (undone at the session's end): a full collection
+    walks all of the process's objects (numpy, scipy, numba, Exudyn: 78 ms at 1000 Hz, once a minute);
+    frozen, it walks only those made since. Before the first sample and as each PF run starts."""
+    gc.collect()
+    gc.freeze()
+
+
+@dataclass(frozen=True)
 class _Motion:
     """The segment rates of a batch of frames, as _Frames.rates reads them from a PFRun."""
-    __slots__ = ("angular_velocities_rad_s", "angular_accelerations_rad_s2")
-
-    def __init__(self, w, a):
-        self.angular_velocities_rad_s, self.angular_accelerations_rad_s2 = w, a
+    angular_velocities_rad_s: np.ndarray
+    angular_accelerations_rad_s2: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -212,7 +220,7 @@ class LiveSession:
         self.record.output(g, out, status, self.run_id)
         if out is not None:
             q, res = out[0], out[4]
-            self.monitor.determinacy(g, q, self.record.rows["active"].a[g])
+            self.monitor.determinacy(g, q, self.record.rows["active"].get(g))
             self.monitor.running(g, q, res)
         else:
             if status == FrameStatus.NOT_CONVERGED:
@@ -283,6 +291,7 @@ class LiveSession:
         b = setup.binding
         frames = _Frames(b.kin, b.points, None, setup.q0, b.held, self.options.pf, None, 1.0 / self.rate)
         self.run_id += 1
+        _settle_heap()  # the new run's system is built: frozen with the rest
         self.run_started = self.clock()
         self.tracking = True
         self._event("run_start", g0, f"PF run {self.run_id} starts from the LS pose of frame {g0}")
@@ -379,8 +388,7 @@ class LiveSession:
                                                             self.intake.n_labels)
         self.events: list[Event] = []
         self.ended_by = ""
-        self.n_failed = self.n_no_state = 0
-        self.n_stepped = 0
+        self.n_failed = self.n_no_state = self.n_stepped = 0
 
     def _bind(self) -> None:
         from exubio.model.frame_kinematics import FrameForward
@@ -401,17 +409,12 @@ class LiveSession:
         self.record = FrameRecord(self.n_labels, len(self.marker_names), self.model.n_coordinates)
         self.pending: dict[int, tuple] = {}  # frame -> (CausalFrame, its sample) taken, not yet solved
         self.deferred: list = []
-        self.run_id = -1
-        self.run_started = self.clock()
-        self.n_frames = 0
-        self.tracking = False
+        self.run_id, self.run_started, self.n_frames, self.tracking = -1, self.clock(), 0, False
         self.angles = PublishedAngles(self.model, self.kin, self.rate)
         from exubio.model.signs import factors
-        from exubio.run.live.outputs import ISB_NAMES
 
         self.angle_signs = factors(ISB_NAMES, self.protocol.signs)  # the stream's convention (ISB inside)
-        self.current_sample = None
-        self.status_due = 0.0
+        self.current_sample, self.status_due = None, 0.0
 
     def _calibrate_from_stream(self) -> Any:
         """Buffer the static frames, calibrate the model on them (their raw samples), and rebind."""
@@ -427,11 +430,18 @@ class LiveSession:
     def run(self) -> LiveRecording:
         """Run until the stream ends or ``stop()``; returns the recording (also after Ctrl-C)."""
         self._open()
+        try:
+            return self._run()
+        finally:
+            gc.unfreeze()
+
+    def _run(self) -> LiveRecording:
         report = None
         if self.static_frames is None:
             self._bind()  # before the first sample: the stream's start is not kept waiting
             if self.on_ready is not None:
                 self.on_ready(self)
+            _settle_heap()
         if not self.intake.pull(1.0) or not self.intake.queue:
             if not self._wait_for_sample(first=True):
                 raise InputError(f"{self.info.name}: no sample came within {self.options.open_timeout_s:g} s of "

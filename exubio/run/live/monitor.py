@@ -12,7 +12,7 @@ import numpy as np
 from exubio.trust import quality as Q
 from exubio.trust.assess import DETERMINACY_PERIOD_S, angle_status_of_protocol, coordinates_not_measured_by_protocol
 from exubio.trust.checks import Evidence, LiveCounts, judge
-from exubio.trust.observability import determinacy
+from exubio.trust.frame_determinacy import FrameDeterminacy
 from exubio.model.ranges import AT_LIMIT_TOLERANCE_RAD
 from exubio.run.live.outputs import ISB_NAMES, Event, angles_measured
 from exubio.protocol.bind import Binding
@@ -66,7 +66,8 @@ class LiveMonitor:
         self.gap_start = np.zeros(k, dtype=int)
         self.gaps: list[Gap] = []
         self.res_sum, self.res_sq, self.res_n = np.zeros(k), np.zeros(k), np.zeros(k, dtype=int)
-        self.frame_means: list[float] = []
+        self.frame_means = np.empty(4096)  # the mean residual of each frame (mm), the first n_means
+        self.n_means = 0
         self.lim_count, self.lim_first, self.lim_beyond = np.zeros(m, dtype=int), np.zeros(m, dtype=int), np.zeros(m)
         self.undetermined_frames = np.zeros(m, dtype=int)
         self.quality = Q.Quality.of([])
@@ -74,6 +75,8 @@ class LiveMonitor:
         self.verdict_due = self.verdict_every - 1
         self.det_every = max(int(round(DETERMINACY_PERIOD_S * rate)), 1)
         self.det_due = 0
+        self.frame_determinacy = FrameDeterminacy(self.kin, self.points, protocol.weights, excluded=self.excluded)
+        self._measured_of: dict[tuple[str, ...], np.ndarray] = {}  # angles_measured by undetermined coordinates
 
     def track_gaps(self, g: int, present: np.ndarray, dropped: bool) -> None:
         """Gaps of single markers (not whole missing frames) reported by marker name."""
@@ -108,12 +111,13 @@ class LiveMonitor:
         if g < self.det_due:
             return
         self.det_due = g + self.det_every
-        present = active[None]
-        det = determinacy(self.kin, self.points, q[None], present, self.protocol.weights, excluded=self.excluded)
-        und = [n for n, u in zip(self.model.coordinate_names, det.undetermined[0] & ~det.near_gimbal_lock[0]) if u]
-        self.measured = angles_measured(self.model, self.not_solved, und, unmeasurable=self.unmeasurable,
-                                        structural=self.structural)
-        self.undetermined_frames += det.undetermined[0]
+        undetermined, near_lock = self.frame_determinacy(q, active)
+        und = tuple(n for n, u in zip(self.model.coordinate_names, undetermined & ~near_lock) if u)
+        if und not in self._measured_of:  # (the same few sets again and again)
+            self._measured_of[und] = angles_measured(self.model, self.not_solved, und, unmeasurable=self.unmeasurable,
+                                                     structural=self.structural)
+        self.measured = self._measured_of[und]
+        self.undetermined_frames += undetermined
 
     def label_check(self, g: int, res: np.ndarray, pts: np.ndarray, meas: np.ndarray) -> None:
         """A swapped pair: both far from their own model points, each close to the other's (residuals
@@ -152,7 +156,10 @@ class LiveMonitor:
         self.res_sum += np.where(ok, res, 0.0)
         self.res_sq += np.where(ok, res * res, 0.0)
         self.res_n += ok
-        self.frame_means.append(float(res[ok].mean()) * 1e3 if ok.any() else np.nan)
+        if self.n_means == self.frame_means.size:  # an array, not a list: the verdict reads it without a copy
+            self.frame_means = np.concatenate([self.frame_means, np.empty(self.frame_means.size)])
+        self.frame_means[self.n_means] = float(res[ok].mean()) * 1e3 if ok.any() else np.nan
+        self.n_means += 1
         lo, hi = self.ranges[:, 0], self.ranges[:, 1]
         at = ((q >= hi - AT_LIMIT_TOLERANCE_RAD) | (q <= lo + AT_LIMIT_TOLERANCE_RAD)) & ~self.excluded
         if at.any():
@@ -176,7 +183,7 @@ class LiveMonitor:
             residual = {"mean": float(self.res_sum.sum() / self.res_n.sum()) * 1e3,
                         "per_marker_rmse": {m: (None if self.res_n[j] == 0 else float(rmse[j]))
                                             for j, m in enumerate(self.marker_names)}}
-            per_frame = np.asarray(self.frame_means)
+            per_frame = self.frame_means[:self.n_means]
         names = self.model.coordinate_names
         lims = [{"coordinate": names[j], "range_deg": [float(np.degrees(self.ranges[j, 0])), float(np.degrees(self.ranges[j, 1]))],
                  "frames_at_limit": int(self.lim_count[j]), "first_frame": int(self.lim_first[j]),
