@@ -21,7 +21,7 @@ from exubio.types import Gap
 if TYPE_CHECKING:
     from exubio.run.live.options import LiveOptions
 
-__all__ = ["LiveMonitor", "LABEL_SWAP_FRAMES"]
+__all__ = ["LiveMonitor", "LABEL_SWAP_FRAMES", "mean_finite"]
 
 LABEL_SWAP_FRAMES = 3
 """Frames in a row a pair must look swapped before its springs go off (one frame can be noise)."""
@@ -30,6 +30,15 @@ LABEL_SWAP_MIN_MM = Q.RESIDUAL_MEAN_MM[0]
 trial's mean residual is already a check (quality.RESIDUAL_MEAN_MM)."""
 LABEL_SWAP_RATIO = 0.5
 """Swapped, the pair's residuals must sum to less than this fraction of the unswapped sum."""
+
+
+def mean_finite(x: np.ndarray) -> float:
+    """The mean of the finite values of x (1-D), NaN if none: ``x[ok].mean()``'s operations (a sum
+    and a division), without the copy when every value is finite."""
+    ok = np.isfinite(x)
+    if ok.all():
+        return float(np.add.reduce(x) / x.size) if x.size else np.nan
+    return float(np.add.reduce(x[ok]) / ok.sum()) if ok.any() else np.nan
 
 
 class LiveMonitor:
@@ -81,7 +90,7 @@ class LiveMonitor:
     def track_gaps(self, g: int, present: np.ndarray, dropped: bool) -> None:
         """Gaps of single markers (not whole missing frames) reported by marker name."""
         names = self.marker_names
-        if dropped:
+        if dropped or (not self.in_gap.any() and present.all()):  # (the usual frame: nothing to report)
             return
         for j in np.flatnonzero(~present & ~self.in_gap & self.in_stream):
             self.in_gap[j] = True
@@ -123,6 +132,8 @@ class LiveMonitor:
         """A swapped pair: both far from their own model points, each close to the other's (residuals
         res (k,), model points and measured positions (k, 3) of this frame)."""
         far = np.flatnonzero(res > LABEL_SWAP_MIN_MM * 1e-3)
+        if far.size < 2 and not self.swap_count and not self.swapped:  # (the usual frame: no pair, none to follow)
+            return
         seen = set()
         for a_i, a in enumerate(far):
             for b in far[a_i + 1:]:
@@ -158,7 +169,7 @@ class LiveMonitor:
         self.res_n += ok
         if self.n_means == self.frame_means.size:  # an array, not a list: the verdict reads it without a copy
             self.frame_means = np.concatenate([self.frame_means, np.empty(self.frame_means.size)])
-        self.frame_means[self.n_means] = float(res[ok].mean()) * 1e3 if ok.any() else np.nan
+        self.frame_means[self.n_means] = mean_finite(res) * 1e3
         self.n_means += 1
         lo, hi = self.ranges[:, 0], self.ranges[:, 1]
         at = ((q >= hi - AT_LIMIT_TOLERANCE_RAD) | (q <= lo + AT_LIMIT_TOLERANCE_RAD)) & ~self.excluded

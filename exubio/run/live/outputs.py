@@ -119,7 +119,9 @@ class _Growing:
         return blocks[b]
 
     def set(self, i: int, row) -> None:
-        self._row_block(i)[i % self.BLOCK_ROWS] = row
+        b, r = divmod(i, self.BLOCK_ROWS)
+        blocks = self.blocks
+        (blocks[b] if b < len(blocks) else self._row_block(i))[r] = row
         if i >= self.n:
             self.n = i + 1
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import os
 import re
 import tempfile
@@ -225,8 +226,9 @@ class LSLSource:
         if sample is None:
             return []
         out = [(float(ts), np.asarray(sample, dtype=float))]
-        more, times = self.inlet.pull_chunk(timeout=0.0)
-        out.extend((float(t), np.asarray(s, dtype=float)) for s, t in zip(more, times))
+        if self.inlet.samples_available():  # (an empty pull_chunk costs as much as the sample's)
+            more, times = self.inlet.pull_chunk(timeout=0.0)
+            out.extend((float(t), np.asarray(s, dtype=float)) for s, t in zip(more, times))
         return out
 
     def wake(self) -> None:  # pulls time out within their (short) timeout
@@ -260,10 +262,9 @@ class LSLPublisher:
         self.events = lsl.StreamOutlet(ev)
 
     def __call__(self, row: np.ndarray, timestamp: float) -> None:
-        if np.isfinite(timestamp):
-            self.outlet.push_sample(row.tolist(), timestamp)
-        else:
-            self.outlet.push_sample(row.tolist())
+        # one sample as a chunk of one: pylsl hands the array's buffer to liblsl (push_sample builds a
+        # ctypes array value by value); a timestamp of 0.0 is liblsl's "now"
+        self.outlet.push_chunk(np.asarray(row, dtype=float)[None], timestamp if math.isfinite(timestamp) else 0.0)
 
     def event(self, event) -> None:
         self.events.push_sample([json.dumps(event.to_dict())])
