@@ -73,6 +73,7 @@ class LiveMonitor:
         self.swapped: dict = {}
         self.in_gap = np.zeros(k, dtype=bool)
         self.gap_start = np.zeros(k, dtype=int)
+        self._expected = np.asarray(in_stream, dtype=bool).copy()
         self.gaps: list[Gap] = []
         self.res_sum, self.res_sq, self.res_n = np.zeros(k), np.zeros(k), np.zeros(k, dtype=int)
         self.frame_means = np.empty(4096)  # the mean residual of each frame (mm), the first n_means
@@ -90,7 +91,7 @@ class LiveMonitor:
     def track_gaps(self, g: int, present: np.ndarray, dropped: bool) -> None:
         """Gaps of single markers (not whole missing frames) reported by marker name."""
         names = self.marker_names
-        if dropped or (not self.in_gap.any() and present.all()):  # (the usual frame: nothing to report)
+        if dropped or (present == self._expected).all():  # (the usual frame: nothing to report)
             return
         for j in np.flatnonzero(~present & ~self.in_gap & self.in_stream):
             self.in_gap[j] = True
@@ -101,6 +102,7 @@ class LiveMonitor:
             self.gaps.append(Gap(names[j], int(self.gap_start[j]), g))
             self._event("gap_end", g, f"marker {names[j]} back after {(g - self.gap_start[j]) / self.rate:.2f} s "
                         f"({g - self.gap_start[j]} frames)", (names[j],))
+        self._expected = self.in_stream & ~self.in_gap  # present where nothing changes
 
     def diverged(self, g: int, q: np.ndarray, res: np.ndarray, present: np.ndarray) -> str:
         """Why the run diverged at this frame ("" if not): exubio.methods.pf's criterion, a spring
