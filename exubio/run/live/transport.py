@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import json
 import logging
-import math
 import os
 import re
 import tempfile
@@ -262,9 +261,10 @@ class LSLPublisher:
         self.events = lsl.StreamOutlet(ev)
 
     def __call__(self, row: np.ndarray, timestamp: float) -> None:
-        # one sample as a chunk of one: pylsl hands the array's buffer to liblsl (push_sample builds a
-        # ctypes array value by value); a timestamp of 0.0 is liblsl's "now"
-        self.outlet.push_chunk(np.asarray(row, dtype=float)[None], timestamp if math.isfinite(timestamp) else 0.0)
+        if np.isfinite(timestamp):
+            self.outlet.push_sample(row.tolist(), timestamp)
+        else:
+            self.outlet.push_sample(row.tolist())
 
     def event(self, event) -> None:
         self.events.push_sample([json.dumps(event.to_dict())])
