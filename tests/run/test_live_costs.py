@@ -64,3 +64,17 @@ def test_one_frame_determinacy_is_the_trial_function_on_that_frame():
         seen_und += und.any()
         seen_lock += lock.any()
     assert seen_und and seen_lock  # both flags were exercised
+
+
+def test_mean_of_the_finite_residuals_is_numpys_to_the_bit():
+    """mean_finite (every live frame's mean residual) = x[np.isfinite(x)].mean(), NaN when none is finite."""
+    from exubio.run.live.monitor import mean_finite
+
+    rng = np.random.default_rng(11)
+    for size in (1, 7, 21, 200):
+        x = rng.normal(size=size) ** 2 * 1e-3
+        assert mean_finite(x) == float(x.mean())
+        x[rng.random(size) < 0.3] = np.nan
+        ok = np.isfinite(x)
+        assert (mean_finite(x) == float(x[ok].mean())) if ok.any() else np.isnan(mean_finite(x))
+    assert np.isnan(mean_finite(np.full(5, np.nan))) and np.isnan(mean_finite(np.zeros(0)))
