@@ -132,9 +132,7 @@ class CausalTargets:
         else:
             pos = np.full((self.k, 3), np.nan)
             pos[self._have] = raw[self._have_columns]
-        whole = np.isfinite(pos).all(axis=1)
-        if not whole.all():
-            pos[~whole] = np.nan
+        pos[~np.isfinite(pos).all(axis=1)] = np.nan
         if self.thorax:
             found = raw[self._thorax_columns]  # every landmark at once; held ones only where one is missing
             if np.isfinite(found).all():
@@ -161,22 +159,14 @@ class CausalTargets:
         if self.sos is not None:
             p = self._filter(p, present)
         cont = present & self.prev_present
-        if cont.all():  # (every marker continues: the same arithmetic on whole arrays)
-            v = (p - self.prev_p) / self.dt
-            acc = self.prev_has_v
-            if acc.all():
-                a = (v - self.prev_v) / self.dt
-            else:
-                a = np.zeros((self.k, 3))
-                a[acc] = (v[acc] - self.prev_v[acc]) / self.dt
-        else:
-            v = np.zeros((self.k, 3))
-            a = np.zeros((self.k, 3))
-            if cont.any():
-                v[cont] = (p[cont] - self.prev_p[cont]) / self.dt
-                acc = cont & self.prev_has_v
-                a[acc] = (v[acc] - self.prev_v[acc]) / self.dt
-        self.prev_p = p if present.all() else np.where(present[:, None], p, np.nan)
+        # the backward differences on whole arrays, zero where not defined (the rows a marker is missing in
+        # are NaN in p: what they give is replaced)
+        v = (p - self.prev_p) / self.dt
+        v[~cont] = 0.0
+        acc = cont & self.prev_has_v
+        a = (v - self.prev_v) / self.dt
+        a[~acc] = 0.0
+        self.prev_p = p  # (NaN where a marker is missing: p's rows)
         self.prev_v = v
         self.prev_present = present
         self.prev_has_v = cont
