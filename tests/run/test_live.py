@@ -484,3 +484,19 @@ def test_the_collector_is_frozen_while_the_loop_runs_and_given_back(short_trial,
     assert rec.ended_by == "stopped" and len(frozen) >= 50
     assert min(frozen) > before + 1000  # the libraries' objects, frozen before the first frame
     assert gc.get_freeze_count() == before
+
+
+def test_a_host_that_froze_objects_itself_keeps_them_frozen(short_trial, model_protocol):
+    """A process that froze its own objects (a forking server) keeps its policy: the session neither
+    freezes nor unfreezes."""
+    model, protocol = model_protocol
+    gc.freeze()
+    try:
+        before = gc.get_freeze_count()
+        src = ReplaySource(Trajectories(labels=short_trial.labels, positions_m=short_trial.positions_m[:60],
+                                        rate_hz=short_trial.rate_hz, time_s=short_trial.time_s[:60], source="s"), speed=None)
+        rec = LiveSession(model, protocol, src, options=LiveOptions(end_after_s=None, stall_s=float("inf"),
+                                                                    max_behind_s=float("inf"))).run()
+        assert rec.n_frames == 60 and 0 < gc.get_freeze_count() <= before  # (frozen objects freed meanwhile count out)
+    finally:
+        gc.unfreeze()

@@ -35,6 +35,7 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
+from types import SimpleNamespace
 from typing import Any, Callable, Sequence
 
 import numpy as np
@@ -60,20 +61,14 @@ is done together, vectorised, after their angles went out (a fixed count: the sa
 offline)."""
 
 
-def _settle_heap(*, collect: bool = True) -> None:
+def _settle_heap(*, collect: bool = True, freeze: bool = True) -> None:
     """Freeze every object alive (undone at the session's end), after collecting those made since the last
     freeze: a full collection walks all the process's objects (78 ms at 1000 Hz, once a minute), frozen only
     the newer. At the set-up (not collected: 64 ms) and as each PF run starts (0.1 ms)."""
-    if collect:
+    if freeze and collect:
         gc.collect()
-    gc.freeze()
-
-
-@dataclass(frozen=True)
-class _Motion:
-    """The segment rates of a batch of frames, as _Frames.rates reads them from a PFRun."""
-    angular_velocities_rad_s: np.ndarray
-    angular_accelerations_rad_s2: np.ndarray
+    if freeze:
+        gc.freeze()
 
 
 @dataclass(frozen=True)
@@ -203,8 +198,9 @@ class LiveSession:
             q, qd, qdd = (np.vstack([b[4][k] for b in batch]) for k in range(3))
         else:
             q = np.vstack([b[1] for b in batch])
-            motion = _Motion(np.concatenate([b[2].angular_velocities_rad_s for b in batch]),
-                             np.concatenate([b[2].angular_accelerations_rad_s2 for b in batch]))
+            motion = SimpleNamespace(  # the segment rates of the batch, as _Frames.rates reads them from a PFRun
+                angular_velocities_rad_s=np.concatenate([b[2].angular_velocities_rad_s for b in batch]),
+                angular_accelerations_rad_s2=np.concatenate([b[2].angular_accelerations_rad_s2 for b in batch]))
             q, qd, qdd = frames.rates(q, motion)
         targets = MarkerTargets(time_s=np.array(gs) / self.rate, marker_names=self.marker_names,
                                 positions_m=np.stack([b[3].positions_m for b in batch]),
@@ -291,7 +287,7 @@ class LiveSession:
         b = setup.binding
         frames = _Frames(b.kin, b.points, None, setup.q0, b.held, self.options.pf, None, 1.0 / self.rate)
         self.run_id += 1
-        _settle_heap()  # the new run's system is built: frozen with the rest
+        _settle_heap(freeze=self.own_gc)  # the new run's system is built: frozen with the rest
         self.run_started = self.clock()
         self.tracking = True
         self._event("run_start", g0, f"PF run {self.run_id} starts from the LS pose of frame {g0}")
@@ -430,10 +426,12 @@ class LiveSession:
     def run(self) -> LiveRecording:
         """Run until the stream ends or ``stop()``; returns the recording (also after Ctrl-C)."""
         self._open()
+        self.own_gc = gc.get_freeze_count() == 0  # (a host that froze objects itself keeps its own policy)
         try:
             return self._run()
         finally:
-            gc.unfreeze()
+            if self.own_gc:
+                gc.unfreeze()
 
     def _run(self) -> LiveRecording:
         report = None
@@ -458,7 +456,7 @@ class LiveSession:
             if self.on_ready is not None:
                 self.on_ready(self)
         self.intake.check_units(self.causal)
-        _settle_heap(collect=False)
+        _settle_heap(collect=False, freeze=self.own_gc)
         g = 0
         cpu0, wall0 = time.process_time(), time.perf_counter()
         try:
