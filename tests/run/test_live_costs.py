@@ -1,6 +1,6 @@
 """What the live loop does to keep its frames short (issue 38): the recording grows in blocks without
-copying, and the noise gains of one frame skip the trial's frame selection (the collector's freeze
-is tested in tests/run/test_live.py, with Exudyn)."""
+copying, the mean residual of a frame is numpy's without its copy (the collector's freeze is tested
+in tests/run/test_live.py, with Exudyn; the one-frame noise gains in tests/trust/test_frame_determinacy.py)."""
 from __future__ import annotations
 
 
@@ -37,33 +37,6 @@ def test_a_block_is_never_copied_as_the_recording_grows():
     for i in range(1, 4 * _Growing.BLOCK_ROWS):
         grow.set(i, [i, i, i])
     assert grow.blocks[0] is first and first[0].tolist() == [1.0, 2.0, 3.0]
-
-
-def test_one_frame_determinacy_is_the_trial_function_on_that_frame():
-    """FrameDeterminacy (a live frame every 50 ms) gives determinacy's flags of that frame bit for bit,
-    with markers missing and near a gimbal lock."""
-    from exubio.protocol.bind import bind
-    from exubio.run.inputs import load_model_and_protocol
-    from exubio.trust.frame_determinacy import FrameDeterminacy
-    from exubio.trust.observability import determinacy
-
-    b = bind(*load_model_and_protocol())
-    kin, points, weights, excluded = b.kin, b.points, b.protocol.weights, b.not_solved
-    one = FrameDeterminacy(kin, points, weights, excluded=excluded)
-    rng = np.random.default_rng(7)
-    k, m = len(b.protocol.marker_names), b.model.n_coordinates
-    seen_und = seen_lock = 0
-    for trial in range(40):
-        q = rng.uniform(-1.2, 1.2, m)
-        if trial % 4 == 0:
-            q[4] = np.pi / 2 - 0.05  # a spherical joint's middle angle near its lock
-        present = rng.random(k) > (0.0 if trial % 3 == 0 else 0.5)  # some frames with half the markers gone
-        det = determinacy(kin, points, q[None], present[None], weights, excluded=excluded)
-        und, lock = one(q, present)
-        assert np.array_equal(und, det.undetermined[0]) and np.array_equal(lock, det.near_gimbal_lock[0])
-        seen_und += und.any()
-        seen_lock += lock.any()
-    assert seen_und and seen_lock  # both flags were exercised
 
 
 def test_mean_of_the_finite_residuals_is_numpys_to_the_bit():
