@@ -6,7 +6,9 @@ CPU time (the thread's), the time of the stages it calls excluded; "other" is wh
 (the loop's own Python). The timers cost about 1 us per call: the table gives each stage's share
 of the timed run, applied to the CPU time per frame of untimed runs of the same work (median). The live frame is the live loop run on an in-process replay (``reconstruct_causal``,
 exubio.run.live.offline: no LSL); what LSL adds is the live process's CPU per frame in
-``bench_live.py`` minus this loop's.
+``bench_live.py`` minus this loop's. For the live loop it also prints the wall time between two
+published frames of the untimed runs (p50, p99, max): the lumps a frame can be held by (a garbage
+collection, the deferred checks), without LSL or another process.
 
     python benchmarks/profile_frames.py                  # PF, LS and live on 25 s / 10 s at 200 Hz
     python benchmarks/profile_frames.py --modes live --rate 1000 --duration 5
@@ -149,6 +151,9 @@ def live_inputs(duration_s: float, rate_hz: float):
 
 
 def profile(mode: str, args) -> dict:
+    import numpy as np
+
+    gaps: list = []
     if mode == "live":
         from exubio.run.live.offline import reconstruct_causal
 
@@ -156,7 +161,9 @@ def profile(mode: str, args) -> dict:
         n = trial.n_frames
 
         def work():
-            reconstruct_causal(trial, model, protocol)
+            rec = reconstruct_causal(trial, model, protocol)
+            pub = rec.published_s[np.isfinite(rec.published_s)]
+            gaps.append(np.diff(pub) * 1e3)  # the loop's wall time from one published frame to the next, ms
     else:
         from exubio.run.pipeline import reconstruct
 
@@ -183,7 +190,12 @@ def profile(mode: str, args) -> dict:
     held = sum(timers.own.values())
     rows = {stage: timers.own[stage] / timed for stage in timers.own}
     rows["other (the loop's own Python)"] = max(timed - held, 0.0) / timed
-    return {"mode": mode, "frames": n, "cpu_ms_per_frame": cpu_ms, "cpu_ms_per_frame_runs": [1e3 * c / n for c in cpu],
+    lumps = None
+    if gaps:  # the untimed runs (the first, warming, left out): how long the longest frames hold the loop
+        d = np.concatenate(gaps[1:1 + args.runs])
+        lumps = {"p50_ms": float(np.percentile(d, 50)), "p99_ms": float(np.percentile(d, 99)),
+                 "p999_ms": float(np.percentile(d, 99.9)), "max_ms": float(d.max()), "over_2_ms": int((d > 2).sum())}
+    return {"mode": mode, "frames": n, "lumps": lumps, "cpu_ms_per_frame": cpu_ms, "cpu_ms_per_frame_runs": [1e3 * c / n for c in cpu],
             "timed_ms_per_frame": 1e3 * timed / n,
             "stages": {s: {"share": f, "us_per_frame": 1e3 * f * cpu_ms, "calls_per_frame": timers.calls.get(s, 0) / n}
                        for s, f in sorted(rows.items(), key=lambda kv: -kv[1])}}
@@ -213,6 +225,10 @@ def main(argv: list[str] | None = None) -> int:
               f"(median of {args.runs}; runs {', '.join(f'{x * 1e3:.1f}' for x in res['cpu_ms_per_frame_runs'])}), "
               f"timed run {res['timed_ms_per_frame'] * 1e3:.1f} us/frame; core {cpu}; "
               f"load {' '.join(f'{x:.2f}' for x in res['load_average'])}")
+        if res["lumps"]:
+            lu = res["lumps"]
+            print(f"  wall time between published frames (untimed runs, ms): p50 {lu['p50_ms']:.3f}, p99 {lu['p99_ms']:.3f}, "
+                  f"p99.9 {lu['p999_ms']:.3f}, max {lu['max_ms']:.1f}; {lu['over_2_ms']} over 2 ms")
         print(f"  {'stage':<52} {'us/frame':>9} {'share':>7} {'calls/frame':>12}")
         for stage, row in res["stages"].items():
             print(f"  {stage:<52} {row['us_per_frame']:9.1f} {100 * row['share']:6.1f}% {row['calls_per_frame']:12.2f}")

@@ -87,9 +87,11 @@ class SpringTargets:
     def switch(self, now: np.ndarray, state: np.ndarray) -> None:
         """The springs whose markers the next step uses (``now``, (k,) bool) on, the others off;
         ``state`` (the switches as they are) follows."""
-        for j in np.flatnonzero(now != state):
-            self.set_parameter(self.objects[j], "activeConnector", bool(now[j]))
-        state[:] = now
+        changed = now != state
+        if changed.any():
+            for j in np.flatnonzero(changed):
+                self.set_parameter(self.objects[j], "activeConnector", bool(now[j]))
+            state[:] = now
 
 
 @dataclass(frozen=True)

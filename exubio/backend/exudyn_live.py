@@ -52,9 +52,11 @@ class _LiveRun(Integration):
         if p.shape != (k, 3) or v.shape != (k, 3) or a.shape != (k,):
             raise ValueError(f"run_live: frame {i} must be positions ({k}, 3), velocities ({k}, 3), active ({k},); "
                              f"got {p.shape}, {v.shape}, {a.shape}")
-        if np.any(a & ~(np.isfinite(p).all(axis=1) & np.isfinite(v).all(axis=1))):
+        if not a.all():  # the inactive markers' rows zero (NaN where missing)
+            p, v = np.where(a[:, None], p, 0.0), np.where(a[:, None], v, 0.0)
+        if not (np.isfinite(p).all() and np.isfinite(v).all()):
             raise ValueError(f"run_live: a marker is active but not finite at frame {i}")
-        self.frames[i] = (np.where(a[:, None], p, 0.0), np.where(a[:, None], v, 0.0), a)
+        self.frames[i] = (p, v, a)
         self.frames.pop(i - 8, None)  # a rejected step may be retried over earlier frames: keep a few
         return True
 

@@ -404,6 +404,8 @@ class _Frames:
 def _unwrap_correction(dd: np.ndarray) -> np.ndarray:
     """What np.unwrap (period 2 pi) adds to a sample whose difference from the one before is ``dd``
     (the same operations, so the same bits)."""
+    if (np.abs(dd) < np.pi).all():  # (every step: nothing to add)
+        return np.zeros_like(dd)
     ddmod = np.mod(dd + np.pi, 2.0 * np.pi) - np.pi
     ddmod[(ddmod == -np.pi) & (dd > 0)] = np.pi
     correction = ddmod - dd

@@ -11,7 +11,7 @@ import numpy as np
 
 from exubio.model.kinematics import Kinematics
 
-__all__ = ["FrameForward", "FrameInverse"]
+__all__ = ["FrameForward", "FrameInverse", "FramePoints"]
 
 
 class FrameForward:
@@ -30,6 +30,26 @@ class FrameForward:
         ax = np.empty((1, self.m, 3))
         self.forward(np.ascontiguousarray(q, dtype=float).reshape(1, -1), *self.tables, R, p, ax, np.empty_like(ax))
         return R[0], p[0]
+
+
+class FramePoints:
+    """``model_points(R, p)``: the global positions (k, 3) of the model points ``points`` for one
+    frame's segment rotations R (n_seg, 3, 3) and origins p (n_seg, 3), as ``kin.points`` (the same
+    compiled kernel, exubio.model.kernels.points, its index and local positions converted once)."""
+
+    def __init__(self, kin: Kinematics, points, /):
+        from exubio.model import kernels  # numba: imported where used
+
+        self.kernel = kernels.points
+        self.segment_index = np.asarray(points.segment_index, dtype=np.int64)
+        self.local_m = np.ascontiguousarray(points.local_m, dtype=float)
+        self.n_seg, self.k = kin.n_segments, len(points.segment_index)
+
+    def __call__(self, R: np.ndarray, p: np.ndarray) -> np.ndarray:
+        out = np.empty((1, self.k, 3))
+        self.kernel(np.ascontiguousarray(R, dtype=float).reshape(1, self.n_seg, 3, 3),
+                    np.ascontiguousarray(p, dtype=float).reshape(1, self.n_seg, 3), self.segment_index, self.local_m, out)
+        return out[0]
 
 
 class FrameInverse:

@@ -5,6 +5,7 @@ cannot load). Every test ends by itself: the in-process sources end, every LSL w
 subprocesses are killed after a bound."""
 from __future__ import annotations
 
+import gc
 import json
 import os
 import signal
@@ -460,3 +461,42 @@ def test_the_display_shows_latency_backlog_residual_verdict_and_key_angles():
     q.event(Event("gap", 10, 0.1, "x"))
     q.event(Event("verdict", 10, 0.1, "fail: y"))
     assert "gap" not in quiet.getvalue() and "verdict: fail: y" in quiet.getvalue()
+
+
+def test_the_collector_is_frozen_while_the_loop_runs_and_given_back(short_trial, model_protocol):
+    """gc.freeze during a session (a full collection walked every object of the process and held a
+    1000 Hz loop 78 ms), gc.unfreeze at its end, also when the run was stopped."""
+    from exubio.run.live.loop import SessionHooks
+
+    model, protocol = model_protocol
+    frozen = []
+    before = gc.get_freeze_count()
+    session = None
+
+    def publish(row, ts):
+        frozen.append(gc.get_freeze_count())
+        if len(frozen) == 50:
+            session.stop()
+
+    session = LiveSession(model, protocol, ReplaySource(short_trial, speed=None), hooks=SessionHooks(publish=publish),
+                          options=LiveOptions(end_after_s=None, stall_s=float("inf"), max_behind_s=float("inf")))
+    rec = session.run()
+    assert rec.ended_by == "stopped" and len(frozen) >= 50
+    assert min(frozen) > before + 1000  # the libraries' objects, frozen before the first frame
+    assert gc.get_freeze_count() == before
+
+
+def test_a_host_that_froze_objects_itself_keeps_them_frozen(short_trial, model_protocol):
+    """A process that froze its own objects (a forking server) keeps its policy: the session neither
+    freezes nor unfreezes."""
+    model, protocol = model_protocol
+    gc.freeze()
+    try:
+        before = gc.get_freeze_count()
+        src = ReplaySource(Trajectories(labels=short_trial.labels, positions_m=short_trial.positions_m[:60],
+                                        rate_hz=short_trial.rate_hz, time_s=short_trial.time_s[:60], source="s"), speed=None)
+        rec = LiveSession(model, protocol, src, options=LiveOptions(end_after_s=None, stall_s=float("inf"),
+                                                                    max_behind_s=float("inf"))).run()
+        assert rec.n_frames == 60 and 0 < gc.get_freeze_count() <= before  # (frozen objects freed meanwhile count out)
+    finally:
+        gc.unfreeze()

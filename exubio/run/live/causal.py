@@ -92,6 +92,7 @@ class CausalTargets:
         self._held = {key: (None, 0) for key in self.thorax}  # last valid landmark and frames since
         self._have = self.columns >= 0
         self._have_columns = self.columns[self._have]
+        self._have_all = bool(self._have.all())
         self._thorax_keys = tuple(self.thorax)
         self._thorax_columns = np.array([self.thorax[key] for key in self._thorax_keys], dtype=int)
         if options.cutoff_hz is not None:
@@ -126,8 +127,11 @@ class CausalTargets:
     def thorax_positions(self, raw: np.ndarray) -> np.ndarray:
         """The protocol markers of one raw frame in the thorax frame (k, 3), NaN where missing."""
         raw = np.asarray(raw, dtype=float)
-        pos = np.full((self.k, 3), np.nan)
-        pos[self._have] = raw[self._have_columns]
+        if self._have_all:  # (the usual stream: one indexing, no NaN-filled copy)
+            pos = raw[self.columns]
+        else:
+            pos = np.full((self.k, 3), np.nan)
+            pos[self._have] = raw[self._have_columns]
         pos[~np.isfinite(pos).all(axis=1)] = np.nan
         if self.thorax:
             found = raw[self._thorax_columns]  # every landmark at once; held ones only where one is missing
@@ -154,14 +158,15 @@ class CausalTargets:
         present = np.isfinite(p).all(axis=1)
         if self.sos is not None:
             p = self._filter(p, present)
-        v = np.zeros((self.k, 3))
-        a = np.zeros((self.k, 3))
         cont = present & self.prev_present
-        if cont.any():
-            v[cont] = (p[cont] - self.prev_p[cont]) / self.dt
-            acc = cont & self.prev_has_v
-            a[acc] = (v[acc] - self.prev_v[acc]) / self.dt
-        self.prev_p = np.where(present[:, None], p, np.nan)
+        # the backward differences on whole arrays, zero where not defined (the rows a marker is missing in
+        # are NaN in p: what they give is replaced)
+        v = (p - self.prev_p) / self.dt
+        v[~cont] = 0.0
+        acc = cont & self.prev_has_v
+        a = (v - self.prev_v) / self.dt
+        a[~acc] = 0.0
+        self.prev_p = p  # (NaN where a marker is missing: p's rows)
         self.prev_v = v
         self.prev_present = present
         self.prev_has_v = cont

@@ -112,9 +112,14 @@ class SampleIntake:
             if stop.is_set():
                 return "stopped"
             silent = self.clock() - self.last_arrival
-            if limit is not None and silent > limit:
-                return f"no sample for {limit:g} s"
-            if silent > self.options.stall_s and not self.stalled:
+            ended = limit is not None and silent > limit
+            if ended or (silent > self.options.stall_s and not self.stalled):
+                if not self.pull(0.0):  # what waits in the source's buffer is no silence
+                    return "end of stream"
+                if self.queue:
+                    break
+                if ended:
+                    return f"no sample for {limit:g} s"
                 self.stalled = True
                 self._event("stall", self.last_index + 1, f"no sample for {silent:.2f} s")
             if not self.pull(0.02):
@@ -129,8 +134,8 @@ class SampleIntake:
         ``restart()``: called at a restart (the causal filter starts again); ``may_skip()``: whether
         a backlog may be skipped now."""
         queue = self.queue
-        if not queue or self.clock() - self.last_pull > PULL_EVERY_S:  # what waits in the source's buffer
-            self.pull(0.0)  # counts as backlog too
+        if queue and self.clock() - self.last_pull > PULL_EVERY_S:  # what waits in the source's buffer
+            self.pull(0.0)  # counts as backlog too (an empty queue: wait() pulls)
         if not queue and not wait():
             raise StopIteration
         head = queue[0]

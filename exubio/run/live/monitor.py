@@ -12,7 +12,7 @@ import numpy as np
 from exubio.trust import quality as Q
 from exubio.trust.assess import DETERMINACY_PERIOD_S, angle_status_of_protocol, coordinates_not_measured_by_protocol
 from exubio.trust.checks import Evidence, LiveCounts, judge
-from exubio.trust.observability import determinacy
+from exubio.trust.frame_determinacy import FrameDeterminacy
 from exubio.model.ranges import AT_LIMIT_TOLERANCE_RAD
 from exubio.run.live.outputs import ISB_NAMES, Event, angles_measured
 from exubio.protocol.bind import Binding
@@ -21,7 +21,7 @@ from exubio.types import Gap
 if TYPE_CHECKING:
     from exubio.run.live.options import LiveOptions
 
-__all__ = ["LiveMonitor", "LABEL_SWAP_FRAMES"]
+__all__ = ["LiveMonitor", "LABEL_SWAP_FRAMES", "mean_finite"]
 
 LABEL_SWAP_FRAMES = 3
 """Frames in a row a pair must look swapped before its springs go off (one frame can be noise)."""
@@ -30,6 +30,15 @@ LABEL_SWAP_MIN_MM = Q.RESIDUAL_MEAN_MM[0]
 trial's mean residual is already a check (quality.RESIDUAL_MEAN_MM)."""
 LABEL_SWAP_RATIO = 0.5
 """Swapped, the pair's residuals must sum to less than this fraction of the unswapped sum."""
+
+
+def mean_finite(x: np.ndarray) -> float:
+    """The mean of the finite values of x (1-D), NaN if none: ``x[ok].mean()``'s operations (a sum
+    and a division), without the copy when every value is finite."""
+    ok = np.isfinite(x)
+    if ok.all():
+        return float(np.add.reduce(x) / x.size) if x.size else np.nan
+    return float(np.add.reduce(x[ok]) / ok.sum()) if ok.any() else np.nan
 
 
 class LiveMonitor:
@@ -64,9 +73,11 @@ class LiveMonitor:
         self.swapped: dict = {}
         self.in_gap = np.zeros(k, dtype=bool)
         self.gap_start = np.zeros(k, dtype=int)
+        self._expected = np.asarray(in_stream, dtype=bool).copy()
         self.gaps: list[Gap] = []
         self.res_sum, self.res_sq, self.res_n = np.zeros(k), np.zeros(k), np.zeros(k, dtype=int)
-        self.frame_means: list[float] = []
+        self.frame_means = np.empty(4096)  # the mean residual of each frame (mm), the first n_means
+        self.n_means = 0
         self.lim_count, self.lim_first, self.lim_beyond = np.zeros(m, dtype=int), np.zeros(m, dtype=int), np.zeros(m)
         self.undetermined_frames = np.zeros(m, dtype=int)
         self.quality = Q.Quality.of([])
@@ -74,11 +85,13 @@ class LiveMonitor:
         self.verdict_due = self.verdict_every - 1
         self.det_every = max(int(round(DETERMINACY_PERIOD_S * rate)), 1)
         self.det_due = 0
+        self.frame_determinacy = FrameDeterminacy(self.kin, self.points, protocol.weights, excluded=self.excluded)
+        self._measured_of: dict[tuple[str, ...], np.ndarray] = {}  # angles_measured by undetermined coordinates
 
     def track_gaps(self, g: int, present: np.ndarray, dropped: bool) -> None:
         """Gaps of single markers (not whole missing frames) reported by marker name."""
         names = self.marker_names
-        if dropped:
+        if dropped or (present == self._expected).all():  # (the usual frame: nothing to report)
             return
         for j in np.flatnonzero(~present & ~self.in_gap & self.in_stream):
             self.in_gap[j] = True
@@ -89,6 +102,7 @@ class LiveMonitor:
             self.gaps.append(Gap(names[j], int(self.gap_start[j]), g))
             self._event("gap_end", g, f"marker {names[j]} back after {(g - self.gap_start[j]) / self.rate:.2f} s "
                         f"({g - self.gap_start[j]} frames)", (names[j],))
+        self._expected = self.in_stream & ~self.in_gap  # present where nothing changes
 
     def diverged(self, g: int, q: np.ndarray, res: np.ndarray, present: np.ndarray) -> str:
         """Why the run diverged at this frame ("" if not): exubio.methods.pf's criterion, a spring
@@ -108,17 +122,20 @@ class LiveMonitor:
         if g < self.det_due:
             return
         self.det_due = g + self.det_every
-        present = active[None]
-        det = determinacy(self.kin, self.points, q[None], present, self.protocol.weights, excluded=self.excluded)
-        und = [n for n, u in zip(self.model.coordinate_names, det.undetermined[0] & ~det.near_gimbal_lock[0]) if u]
-        self.measured = angles_measured(self.model, self.not_solved, und, unmeasurable=self.unmeasurable,
-                                        structural=self.structural)
-        self.undetermined_frames += det.undetermined[0]
+        undetermined, near_lock = self.frame_determinacy(q, active)
+        und = tuple(n for n, u in zip(self.model.coordinate_names, undetermined & ~near_lock) if u)
+        if und not in self._measured_of:  # (the same few sets again and again)
+            self._measured_of[und] = angles_measured(self.model, self.not_solved, und, unmeasurable=self.unmeasurable,
+                                                     structural=self.structural)
+        self.measured = self._measured_of[und]
+        self.undetermined_frames += undetermined
 
     def label_check(self, g: int, res: np.ndarray, pts: np.ndarray, meas: np.ndarray) -> None:
         """A swapped pair: both far from their own model points, each close to the other's (residuals
         res (k,), model points and measured positions (k, 3) of this frame)."""
         far = np.flatnonzero(res > LABEL_SWAP_MIN_MM * 1e-3)
+        if far.size < 2 and not self.swap_count and not self.swapped:  # (the usual frame: no pair, none to follow)
+            return
         seen = set()
         for a_i, a in enumerate(far):
             for b in far[a_i + 1:]:
@@ -152,7 +169,10 @@ class LiveMonitor:
         self.res_sum += np.where(ok, res, 0.0)
         self.res_sq += np.where(ok, res * res, 0.0)
         self.res_n += ok
-        self.frame_means.append(float(res[ok].mean()) * 1e3 if ok.any() else np.nan)
+        if self.n_means == self.frame_means.size:  # an array, not a list: the verdict reads it without a copy
+            self.frame_means = np.concatenate([self.frame_means, np.empty(self.frame_means.size)])
+        self.frame_means[self.n_means] = mean_finite(res) * 1e3
+        self.n_means += 1
         lo, hi = self.ranges[:, 0], self.ranges[:, 1]
         at = ((q >= hi - AT_LIMIT_TOLERANCE_RAD) | (q <= lo + AT_LIMIT_TOLERANCE_RAD)) & ~self.excluded
         if at.any():
@@ -176,7 +196,7 @@ class LiveMonitor:
             residual = {"mean": float(self.res_sum.sum() / self.res_n.sum()) * 1e3,
                         "per_marker_rmse": {m: (None if self.res_n[j] == 0 else float(rmse[j]))
                                             for j, m in enumerate(self.marker_names)}}
-            per_frame = np.asarray(self.frame_means)
+            per_frame = self.frame_means[:self.n_means]
         names = self.model.coordinate_names
         lims = [{"coordinate": names[j], "range_deg": [float(np.degrees(self.ranges[j, 0])), float(np.degrees(self.ranges[j, 1]))],
                  "frames_at_limit": int(self.lim_count[j]), "first_frame": int(self.lim_first[j]),

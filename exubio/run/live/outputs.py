@@ -97,27 +97,47 @@ class Event:
 
 
 class _Growing:
-    """A (n, ...) float array appended one row at a time (amortised doubling)."""
+    """A (n, ...) array appended one row at a time, kept in blocks of BLOCK_ROWS rows: growing never
+    copies what is already there (a doubling array's copy held a 1000 Hz session up to 12 ms at
+    32768 frames, benchmarks/README.md). Rows never set hold ``fill``."""
+
+    BLOCK_ROWS = 512
 
     def __init__(self, shape: tuple[int, ...], fill: float = np.nan, dtype=float):
-        self.a = np.full((256,) + tuple(shape), fill, dtype=dtype)
-        self.n, self.fill = 0, fill
+        self.shape, self.fill, self.dtype = tuple(shape), fill, dtype
+        self.blocks: list[np.ndarray] = []
+        self.n = 0
+
+    def _row_block(self, i: int) -> np.ndarray:
+        b = i // self.BLOCK_ROWS
+        blocks = self.blocks
+        while len(blocks) <= b:
+            blocks.append(np.full((self.BLOCK_ROWS,) + self.shape, self.fill, dtype=self.dtype))
+        return blocks[b]
 
     def set(self, i: int, row) -> None:
-        if i >= self.a.shape[0]:
-            new = np.full((max(2 * self.a.shape[0], i + 1),) + self.a.shape[1:], self.fill, dtype=self.a.dtype)
-            new[:self.n] = self.a[:self.n]
-            self.a = new
-        self.a[i] = row
-        self.n = max(self.n, i + 1)
+        b, r = divmod(i, self.BLOCK_ROWS)
+        blocks = self.blocks
+        (blocks[b] if b < len(blocks) else self._row_block(i))[r] = row
+        if i >= self.n:
+            self.n = i + 1
+
+    def get(self, i: int) -> np.ndarray:
+        """Row i (a view)."""
+        return self.blocks[i // self.BLOCK_ROWS][i % self.BLOCK_ROWS]
 
     def grow_to(self, n: int) -> None:
         if n > self.n:
-            self.set(n - 1, self.fill)
+            self._row_block(n - 1)
             self.n = n
 
     def view(self, n: int | None = None) -> np.ndarray:
-        return self.a[: self.n if n is None else n]
+        """The first n rows (all set so far if None), as one new array."""
+        n = self.n if n is None else n
+        if n == 0:
+            return np.full((0,) + self.shape, self.fill, dtype=self.dtype)
+        self._row_block(n - 1)
+        return np.concatenate(self.blocks[:(n - 1) // self.BLOCK_ROWS + 1])[:n]
 
 
 class FrameRecord:
@@ -176,7 +196,7 @@ class FrameRecord:
         """The n frames' arrays (copies), by LiveRecording field name."""
         for arr in self.rows.values():
             arr.grow_to(n)
-        return {key: arr.view(n).copy() for key, arr in self.rows.items()}
+        return {key: arr.view(n) for key, arr in self.rows.items()}
 
     def latency_ms(self) -> dict[str, Any]:
         """The loop latency's median, 99th percentile and maximum (ms; None without a sample)."""

@@ -226,8 +226,9 @@ class LSLSource:
         if sample is None:
             return []
         out = [(float(ts), np.asarray(sample, dtype=float))]
-        more, times = self.inlet.pull_chunk(timeout=0.0)
-        out.extend((float(t), np.asarray(s, dtype=float)) for s, t in zip(more, times))
+        if self.inlet.samples_available():  # (an empty pull_chunk costs as much as the sample's)
+            more, times = self.inlet.pull_chunk(timeout=0.0)
+            out.extend((float(t), np.asarray(s, dtype=float)) for s, t in zip(more, times))
         return out
 
     def wake(self) -> None:  # pulls time out within their (short) timeout
