@@ -4,8 +4,8 @@ report on, run by ``exubio study`` with the local process pool (--jobs 2) and wi
 (--scheduler local:2). Prints the wall time of each run, the per-trial time and the per-trial
 overhead outside the solver (trial wall time minus the PF solve time of its summary), and the CPU
 time of the run (all its processes) per trial, and the time after the last trial's DONE.json
-(the study's long tables, its report and files). ``--no-trial-reports``: the same study without
-the per-trial reports.
+(the study's long tables, its report and files). ``--no-trial-reports``: the same study with
+``report: false`` (no per-trial report and no study report; the tables and files stay).
 
 Usage:
     python benchmarks/bench_study.py [--trials 100] [--duration 25] [--rate 200] [--methods pf]
@@ -143,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--runs", default="jobs,dask", help="which runs: jobs (process pool, --jobs 2), dask (local:2)")
     ap.add_argument("--keep", help="write the trials and results here instead of a temporary folder")
     ap.add_argument("--no-trial-reports", action="store_true",
-                    help="the study without its per-trial reports (the study's own table, report and files stay)")
+                    help="the study with report: false (no per-trial reports and no study report; its tables and files stay)")
     ap.add_argument("--breakdown", type=int, metavar="N",
                     help="instead of the study runs: CPU time per stage of N trials run one after the other here")
     args = ap.parse_args(argv)
