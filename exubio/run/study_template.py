@@ -6,7 +6,7 @@ STUDY_TEMPLATE = """\
 schema_version: 1
 name: shoulder study                # optional
 methods: [pf, ls]                   # optional (default [pf, ls]); a session may override
-report: true                        # optional: the per-trial PDF/PNG report (default true)
+report: true                        # optional: the reports, each trial's PDF/PNG and the study's PDF (default true)
 signs: isb                          # optional: isb (raw ISB angles) or clinical (elevation positive); default: each protocol's signs key, else isb
 sessions:
   - subject: S01
