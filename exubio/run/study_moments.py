@@ -23,7 +23,7 @@ import numpy as np
 from exubio.errors import InputError
 from exubio.io.result_names import beside, method_stem, set_paths
 from exubio.io.results import atomic_write
-from exubio.run.study_table import categorical_runs
+from exubio.run.study_table import VERDICTS, categorical_runs
 
 if TYPE_CHECKING:
     import pandas
@@ -102,7 +102,7 @@ def moments_study_table(trials: Iterable[tuple[dict, Path]], /) -> "pandas.DataF
     cols = {}
     for c in MOMENT_COLUMNS:
         if c in _CATEGORICAL:
-            cols[c] = categorical_runs((p["runs"][c] for p in parts), ("ok", "check", "fail", "") if c == "verdict" else None)
+            cols[c] = categorical_runs((p["runs"][c] for p in parts), VERDICTS if c == "verdict" else None)
         else:
             cols[c] = np.concatenate([p[c] for p in parts]).astype("float64") if parts else np.zeros(0)
     return pd.DataFrame(cols)

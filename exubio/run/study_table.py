@@ -36,8 +36,8 @@ CSV_GZ = "angles.csv.gz"
 TABLE_COLUMNS = ("subject", "session", "trial", "task", "method", "time_s", "angle", "value_deg", "u_deg", "status",
                  "verdict", "signs")
 _STATUS = tuple(s.label for s in AngleStatus)
-_VERDICTS = ("ok", "check", "fail", "")
-_FIXED = {"verdict": _VERDICTS, "signs": SIGNS}
+VERDICTS = ("ok", "check", "fail", "")  # the verdict column's categories (a result without one: "")
+_FIXED = {"verdict": VERDICTS, "signs": SIGNS}
 FLOAT_DECIMALS = 6  # the numbers of angles.csv.gz, printed as "%.6f" (as the per-trial CSV)
 
 
