@@ -16,7 +16,15 @@ log = logging.getLogger(__name__)
 def _constraint_chain(kin: Kinematics) -> tuple[Kinematics, np.ndarray]:
     """Kinematics of the chain that carries the ellipsoid contact points (thorax, clavicle,
     scapula) and the indices of its coordinates in the full model: g depends on nothing else, and
-    the projection below runs ~4x faster on it."""
+    the projection below runs ~4x faster on it. Made once per ``kin`` and kept on it (57 us a
+    build: the live loop projects a block of 16 frames at a time)."""
+    chain = kin.__dict__.get("_constraint_chain")
+    if chain is None:
+        chain = kin.__dict__["_constraint_chain"] = _make_constraint_chain(kin)
+    return chain
+
+
+def _make_constraint_chain(kin: Kinematics) -> tuple[Kinematics, np.ndarray]:
     model = kin.model
     keep: set[int] = set()
     for i in np.unique(kin.contacts.segment_index):
