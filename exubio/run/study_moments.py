@@ -12,7 +12,6 @@ per-trial files (read back from them). Written atomically, like angles.parquet
 """
 from __future__ import annotations
 
-import gzip
 import io
 import math
 from pathlib import Path
@@ -23,6 +22,7 @@ import numpy as np
 from exubio.errors import InputError
 from exubio.io.result_names import beside, method_stem, set_paths
 from exubio.io.results import atomic_write
+from exubio.run.csv_gz import gzip_writer
 from exubio.run.study_table import VERDICTS, categorical_runs
 
 if TYPE_CHECKING:
@@ -116,7 +116,7 @@ def write_moments_table(out_dir: Path, trials: Iterable[tuple[dict, Path]], /) -
     pq = atomic_write(out_dir / PARQUET, lambda tmp: df.to_parquet(tmp, engine="pyarrow", index=False))
 
     def write_gz(tmp) -> None:  # the same bytes for the same rows (no name, mtime 0), as angles.csv.gz
-        with open(tmp, "wb") as raw, gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0) as gz_file:
+        with open(tmp, "wb") as raw, gzip_writer(raw) as gz_file:
             with io.TextIOWrapper(gz_file, encoding="utf-8", newline="") as text:
                 df.to_csv(text, index=False, float_format="%.9g")
 

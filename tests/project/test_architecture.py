@@ -24,6 +24,7 @@ OWNERS = {
     "dask": {"run/executors.py"},
     "pandas": {"api.py", "run/study_table.py", "run/study_moments.py", "run/csv_gz.py"},  # the study's angles table (Parquet, CSV) is a DataFrame
     "polars": {"run/csv_gz.py"},  # the study table's CSV writer
+    "isal": {"run/csv_gz.py"},  # the study tables' gzip
     "pylsl": {"run/live/transport.py"},
     "numba": {"model/kernels.py"},  # the compiled kernels, imported where used (0.2 s to import)
 }
