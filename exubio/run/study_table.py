@@ -123,12 +123,19 @@ def _joined(arrays: list[np.ndarray], dtype) -> np.ndarray:
 
 
 def write_study_table(out_dir: Path, trials: Iterable[tuple[dict, Path]], /) -> tuple[Path, Path]:
-    """``angles.parquet`` and ``angles.csv.gz`` in out_dir (atomic), the same rows."""
+    """``angles.parquet`` and ``angles.csv.gz`` in out_dir (atomic), the same rows; the Parquet on
+    a thread while the CSV is written (pyarrow, polars and the compression run outside Python's lock)."""
+    from concurrent.futures import ThreadPoolExecutor
+
     df = study_table(trials)
     df.attrs = {}
-    pq = atomic_write(out_dir / PARQUET, lambda tmp: df.to_parquet(tmp, engine="pyarrow", index=False))
-    gz = atomic_write(out_dir / CSV_GZ, lambda tmp: write_csv_gz(tmp, df, FLOAT_DECIMALS))
-    return pq, gz
+    with ThreadPoolExecutor(1, thread_name_prefix="exubio-parquet") as pool:
+        pq = pool.submit(atomic_write, out_dir / PARQUET, lambda tmp: df.to_parquet(tmp, engine="pyarrow", index=False))
+        try:
+            gz = atomic_write(out_dir / CSV_GZ, lambda tmp: write_csv_gz(tmp, df, FLOAT_DECIMALS))
+        finally:
+            pq_path = pq.result()  # its error, if any, is the table's
+    return pq_path, gz
 
 
 def read_study_table(folder: str | Path, /) -> "pandas.DataFrame":
