@@ -29,7 +29,7 @@ import numpy as np
 import exudyn as exu
 
 from exubio.backend.exudyn_limits import LimitSwitching
-from exubio.backend.pf_numerics import LimitElement, StateRecord, frames_from_steps, hermite
+from exubio.backend.pf_numerics import JoinedRows, LimitElement, StateRecord, finite_rows, frames_from_steps, hermite
 from exubio.backend.pf_types import IntegratorOptions, PFRun, SpringSet
 
 __all__ = ["BuiltSystem", "Integration", "SpringTargets", "integrate_trial", "solver_settings"]
@@ -209,10 +209,13 @@ class Integration:
 # --------------------------------------------------------------------------------------------
 def integrate_trial(system: BuiltSystem, targets_pos, targets_vel, active, /, *, frame_dt_s: float,
                     options: IntegratorOptions, progress: Callable[[int], None] | None,
-                    on_frames: Callable[[PFRun], None] | None, chunk_frames: int, first_chunk_extra: int) -> PFRun:
+                    on_frames: Callable[[PFRun], None] | None, chunk_frames: int, first_chunk_extra: int,
+                    lead_in: tuple[np.ndarray, np.ndarray] | None = None) -> PFRun:
     """``PFSystem.run`` (see there): the inputs checked and the steps counted, then the run."""
     pos = np.asarray(targets_pos, dtype=float)
     vel = np.asarray(targets_vel, dtype=float)
+    if lead_in is not None:  # frames before targets_pos's first, read with them without copying them
+        pos, vel = (JoinedRows(np.asarray(a, dtype=float), b) for a, b in zip(lead_in, (pos, vel)))
     k = system.targets.k
     if pos.ndim != 3 or pos.shape[1:] != (k, 3) or pos.shape[0] < 2:
         raise ValueError(f"run: targets_pos must have shape (n >= 2, {k}, 3), got {pos.shape}")
@@ -222,7 +225,7 @@ def integrate_trial(system: BuiltSystem, targets_pos, targets_vel, active, /, *,
     act = np.ones((n, k), dtype=bool) if active is None else np.asarray(active, dtype=bool)
     if act.shape != (n, k):
         raise ValueError(f"run: active must have shape ({n}, {k}), got {act.shape}")
-    finite = np.isfinite(pos).all(axis=2) & np.isfinite(vel).all(axis=2)
+    finite = finite_rows(pos) & finite_rows(vel)
     if np.any(act & ~finite):
         f, j = np.argwhere(act & ~finite)[0]
         raise ValueError(f"run: marker {j} is active but not finite at frame {f}; mark missing samples inactive")

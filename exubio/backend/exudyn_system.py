@@ -359,7 +359,7 @@ class PFSystem:
             frame_dt_s: float, options: IntegratorOptions = IntegratorOptions(),
             progress: Callable[[int], None] | None = None,
             on_frames: Callable[[PFRun], None] | None = None, chunk_frames: int = 8000,
-            first_chunk_extra: int = 0) -> PFRun:
+            first_chunk_extra: int = 0, lead_in: tuple[np.ndarray, np.ndarray] | None = None) -> PFRun:
         """Integrate the PF system through the measured marker trajectories.
 
         targets_pos, targets_vel: (n, k, 3) marker positions (m) and velocities (m/s) at the frame
@@ -381,10 +381,13 @@ class PFSystem:
         statistics with no frames. An exception raised by ``on_frames`` stops the solver and is
         raised from here. ``first_chunk_extra``: the first chunk has this many frames more (a
         lead-in before the frames the caller counts, exubio.methods.pf). Without it, the PFRun returned holds every frame.
+        ``lead_in``: (positions, velocities) of frames before the first of targets_pos, run as if
+        concatenated before targets_pos and targets_vel but without that whole-trial copy (``active``
+        then covers the lead-in's frames too; ``first_chunk_extra`` is usually their number).
         """
         return integrate_trial(self._built, targets_pos, targets_vel, active, frame_dt_s=frame_dt_s, options=options,
                                progress=progress, on_frames=on_frames, chunk_frames=chunk_frames,
-                               first_chunk_extra=first_chunk_extra)
+                               first_chunk_extra=first_chunk_extra, lead_in=lead_in)
 
     def run_live(self, next_frame: Callable[[int], tuple | None], on_frame: Callable[[int, PFRun], None], /, *,
                  frame_dt_s: float, options: IntegratorOptions = IntegratorOptions(),

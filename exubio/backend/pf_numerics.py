@@ -1,7 +1,8 @@
 """The pure-numpy side of the potential-field backend (the exudyn_* modules of exubio.backend, which
 alone import Exudyn): Euler-parameter kinematics of the system coordinates, the Hermite interpolation of
-targets between frames and of step states at the frame times, the record of the accepted steps, and
-the geometry of the range-of-motion limit elements and their switching."""
+targets between frames and of step states at the frame times, the record of the accepted steps, the
+geometry of the range-of-motion limit elements and their switching, and a run's frames read as one
+array from a lead-in and a trial's own arrays (``JoinedRows``)."""
 from __future__ import annotations
 
 import math
@@ -210,3 +211,51 @@ def limit_window(lo: float, hi: float, kind: str, half: float):
     else:
         return None, None, 0.0
     return lo - c, hi - c, c
+
+
+# --------------------------------------------------------------------------------------------
+# A lead-in and a trial's frames, read as one array without a copy
+# --------------------------------------------------------------------------------------------
+class JoinedRows:
+    """The rows of ``head`` then those of ``tail`` (arrays (h, ...) and (t, ...)), read as their
+    concatenation reads but without its copy: a lead-in of a few frames before a whole trial's
+    marker targets (PFSystem.run's ``lead_in``; the copy was 207 MB of positions and velocities on a
+    20-minute trial at 200 Hz). Indexed by one row (a view) or an integer array of rows (a copy of
+    those rows); ``shape`` and ``ndim`` are the concatenation's."""
+
+    def __init__(self, head: np.ndarray, tail: np.ndarray):
+        if head.ndim != tail.ndim or head.shape[1:] != tail.shape[1:]:
+            raise ValueError(f"JoinedRows: rows of shape {head.shape[1:]} cannot precede rows of shape {tail.shape[1:]}")
+        self.head, self.tail, self.h = head, tail, head.shape[0]
+        self.shape = (head.shape[0] + tail.shape[0],) + tail.shape[1:]
+        self.ndim = tail.ndim
+        self.dtype = np.result_type(head, tail)
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def __getitem__(self, i):
+        n = self.shape[0]
+        if np.ndim(i) == 0:
+            j = int(i) + (n if int(i) < 0 else 0)
+            if not 0 <= j < n:
+                raise IndexError(f"JoinedRows: row {int(i)} of {n}")
+            return self.head[j] if j < self.h else self.tail[j - self.h]
+        j = np.asarray(i)
+        if j.dtype.kind not in "iu":
+            raise IndexError(f"JoinedRows: rows are indexed by integers, got {j.dtype}")
+        j = np.where(j < 0, j + n, j)
+        if j.size and not (0 <= j.min() and j.max() < n):
+            raise IndexError(f"JoinedRows: rows {j.min()}..{j.max()} of {n}")
+        out = np.empty(j.shape + self.shape[1:], dtype=self.dtype)
+        first = j < self.h
+        out[first] = self.head[j[first]]
+        out[~first] = self.tail[j[~first] - self.h]
+        return out
+
+
+def finite_rows(a) -> np.ndarray:
+    """(n, k) bool: the rows of an array or JoinedRows (n, k, d) whose d values are all finite."""
+    if isinstance(a, JoinedRows):
+        return np.concatenate([finite_rows(a.head), finite_rows(a.tail)])
+    return np.isfinite(a).all(axis=-1)

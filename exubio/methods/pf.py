@@ -259,7 +259,7 @@ def _stream_pf_once(binding: Binding, targets: MarkerTargets, sink: ChunkSink, d
                  else protocol.cutoff_hz)
     step = integration_step(dt, options.step_s, cutoff_hz)
     lead = lead_in_frames(options.lead_in_s, dt, step)
-    start, run_pos, run_vel = lead_in_run(targets, lead, dt)  # no whole-trial copy beyond what the run reads
+    start, lead_pos, lead_vel = lead_in_run(targets, lead, dt)  # the run reads them before the targets: no copy
     setup = pf_setup(binding, start, options)  # the start state at the lead-in's first frame
     kin, points, held, q0, system = binding.kin, binding.points, binding.held, setup.q0, setup.system
     t1, t2 = t0 + setup.equilibrium_s, t0 + setup.equilibrium_s + setup.build_s
@@ -280,9 +280,10 @@ def _stream_pf_once(binding: Binding, targets: MarkerTargets, sink: ChunkSink, d
                 progress(k)
 
     frames = _Frames(kin, points, targets, q0, held, options, sink, dt, lead=lead)
-    run = system.run(run_pos, run_vel, ~np.isnan(run_pos).any(axis=2), frame_dt_s=dt,
-                     options=integ, progress=tick, on_frames=frames, chunk_frames=chunk_frames,
-                     first_chunk_extra=lead)
+    active = np.concatenate([~np.isnan(lead_pos).any(axis=2), targets.present])  # the lead-in's frames, then the trial's
+    run = system.run(targets.positions_m, targets.velocities_m_s, active,
+                     frame_dt_s=dt, options=integ, progress=tick, on_frames=frames, chunk_frames=chunk_frames,
+                     first_chunk_extra=lead, lead_in=(lead_pos, lead_vel))
     completed = max(run.completed_frames - lead, 0)
     if progress and completed > done[0]:
         progress(completed - done[0])

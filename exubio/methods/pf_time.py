@@ -69,17 +69,17 @@ def with_lead_in(targets: MarkerTargets, lead: int, frame_dt_s: float, /) -> Mar
 def lead_in_run(targets: MarkerTargets, lead: int, frame_dt_s: float, /
                 ) -> tuple[MarkerTargets, np.ndarray, np.ndarray]:
     """What a PF run with ``lead`` frames of lead-in reads (the values of :func:`with_lead_in`,
-    without its whole-trial copy of the accelerations, which the run does not read): (the lead-in
-    and the trial's first frame as targets: the start, pf_setup; the positions and velocities of
-    the lead-in then of every frame: the springs, PFSystem.run)."""
+    without its whole-trial copies, which the run does not need): (the lead-in and the trial's
+    first frame as targets: the start, pf_setup; the lead-in's positions and velocities (lead, k,
+    3): the springs before the trial's own, PFSystem.run's ``lead_in``)."""
     if lead <= 0:
-        return targets, targets.positions_m, targets.velocities_m_s
+        return targets, targets.positions_m[:0], targets.velocities_m_s[:0]
     t, pos, vel, acc = _lead_in(targets, lead, frame_dt_s)
     start = dataclasses.replace(
         targets, time_s=np.concatenate([t, targets.time_s[:1]]), positions_m=np.concatenate([pos, targets.positions_m[:1]]),
         velocities_m_s=np.concatenate([vel, targets.velocities_m_s[:1]]),
         accelerations_m_s2=np.concatenate([acc, targets.accelerations_m_s2[:1]]), gaps=())
-    return start, np.concatenate([pos, targets.positions_m]), np.concatenate([vel, targets.velocities_m_s])
+    return start, pos, vel
 
 
 def _lead_in(targets: MarkerTargets, lead: int, frame_dt_s: float, /) -> tuple[np.ndarray, ...]:

@@ -198,6 +198,12 @@ FILTER_BLOCK_VALUES = 4_000_000
 markers at 200 Hz are 330,000): filtfilt's working copies of a long trial then stay bounded."""
 
 
+FILTFILT_VALUES = 1_000_000
+"""filtfilt filters at most this many values of a group at a time (8 MB; a 25 s trial's markers at
+200 Hz are one call): its forward and backward passes' copies of a long trial's group (a 20-minute
+trial's 15 series: 29 MB each) would otherwise add ~100 MB to the peak of Winter's analysis."""
+
+
 def _column_blocks(cols: list[int], values_per_column: int, /) -> list[list[int]]:
     per = max(FILTER_BLOCK_VALUES // max(values_per_column, 1), 1)
     return [cols[a:a + per] for a in range(0, len(cols), per)]
@@ -249,8 +255,10 @@ def _filtfilt_run(seg: np.ndarray, b: np.ndarray, a: np.ndarray, /, *, rate_hz: 
     ext[:, :pad] = head.T
     ext[:, pad:pad + n] = flat.T
     ext[:, pad + n:] = tail.T
-    filtered = filtfilt(b, a, ext, axis=1, padtype=None)
-    return filtered[:, pad:pad + n].T.reshape(seg.shape)
+    rows = max(FILTFILT_VALUES // ext.shape[1], 1)
+    for r in range(0, ext.shape[0], rows):  # each series' recursion is its own: the same values, fewer at a time
+        ext[r:r + rows] = filtfilt(b, a, ext[r:r + rows], axis=1, padtype=None)
+    return np.moveaxis(ext[:, pad:pad + n].reshape(seg.shape[1:] + (n,)), -1, 0)  # a view: no copy
 
 
 def _polynomial_extension(window: np.ndarray, pad: int, /) -> np.ndarray:

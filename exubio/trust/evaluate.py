@@ -15,21 +15,22 @@ def residual_statistics(recon: Reconstruction, /) -> dict[str, Any]:
     markers (E_j of Eq. 8) and its maximum with the SD at that frame, and per-marker RMSE."""
     res = recon.residuals_m * 1000.0
     names = list(recon.marker_names)
-    valid = ~np.isnan(res)
-    if not valid.any():
+    if np.isnan(res).all():
         return {"mean": None, "sd": None, "max": None, "max_marker": None}
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # an optional marker may be absent throughout
         per_frame_mean = np.nanmean(res, axis=1)  # res is NaN wherever it is not valid: no masked copy
         per_frame_sd = np.nanstd(res, axis=1)
-        per_marker_rmse = np.sqrt(np.nanmean(res**2, axis=0))
         per_marker_max = np.nanmax(res, axis=0)
+        mean, sd = float(np.nanmean(res)), float(np.nanstd(res))
+        # res squared in place (its last use; res**2 was a second whole-trial copy beside nanmean's)
+        per_marker_rmse = np.sqrt(np.nanmean(np.square(res, out=res), axis=0))
     j = int(np.nanargmax(per_frame_mean))
     worst = int(np.nanargmax(per_marker_max))
     worst_rmse = int(np.nanargmax(per_marker_rmse))
     return {
-        "mean": float(np.nanmean(res)),
-        "sd": float(np.nanstd(res)),
+        "mean": mean,
+        "sd": sd,
         "max": float(per_marker_max[worst]),
         "max_marker": names[worst],
         "max_frame_mean": float(per_frame_mean[j]),

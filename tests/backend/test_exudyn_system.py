@@ -145,6 +145,38 @@ def test_a_missing_marker_switches_its_spring_off(kin, springs, motion):
     assert np.degrees(np.abs(q_pf - q[:n])).max() < 0.5
 
 
+@pytest.mark.parametrize("step_s", [None, 0.01])
+def test_a_lead_in_runs_as_its_concatenation_before_the_targets(kin, springs, motion, step_s):
+    """PFSystem.run's ``lead_in`` (read without a whole-trial copy) gives bitwise the run on the
+    concatenated targets, chunk for chunk, with a marker missing in the lead-in and later."""
+    q, qd, pos, vel = motion
+    n, lead = 121, 20
+    active = np.ones((n, springs.n_springs), dtype=bool)
+    active[:8, 3] = active[50:70, 11] = False
+    p, v = pos[:n].copy(), vel[:n].copy()
+    p[~active] = v[~active] = np.nan
+    options = IntegratorOptions(step_s=step_s)
+    runs = []
+    for joined in (False, True):
+        chunks = []
+        system = PFSystem(bound(kin), springs=springs, q0=q[0], qd0=qd[0])
+        args = (p[lead:], v[lead:]) if joined else (p, v)
+        run = system.run(*args, active, frame_dt_s=1 / RATE_HZ, options=options, on_frames=chunks.append,
+                         chunk_frames=40, first_chunk_extra=lead, lead_in=(p[:lead], v[:lead]) if joined else None)
+        assert run.success and run.completed_frames == n, run.message
+        runs.append(chunks)
+    assert [c.n_frames for c in runs[0]] == [c.n_frames for c in runs[1]] == [60, 40, 21]
+    for a, b in zip(*runs):
+        for name in ("time_s", "rotations", "origins_m", "velocities_m_s", "accelerations_m_s2",
+                     "angular_velocities_rad_s", "angular_accelerations_rad_s2"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    with pytest.raises(ValueError, match="not finite"):
+        bad = p[:lead].copy()
+        bad[2, 0] = np.nan
+        PFSystem(bound(kin), springs=springs, q0=q[0], qd0=qd[0]).run(
+            p[lead:], v[lead:], active, frame_dt_s=1 / RATE_HZ, lead_in=(bad, v[:lead]))
+
+
 def test_sub_steps_interpolate_between_frames(kin, springs, motion, tracked):
     q, qd, pos, vel = motion
     n = 100

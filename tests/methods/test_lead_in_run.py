@@ -1,6 +1,6 @@
-"""PF's run reads the lead-in without a whole-trial copy of the accelerations (issue 38's memory
-bound): what ``lead_in_run`` gives the start (pf_setup) and the springs (PFSystem.run) is exactly
-what ``with_lead_in`` gives, frame for frame."""
+"""PF's run reads the lead-in without a whole-trial copy (issue 38's memory bound): what
+``lead_in_run`` gives the start (pf_setup) and the springs (PFSystem.run's lead_in, before the
+trial's own targets) is exactly what ``with_lead_in`` gives, frame for frame."""
 from __future__ import annotations
 
 import numpy as np
@@ -33,8 +33,9 @@ def test_lead_in_run_reads_what_with_lead_in_gives():
         assert lead == 20
         full = with_lead_in(tg, lead, 0.005)
         start, pos, vel = lead_in_run(tg, lead, 0.005)
-        _same(pos, full.positions_m)
-        _same(vel, full.velocities_m_s)
+        assert pos.shape == vel.shape == (lead, 3, 3)
+        _same(np.concatenate([pos, tg.positions_m]), full.positions_m)
+        _same(np.concatenate([vel, tg.velocities_m_s]), full.velocities_m_s)
         assert start.n_frames == lead + 1 and start.marker_names == tg.marker_names
         for name in ("time_s", "positions_m", "velocities_m_s", "accelerations_m_s2"):
             _same(getattr(start, name), getattr(full, name)[: lead + 1])
@@ -44,4 +45,4 @@ def test_lead_in_run_reads_what_with_lead_in_gives():
 def test_no_lead_in_hands_on_the_targets_themselves():
     tg = _targets()
     start, pos, vel = lead_in_run(tg, 0, 0.005)
-    assert start is tg and pos is tg.positions_m and vel is tg.velocities_m_s
+    assert start is tg and pos.shape == vel.shape == (0, 3, 3)
