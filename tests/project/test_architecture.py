@@ -25,7 +25,8 @@ OWNERS = {
     "pandas": {"api.py", "run/study_table.py", "run/study_moments.py", "run/csv_gz.py"},  # the study's angles table (Parquet, CSV) is a DataFrame
     "polars": {"run/csv_gz.py"},  # the study table's CSV writer
     "pylsl": {"run/live/transport.py"},
-    "numba": {"model/kernels.py"},  # the compiled kernels, imported where used (0.2 s to import)
+    "numba": {"model/kernels.py",  # the compiled kernels, imported where used (0.2 s to import)
+              "model/batch_kernels.py"},  # those of the preparation and the checks (filter, chain fits), bit-identical
 }
 VALIDATION_STUDY = tuple(f"exubio.validation.{m}" for m in ("run", "trials", "determinacy", "sensitivity", "residuals",
                                                               "sier", "invivo", "c3d_tasks", "agreement", "mismatch"))

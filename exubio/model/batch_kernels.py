@@ -1,0 +1,72 @@
+"""Compiled (numba) kernels of the per-trial preparation and checks, where numpy's cost per call or
+its generic loops dominate: the zero-lag IIR filter of many series at once (``filtfilt_columns``,
+the low-pass and the automatic cut-off of exubio.prep.filtering) and small batched contractions
+(the chain fits of exubio.trust.label_chains, the uncertainty's quadratic forms).
+
+Each kernel does the same arithmetic in the same order as its numpy (or scipy) reference, so the
+results are bit-identical, not only close: the tests (tests/model/test_batch_kernels.py) hold them
+equal with ``np.array_equal``. Numba's default (no fastmath) keeps every multiply and add as
+written (no fused multiply-add, no reassociation); vectorising across independent series or
+problems does not change any one's order of operations. Arrays only, no exubio imports; compiled
+on the first call and cached on disk (``cache=True``). Importing this module imports numba: import
+it where it is used, inside the function.
+"""
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+
+# --------------------------------------------------------------------------------------------
+# Zero-lag IIR filter (scipy.signal.filtfilt with padtype=None), time first, many series at once
+# --------------------------------------------------------------------------------------------
+@numba.njit(cache=True, nogil=True)
+def _lfilter_pass(bn, an, x, out, z, t0, t1, step):
+    """One pass of scipy's lfilter (transposed direct form II, coefficients normalised by a[0]) over
+    the rows t0, t0 + step, ... (not t1) of x (L, m) into out (may be x itself); z (nb - 1, m): the
+    state, updated. Per series the operations of scipy's C loop, in its order."""
+    m = x.shape[1]
+    nb = bn.shape[0]
+    xr = np.empty(m)
+    t = t0
+    while t != t1:
+        for s in range(m):
+            xr[s] = x[t, s]
+        yr = out[t]
+        for s in range(m):
+            yr[s] = z[0, s] + bn[0] * xr[s]
+        for k in range(nb - 2):
+            zk = z[k]
+            zk1 = z[k + 1]
+            bk = bn[k + 1]
+            ak = an[k + 1]
+            for s in range(m):
+                zk[s] = zk1[s] + xr[s] * bk - yr[s] * ak
+        zl = z[nb - 2]
+        bl = bn[nb - 1]
+        al = an[nb - 1]
+        for s in range(m):
+            zl[s] = xr[s] * bl - yr[s] * al
+        t += step
+
+
+@numba.njit(cache=True, nogil=True)
+def filtfilt_columns(b, a, zi, x, out):
+    """scipy.signal.filtfilt(b, a, x.T, padtype=None).T of x (L, m): every column a series, filtered
+    forward from the steady state ``zi`` (scipy.signal.lfilter_zi(b, a)) times its first sample,
+    then backward from ``zi`` times the forward pass's last sample, into out (L, m). len(b) ==
+    len(a) >= 2. The columns are filtered side by side (one time step of every series, then the
+    next): the recursions are independent, and the loops over the series vectorise."""
+    L, m = x.shape
+    nb = b.shape[0]
+    bn = b / a[0]
+    an = a / a[0]
+    z = np.empty((nb - 1, m))
+    for k in range(nb - 1):
+        for s in range(m):
+            z[k, s] = zi[k] * x[0, s]
+    _lfilter_pass(bn, an, x, out, z, 0, L, 1)
+    for k in range(nb - 1):
+        for s in range(m):
+            z[k, s] = zi[k] * out[L - 1, s]
+    _lfilter_pass(bn, an, out, out, z, L - 1, -1, -1)
