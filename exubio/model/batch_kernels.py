@@ -70,3 +70,73 @@ def filtfilt_columns(b, a, zi, x, out):
         for s in range(m):
             z[k, s] = zi[k] * out[L - 1, s]
     _lfilter_pass(bn, an, out, out, z, L - 1, -1, -1)
+
+
+# --------------------------------------------------------------------------------------------
+# Chain fits (exubio.trust.label_chains): rigid placement and Levenberg-Marquardt normal equations
+# --------------------------------------------------------------------------------------------
+@numba.njit(cache=True, nogil=True)
+def to_root_frame(rot, org, p, jac, rel, jrel):
+    """rel (b, k, 3) = R^T (p - org) and jrel (b, k, 3, c) = R^T jac of each problem b (rot (b, 3, 3),
+    org (b, 3), p (b, k, 3), jac (b, k, 3, c)): np.einsum("bji,bkj->bki", ...) and
+    np.einsum("bji,bkjc->bkic", ...), each sum over j taken in order 0, 1, 2."""
+    b, k, _, c = jac.shape
+    d = np.empty(3)
+    for n in range(b):
+        for s in range(k):
+            for j in range(3):
+                d[j] = p[n, s, j] - org[n, j]
+            for i in range(3):
+                acc = 0.0
+                for j in range(3):
+                    acc += rot[n, j, i] * d[j]
+                rel[n, s, i] = acc
+                for cc in range(c):
+                    acc = 0.0
+                    for j in range(3):
+                        acc += rot[n, j, i] * jac[n, s, j, cc]
+                    jrel[n, s, i, cc] = acc
+
+
+@numba.njit(cache=True, nogil=True)
+def chain_normal_equations(rot, rel, jrel, w, e, hess, grad):
+    """The Gauss-Newton terms of the chain fit (label_chains._normal_equations_numpy): per problem b
+    the weighted Jacobian jw (k, 3, 6 + c) of the residuals R rel + t - target with respect to a
+    rotation increment (-R [rel]x), the translation (I) and the chain's coordinates (R jrel), each
+    row times w (b, k); hess (b, p, p) = sum over markers and axes of jw^T jw, grad (b, p) = jw^T e,
+    accumulated marker by marker, axis by axis, as np.einsum does."""
+    b, k, _, c = jrel.shape
+    npar = 6 + c
+    sk = np.empty((3, 3))
+    jw = np.empty((k, 3, npar))
+    for n in range(b):
+        for s in range(k):
+            x, y, z = rel[n, s, 0], rel[n, s, 1], rel[n, s, 2]
+            sk[0, 0], sk[0, 1], sk[0, 2] = 0.0, -z, y
+            sk[1, 0], sk[1, 1], sk[1, 2] = z, 0.0, -x
+            sk[2, 0], sk[2, 1], sk[2, 2] = -y, x, 0.0
+            ws = w[n, s]
+            for i in range(3):
+                for col in range(3):
+                    acc = 0.0
+                    for j in range(3):
+                        acc += rot[n, i, j] * sk[j, col]
+                    jw[s, i, col] = -acc * ws
+                for col in range(3):
+                    jw[s, i, 3 + col] = (1.0 if i == col else 0.0) * ws
+                for cc in range(c):
+                    acc = 0.0
+                    for j in range(3):
+                        acc += rot[n, i, j] * jrel[n, s, j, cc]
+                    jw[s, i, 6 + cc] = acc * ws
+        for pp in range(npar):
+            grad[n, pp] = 0.0
+            for qq in range(npar):
+                hess[n, pp, qq] = 0.0
+        for s in range(k):
+            for i in range(3):
+                for pp in range(npar):
+                    a = jw[s, i, pp]
+                    grad[n, pp] += a * e[n, s, i]
+                    for qq in range(npar):
+                        hess[n, pp, qq] += a * jw[s, i, qq]

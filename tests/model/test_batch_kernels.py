@@ -38,3 +38,51 @@ def test_filtfilt_columns_passes_a_constant_and_a_line():
     K.filtfilt_columns(b, a, lfilter_zi(b, a), x, out)
     assert np.abs(out[:, 0] - 0.25).max() < 1e-12
     assert np.abs(out[150:-150, 1] - x[150:-150, 1]).max() < 1e-12
+
+
+@pytest.mark.parametrize("b, k, c", [(40, 4, 2), (40, 18, 10), (1, 1, 2), (120, 5, 4), (7, 6, 3)])
+def test_chain_kernels_are_the_numpy_reference_to_the_bit(b, k, c):
+    """(A chain of one coordinate keeps the numpy terms: np.einsum then sums its column in another order.)"""
+    from scipy.spatial.transform import Rotation
+
+    from exubio.trust.label_chains import _normal_equations_numpy, _to_root_frame_numpy
+
+    rng = np.random.default_rng(b + k + c)
+    rot = Rotation.random(b, random_state=rng.integers(1 << 31)).as_matrix()
+    org, p = rng.normal(size=(b, 3)), rng.normal(scale=0.3, size=(b, k, 3))
+    jac = rng.normal(scale=0.2, size=(b, k, 3, c))
+    rel, jrel = np.empty((b, k, 3)), np.empty((b, k, 3, c))
+    K.to_root_frame(rot, org, p, jac, rel, jrel)
+    want_rel, want_jrel = _to_root_frame_numpy(rot, org, p, jac)
+    assert np.array_equal(rel, want_rel) and np.array_equal(jrel, want_jrel)
+    w = (rng.random((b, k)) > 0.2).astype(float)  # missing markers weigh 0
+    e = rng.normal(scale=0.01, size=(b, k, 3)) * w[..., None]
+    hess, grad = np.empty((b, 6 + c, 6 + c)), np.empty((b, 6 + c))
+    K.chain_normal_equations(rot, rel, jrel, w, e, hess, grad)
+    want_hess, want_grad = _normal_equations_numpy(rot, rel, jrel, w, e)
+    assert np.array_equal(hess, want_hess) and np.array_equal(grad, want_grad)
+
+
+def test_chain_normal_equations_are_those_of_finite_differences():
+    """A truth neither computes: the Jacobian the normal equations are built of is that of the
+    residual R(dw) rel(qc) + t - target, checked by central differences (hess = J^T J, grad = J^T e)."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(5)
+    k, c = 4, 2
+    rot0 = Rotation.random(1, random_state=3).as_matrix()
+    t0 = rng.normal(size=3)
+    base = rng.normal(scale=0.2, size=(k, 3))
+    lin = rng.normal(scale=0.1, size=(k, 3, c))  # rel(qc) = base + lin @ qc: a chain whose points move linearly
+    target = rng.normal(scale=0.2, size=(k, 3))
+
+    def res(x):
+        r = rot0[0] @ Rotation.from_rotvec(x[:3]).as_matrix()  # the fit's increment: R <- R Rodrigues(dw)
+        return (np.einsum("ij,kj->ki", r, base + lin @ x[6:]) + t0 + x[3:6] - target).ravel()
+
+    x0 = np.zeros(6 + c)
+    jac = np.stack([(res(x0 + h) - res(x0 - h)) / 2e-6 for h in np.eye(6 + c) * 1e-6], axis=1)
+    hess, grad = np.empty((1, 6 + c, 6 + c)), np.empty((1, 6 + c))
+    K.chain_normal_equations(rot0, base[None], lin[None], np.ones((1, k)), res(x0).reshape(1, k, 3), hess, grad)
+    assert np.allclose(hess[0], jac.T @ jac, atol=1e-8)
+    assert np.allclose(grad[0], jac.T @ res(x0), atol=1e-8)
