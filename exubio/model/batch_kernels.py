@@ -140,3 +140,44 @@ def chain_normal_equations(rot, rel, jrel, w, e, hess, grad):
                     grad[n, pp] += a * e[n, s, i]
                     for qq in range(npar):
                         hess[n, pp, qq] += a * jw[s, i, qq]
+
+
+# --------------------------------------------------------------------------------------------
+# Partial label swaps (exubio.trust.label_ranges): RMS distance errors to the partner markers
+# --------------------------------------------------------------------------------------------
+@numba.njit(cache=True, nogil=True)
+def partner_rms(P, ref, rows, cols, n_cols, own, out):
+    """For every frame of P (n, k, 3) and every term t: the RMS over the partners cols[t, :n_cols[t]]
+    of (|P[rows[t]] - P[partner]| - ref[own[t], partner]), missing values (NaN) left out (NaN where
+    none is left), into out (n, T). The numpy reference (label_ranges._partner_rms_numpy):
+    np.linalg.norm of the differences, then np.sqrt(np.nanmean(d ** 2)) over each term's partners,
+    whose (frames, partners) array numpy lays out partner by partner and so sums in partner order;
+    the same operations in the same order here."""
+    n, k, _ = P.shape
+    D = np.empty((k, k))
+    v = np.empty(cols.shape[1])
+    for f in range(n):
+        for a in range(k):
+            for b in range(a + 1, k):
+                dx = P[f, a, 0] - P[f, b, 0]
+                dy = P[f, a, 1] - P[f, b, 1]
+                dz = P[f, a, 2] - P[f, b, 2]
+                d = np.sqrt(dx * dx + dy * dy + dz * dz)
+                D[a, b] = d
+                D[b, a] = d
+        for t in range(rows.shape[0]):
+            r, o, p = rows[t], own[t], n_cols[t]
+            cnt = 0
+            for j in range(p):
+                c = cols[t, j]
+                e = D[r, c] - ref[o, c]
+                e = e * e
+                if np.isnan(e):
+                    v[j] = 0.0
+                else:
+                    v[j] = e
+                    cnt += 1
+            tot = 0.0
+            for j in range(p):
+                tot += v[j]
+            out[f, t] = np.sqrt(tot / cnt) if cnt > 0 else np.nan

@@ -86,3 +86,33 @@ def test_chain_normal_equations_are_those_of_finite_differences():
     K.chain_normal_equations(rot0, base[None], lin[None], np.ones((1, k)), res(x0).reshape(1, k, 3), hess, grad)
     assert np.allclose(hess[0], jac.T @ jac, atol=1e-8)
     assert np.allclose(grad[0], jac.T @ res(x0), atol=1e-8)
+
+
+@pytest.mark.parametrize("k", [4, 9, 15, 30])
+def test_partner_rms_is_the_numpy_reference_to_the_bit(k):
+    from exubio.trust.label_ranges import _error_terms, _partner_rms, _partner_rms_numpy
+
+    rng = np.random.default_rng(k)
+    n = 400
+    P = rng.normal(scale=0.3, size=(n, k, 3))
+    P[rng.random((n, k)) < 0.05] = np.nan  # gaps
+    P[:20, 0] = np.nan  # a marker missing in a run of frames
+    ref = np.abs(rng.normal(scale=0.3, size=(k, k)))
+    ref = ref + ref.T
+    ref[0, 1] = ref[1, 0] = np.nan  # never seen together
+    pairs = []
+    for i in range(k):
+        for j in range(i + 1, k):
+            pi, pj = rng.random(k) < 0.7, rng.random(k) < 0.7
+            pi[[i, j]] = pj[[i, j]] = False
+            if pi.any() and pj.any():
+                pairs.append((i, j, pi, pj))
+    terms = _error_terms(pairs)
+    got = _partner_rms(P, ref, *terms)
+    assert np.array_equal(got, _partner_rms_numpy(P, ref, *terms), equal_nan=True)
+    # a truth neither computes: one term by hand, in plain Python
+    f, t = 25, 2
+    rows, cols, n_cols, own = terms
+    d = [np.sqrt(((P[f, rows[t]] - P[f, c]) ** 2).sum()) - ref[own[t], c] for c in cols[t, :n_cols[t]]]
+    d = [x for x in d if np.isfinite(x)]
+    assert got[f, t] == pytest.approx(np.sqrt(np.mean(np.square(d))), rel=1e-12)
