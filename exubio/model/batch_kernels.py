@@ -181,3 +181,52 @@ def partner_rms(P, ref, rows, cols, n_cols, own, out):
             for j in range(p):
                 tot += v[j]
             out[f, t] = np.sqrt(tot / cnt) if cnt > 0 else np.nan
+
+
+# --------------------------------------------------------------------------------------------
+# Quadratic forms of the uncertainty (exubio.trust.observability, exubio.trust.angle_uncertainty)
+# --------------------------------------------------------------------------------------------
+@numba.njit(cache=True, nogil=True)
+def quadratic_forms(D, S, out):
+    """out[b, a] = sum_i sum_j D[b, a, i] S[b, i, j] D[b, a, j] (D (B, A, n), S (B, n, n)):
+    np.einsum("bai,bij,baj->ba", D, S, D), each product formed left to right and the terms added
+    in (i, j) order from 0, as einsum does; the rows a are summed side by side (independent sums,
+    so the loop over them vectorises)."""
+    B, A, n = D.shape
+    Dt = np.empty((n, A))
+    acc = np.empty(A)
+    for b in range(B):
+        for i in range(n):
+            for a in range(A):
+                Dt[i, a] = D[b, a, i]
+        for a in range(A):
+            acc[a] = 0.0
+        for i in range(n):
+            di = Dt[i]
+            for j in range(n):
+                s = S[b, i, j]
+                dj = Dt[j]
+                for a in range(A):
+                    acc[a] += di[a] * s * dj[a]
+        for a in range(A):
+            out[b, a] = acc[a]
+
+
+@numba.njit(cache=True, nogil=True)
+def bilinear_blocks(X, S, Y, out):
+    """out[b, i, x, j, y] = sum_k sum_l X[b, i, x, k] S[b, k, l] Y[b, j, y, l] (X (B, I, 3, p),
+    S (B, p, q), Y (B, J, 3, q)): np.einsum("bixk,bkl,bjyl->bixjy", X, S, Y), each product formed
+    left to right and the terms added in (k, l) order from 0, as einsum does."""
+    B, I, d, p = X.shape
+    J, e, q = Y.shape[1], Y.shape[2], Y.shape[3]
+    for b in range(B):
+        for i in range(I):
+            for x in range(d):
+                for j in range(J):
+                    for y in range(e):
+                        acc = 0.0
+                        for k in range(p):
+                            xk = X[b, i, x, k]
+                            for l in range(q):
+                                acc += xk * S[b, k, l] * Y[b, j, y, l]
+                        out[b, i, x, j, y] = acc

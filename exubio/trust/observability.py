@@ -469,7 +469,7 @@ def _angle_block(kin: Kinematics, points: PointSet, qf: np.ndarray, pres: np.nda
                 kin, points, qf, pres, amplitude, noise_mm=noise_mm, anatomical=anat,
                 residual_m=residuals, expected_ms=AU.expected_residual_ms(Jm, K, Sigma))
         DK = D @ K
-        var_u = np.einsum("bai,bij,baj->ba", DK, Sigma, DK)
+        var_u = AU.quadratic_forms(DK, Sigma)
         if trunk is not None:
             var_u = var_u + AU.trunk_angle_variance(kin, points, qf, DK, trunk)
         unc = np.where(unseen, np.inf, np.sqrt(np.maximum(var_u, 0.0)))

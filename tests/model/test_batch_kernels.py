@@ -116,3 +116,30 @@ def test_partner_rms_is_the_numpy_reference_to_the_bit(k):
     d = [np.sqrt(((P[f, rows[t]] - P[f, c]) ** 2).sum()) - ref[own[t], c] for c in cols[t, :n_cols[t]]]
     d = [x for x in d if np.isfinite(x)]
     assert got[f, t] == pytest.approx(np.sqrt(np.mean(np.square(d))), rel=1e-12)
+
+
+@pytest.mark.parametrize("B, A, n", [(500, 22, 54), (7, 3, 13), (1, 1, 1)])
+def test_quadratic_forms_are_einsums_to_the_bit(B, A, n):
+    from exubio.trust.angle_uncertainty import quadratic_forms
+
+    rng = np.random.default_rng(n)
+    D = rng.normal(size=(B, A, n))
+    L = rng.normal(size=(B, n, n))
+    S = L @ np.swapaxes(L, 1, 2)  # covariances
+    got = quadratic_forms(D, S)
+    assert np.array_equal(got, np.einsum("bai,bij,baj->ba", D, S, D))
+    # a truth neither computes: the variance of D x for x ~ N(0, S) is d S d^T, by matrix products
+    assert np.allclose(got, np.einsum("bai,bai->ba", D @ S, D), rtol=1e-12, atol=0)
+
+
+@pytest.mark.parametrize("B, I, J, p", [(500, 3, 3, 6), (9, 5, 2, 6), (2, 1, 1, 4)])
+def test_bilinear_blocks_are_einsums_to_the_bit(B, I, J, p):
+    from exubio.trust.angle_uncertainty import _bilinear_blocks
+
+    rng = np.random.default_rng(I + J)
+    X, Y = rng.normal(size=(B, I, 3, p)), rng.normal(size=(B, J, 3, p))
+    S = rng.normal(size=(B, p, p))
+    got = _bilinear_blocks(X, S, Y)
+    assert np.array_equal(got, np.einsum("bixk,bkl,bjyl->bixjy", X, S, Y))
+    want = (X.reshape(B, I * 3, p) @ S @ np.swapaxes(Y.reshape(B, J * 3, p), 1, 2)).reshape(B, I, 3, J, 3)
+    assert np.allclose(got, want, rtol=1e-12, atol=1e-12)
