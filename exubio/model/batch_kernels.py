@@ -230,3 +230,22 @@ def bilinear_blocks(X, S, Y, out):
                             for l in range(q):
                                 acc += xk * S[b, k, l] * Y[b, j, y, l]
                         out[b, i, x, j, y] = acc
+
+
+# --------------------------------------------------------------------------------------------
+# Pair distances (exubio.trust.label_distances)
+# --------------------------------------------------------------------------------------------
+@numba.njit(cache=True, nogil=True)
+def pair_distance_series(pos, iu, ju, out):
+    """out[c, f] = |pos[f, iu[c]] - pos[f, ju[c]]| (pos (n, k, 3), out (pairs, n)): one row per pair,
+    its frames contiguous. np.linalg.norm(pos[:, iu] - pos[:, ju], axis=2): the squares added in
+    axis order (x + y) + z, then the square root; NaN where either marker is missing."""
+    n = pos.shape[0]
+    for c in range(iu.shape[0]):
+        a, b = iu[c], ju[c]
+        row = out[c]
+        for f in range(n):
+            dx = pos[f, a, 0] - pos[f, b, 0]
+            dy = pos[f, a, 1] - pos[f, b, 1]
+            dz = pos[f, a, 2] - pos[f, b, 2]
+            row[f] = np.sqrt(dx * dx + dy * dy + dz * dz)

@@ -143,3 +143,21 @@ def test_bilinear_blocks_are_einsums_to_the_bit(B, I, J, p):
     assert np.array_equal(got, np.einsum("bixk,bkl,bjyl->bixjy", X, S, Y))
     want = (X.reshape(B, I * 3, p) @ S @ np.swapaxes(Y.reshape(B, J * 3, p), 1, 2)).reshape(B, I, 3, J, 3)
     assert np.allclose(got, want, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("n, k", [(400, 18), (1, 4), (37, 2)])
+def test_pair_distances_are_numpys_norms_to_the_bit_and_layout(n, k):
+    from exubio.trust.label_distances import _distances
+
+    rng = np.random.default_rng(n + k)
+    pos = rng.normal(scale=0.4, size=(n, k, 3))
+    pos[rng.random((n, k)) < 0.05] = np.nan
+    iu, ju = np.triu_indices(k, 1)
+    want = np.linalg.norm(pos[:, iu, :] - pos[:, ju, :], axis=2)
+    got = _distances(pos, iu, ju)
+    assert np.array_equal(got, want, equal_nan=True)
+    # the medians and SDs are taken over the same layout, so summed alike (a unit axis's stride does not matter)
+    assert [st for st, d in zip(got.strides, got.shape) if d > 1] == [st for st, d in zip(want.strides, want.shape) if d > 1]
+    a, b = iu[-1], ju[-1]
+    ok = np.isfinite(pos[:, [a, b]]).all(axis=(1, 2))
+    assert np.allclose(got[ok, -1], [np.sqrt(sum((x - y) ** 2 for x, y in zip(p, q))) for p, q in pos[ok][:, [a, b]]])
