@@ -76,25 +76,47 @@ def filtfilt_columns(b, a, zi, x, out):
 # Chain fits (exubio.trust.label_chains): rigid placement and Levenberg-Marquardt normal equations
 # --------------------------------------------------------------------------------------------
 @numba.njit(cache=True, nogil=True)
-def to_root_frame(rot, org, p, jac, rel, jrel):
-    """rel (b, k, 3) = R^T (p - org) and jrel (b, k, 3, c) = R^T jac of each problem b (rot (b, 3, 3),
-    org (b, 3), p (b, k, 3), jac (b, k, 3, c)): np.einsum("bji,bkj->bki", ...) and
-    np.einsum("bji,bkjc->bkic", ...), each sum over j taken in order 0, 1, 2."""
-    b, k, _, c = jac.shape
+def chain_in_root_frame(R, P, axes, pivots, p, affects, coords, root, rel, jrel):
+    """A chain's marker points and their Jacobian in its root segment's frame, per problem b: from
+    the forward kinematics (R (b, n_seg, 3, 3), P (b, n_seg, 3), axes and pivots (b, m, 3)) and
+    the points p (b, k, 3), rel (b, k, 3) = R_root^T (p - P_root) and jrel (b, k, 3, c) = R_root^T
+    dp/dq for the coordinates ``coords`` (c,). The numpy reference (label_chains._chain_in_root_frame_numpy):
+    Kinematics.point_jacobian (column j: w_j x r - w_j x c_j, times ``affects`` (k, m): 1.0 where
+    coordinate j moves point k, else 0.0), then np.einsum("bji,bkj->bki", ...) and
+    np.einsum("bji,bkjc->bkic", ...); the same operations in the same order."""
+    b, k, _ = p.shape
+    c = coords.shape[0]
+    wc = np.empty((c, 3))
+    jac = np.empty((3, c))
     d = np.empty(3)
     for n in range(b):
+        for cc in range(c):
+            j = coords[cc]
+            a0, a1, a2 = axes[n, j, 0], axes[n, j, 1], axes[n, j, 2]
+            b0, b1, b2 = pivots[n, j, 0], pivots[n, j, 1], pivots[n, j, 2]
+            wc[cc, 0] = a1 * b2 - a2 * b1
+            wc[cc, 1] = a2 * b0 - a0 * b2
+            wc[cc, 2] = a0 * b1 - a1 * b0
         for s in range(k):
-            for j in range(3):
-                d[j] = p[n, s, j] - org[n, j]
+            x, y, z = p[n, s, 0], p[n, s, 1], p[n, s, 2]
+            for cc in range(c):
+                j = coords[cc]
+                w0, w1, w2 = axes[n, j, 0], axes[n, j, 1], axes[n, j, 2]
+                f = affects[s, j]
+                jac[0, cc] = ((w1 * z - w2 * y) - wc[cc, 0]) * f
+                jac[1, cc] = ((w2 * x - w0 * z) - wc[cc, 1]) * f
+                jac[2, cc] = ((w0 * y - w1 * x) - wc[cc, 2]) * f
+            for i in range(3):
+                d[i] = p[n, s, i] - P[n, root, i]
             for i in range(3):
                 acc = 0.0
                 for j in range(3):
-                    acc += rot[n, j, i] * d[j]
+                    acc += R[n, root, j, i] * d[j]
                 rel[n, s, i] = acc
                 for cc in range(c):
                     acc = 0.0
                     for j in range(3):
-                        acc += rot[n, j, i] * jac[n, s, j, cc]
+                        acc += R[n, root, j, i] * jac[j, cc]
                     jrel[n, s, i, cc] = acc
 
 

@@ -115,6 +115,8 @@ class _ChainModel:
         self.root = kin.model.segment_index(chain.root)
         self.points = PointSet(points.segment_index[chain.markers], points.local_m[chain.markers])
         self.m = kin.n_coordinates
+        self.coordinates = np.asarray(chain.coordinates, dtype=np.int64)
+        self.affects = np.ascontiguousarray(kin.affects[self.points.segment_index], dtype=float)  # (k, m): 1.0 where q_j moves the point
 
     def local(self, qc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         from exubio.model import batch_kernels as kernels  # numba: imported where used
@@ -123,18 +125,29 @@ class _ChainModel:
         q[..., self.chain.coordinates] = qc
         fr = self.kin.frames(q)
         p = self.kin.points(q, self.points, frames=fr)
-        jac = self.kin.point_jacobian(q, self.points, frames=fr, positions=p)[..., self.chain.coordinates]
-        rot = np.ascontiguousarray(fr.R[..., self.root, :, :])
-        org = np.ascontiguousarray(fr.p[..., self.root, :])
         rel = np.empty(p.shape)
-        jrel = np.empty(jac.shape)
-        kernels.to_root_frame(rot, org, p, np.ascontiguousarray(jac), rel, jrel)  # = _to_root_frame_numpy, bit for bit
+        jrel = np.empty(p.shape + (len(self.chain.coordinates),))
+        kernels.chain_in_root_frame(fr.R, fr.p, fr.axes, fr.pivots, p, self.affects, self.coordinates, self.root,
+                                    rel, jrel)  # = _chain_in_root_frame_numpy, bit for bit
         return rel, jrel
 
+    def local_numpy(self, qc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``local`` in numpy: the compiled kernel's reference."""
+        q = np.zeros(qc.shape[:-1] + (self.m,))
+        q[..., self.chain.coordinates] = qc
+        fr = self.kin.frames(q)
+        p = self.kin.points(q, self.points, frames=fr)
+        return _chain_in_root_frame_numpy(self.kin, self.points, fr, p, self.chain.coordinates, self.root)
 
-def _to_root_frame_numpy(rot: np.ndarray, org: np.ndarray, p: np.ndarray, jac: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The marker points p (b, k, 3) and their Jacobian jac (b, k, 3, c) in the root's frame (rot,
-    org): the numpy reference of exubio.model.batch_kernels.to_root_frame."""
+
+def _chain_in_root_frame_numpy(kin: Kinematics, points: PointSet, fr, p: np.ndarray, coordinates: np.ndarray,
+                               root: int) -> tuple[np.ndarray, np.ndarray]:
+    """The points p (b, k, 3) and their Jacobian with respect to ``coordinates`` in the frame of
+    segment ``root`` at the forward kinematics ``fr``: the numpy reference of
+    exubio.model.batch_kernels.chain_in_root_frame."""
+    jac = kin.point_jacobian(None, points, frames=fr, positions=p)[..., coordinates]
+    rot = fr.R[..., root, :, :]
+    org = fr.p[..., root, :]
     return np.einsum("bji,bkj->bki", rot, p - org[:, None, :]), np.einsum("bji,bkjc->bkic", rot, jac)
 
 

@@ -41,26 +41,46 @@ def test_filtfilt_columns_passes_a_constant_and_a_line():
 
 
 @pytest.mark.parametrize("b, k, c", [(40, 4, 2), (40, 18, 10), (1, 1, 2), (120, 5, 4), (7, 6, 3)])
-def test_chain_kernels_are_the_numpy_reference_to_the_bit(b, k, c):
+def test_chain_normal_equations_are_the_numpy_reference_to_the_bit(b, k, c):
     """(A chain of one coordinate keeps the numpy terms: np.einsum then sums its column in another order.)"""
     from scipy.spatial.transform import Rotation
 
-    from exubio.trust.label_chains import _normal_equations_numpy, _to_root_frame_numpy
+    from exubio.trust.label_chains import _normal_equations_numpy
 
     rng = np.random.default_rng(b + k + c)
     rot = Rotation.random(b, random_state=rng.integers(1 << 31)).as_matrix()
-    org, p = rng.normal(size=(b, 3)), rng.normal(scale=0.3, size=(b, k, 3))
-    jac = rng.normal(scale=0.2, size=(b, k, 3, c))
-    rel, jrel = np.empty((b, k, 3)), np.empty((b, k, 3, c))
-    K.to_root_frame(rot, org, p, jac, rel, jrel)
-    want_rel, want_jrel = _to_root_frame_numpy(rot, org, p, jac)
-    assert np.array_equal(rel, want_rel) and np.array_equal(jrel, want_jrel)
+    rel, jrel = rng.normal(scale=0.3, size=(b, k, 3)), rng.normal(scale=0.2, size=(b, k, 3, c))
     w = (rng.random((b, k)) > 0.2).astype(float)  # missing markers weigh 0
     e = rng.normal(scale=0.01, size=(b, k, 3)) * w[..., None]
     hess, grad = np.empty((b, 6 + c, 6 + c)), np.empty((b, 6 + c))
     K.chain_normal_equations(rot, rel, jrel, w, e, hess, grad)
     want_hess, want_grad = _normal_equations_numpy(rot, rel, jrel, w, e)
     assert np.array_equal(hess, want_hess) and np.array_equal(grad, want_grad)
+
+
+@pytest.mark.parametrize("batch", [40, 1])
+def test_chain_in_root_frame_is_the_numpy_reference_to_the_bit(batch):
+    from exubio.model.kinematics import Kinematics
+    from exubio.run.inputs import load_session
+    from exubio.trust.label_chains import _ChainModel
+    from exubio.trust.label_expectations import expectations_of, marker_points
+
+    exp = expectations_of(load_session().generic_binding)  # the shipped model and protocol's chains
+    kin = Kinematics(exp.model)
+    points = marker_points(kin, exp.protocol)
+    rng = np.random.default_rng(batch)
+    for chain in exp.chains:
+        cm = _ChainModel(kin, chain, points)
+        qc = rng.uniform(-1.0, 1.0, (batch, len(chain.coordinates)))
+        got, want = cm.local(qc), cm.local_numpy(qc)
+        assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1]), chain.root
+        # a truth neither computes: the Jacobian is the derivative of the points in the root frame
+        h = 1e-6
+        for c in range(len(chain.coordinates)):
+            step = np.zeros(len(chain.coordinates))
+            step[c] = h
+            fd = (cm.local(qc + step)[0] - cm.local(qc - step)[0]) / (2 * h)
+            assert np.abs(fd - got[1][..., c]).max() < 1e-7, (chain.root, c)
 
 
 def test_chain_normal_equations_are_those_of_finite_differences():
