@@ -176,33 +176,35 @@ def partner_rms(P, ref, rows, cols, n_cols, own, out):
     whose (frames, partners) array numpy lays out partner by partner and so sums in partner order;
     the same operations in the same order here."""
     n, k, _ = P.shape
-    D = np.empty((k, k))
-    v = np.empty(cols.shape[1])
-    for f in range(n):
-        for a in range(k):
-            for b in range(a + 1, k):
+    D = np.empty((k, k, n))  # frames last: the loops below run over the frames, side by side
+    for a in range(k):
+        for b in range(a + 1, k):
+            row = D[a, b]
+            for f in range(n):
                 dx = P[f, a, 0] - P[f, b, 0]
                 dy = P[f, a, 1] - P[f, b, 1]
                 dz = P[f, a, 2] - P[f, b, 2]
-                d = np.sqrt(dx * dx + dy * dy + dz * dz)
-                D[a, b] = d
-                D[b, a] = d
-        for t in range(rows.shape[0]):
-            r, o, p = rows[t], own[t], n_cols[t]
-            cnt = 0
-            for j in range(p):
-                c = cols[t, j]
-                e = D[r, c] - ref[o, c]
+                row[f] = np.sqrt(dx * dx + dy * dy + dz * dz)
+            D[b, a, :] = row
+    tot = np.empty(n)
+    cnt = np.empty(n, dtype=np.int64)
+    for t in range(rows.shape[0]):
+        r, o = rows[t], own[t]
+        for f in range(n):
+            tot[f] = 0.0
+            cnt[f] = 0
+        for j in range(n_cols[t]):
+            c = cols[t, j]
+            ref_c = ref[o, c]
+            row = D[r, c]
+            for f in range(n):
+                e = row[f] - ref_c
                 e = e * e
-                if np.isnan(e):
-                    v[j] = 0.0
-                else:
-                    v[j] = e
-                    cnt += 1
-            tot = 0.0
-            for j in range(p):
-                tot += v[j]
-            out[f, t] = np.sqrt(tot / cnt) if cnt > 0 else np.nan
+                seen = not np.isnan(e)
+                tot[f] += e if seen else 0.0
+                cnt[f] += 1 if seen else 0
+        for f in range(n):
+            out[f, t] = np.sqrt(tot[f] / cnt[f]) if cnt[f] > 0 else np.nan
 
 
 # --------------------------------------------------------------------------------------------
