@@ -100,15 +100,17 @@ def gimbal_mask(angles: np.ndarray, /) -> np.ndarray:
 
 
 def sensitivity(kin: Kinematics, points: PointSet, qf: np.ndarray, present: np.ndarray, weights: np.ndarray,
-                free: np.ndarray, *, with_jacobian: bool = False):
+                free: np.ndarray, *, with_jacobian: bool = False, design: tuple | None = None,
+                minv: np.ndarray | None = None):
     """K (b, m, 3k): coordinate change per marker displacement of the weighted, constrained
     least-squares step at poses qf (b, m); zero rows for coordinates not in ``free``. With
     ``with_jacobian``: (K, J) with J (b, 3k, m) the markers' Jacobian (zero columns for the others),
-    so J K is the step's hat matrix."""
+    so J K is the step's hat matrix. ``design`` (constrained_design of the same arguments) and
+    ``minv`` (the pseudo-inverse of its M): where the caller has them (the same numbers)."""
     b, m = qf.shape
     k = present.shape[1]
-    J, N, A, w3, M = constrained_design(kin, points, qf, present, weights, free)
-    Minv = np.linalg.pinv(M, rcond=1e-12, hermitian=True)
+    J, N, A, w3, M = constrained_design(kin, points, qf, present, weights, free) if design is None else design
+    Minv = np.linalg.pinv(M, rcond=1e-12, hermitian=True) if minv is None else minv
     Kf = N @ Minv @ (np.swapaxes(A, 1, 2) * w3[:, None, :])
     K = np.zeros((b, m, 3 * k))
     K[:, free, :] = Kf
