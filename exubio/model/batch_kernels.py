@@ -126,7 +126,8 @@ def chain_normal_equations(rot, rel, jrel, w, e, hess, grad):
     the weighted Jacobian jw (k, 3, 6 + c) of the residuals R rel + t - target with respect to a
     rotation increment (-R [rel]x), the translation (I) and the chain's coordinates (R jrel), each
     row times w (b, k); hess (b, p, p) = sum over markers and axes of jw^T jw, grad (b, p) = jw^T e,
-    accumulated marker by marker, axis by axis, as np.einsum does."""
+    accumulated marker by marker, axis by axis, as np.einsum does (which forms hess[p, q] and
+    hess[q, p] from the same products: the upper triangle is computed and mirrored)."""
     b, k, _, c = jrel.shape
     npar = 6 + c
     sk = np.empty((3, 3))
@@ -160,8 +161,11 @@ def chain_normal_equations(rot, rel, jrel, w, e, hess, grad):
                 for pp in range(npar):
                     a = jw[s, i, pp]
                     grad[n, pp] += a * e[n, s, i]
-                    for qq in range(npar):
+                    for qq in range(pp, npar):  # the upper triangle: a * b is b * a, to the bit
                         hess[n, pp, qq] += a * jw[s, i, qq]
+        for pp in range(npar):
+            for qq in range(pp):
+                hess[n, pp, qq] = hess[n, qq, pp]
 
 
 # --------------------------------------------------------------------------------------------

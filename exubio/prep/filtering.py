@@ -374,10 +374,12 @@ def _residual_rms(s: np.ndarray, used: np.ndarray, rate_hz: float, cutoffs: np.n
     count = used.sum(axis=0) * s.shape[2]
     out = np.full((cutoffs.size, s.shape[1]), np.nan)
     runs = _runs(s)
+    unused = None if used.all() else ~used  # (a trial without gaps or short runs: nothing to zero)
     for i, c in enumerate(cutoffs):
         diff = _lowpass_series(s, rate_hz=rate_hz, cutoff_hz=c, order=order, runs=runs)[0]
         diff -= s  # in place: one whole-trial array per cut-off, not two
-        diff[~used] = 0.0
+        if unused is not None:
+            diff[unused] = 0.0
         sq = np.einsum("nmd,nmd->m", diff, diff)
         with np.errstate(invalid="ignore", divide="ignore"):
             out[i] = np.sqrt(sq / count)
