@@ -289,15 +289,19 @@ class AngleDeterminacy:
                 "frames_near_gimbal_lock_fraction": gimbal, "frames_uncertainty_above_bound_fraction": above}
 
 
-def _angle_jacobian(table, q: np.ndarray) -> np.ndarray:
-    """d angle / d q (b, a, m) by central differences (angle differences wrapped to (-pi, pi])."""
+def _angle_jacobian(table, q: np.ndarray, distal: dict[int, int] | None = None) -> np.ndarray:
+    """d angle / d q (b, a, m) by central differences (angle differences wrapped to (-pi, pi]); ``distal``
+    (exubio.model.angles.distal_only_coordinates): coordinate -> its one column, set without the frames."""
     b, m = q.shape
-    steps = np.eye(m) * FD_STEP_RAD
-    qp = (q[:, None, :] + steps[None]).reshape(b * m, m)
-    qm = (q[:, None, :] - steps[None]).reshape(b * m, m)
-    d = table(qp) - table(qm)
-    d = np.angle(np.exp(1j * d)) / (2.0 * FD_STEP_RAD)  # (b*m, a)
-    return np.swapaxes(d.reshape(b, m, -1), 1, 2)
+    qp, qm = q[:, None, :] + np.eye(m) * FD_STEP_RAD, q[:, None, :] - np.eye(m) * FD_STEP_RAD
+    rows = [j for j in range(m) if j not in (distal or {})]
+    part = table(qp[:, rows].reshape(-1, m)) - table(qm[:, rows].reshape(-1, m))
+    d = np.zeros((b, m, part.shape[-1]))  # the other rows: 0 but in the coordinate's own column, as the table gives
+    d[:, rows] = part.reshape(b, len(rows), -1)
+    for j, col in (distal or {}).items():
+        d[:, j, col] = qp[:, j, j] - qm[:, j, j]
+    d = np.angle(np.exp(1j * d)) / (2.0 * FD_STEP_RAD)  # (b, m, a)
+    return np.swapaxes(d, 1, 2)
 
 
 def _covariance(N, M, S, m: int, free: np.ndarray, prior: float | None, *, minv: np.ndarray | None = None):
@@ -436,12 +440,12 @@ def _angle_block(kin: Kinematics, points: PointSet, qf: np.ndarray, pres: np.nda
     uncertainties (rad; inf where unseen, where not ``bounded``), held shares and whether they depend
     on a locked coordinate, each (b, a). ``trunk``: the amplitude model whose unseen trunk motion is added to
     every angle's variance (a run that assumes the thorax still)."""
-    from exubio.model.angles import segment_anatomical_rotations
+    from exubio.model.angles import distal_only_coordinates, segment_anatomical_rotations
     from exubio.trust import angle_uncertainty as AU
 
     model = kin.model
     m = qf.shape[1]
-    D = _angle_jacobian(table, qf)  # (b, a, m)
+    D = _angle_jacobian(table, qf, distal_only_coordinates(model, kin))  # (b, a, m)
     b, a = D.shape[:2]
     design = constrained_design(kin, points, qf, pres, weights, free_actual)  # shared with the sensitivity below
     N, M, S = _marker_information(kin, points, qf, pres, weights, free_actual, design=design)
