@@ -180,6 +180,7 @@ def _partner_rms_numpy(P: np.ndarray, ref: np.ndarray, rows: np.ndarray, cols: n
             out[:, t] = np.sqrt(np.nanmean((D[:, r, part] - ref[o, part]) ** 2, axis=1))
     return out
 
+
 def repair_partial_swaps(traj: Trajectories, protocol: Protocol, swaps: Sequence[PartialSwap], /) -> Trajectories:
     """The trial with each partial swap's two markers exchanged back in its frames (a copy)."""
     import dataclasses
