@@ -411,6 +411,19 @@ def angles_of_frames(Rg: Mapping[str, np.ndarray], /) -> dict[str, np.ndarray]:
     return out
 
 
+def distal_only_coordinates(model: Model, kinematics: Kinematics, /) -> dict[int, int]:
+    """The coordinates that move none of the ISB frames (ISB_FRAME_SEGMENTS), each with its column
+    of :func:`anatomical_table` (where it is one of the distal angles, _DISTAL): a change of one
+    changes that column alone, and every other column not even by a rounding (the frames are
+    computed from the same numbers), which lets a finite difference skip the frames for it."""
+    names = model.coordinate_names
+    frames = [model.segment_index(s) for s in ISB_FRAME_SEGMENTS]
+    moves_a_frame = kinematics.affects[frames].any(axis=0)
+    first = len(ANATOMICAL_COLUMNS) - len(_DISTAL)
+    columns = {names.index(c): first + i for i, c in enumerate(_DISTAL.values())}
+    return {j: columns[j] for j in range(model.n_coordinates) if not moves_a_frame[j] and j in columns}
+
+
 def anatomical_table(model: Model, q: np.ndarray, /, *, kinematics: Kinematics | None = None,
                      unwrap: bool = True) -> tuple[tuple[str, ...], np.ndarray]:
     """The anatomical angles (ANATOMICAL_ANGLES) of q (n, m) or (m,): (column names, angles

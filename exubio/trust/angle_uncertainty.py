@@ -100,15 +100,17 @@ def gimbal_mask(angles: np.ndarray, /) -> np.ndarray:
 
 
 def sensitivity(kin: Kinematics, points: PointSet, qf: np.ndarray, present: np.ndarray, weights: np.ndarray,
-                free: np.ndarray, *, with_jacobian: bool = False):
+                free: np.ndarray, *, with_jacobian: bool = False, design: tuple | None = None,
+                minv: np.ndarray | None = None):
     """K (b, m, 3k): coordinate change per marker displacement of the weighted, constrained
     least-squares step at poses qf (b, m); zero rows for coordinates not in ``free``. With
     ``with_jacobian``: (K, J) with J (b, 3k, m) the markers' Jacobian (zero columns for the others),
-    so J K is the step's hat matrix."""
+    so J K is the step's hat matrix. ``design`` (constrained_design of the same arguments) and
+    ``minv`` (the pseudo-inverse of its M): where the caller has them (the same numbers)."""
     b, m = qf.shape
     k = present.shape[1]
-    J, N, A, w3, M = constrained_design(kin, points, qf, present, weights, free)
-    Minv = np.linalg.pinv(M, rcond=1e-12, hermitian=True)
+    J, N, A, w3, M = constrained_design(kin, points, qf, present, weights, free) if design is None else design
+    Minv = np.linalg.pinv(M, rcond=1e-12, hermitian=True) if minv is None else minv
     Kf = N @ Minv @ (np.swapaxes(A, 1, 2) * w3[:, None, :])
     K = np.zeros((b, m, 3 * k))
     K[:, free, :] = Kf
@@ -185,7 +187,7 @@ def marker_covariance(kin: Kinematics, points: PointSet, qf: np.ndarray, present
             S6 = np.zeros((b, 6, 6))
             S6[:, :3, :3] = (v / rho2)[:, None, None] * np.eye(3)
             S6[:, 3:, 3:] = v[:, None, None] * np.eye(3)
-        C = np.einsum("bixk,bkl,bjyl->bixjy", B, S6, B)  # (b, j, 3, j, 3)
+        C = _bilinear_blocks(B, S6, B)  # (b, j, 3, j, 3)
         if not misfit_only:
             S_nr = axes @ np.diag(nonrigid ** 2)[None] @ np.swapaxes(axes, -1, -2) * (theta ** 2)[:, None, None]
             for a_i in range(len(sel)):
@@ -203,10 +205,34 @@ def marker_covariance(kin: Kinematics, points: PointSet, qf: np.ndarray, present
             ra, Ba, Ta, tha = seen[a]
             rc, Bc, Tc, _ = seen[c]
             S = Ta @ X[None] @ np.swapaxes(Tc, -1, -2) * (tha ** 2)[:, None, None]
-            Cx = np.einsum("bixk,bkl,bjyl->bixjy", Ba, S, Bc).reshape(b, ra.size, rc.size)
+            Cx = _bilinear_blocks(Ba, S, Bc).reshape(b, ra.size, rc.size)
             sigma[:, ra[:, None], rc[None, :]] += Cx
             sigma[:, rc[:, None], ra[None, :]] += np.swapaxes(Cx, 1, 2)
     return sigma
+
+
+def _bilinear_blocks(X: np.ndarray, S: np.ndarray, Y: np.ndarray, /) -> np.ndarray:
+    """np.einsum("bixk,bkl,bjyl->bixjy", X, S, Y) (the covariance blocks X S Y^T of two marker
+    clusters), by the compiled kernel exubio.model.batch_kernels.bilinear_blocks: the same products
+    summed in the same order (bit for bit), about 10 times faster."""
+    from exubio.model import batch_kernels as kernels  # numba: imported where used
+
+    X, S, Y = (np.ascontiguousarray(a, dtype=float) for a in (X, S, Y))
+    out = np.empty(X.shape[:3] + Y.shape[1:3])
+    kernels.bilinear_blocks(X, S, Y, out)
+    return out
+
+
+def quadratic_forms(D: np.ndarray, S: np.ndarray, /) -> np.ndarray:
+    """(B, A): the variances diag(D S D^T) of D (B, A, n) under the covariances S (B, n, n):
+    np.einsum("bai,bij,baj->ba", D, S, D), by the compiled kernel
+    exubio.model.batch_kernels.quadratic_forms (bit for bit, about 3 times faster)."""
+    from exubio.model import batch_kernels as kernels  # numba: imported where used
+
+    D, S = np.ascontiguousarray(D, dtype=float), np.ascontiguousarray(S, dtype=float)
+    out = np.empty(D.shape[:2])
+    kernels.quadratic_forms(D, S, out)
+    return out
 
 
 def expected_residual_ms(J: np.ndarray, K: np.ndarray, sigma: np.ndarray, /) -> np.ndarray:

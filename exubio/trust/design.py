@@ -6,7 +6,7 @@ import numpy as np
 
 from exubio.model.kinematics import Kinematics, PointSet
 
-__all__ = ["constrained_design"]
+__all__ = ["constrained_design", "information_pinv", "marker_information"]
 
 
 def constrained_design(kin: Kinematics, points: PointSet, qf: np.ndarray, present: np.ndarray, weights: np.ndarray,
@@ -25,3 +25,19 @@ def constrained_design(kin: Kinematics, points: PointSet, qf: np.ndarray, presen
     A = J @ N
     M = np.swapaxes(A, 1, 2) @ (A * w3[..., None])
     return J, N, A, w3, M
+
+
+def marker_information(kin: Kinematics, points: PointSet, qf: np.ndarray, present: np.ndarray, weights: np.ndarray,
+                       free: np.ndarray, *, design: tuple | None = None):
+    """For frames qf (b, m): N (b, f, f-2) the null space of G over the free coordinates, M and S
+    (b, f-2, f-2) of exubio.trust.observability's docstring; ``design``: constrained_design of the
+    same arguments, where the caller has it."""
+    _, N, A, w3, M = constrained_design(kin, points, qf, present, weights, free) if design is None else design
+    S = np.swapaxes(A, 1, 2) @ (A * (w3**2)[..., None])
+    return N, M, S
+
+
+def information_pinv(M: np.ndarray, /) -> np.ndarray:
+    """The pseudo-inverse of the information matrices M (b, r, r), which the covariance
+    (exubio.trust.observability) and the sensitivity (exubio.trust.angle_uncertainty) both use."""
+    return np.linalg.pinv(M, rcond=1e-12, hermitian=True)

@@ -115,18 +115,54 @@ class _ChainModel:
         self.root = kin.model.segment_index(chain.root)
         self.points = PointSet(points.segment_index[chain.markers], points.local_m[chain.markers])
         self.m = kin.n_coordinates
+        self.coordinates = np.asarray(chain.coordinates, dtype=np.int64)
+        self.affects = np.ascontiguousarray(kin.affects[self.points.segment_index], dtype=float)  # (k, m): 1.0 where q_j moves the point
 
     def local(self, qc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        from exubio.model import batch_kernels as kernels  # numba: imported where used
+
         q = np.zeros(qc.shape[:-1] + (self.m,))
         q[..., self.chain.coordinates] = qc
         fr = self.kin.frames(q)
         p = self.kin.points(q, self.points, frames=fr)
-        jac = self.kin.point_jacobian(q, self.points, frames=fr, positions=p)[..., self.chain.coordinates]
-        rot = fr.R[..., self.root, :, :]
-        org = fr.p[..., self.root, :]
-        rel = np.einsum("bji,bkj->bki", rot, p - org[:, None, :])
-        jrel = np.einsum("bji,bkjc->bkic", rot, jac)
+        rel = np.empty(p.shape)
+        jrel = np.empty(p.shape + (len(self.chain.coordinates),))
+        kernels.chain_in_root_frame(fr.R, fr.p, fr.axes, fr.pivots, p, self.affects, self.coordinates, self.root,
+                                    rel, jrel)  # = _chain_in_root_frame_numpy, bit for bit
         return rel, jrel
+
+    def local_numpy(self, qc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``local`` in numpy: the compiled kernel's reference."""
+        q = np.zeros(qc.shape[:-1] + (self.m,))
+        q[..., self.chain.coordinates] = qc
+        fr = self.kin.frames(q)
+        p = self.kin.points(q, self.points, frames=fr)
+        return _chain_in_root_frame_numpy(self.kin, self.points, fr, p, self.chain.coordinates, self.root)
+
+
+def _chain_in_root_frame_numpy(kin: Kinematics, points: PointSet, fr, p: np.ndarray, coordinates: np.ndarray,
+                               root: int) -> tuple[np.ndarray, np.ndarray]:
+    """The points p (b, k, 3) and their Jacobian with respect to ``coordinates`` in the frame of
+    segment ``root`` at the forward kinematics ``fr``: the numpy reference of
+    exubio.model.batch_kernels.chain_in_root_frame."""
+    jac = kin.point_jacobian(None, points, frames=fr, positions=p)[..., coordinates]
+    rot = fr.R[..., root, :, :]
+    org = fr.p[..., root, :]
+    return np.einsum("bji,bkj->bki", rot, p - org[:, None, :]), np.einsum("bji,bkjc->bkic", rot, jac)
+
+
+def _normal_equations_numpy(rot: np.ndarray, rel: np.ndarray, jrel: np.ndarray, w: np.ndarray,
+                            e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The Gauss-Newton terms (hess (b, p, p), grad (b, p)) of the chain fit at the placement rot
+    and the chain's points rel (b, k, 3) and Jacobian jrel (b, k, 3, c) in the root frame, marker
+    weights w (b, k), residuals e (b, k, 3): the numpy reference of
+    exubio.model.batch_kernels.chain_normal_equations."""
+    jw = np.empty(rel.shape[:2] + (3, 6 + jrel.shape[-1]))
+    jw[..., :3] = -np.einsum("bij,bkjl->bkil", rot, _skew(rel))
+    jw[..., 3:6] = np.eye(3)
+    jw[..., 6:] = np.einsum("bij,bkjc->bkic", rot, jrel)
+    jw *= w[..., None, None]
+    return np.einsum("bkip,bkiq->bpq", jw, jw), np.einsum("bkip,bki->bp", jw, e)
 
 
 def _fit_chain(cm: _ChainModel, targets: np.ndarray, lo: np.ndarray, hi: np.ndarray,
@@ -135,6 +171,8 @@ def _fit_chain(cm: _ChainModel, targets: np.ndarray, lo: np.ndarray, hi: np.ndar
     (b, s, nc) per target); the root's placement is solved from each start (Kabsch). Returns the
     per-marker residual (b, k) (m) and the coordinates (b, nc) of the best start. Missing target
     markers (NaN) are ignored."""
+    from exubio.model import batch_kernels as kernels  # numba: imported where used
+
     b, k, _ = targets.shape
     starts = np.broadcast_to(starts, (b,) + starts.shape[-2:])
     s, nc = starts.shape[1:]
@@ -153,14 +191,13 @@ def _fit_chain(cm: _ChainModel, targets: np.ndarray, lo: np.ndarray, hi: np.ndar
     mu = np.full(len(qc), 1e-3)
     n_par = 6 + nc
     eye = np.eye(n_par)
+    hess = np.empty((len(qc), n_par, n_par))
+    grad = np.empty((len(qc), n_par))
     for _ in range(CHAIN_ITERATIONS):
-        jw = np.empty(rel.shape[:2] + (3, n_par))
-        jw[..., :3] = -np.einsum("bij,bkjl->bkil", rot, _skew(rel))
-        jw[..., 3:6] = np.eye(3)
-        jw[..., 6:] = np.einsum("bij,bkjc->bkic", rot, jrel)
-        jw *= w[..., None, None]
-        hess = np.einsum("bkip,bkiq->bpq", jw, jw)
-        grad = np.einsum("bkip,bki->bp", jw, e)
+        if nc >= 2:  # the compiled terms, bit for bit those of numpy, which sums one coordinate's column otherwise
+            kernels.chain_normal_equations(rot, rel, jrel, w, e, hess, grad)
+        else:
+            hess, grad = _normal_equations_numpy(rot, rel, jrel, w, e)
         diag = np.einsum("bpp->bp", hess)
         step = -np.linalg.solve(hess + mu[:, None, None] * (eye * (diag[:, None, :] + 1e-9)), grad[..., None])[..., 0]
         big = np.abs(step).max(axis=1)

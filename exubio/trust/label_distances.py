@@ -80,7 +80,7 @@ def pair_distances(positions_m: np.ndarray, names: Sequence[str], /, *, source: 
     per = max(PAIR_BLOCK_VALUES // max(3 * pos.shape[0], 1), 1)  # pairs at a time: bounded memory on long trials
     for a in range(0, len(iu_all), per):
         iu, ju = iu_all[a:a + per], ju_all[a:a + per]
-        d = np.linalg.norm(pos[:, iu, :] - pos[:, ju, :], axis=2)  # (n, pairs of the block)
+        d = _distances(pos, iu, ju)  # (n, pairs of the block), laid out pair by pair
         c = np.isfinite(d).sum(axis=0)
         cnt[iu, ju] = cnt[ju, iu] = c
         seen = c > 0
@@ -99,6 +99,19 @@ def pair_distances(positions_m: np.ndarray, names: Sequence[str], /, *, source: 
     np.fill_diagonal(sd, 0.0)
     np.fill_diagonal(step, 0.0)
     return PairDistances(names=names, median_m=med, spread_m=sd, n_frames=cnt, source=source, step_m=step)
+
+
+def _distances(pos: np.ndarray, iu: np.ndarray, ju: np.ndarray, /) -> np.ndarray:
+    """(n, pairs) distances |pos[:, iu] - pos[:, ju]| (NaN where either marker is missing), each
+    pair's series contiguous (Fortran order: the layout np.linalg.norm(pos[:, iu] - pos[:, ju],
+    axis=2) gives, which the medians and SDs above are taken over): the compiled kernel
+    exubio.model.batch_kernels.pair_distance_series, bit for bit that numpy expression, without its
+    whole-trial (n, pairs, 3) differences."""
+    from exubio.model import batch_kernels as kernels  # numba: imported where used
+
+    out = np.empty((len(iu), pos.shape[0]))
+    kernels.pair_distance_series(np.ascontiguousarray(pos, dtype=float), iu.astype(np.int64), ju.astype(np.int64), out)
+    return out.T
 
 
 def _largest_step(d: np.ndarray) -> np.ndarray:

@@ -111,22 +111,18 @@ def find_partial_swaps(traj: Trajectories, protocol: Protocol, model: Model, /, 
         return ()
     swapped = np.zeros((n, len(pairs)), dtype=bool)
     gains = np.zeros((n, len(pairs)), dtype=np.float32)
+    rows, part_cols, n_cols, own = _error_terms(pairs)
     for a in range(0, n, BLOCK_FRAMES):
-        P = traj.positions_m[a:a + BLOCK_FRAMES][:, cols]
-        with np.errstate(invalid="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # frames where a marker is missing: NaN, no swap
-            D = np.linalg.norm(P[:, :, None] - P[:, None], axis=-1)
-            for c, (i, j, pi, pj) in enumerate(pairs):
-                e0i = np.sqrt(np.nanmean((D[:, i, pi] - ref[i, pi]) ** 2, axis=1))
-                e0j = np.sqrt(np.nanmean((D[:, j, pj] - ref[j, pj]) ** 2, axis=1))
-                e1i = np.sqrt(np.nanmean((D[:, j, pi] - ref[i, pi]) ** 2, axis=1))
-                e1j = np.sqrt(np.nanmean((D[:, i, pj] - ref[j, pj]) ** 2, axis=1))
-                g = (e0i + e0j - e1i - e1j) * 1000.0
-                # an exchange puts BOTH labels back among their partners: each side must gain (one side
-                # alone gaining is a marker far from partners whose distances move with the posture)
-                both = (e0i > e1i) & (e0j > e1j)
-                gains[a:a + BLOCK_FRAMES, c] = np.nan_to_num(g, nan=0.0)
-                swapped[a:a + BLOCK_FRAMES, c] = (np.nan_to_num(g, nan=-np.inf) > gain_mm) & both
+        P = np.ascontiguousarray(traj.positions_m[a:a + BLOCK_FRAMES][:, cols])
+        with np.errstate(invalid="ignore"):
+            e = _partner_rms(P, ref, rows, part_cols, n_cols, own).reshape(P.shape[0], len(pairs), 4)
+            e0i, e0j, e1i, e1j = e[..., 0], e[..., 1], e[..., 2], e[..., 3]
+            g = (e0i + e0j - e1i - e1j) * 1000.0
+            # an exchange puts BOTH labels back among their partners: each side must gain (one side
+            # alone gaining is a marker far from partners whose distances move with the posture)
+            both = (e0i > e1i) & (e0j > e1j)
+            gains[a:a + BLOCK_FRAMES] = np.nan_to_num(g, nan=0.0)
+            swapped[a:a + BLOCK_FRAMES] = (np.nan_to_num(g, nan=-np.inf) > gain_mm) & both
     found = []
     for c, (i, j, _, _) in enumerate(pairs):
         runs = [r for r in _runs(swapped[:, c]) if r[1] - r[0] >= MIN_RUN_FRAMES]
@@ -142,6 +138,47 @@ def find_partial_swaps(traj: Trajectories, protocol: Protocol, model: Model, /, 
         out.append(s)
         taken |= {s.a, s.b}
     return tuple(out)
+
+
+def _error_terms(pairs: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The four RMS errors of every pair (i, j, partners of i, partners of j), in this order: e0i (i to
+    its partners, as labelled), e0j, e1i (j to i's partners: exchanged), e1j; as terms (4 per pair):
+    the marker measured (T,), its partners (T, most partners; -1 after a term's own), their number
+    (T,), the marker whose reference distances they are compared with (T,)."""
+    terms = [(row, np.flatnonzero(part), ref_row) for i, j, pi, pj in pairs
+             for row, part, ref_row in ((i, pi, i), (j, pj, j), (j, pi, i), (i, pj, j))]
+    n_cols = np.array([len(c) for _, c, _ in terms])
+    cols = np.full((len(terms), max(int(n_cols.max()), 1)), -1)
+    for t, (_, c, _) in enumerate(terms):
+        cols[t, :len(c)] = c
+    return np.array([r for r, _, _ in terms]), cols, n_cols, np.array([o for _, _, o in terms])
+
+
+def _partner_rms(P: np.ndarray, ref: np.ndarray, rows: np.ndarray, cols: np.ndarray, n_cols: np.ndarray,
+                 own: np.ndarray) -> np.ndarray:
+    """(frames, T): per frame of P (frames, k, 3) and term, the RMS over the term's partners of its
+    marker's distance to them minus the reference distances ``ref`` (k, k) of marker ``own``, missing
+    values left out: the compiled kernel exubio.model.batch_kernels.partner_rms (bit for bit
+    :func:`_partner_rms_numpy`, about 10 times faster)."""
+    from exubio.model import batch_kernels as kernels  # numba: imported where used
+
+    out = np.empty((P.shape[0], len(rows)))
+    kernels.partner_rms(P, np.ascontiguousarray(ref, dtype=float), rows, cols, n_cols, own, out)
+    return out
+
+
+def _partner_rms_numpy(P: np.ndarray, ref: np.ndarray, rows: np.ndarray, cols: np.ndarray, n_cols: np.ndarray,
+                       own: np.ndarray) -> np.ndarray:
+    """The numpy reference of :func:`_partner_rms`: every distance of the frames, then each term's
+    RMS error over its partners (np.nanmean), term by term."""
+    out = np.empty((P.shape[0], len(rows)))
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # frames where a marker is missing: NaN
+        D = np.linalg.norm(P[:, :, None] - P[:, None], axis=-1)
+        for t, (r, o, p) in enumerate(zip(rows, own, n_cols)):
+            part = cols[t, :p]
+            out[:, t] = np.sqrt(np.nanmean((D[:, r, part] - ref[o, part]) ** 2, axis=1))
+    return out
 
 
 def repair_partial_swaps(traj: Trajectories, protocol: Protocol, swaps: Sequence[PartialSwap], /) -> Trajectories:

@@ -26,7 +26,7 @@ import numpy as np
 
 from exubio.io.heap import release_freed_heap
 from exubio.model.kinematics import Kinematics, PointSet
-from exubio.trust.design import constrained_design
+from exubio.trust.design import constrained_design, information_pinv as _pinv, marker_information as _marker_information
 from exubio.trust.gap_frames import computed_frames, nearest_sample
 
 UNDETERMINED_DEG_PER_MM = 2.0
@@ -289,30 +289,26 @@ class AngleDeterminacy:
                 "frames_near_gimbal_lock_fraction": gimbal, "frames_uncertainty_above_bound_fraction": above}
 
 
-def _angle_jacobian(table, q: np.ndarray) -> np.ndarray:
-    """d angle / d q (b, a, m) by central differences (angle differences wrapped to (-pi, pi])."""
+def _angle_jacobian(table, q: np.ndarray, distal: dict[int, int] | None = None) -> np.ndarray:
+    """d angle / d q (b, a, m) by central differences (angle differences wrapped to (-pi, pi]); ``distal``
+    (exubio.model.angles.distal_only_coordinates): coordinate -> its one column, set without the frames."""
     b, m = q.shape
-    steps = np.eye(m) * FD_STEP_RAD
-    qp = (q[:, None, :] + steps[None]).reshape(b * m, m)
-    qm = (q[:, None, :] - steps[None]).reshape(b * m, m)
-    d = table(qp) - table(qm)
-    d = np.angle(np.exp(1j * d)) / (2.0 * FD_STEP_RAD)  # (b*m, a)
-    return np.swapaxes(d.reshape(b, m, -1), 1, 2)
+    qp, qm = q[:, None, :] + np.eye(m) * FD_STEP_RAD, q[:, None, :] - np.eye(m) * FD_STEP_RAD
+    rows = [j for j in range(m) if j not in (distal or {})]
+    part = table(qp[:, rows].reshape(-1, m)) - table(qm[:, rows].reshape(-1, m))
+    d = np.zeros((b, m, part.shape[-1]))  # the other rows: 0 but in the coordinate's own column, as the table gives
+    d[:, rows] = part.reshape(b, len(rows), -1)
+    for j, col in (distal or {}).items():
+        d[:, j, col] = qp[:, j, j] - qm[:, j, j]
+    d = np.angle(np.exp(1j * d)) / (2.0 * FD_STEP_RAD)  # (b, m, a)
+    return np.swapaxes(d, 1, 2)
 
 
-def _marker_information(kin: Kinematics, points: PointSet, qf: np.ndarray, present: np.ndarray, weights: np.ndarray,
-                        free: np.ndarray):
-    """For frames qf (b, m): N (b, f, f-2) the null space of G over the free coordinates, M and S
-    of the module docstring (b, f-2, f-2)."""
-    _, N, A, w3, M = constrained_design(kin, points, qf, present, weights, free)
-    S = np.swapaxes(A, 1, 2) @ (A * (w3**2)[..., None])
-    return N, M, S
-
-
-def _covariance(N, M, S, m: int, free: np.ndarray, prior: float | None):
+def _covariance(N, M, S, m: int, free: np.ndarray, prior: float | None, *, minv: np.ndarray | None = None):
     """Coordinate covariance (b, m, m) per m^2 of marker noise (zero rows for coordinates not in
     ``free``), and the blind directions (b, m, r) (zero columns where a direction is seen); with
-    ``prior`` (relative), a Tikhonov term instead of the pseudo-inverse, and no blind directions."""
+    ``prior`` (relative), a Tikhonov term instead of the pseudo-inverse, and no blind directions.
+    ``minv``: the pseudo-inverse of M (design.information_pinv), where the caller has it."""
     b = N.shape[0]
     if prior is not None:  # information form (the posterior of a weak Gaussian prior): a direction no
         # marker sees gets the prior's large variance, not the sandwich form's zero
@@ -322,7 +318,7 @@ def _covariance(N, M, S, m: int, free: np.ndarray, prior: float | None):
         cov[:, free[:, None], free[None, :]] = N @ Minv @ np.swapaxes(N, 1, 2)
         return cov, np.zeros((b, m, 0))
     else:
-        Minv = np.linalg.pinv(M, rcond=1e-12, hermitian=True)
+        Minv = _pinv(M) if minv is None else minv
         evals, evecs = np.linalg.eigh(M)
         null = evals <= 1e-12 * evals[..., -1:]
         dirs = np.einsum("bfr,brs->bfs", N, evecs) * null[:, None, :]
@@ -444,15 +440,17 @@ def _angle_block(kin: Kinematics, points: PointSet, qf: np.ndarray, pres: np.nda
     uncertainties (rad; inf where unseen, where not ``bounded``), held shares and whether they depend
     on a locked coordinate, each (b, a). ``trunk``: the amplitude model whose unseen trunk motion is added to
     every angle's variance (a run that assumes the thorax still)."""
-    from exubio.model.angles import segment_anatomical_rotations
+    from exubio.model.angles import distal_only_coordinates, segment_anatomical_rotations
     from exubio.trust import angle_uncertainty as AU
 
     model = kin.model
     m = qf.shape[1]
-    D = _angle_jacobian(table, qf)  # (b, a, m)
+    D = _angle_jacobian(table, qf, distal_only_coordinates(model, kin))  # (b, a, m)
     b, a = D.shape[:2]
-    N, M, S = _marker_information(kin, points, qf, pres, weights, free_actual)
-    cov, blind = _covariance(N, M, S, m, free_actual, None)
+    design = constrained_design(kin, points, qf, pres, weights, free_actual)  # shared with the sensitivity below
+    N, M, S = _marker_information(kin, points, qf, pres, weights, free_actual, design=design)
+    Minv = _pinv(M)
+    cov, blind = _covariance(N, M, S, m, free_actual, None, minv=Minv)
     var = np.einsum("bam,bmn,ban->ba", D, cov, D)
     g = np.degrees(np.sqrt(np.maximum(var, 0.0))) / 1000.0
     unseen = (np.abs(np.einsum("bam,bmr->bar", D, blind)) > 1e-6).any(axis=2) if blind.shape[-1] else False
@@ -460,7 +458,7 @@ def _angle_block(kin: Kinematics, points: PointSet, qf: np.ndarray, pres: np.nda
     unc = np.full((b, a), np.inf)
     share = np.zeros((b, a))
     if bounded:
-        K, Jm = AU.sensitivity(kin, points, qf, pres, weights, free_actual, with_jacobian=True)
+        K, Jm = AU.sensitivity(kin, points, qf, pres, weights, free_actual, with_jacobian=True, design=design, minv=Minv)
         frames_isb = segment_anatomical_rotations(model, qf, kinematics=kin)
         anat = {s_: frames_isb[s_] for s_ in ("scapula", "humerus") if s_ in frames_isb}
         Sigma = AU.marker_covariance(kin, points, qf, pres, amplitude, noise_mm=noise_mm, anatomical=anat)
@@ -469,7 +467,7 @@ def _angle_block(kin: Kinematics, points: PointSet, qf: np.ndarray, pres: np.nda
                 kin, points, qf, pres, amplitude, noise_mm=noise_mm, anatomical=anat,
                 residual_m=residuals, expected_ms=AU.expected_residual_ms(Jm, K, Sigma))
         DK = D @ K
-        var_u = np.einsum("bai,bij,baj->ba", DK, Sigma, DK)
+        var_u = AU.quadratic_forms(DK, Sigma)
         if trunk is not None:
             var_u = var_u + AU.trunk_angle_variance(kin, points, qf, DK, trunk)
         unc = np.where(unseen, np.inf, np.sqrt(np.maximum(var_u, 0.0)))

@@ -26,7 +26,8 @@ OWNERS = {
     "polars": {"run/csv_gz.py"},  # the study table's CSV writer
     "isal": {"run/csv_gz.py"},  # the study tables' gzip
     "pylsl": {"run/live/transport.py"},
-    "numba": {"model/kernels.py"},  # the compiled kernels, imported where used (0.2 s to import)
+    "numba": {"model/kernels.py",  # the compiled kernels, imported where used (0.2 s to import)
+              "model/batch_kernels.py"},  # those of the preparation and the checks (filter, chain fits), bit-identical
 }
 VALIDATION_STUDY = tuple(f"exubio.validation.{m}" for m in ("run", "trials", "determinacy", "sensitivity", "residuals",
                                                               "sier", "invivo", "c3d_tasks", "agreement", "mismatch"))

@@ -55,3 +55,25 @@ def test_a_segment_without_markers_is_undetermined_and_a_gimbal_lock_is_named():
         assert d.undetermined[0, names.index(n)] and d.near_gimbal_lock[0, names.index(n)]
     assert d.trial_undetermined() == []  # a gimbal lock is not the markers' fault
     assert set(d.fraction_gimbal()) == {"gh_abduction", "gh_flexion"}
+
+
+def test_the_angle_jacobian_skips_the_frames_for_distal_coordinates_to_the_bit():
+    """A distal coordinate (elbow, pronation, wrist) moves none of the ISB frames: its row of the
+    finite-difference Jacobian is set without them, the same numbers as through the whole table."""
+    from exubio.model.angles import anatomical_table, distal_only_coordinates
+    from exubio.trust.observability import _angle_jacobian
+
+    model, _ = load_model_and_protocol()
+    kin = Kinematics(model)
+    distal = distal_only_coordinates(model, kin)
+    names = model.coordinate_names
+    assert sorted(names[j] for j in distal) == sorted(["elbow_flexion", "pronation", "wrist_flexion",
+                                                       "wrist_radial_deviation"])
+    table = lambda qq: anatomical_table(model, qq, kinematics=kin, unwrap=False)[1]
+    q = np.random.default_rng(3).uniform(-1.2, 1.2, (40, model.n_coordinates))
+    got, want = _angle_jacobian(table, q, distal), _angle_jacobian(table, q)
+    assert np.array_equal(got, want) and got.strides == want.strides
+    cols = anatomical_table(model, q[:1], kinematics=kin)[0]
+    for j, col in distal.items():  # a truth neither computes: a distal angle is its coordinate
+        assert cols[col] in ("elbow_flexion", "forearm_pronation", "wrist_flexion", "wrist_radial_deviation")
+        assert np.allclose(got[:, col, j], 1.0) and not got[:, :, j][:, np.arange(len(cols)) != col].any()
