@@ -35,14 +35,7 @@ import pstats  # noqa: E402
 import statistics  # noqa: E402
 import time  # noqa: E402
 
-
-def pin_to_one_core() -> int | None:
-    try:
-        cpu = min(os.sched_getaffinity(0))
-        os.sched_setaffinity(0, {cpu})
-        return cpu
-    except (AttributeError, OSError):
-        return None
+from bench_reconstruction import pin_to_one_core  # noqa: E402  (this folder: the script's own)
 
 
 def _name(func: tuple) -> str:
