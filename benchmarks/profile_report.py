@@ -4,9 +4,10 @@
 
 Each DIR holds one trial's results (``<trial>.<method>.npz`` with its .csv and summary.json, as
 ``exubio reconstruct --no-report`` or a study writes them); the report of DIR is drawn from all its
-.npz (PF alone or PF and LS) into a temporary folder, as ``exubio report`` draws it. The first DIR
-is drawn once more first (a warm-up: imports, fonts, the re-used figures). Prints the CPU seconds
-of each report and their median. ``--profile N``: cProfile of the reports, the N costliest
+.npz (PF alone or PF and LS) into a temporary folder with draw_trial_report, each result holding
+its model in memory as a study's run gives it (loaded once per model file, outside the timing, as
+is the reading of the files). The first DIR is drawn once more first (a warm-up: imports, fonts,
+the re-used figures). Prints the CPU seconds of each report and their median. ``--profile N``: cProfile of the reports, the N costliest
 functions by own time and by cumulative time. ``--pages OUT``: writes OUT (JSON): for each report,
 the SHA-256 of every PDF page rendered to RGBA pixels by Agg at 100 dpi just after the PDF saved it,
 of the PNG of page 1, and of the PDF (written with a fixed creation date). Two such files (before
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import cProfile
+import dataclasses
 import hashlib
 import io
 import json
@@ -28,10 +30,12 @@ import time
 from pathlib import Path
 
 PAGE_DPI = 100
+_MODELS: dict[str, object] = {}
 
 
 def _report(folder: Path, out: Path, pages: list[str] | None) -> float:
     from exubio.report import trial_report
+    from exubio.scapulohumeral.files import model_of
 
     npz = sorted(folder.glob("*.npz"))
     if not npz:
@@ -46,10 +50,17 @@ def _report(folder: Path, out: Path, pages: list[str] | None) -> float:
                 figure.savefig(buf, format="rgba", dpi=PAGE_DPI)
                 pages.append(f"{figure.get_size_inches().tolist()} {hashlib.sha256(buf.getvalue()).hexdigest()}")
 
+    results = []
+    for p in npz:
+        r = trial_report.read_result(p)
+        key = str(r.metadata.get("model"))
+        if key not in _MODELS:
+            _MODELS[key] = model_of(r.metadata)[0]
+        results.append(dataclasses.replace(r, model=_MODELS[key]))
     trial_report.PdfPages = Recording
     try:
         t0 = time.process_time()
-        trial_report.build_trial_report(npz, out / f"{folder.name}.report.pdf")
+        trial_report.draw_trial_report(results, out / f"{folder.name}.report.pdf")
         return time.process_time() - t0
     finally:
         trial_report.PdfPages = original

@@ -20,6 +20,14 @@ def _figure(size=(11.69, 8.27)) -> Figure:
     return fig
 
 
+def _figure_with_axes(*rects) -> Figure:
+    """A new A4 figure with axes at ``rects`` (figure fractions), for pages that place them later."""
+    fig = _figure()
+    for rect in rects:
+        fig.add_axes(rect)
+    return fig
+
+
 # --------------------------------------------------------------------------------------------
 # Figures of the plot pages, drawn again for the next trial of the process
 # --------------------------------------------------------------------------------------------
