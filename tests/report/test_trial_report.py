@@ -1,7 +1,8 @@
-"""The trial report's drawing shortcuts give the report matplotlib draws without them: plot pages
-drawn into the figures of the previous report (exubio.report.trial_report keeps them per process)
-are byte for byte those of new figures, whatever the order of the trials; text wrapped by bisection
-breaks where matplotlib's own wrapping does; titles fixed in place sit where matplotlib puts them."""
+"""The trial report's drawing shortcuts give the report matplotlib draws without them: page 1 and
+the plot pages drawn into the figures of the previous report (exubio.report.trial_report keeps them
+per process) are byte for byte those of new figures, whatever the order of the trials; text wrapped
+by bisection breaks where matplotlib's own wrapping does, also with the lines and widths kept from
+earlier drawings; titles fixed in place sit where matplotlib puts them."""
 from __future__ import annotations
 
 import dataclasses
