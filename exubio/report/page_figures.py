@@ -20,6 +20,14 @@ def _figure(size=(11.69, 8.27)) -> Figure:
     return fig
 
 
+def _figure_with_axes(*rects) -> Figure:
+    """A new A4 figure with axes at ``rects`` (figure fractions), for pages that place them later."""
+    fig = _figure()
+    for rect in rects:
+        fig.add_axes(rect)
+    return fig
+
+
 # --------------------------------------------------------------------------------------------
 # Figures of the plot pages, drawn again for the next trial of the process
 # --------------------------------------------------------------------------------------------
@@ -148,13 +156,33 @@ class _BisectWrapText(Text):
     (each line takes words while its rendered width stays within the figure), finding each break
     by bisection instead of measuring every longer prefix in turn (which took a third of the time
     of drawing the verdict page): a line's width grows with every word it takes. Text with "$"
-    (mathtext, whose width does not grow word by word) is wrapped by matplotlib itself."""
+    (mathtext, whose width does not grow word by word) is wrapped by matplotlib itself.
+
+    The lines and the widths measured are kept (see :func:`_metrics_key`): a text is wrapped when
+    it is measured on the page, again when the PDF draws it and once more for the PNG, and the same
+    texts (the notes, most reasons) come again in every trial's report."""
 
     def _get_wrapped_text(self) -> str:
         text = self.get_text()
         if not self.get_wrap() or self.get_usetex() or "$" in text:
             return super()._get_wrapped_text()
         line_width = self._get_wrap_line_width()
+        key = (_metrics_key(self), text, line_width)
+        done = _WRAPS.get(key)
+        if done is None:
+            done = self._bisect_lines(text, line_width, key[0])
+            _remember(_WRAPS, key, done)
+        return done
+
+    def _bisect_lines(self, text: str, line_width: float, metrics: tuple) -> str:
+        def width(s: str) -> float:
+            k = (metrics, s)
+            w = _WIDTHS.get(k)
+            if w is None:
+                w = self._get_rendered_text_width(s)
+                _remember(_WIDTHS, k, w)
+            return w
+
         wrapped = []
         for unwrapped in text.split("\n"):
             words = unwrapped.split(" ")
@@ -165,7 +193,7 @@ class _BisectWrapText(Text):
                 lo, hi = 2, len(words) + 1  # the first i in [2, len] whose words[:i] are too wide
                 while lo < hi:
                     mid = (lo + hi) // 2
-                    if self._get_rendered_text_width(" ".join(words[:mid])) > line_width:
+                    if width(" ".join(words[:mid])) > line_width:
                         hi = mid
                     else:
                         lo = mid + 1
@@ -176,6 +204,31 @@ class _BisectWrapText(Text):
                     wrapped.append(" ".join(words))
                     words = []
         return "\n".join(wrapped)
+
+
+_WRAPS: dict[tuple, str] = {}
+_WIDTHS: dict[tuple, float] = {}
+_CACHED_MAX = 20000  # entries per cache (a report adds a few hundred); emptied when full
+_METRIC_RCPARAMS = ("text.hinting", "text.hinting_factor", "text.kerning_factor", "pdf.use14corefonts", "ps.useafm",
+                    "font.family", "font.sans-serif", "font.serif", "font.monospace", "font.cursive", "font.fantasy")
+
+
+def _metrics_key(text: Text) -> tuple:
+    """What a plain text's rendered width depends on besides its string: the renderer's kind and
+    resolution (Agg measures with hinting at its dpi, the PDF without hinting in points), the
+    figure's dpi, the font properties and the settings that pick and measure the font. Two texts
+    with the same key measure any string alike (matplotlib's own cache of text metrics is kept per
+    renderer, and the PDF has a new renderer per page)."""
+    renderer = text._renderer
+    rc = tuple(tuple(v) if isinstance(v, list) else v for v in (mpl.rcParams[k] for k in _METRIC_RCPARAMS))
+    return (type(renderer), getattr(renderer, "dpi", None), text.get_figure(root=True).dpi, rc,
+            text.get_fontproperties().copy())
+
+
+def _remember(cache: dict, key: tuple, value) -> None:
+    if len(cache) >= _CACHED_MAX:
+        cache.clear()
+    cache[key] = value
 
 
 def _bisect_wrap(text: Text) -> Text:

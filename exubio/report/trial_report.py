@@ -34,7 +34,7 @@ from exubio.io.results import atomic_write, read_angles_csv, read_npz, read_npz_
 from exubio.model.signs import CLINICAL_FLIPPED, convert, factors, signs_of_file
 from exubio.types import FrameStatus, Reconstruction
 from exubio.report.calibration_page import calibration_page, short_paths
-from exubio.report.page_figures import (PLOT_POINTS, _bisect_wrap, _empty, _envelope, _figure, _page_figure,  # noqa: F401
+from exubio.report.page_figures import (PLOT_POINTS, _bisect_wrap, _empty, _envelope, _figure, _figure_with_axes, _page_figure,  # noqa: F401
                                         _pin_titles, _release, _x_labels_at_top)
 from exubio.method_registry import REGISTRY, method_style
 
@@ -100,7 +100,7 @@ def verdict_page(recons: Sequence[Reconstruction], meta: dict, summaries: dict[s
     with the truth when it is known, the findings, and the key angles over time. Every text block
     is measured as drawn: the reasons stop above the findings (the rest: '... N more', in the
     summary.json) and nothing overlaps the picture."""
-    fig = _figure()
+    fig, _ = _page_figure(("verdict", bool(angles)), lambda: _figure_with_axes(*[(0.07, 0.06, 0.66, 0.5)] * bool(angles)))
     fig.suptitle(_title(recons, meta), fontsize=9)
     fig.set_dpi(PAGE1_DPI)  # measured at the resolution of the PNG, where the lines break the same way
     renderer = fig.canvas.get_renderer()
@@ -244,14 +244,14 @@ KEY_ANGLES = (("HT_X_elevation", "HT elevation"), ("GH_phadke_X_elevation", "GH 
 """The angles page 1 draws: what a shoulder study reads first."""
 
 
-
 def _key_angles(fig: Figure, recons: Sequence[Reconstruction], angles: dict[str, Angles], summaries: dict, *,
                 top: float = FOOTER_BOTTOM - 0.045) -> None:
     """Page 1's picture: the key anatomical angles of the first method over time, in colour where
     measured, grey where modelled or not measured (legend says which); its axes end at ``top``."""
     method = recons[0].method if recons[0].method in angles else next(iter(angles))
     a = angles[method]
-    ax = fig.add_axes([0.07, 0.06, 0.66, min(top, 0.6) - 0.06])
+    ax = fig.axes[0]  # made with the page (verdict_page), placed here below its texts
+    ax.set_position([0.07, 0.06, 0.66, min(top, 0.6) - 0.06])
     palette = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown")
     for (name, label), colour in zip(KEY_ANGLES, palette):
         if name not in a.names:
