@@ -17,6 +17,11 @@ parameters to describe its points), no point with a label, and what ezc3d refuse
 file's terms where it is known (ANALOG:OFFSET stored as floats, POINT:LABELS missing for
 POINT:USED points).
 
+What ezc3d cannot read but exubio.io.c3d_raw can put in terms it reads is read through a copy
+(``ezc3d_copy``, in a temporary folder, with a finding): an SGI/MIPS (big-endian) file turned to
+Intel byte order, a description longer than 127 characters cut, analog channels ezc3d crashes on
+(ANALOG:SCALE or OFFSET absent) left out.
+
 ezc3d silently stops at the end of a truncated file (it returns the frames it could read and
 rewrites the header to match), so the frame count declared in the raw 512-byte header is checked
 against what was read.
@@ -42,6 +47,7 @@ import logging
 import os
 import re
 import struct
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -50,8 +56,8 @@ import numpy as np
 from exubio.errors import InputError
 from exubio.io.c3d_raw import DEC as _DEC
 from exubio.io.c3d_raw import HEADER_CLIPPED as _HEADER_CLIPPED
-from exubio.io.c3d_raw import check_raw_header, declared_frame_count, declared_point_count, header_count_findings
-from exubio.io.c3d_raw import parameter_records
+from exubio.io.c3d_raw import RawCheck, check_raw_header, declared_frame_count, declared_point_count, header_count_findings
+from exubio.io.c3d_raw import ezc3d_copy, parameter_records
 from exubio.io.heap import release_freed_heap
 from exubio.io.c3d_raw import raw_header as _raw_header
 from exubio.io.c3d_raw import raw_parameters as _raw_parameters  # noqa: F401 (the tests patch files through it)
@@ -75,7 +81,7 @@ def read_c3d(path: str | os.PathLike, /) -> Trajectories:
     """Marker trajectories of a C3D file, in metres (see the module docstring)."""
     path = Path(path)
     raw = check_raw_header(path)
-    c3d = _open(path)
+    c3d = _open(path, raw)
     points = c3d["data"]["points"]  # (4, n_markers, n_frames), file units
     residuals = c3d["data"]["meta_points"]["residuals"]
     if points.shape[1] == 0:
@@ -118,7 +124,10 @@ def read_c3d_analogs(path: str | os.PathLike, /) -> tuple[tuple[str, ...], tuple
     values (n_samples, n_channels) as ezc3d scales them), the first sample at the first point
     frame's time. A file with no analog channel raises InputError."""
     path = Path(path)
-    c3d = _open(path)
+    raw = check_raw_header(path)
+    if raw.analogs_unreadable:
+        raise InputError(f"{path}: its analog channels cannot be read: {raw.analogs_unreadable}")
+    c3d = _open(path, raw)
     analogs = np.asarray(c3d["data"]["analogs"], dtype=float)  # (1, n_channels, n_samples)
     params = c3d["parameters"].get("ANALOG", {})
     if analogs.ndim != 3 or analogs.shape[1] == 0 or analogs.shape[2] == 0:
@@ -132,7 +141,10 @@ def read_c3d_analogs(path: str | os.PathLike, /) -> tuple[tuple[str, ...], tuple
     return labels, units, rate, analogs[0].T.copy()
 
 
-def _open(path: Path) -> Any:
+def _open(path: Path, raw: RawCheck | None = None) -> Any:
+    """ezc3d's reading of the file; where the raw check says it ``needs_copy`` (SGI/MIPS byte
+    order, a description ezc3d misreads, analog channels ezc3d crashes on) of the copy
+    exubio.io.c3d_raw.ezc3d_copy makes, written to a temporary file ezc3d reads and removed."""
     if not path.exists():
         raise InputError(f"{path}: file not found")
     if not path.is_file():
@@ -140,7 +152,12 @@ def _open(path: Path) -> Any:
     import ezc3d  # deferred: importing ezc3d costs time and only this module needs it
 
     try:
-        return ezc3d.c3d(str(path))
+        if raw is None or not raw.needs_copy:
+            return ezc3d.c3d(str(path))
+        with tempfile.TemporaryDirectory(prefix="exubio-c3d-") as folder:
+            copy = Path(folder) / "copy.c3d"
+            copy.write_bytes(ezc3d_copy(path, drop_analogs=bool(raw.analogs_unreadable)))
+            return ezc3d.c3d(str(copy))
     except Exception as exc:  # ezc3d raises OSError/RuntimeError/ValueError from C++
         raise InputError(f"{path}: not a readable C3D file ({_ezc3d_refusal(path, exc)})") from exc
 
@@ -400,8 +417,12 @@ def write_c3d_samples(source: str | os.PathLike, path: str | os.PathLike, sample
     files that store residual 0 on measured samples too (Vicon Nexus exports) cannot tell them apart
     by the residual. Written atomically."""
     source, path = Path(source), Path(path)
-    check_raw_header(source)
-    c3d = _open(source)
+    raw = check_raw_header(source)
+    if raw.analogs_unreadable:
+        raise InputError(f"{source}: {raw.analogs_unreadable}: its analog channels cannot be read, so a copy of the "
+                         f"file with its samples set cannot be written (it would lose them); fill the gaps in the "
+                         f"capture software")
+    c3d = _open(source, raw)
     points = c3d["data"]["points"]
     n_frames = points.shape[2]
     if _long_frame_count(source, c3d) is not None:

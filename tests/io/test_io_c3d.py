@@ -3,6 +3,7 @@ trips and refusal of broken files. Special files are crafted through the private
 module so that ezc3d stays imported by exubio/io/c3d.py only."""
 from __future__ import annotations
 
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -249,12 +250,75 @@ def test_parameters_past_the_declared_section_length_are_read_with_a_finding(tmp
     assert "declares 1 block(s) (512 bytes) but its records run to byte" in finding
 
 
-def test_sgi_mips_processor_format_refused_as_such(tmp_path):
+def test_a_file_marked_sgi_mips_that_is_not_big_endian_is_refused_not_crashed(tmp_path):
+    """Byte 4 set to 86 on an Intel file: read big-endian, its header points past the file's end."""
     path = write_c3d(tmp_path / "sgi.c3d", make_trajectories(["A"]))
     data = bytearray(path.read_bytes())
     data[(data[0] - 1) * 512 + 3] = 86
     path.write_bytes(bytes(data))
-    with pytest.raises(InputError, match=r"sgi\.c3d: processor format SGI/MIPS .* is not supported"):
+    with pytest.raises(InputError, match=r"sgi\.c3d: not a readable C3D file \(the header contradicts the file"):
+        read_c3d(path)
+
+
+def test_a_description_longer_than_127_characters_is_read_with_a_finding(tmp_path):
+    """ezc3d writes a 160-character group description with a length byte its own reader takes as
+    negative (KINARM's Dexterit-E writes such files): ezc3d cannot read the file back, exubio can."""
+    import ezc3d
+
+    traj = make_trajectories(["A", "B"])
+
+    def long_description(c3d):
+        c3d["parameters"]["POINT"]["__METADATA__"]["DESCRIPTION"] = "x" * 160
+
+    path = write_custom(tmp_path / "kinarm.c3d", traj, edit=long_description)
+    with pytest.raises(OSError):
+        ezc3d.c3d(str(path))
+    got = read_c3d(path)
+    np.testing.assert_allclose(got.positions_m, traj.positions_m, atol=TOL_M)
+    (finding,) = got.input_findings
+    assert "kinarm.c3d" in finding and "description of POINT (160 characters)" in finding and "cut to 127" in finding
+
+
+@pytest.mark.parametrize("name", ["OFFSET", "SCALE"])
+def test_analog_channels_ezc3d_crashes_on_are_left_out_and_the_markers_read(tmp_path, name):
+    """ANALOG:OFFSET or ANALOG:SCALE absent while ANALOG:USED > 0 (an old Motion Analysis file names
+    them ANALOG:OFFSETS): ezc3d crashes (segmentation fault) on such a file; exubio reads its markers
+    without the analog channels, says so, and refuses to read the channels."""
+    from exubio.io.c3d import read_c3d_analogs
+
+    traj = make_trajectories(["A", "B", "C"], n_frames=40)
+
+    def analogs(c3d):
+        c3d["parameters"]["ANALOG"]["RATE"]["value"] = np.array([1000.0])
+        c3d["parameters"]["ANALOG"]["LABELS"]["value"] = ("F1", "F2", "F3", "F4")
+        c3d["data"]["analogs"] = np.random.default_rng(1).normal(size=(1, 4, 400))
+
+    path = write_custom(tmp_path / "mac.c3d", traj, edit=analogs)
+    data = bytearray(path.read_bytes())
+    at = data.index(bytes([len(name), 2]) + name.encode())  # the record of ANALOG (group 2) named so
+    data[at + 1 + len(name)] = ord("Q")  # its last letter: the parameter is gone under another name
+    path.write_bytes(bytes(data))
+    got = read_c3d(path)
+    np.testing.assert_allclose(got.positions_m, traj.positions_m, atol=TOL_M)
+    (finding,) = got.input_findings
+    assert f"ANALOG:USED is 4 but ANALOG:{name} is absent" in finding and "read without them" in finding
+    with pytest.raises(InputError, match=rf"mac\.c3d: its analog channels cannot be read: .*ANALOG:{name}"):
+        read_c3d_analogs(path)
+
+
+def test_integer_scale_factors_that_disagree_are_refused(tmp_path):
+    """An integer-format file whose header scale (words 7-8) is not its POINT:SCALE: positions would
+    differ by their ratio (the old Motion Analysis sample, 2.56), so it is refused naming both."""
+    source = Path(__file__).resolve().parents[3] / "shared" / "data" / "c3d_vendors" / "sample01_Eb015pi.c3d"
+    if not source.is_file():
+        pytest.skip(f"{source} not available")
+    data = bytearray(source.read_bytes())
+    scale = struct.unpack("<f", data[12:16])[0]
+    assert scale > 0  # the integer format
+    data[12:16] = struct.pack("<f", 2.5 * scale)
+    path = tmp_path / "scales.c3d"
+    path.write_bytes(bytes(data))
+    with pytest.raises(InputError, match=r"scales\.c3d: its scale factors disagree: .* differ by a factor 2\.5"):
         read_c3d(path)
 
 
