@@ -205,7 +205,8 @@ def angle_status(reconstruction: Reconstruction, model: Model | None = None, pro
     dt = float(np.median(np.diff(reconstruction.time_s))) if reconstruction.n_frames > 1 else 1.0
     return angle_determinacy(b.kin, b.points, reconstruction.q_rad, present, protocol.weights,
                              held=b.held, locked=b.locked,
-                             every=max(1, int(round(0.05 / dt))), residuals_m=reconstruction.residuals_m)
+                             every=max(1, int(round(0.05 / dt))), residuals_m=reconstruction.residuals_m,
+                             marker_positions_m=reconstruction.measured_m)
 
 
 def to_dataframe(reconstruction: Reconstruction, /, *, model: Model | None = None,

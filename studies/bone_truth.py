@@ -6,6 +6,12 @@ four S2M tasks and used on the fourth (coverage with a model that did not see th
 
     python studies/bone_truth.py                 # the table (markdown) to stdout
     python studies/bone_truth.py --loto          # + leave-one-task-out coverage
+    python studies/bone_truth.py --data DIR      # the trials of another folder (e.g. the tasks below)
+    python studies/bone_truth.py --no-direct-misfit   # u as before the direct misfit term
+
+Tasks of the same source not in ../shared (S2M armAdd, armExt, ballThrowing, behindBackReach;
+ARTANIM armFlex): STAOpenData/Data @ 33dd5a4, documents_and_data/dataSample/Matlab/, read from a
+folder given with --data; not copied into the project.
 
 Data: Cereatti et al. 2017, J Biomech 62:5-13 (ISB STA data-sharing sample; see
 ../shared/data/truth/SOURCES.md). Rates: S2M 300 Hz, ARTANIM 30 Hz (its SOURCES.md).
@@ -74,13 +80,21 @@ def table(comps: list, title: str) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--loto", action="store_true", help="also leave-one-task-out STA amplitude coverage (S2M)")
+    ap.add_argument("--data", type=Path, default=DATA, help=f"folder of .mat trials (default {DATA})")
+    ap.add_argument("--no-direct-misfit", action="store_true",
+                    help="as before the direct misfit term: a misfit segment's frame not turned "
+                         "(exubio.trust.angle_uncertainty.misfit_angle_variance)")
     args = ap.parse_args(argv)
-    if not DATA.is_dir():
-        print(f"no data at {DATA}", file=sys.stderr)
+    if not args.data.is_dir():
+        print(f"no data at {args.data}", file=sys.stderr)
         return 2
+    if args.no_direct_misfit:
+        from exubio.trust import angle_uncertainty
+
+        angle_uncertainty.DIRECT_MISFIT = False
     logging.disable(logging.WARNING)
     warnings.simplefilter("ignore")
-    files = sorted(DATA.glob("*.mat"))
+    files = sorted(args.data.glob("*.mat"))
     comps = [run(f) for f in files]
     print(table(comps, "skin markers as recorded (raw, gaps left as gaps)"))
     print()

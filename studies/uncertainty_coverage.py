@@ -10,6 +10,7 @@ the artefact's mean course is, lies within +-2u in every frame when its RMS is u
     python studies/uncertainty_coverage.py --seeds 3          # a table per method
     python studies/uncertainty_coverage.py --seeds 3 --sta per-marker
     python studies/uncertainty_coverage.py --seeds 5 --by-elevation   # also per HT elevation band (LS)
+    python studies/uncertainty_coverage.py --seeds 5 --no-direct-misfit   # u as before the direct misfit term
 
 The bone-pin model is one subject's (S2M; Cereatti et al. 2017, J Biomech 62:5-13).
 """
@@ -58,7 +59,14 @@ def main(argv=None) -> int:
     ap.add_argument("--duration", type=float, default=10.0)
     ap.add_argument("--rate", type=float, default=50.0)
     ap.add_argument("--by-elevation", action="store_true", help="also coverage per HT elevation band, first method")
+    ap.add_argument("--no-direct-misfit", action="store_true",
+                    help="as before the direct misfit term: a misfit segment's frame not turned "
+                         "(exubio.trust.angle_uncertainty.misfit_angle_variance)")
     args = ap.parse_args(argv)
+    if args.no_direct_misfit:
+        from exubio.trust import angle_uncertainty
+
+        angle_uncertainty.DIRECT_MISFIT = False
     band: dict = {}
     logging.disable(logging.WARNING)
     warnings.simplefilter("ignore")

@@ -11,10 +11,14 @@ move by D dq (D = d angle / d q). The markers' error covariance has two parts:
 * the model's misfit, where the reconstruction shows one: a segment whose markers lie farther from
   their model points than noise and the artefact explain (the excess v of its mean square residual
   per coordinate over what those leave after the least-squares step, ``expected_residual_ms``) may
-  be off by that much as a whole, so it adds a rigid rotation of SD
-  sqrt(v)/rho per axis (rho: the RMS distance of its markers from their centroid) and a translation
-  of SD sqrt(v). A model that cannot follow the bones (a girdle that does not fit the subject, a
-  thorax that moved while assumed still) thus widens the angles it moves, frame by frame;
+  be off by that much as a whole. It enters twice: as marker errors (a rigid rotation of SD
+  sqrt(v)/rho per axis, rho the RMS distance of its markers from their centroid, and a translation
+  of SD sqrt(v)) carried through the step, and as the segment's frame turned by the rotation that
+  carries its model points onto its markers, scaled by the share of the residual that is misfit
+  (``misfit_angle_variance``): the step does not follow a misfit, by construction, so the first
+  alone leaves out what the bone is off by. A model that cannot follow the bones (a girdle that
+  does not fit the subject, a thorax that moved while assumed still) thus widens the angles it
+  moves, frame by frame;
 * the soft-tissue artefact (``exubio.trust.sta_amplitude``, fitted on bone pins): each segment's
   markers move together by a rigid rotation about their centroid and a translation (standard
   deviations per ISB axis, proportional to the motion away from the reference posture), plus
@@ -45,7 +49,7 @@ from exubio.model.kinematics import Kinematics, PointSet
 from exubio.trust.design import constrained_design
 from exubio.trust.sta_amplitude import STAAmplitude
 
-__all__ = ["BOUND_SETS", "bound_applies", "NOISE_MM", "U_BOUND_DEG", "GIMBAL_MARGIN_DEG", "marker_covariance", "sensitivity", "gimbal_mask",
+__all__ = ["misfit_angle_variance", "BOUND_SETS", "bound_applies", "NOISE_MM", "U_BOUND_DEG", "GIMBAL_MARGIN_DEG", "marker_covariance", "sensitivity", "gimbal_mask",
            "expected_residual_ms", "UNCERTAINTY_DEFINITION"]
 
 NOISE_MM = 1.0
@@ -67,8 +71,9 @@ UNCERTAINTY_DEFINITION = (
     f"standard uncertainty (1 SD, deg): {NOISE_MM:g} mm marker noise and the soft-tissue artefact model fitted on "
     "bone pins (rigid cluster rotation and translation plus non-rigid parts per segment, the scapula's and humerus's "
     "correlated, growing with the motion from the reference posture; exubio.trust.sta_amplitude), carried through "
-    "the reconstruction's first-order "
-    f"sensitivity; an ST, GH or HT angle is not measured where u > {U_BOUND_DEG:g} deg, any angle within "
+    "the reconstruction's first-order sensitivity, and where a segment's markers fit the model worse than noise and "
+    "the artefact explain, that misfit as a turn of the segment's frame (the rotation carrying its model points onto "
+    f"its markers); an ST, GH or HT angle is not measured where u > {U_BOUND_DEG:g} deg, any angle within "
     f"{GIMBAL_MARGIN_DEG:g} deg of its sequence's gimbal lock (SC, AC and distal angles: u from coefficients borrowed "
     "from the humerus, no bone data)")
 
@@ -244,6 +249,97 @@ def expected_residual_ms(J: np.ndarray, K: np.ndarray, sigma: np.ndarray, /) -> 
     R = I_H @ sigma @ np.swapaxes(I_H, -1, -2)
     d = np.einsum("bii->bi", R).reshape(b, n3 // 3, 3)
     return d.sum(axis=2) / 3.0
+
+
+MISFIT_MIN_MARKERS = 3
+"""A segment's misfit turns its frame (``misfit_angle_variance``) only where at least this many of
+its markers are seen: fewer define no rotation."""
+
+DIRECT_MISFIT = True  # benchmarks and studies only: False leaves the misfit to the step (K) alone, as before
+
+
+def misfit_angle_variance(kin: Kinematics, points: PointSet, qf: np.ndarray, present: np.ndarray,
+                          residual_m: np.ndarray, expected_ms: np.ndarray, n_angles: int, /, *,
+                          measured_m: np.ndarray | None = None) -> np.ndarray:
+    """(b, n_angles) rad^2: what a segment the model does not follow adds to the angles of its frame.
+
+    A segment whose markers lie farther from their model points than noise and the artefact leave
+    (the excess v of its mean square residual per coordinate over ``expected_ms``; at least
+    ``MISFIT_MIN_MARKERS`` markers seen) is taken as turned away from its model frame, and every angle
+    of its ISB frame moves with it (d angle / d rotation of that frame alone, the other frames kept):
+    - with ``measured_m`` (b, k, 3: the markers the reconstruction tracked), by the rotation omega
+      that best carries the model points onto the markers (least squares, with a translation), scaled by
+      sqrt(v / (v + expected)): the share of the residual that noise and the artefact do not explain.
+      A misfit that is a shift of the cluster (a scapula off its ellipsoid) turns no frame;
+    - without (a reconstruction read back from its files keeps the distances only), by a rotation of SD
+      sqrt(v)/rho per axis (rho: the RMS distance of the markers from their centroid): a shift is
+      then taken as a turn, which errs on the wide side.
+    Carried through the least-squares step instead (``marker_covariance``'s misfit term) the turn is
+    mostly lost: a residual is what the step did not follow, so the step's response to it is small
+    by construction, while the bone is off by it (measured on the ISB STA data-sharing trials with
+    every skin marker carried by its bone: in an arm extension the scapula markers lay 18-73 mm from
+    the model, ST upward rotation and GH elevation were 11-28 deg off, and the step's misfit term
+    gave u of 4-11 deg). Frame angles only (the first columns, as ``angles_of_frames`` orders them);
+    the distal angles, coordinates, get nothing here."""
+    from exubio.model.angles import anatomical_frames, angles_of_frames, segment_anatomical_rotations
+
+    model = kin.model
+    b = qf.shape[0]
+    R, _ = kin.poses(qf)
+    P = kin.points(qf, points)
+    names = [s.name for s in model.segments]
+    frames = segment_anatomical_rotations(model, qf, kinematics=kin, frames=anatomical_frames(model), rotations=R)
+    sets = list(angles_of_frames(frames))
+
+    def table(fr):
+        a = angles_of_frames(fr)
+        return np.concatenate([a[s] for s in sets], axis=-1)
+
+    base = table(frames)
+    out = np.zeros((b, n_angles))
+    eps = 1e-6
+    for s_idx in np.unique(points.segment_index):
+        seg = names[s_idx]
+        if seg not in frames:
+            continue
+        sel = np.flatnonzero(points.segment_index == s_idx)
+        ok = present[:, sel] & np.isfinite(residual_m[:, sel])
+        cnt = ok.sum(axis=1)
+        if not (cnt >= MISFIT_MIN_MARKERS).any():
+            continue
+        c = np.where(ok[..., None], P[:, sel], 0.0).sum(axis=1) / np.maximum(cnt, 1)[:, None]
+        r = np.where(ok[..., None], P[:, sel] - c[:, None, :], 0.0)  # (b, j, 3)
+        rho2 = (r ** 2).sum(axis=(1, 2)) / np.maximum(cnt, 1)
+        with np.errstate(invalid="ignore", divide="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            exp = np.nan_to_num(np.nanmean(np.where(ok, expected_ms[:, sel], np.nan), axis=1), nan=0.0)
+            v = np.maximum(np.nan_to_num(np.nanmean(np.where(ok, residual_m[:, sel], np.nan) ** 2, axis=1) / 3.0 - exp,
+                                         nan=0.0), 0.0)
+        enough = cnt >= MISFIT_MIN_MARKERS
+        G = np.zeros((b, base.shape[1], 3))
+        for i in range(3):
+            w = np.zeros(3)
+            w[i] = eps
+            moved = dict(frames)
+            moved[seg] = (np.eye(3) + _skew(w)) @ frames[seg]  # first order: this frame alone turns by w
+            G[:, :, i] = ((table(moved) - base + np.pi) % (2 * np.pi) - np.pi) / eps
+        if measured_m is not None:
+            e = measured_m[:, sel] - P[:, sel]
+            use = ok & np.isfinite(e).all(axis=2)
+            enough &= use.sum(axis=1) >= MISFIT_MIN_MARKERS
+            A = np.concatenate([np.broadcast_to(np.eye(3), r.shape + (3,)), -_skew(r)], axis=-1)  # e = t + w x r
+            A = np.where(use[..., None, None], A, 0.0)
+            M = np.einsum("bjxk,bjxl->bkl", A, A)
+            y = np.einsum("bjxk,bjx->bk", A, np.where(use[..., None], e, 0.0))
+            turn = np.einsum("bkl,bl->bk", np.linalg.pinv(M, rcond=1e-9, hermitian=True), y)[:, 3:]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                share = np.where(v > 0, v / (v + exp), 0.0)
+            turn = turn * np.sqrt(np.where(enough, share, 0.0))[:, None]
+            out[:, : G.shape[1]] += np.einsum("bai,bi->ba", G, turn) ** 2
+        else:
+            var = np.where(enough, v / np.maximum(rho2, 1e-4), 0.0)  # rad^2 per axis
+            out[:, : G.shape[1]] += var[:, None] * (G ** 2).sum(axis=2)
+    return out
 
 
 def trunk_angle_variance(kin: Kinematics, points: PointSet, qf: np.ndarray, DK: np.ndarray, amplitude: STAAmplitude,

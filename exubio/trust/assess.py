@@ -209,7 +209,8 @@ def assess_trial(binding: Binding, targets: MarkerTargets, recons: Sequence[Reco
                                   every=determinacy_every) for r in recons}
     angles = {r.method: angle_determinacy(kin, points, r.q_rad, targets.present, protocol.weights, held=held,
                                           locked=binding.locked, every=determinacy_every,
-                                          residuals_m=r.residuals_m) for r in recons}
+                                          residuals_m=r.residuals_m, marker_positions_m=targets.positions_m)
+              for r in recons}
     structural = angle_status_of_protocol(binding)
     unmeasurable = coordinates_not_measured_by_protocol(binding)
     label_findings, calibration = c.label_findings, c.calibration

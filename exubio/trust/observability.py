@@ -334,14 +334,15 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
                       *, held: np.ndarray, locked: np.ndarray, every: int = 1,
                       rules: Mapping[str, str] | None = None, amplitude=None,
                       noise_mm: float | None = None, residuals_m: np.ndarray | None = None,
-                      bounded: bool = True, thorax_assumed_still: bool = False) -> AngleDeterminacy:
+                      bounded: bool = True, thorax_assumed_still: bool = False,
+                      marker_positions_m: np.ndarray | None = None) -> AngleDeterminacy:
     """Measured / modelled / not measured for every anatomical angle (exubio.model.angles.ANATOMICAL_ANGLES)
     in the frames of q (n, m), computed every ``every``-th frame and copied to the frames between.
     held: (m,) bool, coordinates a protocol rule holds; locked: (m,) bool, coordinates of segments
     no marker observes; rules: the rule's name per held coordinate (default 'hold'). Each angle's
     standard uncertainty (exubio.trust.angle_uncertainty: ``noise_mm`` of marker noise and the STA
     ``amplitude`` model, default the shipped one; the model's misfit where ``residuals_m`` (n, k) is
-    given) is computed with it; an angle is not measured
+    given; ``marker_positions_m`` (n, k, 3), the markers tracked: its direction) is computed with it; an angle is not measured
     where it exceeds the bound or where its sequence is near its gimbal lock. ``bounded=False``: the
     markers' determinacy alone (what a marker set can see, e.g. whether dropping a marker loses an
     angle), no uncertainty computed. ``thorax_assumed_still``: the run has no thorax marker and takes
@@ -370,11 +371,11 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
 
     res_floor = None if residuals_m is None else nearest_sample(residuals_m)  # a hidden marker's misfit: its edges'
 
-    def block(frames: np.ndarray, pres: np.ndarray, res: np.ndarray | None):
+    def block(frames: np.ndarray, pres: np.ndarray, res: np.ndarray | None, vec: np.ndarray | None = marker_positions_m):
         return _angle_block(kin, points, q[frames], pres, weights, table, held=held, locked=locked,
-                            free_actual=free_actual, free_released=free_released, bounded=bounded,
-                            amplitude=amplitude, noise_mm=noise_mm, residuals=None if res is None else res[frames],
-                            trunk=amplitude if thorax_assumed_still else None)
+                            free_actual=free_actual, free_released=free_released, bounded=bounded, amplitude=amplitude,
+                            noise_mm=noise_mm, residuals=None if res is None else res[frames],
+                            trunk=amplitude if thorax_assumed_still else None, vectors=None if vec is None else vec[frames])
 
     gain = np.full((len(sel), a), np.inf)
     unc = np.full((len(sel), a), np.inf)
@@ -390,7 +391,7 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
         gap = (present[frames] != trial_markers[None, :]).any(axis=1)
         if gap.any():  # a gap never makes an angle surer than the trial's markers make it (GAP_FLOOR)
             g_full, u_full, _, _ = block(frames[gap], np.broadcast_to(trial_markers, (int(gap.sum()), len(trial_markers))),
-                                         res_floor)
+                                         res_floor, None)
             rows = part[gap]
             with np.errstate(invalid="ignore"):
                 gain[rows] = np.fmax(gain[rows], g_full)
@@ -425,17 +426,16 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
 GAP_FLOOR = ("in a frame where a marker the trial has is missing (a gap), each angle's noise gain and "
              "uncertainty are at least those the trial's full marker set gives at the same pose, with each hidden "
              "marker's residual taken from the nearest frame where it was seen")
-"""Why a floor: the uncertainty propagates the artefact model through the protocol's fixed least-squares
-weights, which are not the model's optimal (inverse-covariance) weights, so leaving out a marker the
-model gives a large non-rigid artefact (e.g. ARM on the upper arm) can lower the propagated value by
-up to a quarter (measured on bioptim_exo_martin_dynamique, docs/gaps.md). Leaving a marker out is not how a
-lab would make an angle surer, and the artefact model's per-marker parts were not fitted for it: a
-gap frame says at least what the full set says."""
+"""Why a floor: the uncertainty propagates the artefact model through the protocol's fixed least-squares weights, which
+are not the model's optimal (inverse-covariance) weights, so leaving out a marker the model gives a large non-rigid
+artefact (e.g. ARM on the upper arm) can lower the propagated value by up to a quarter (measured on
+bioptim_exo_martin_dynamique, docs/gaps.md). Leaving a marker out is not how a lab would make an angle surer, and
+the artefact model's per-marker parts were not fitted for it: a gap frame says at least what the full set says."""
 
 
 def _angle_block(kin: Kinematics, points: PointSet, qf: np.ndarray, pres: np.ndarray, weights: np.ndarray, table, /,
                  *, held: np.ndarray, locked: np.ndarray, free_actual: np.ndarray, free_released: np.ndarray,
-                 bounded: bool, amplitude, noise_mm: float, residuals: np.ndarray | None, trunk=None):
+                 bounded: bool, amplitude, noise_mm: float, residuals: np.ndarray | None, trunk=None, vectors=None):
     """For the poses qf (b, m) with the markers pres (b, k): the angles' noise gains (deg/mm), standard
     uncertainties (rad; inf where unseen, where not ``bounded``), held shares and whether they depend
     on a locked coordinate, each (b, a). ``trunk``: the amplitude model whose unseen trunk motion is added to
@@ -462,12 +462,15 @@ def _angle_block(kin: Kinematics, points: PointSet, qf: np.ndarray, pres: np.nda
         frames_isb = segment_anatomical_rotations(model, qf, kinematics=kin)
         anat = {s_: frames_isb[s_] for s_ in ("scapula", "humerus") if s_ in frames_isb}
         Sigma = AU.marker_covariance(kin, points, qf, pres, amplitude, noise_mm=noise_mm, anatomical=anat)
+        direct = 0.0  # a misfit segment's frame turned (AU.misfit_angle_variance)
         if residuals is not None:
-            Sigma = Sigma + AU.marker_covariance(
-                kin, points, qf, pres, amplitude, noise_mm=noise_mm, anatomical=anat,
-                residual_m=residuals, expected_ms=AU.expected_residual_ms(Jm, K, Sigma))
+            expected = AU.expected_residual_ms(Jm, K, Sigma)
+            direct = (AU.misfit_angle_variance(kin, points, qf, pres, residuals, expected, a, measured_m=vectors)
+                      if AU.DIRECT_MISFIT else 0.0)
+            Sigma = Sigma + AU.marker_covariance(kin, points, qf, pres, amplitude, noise_mm=noise_mm, anatomical=anat,
+                                                 residual_m=residuals, expected_ms=expected)
         DK = D @ K
-        var_u = AU.quadratic_forms(DK, Sigma)
+        var_u = AU.quadratic_forms(DK, Sigma) + direct
         if trunk is not None:
             var_u = var_u + AU.trunk_angle_variance(kin, points, qf, DK, trunk)
         unc = np.where(unseen, np.inf, np.sqrt(np.maximum(var_u, 0.0)))

@@ -118,7 +118,7 @@ def _still_thorax_status(inputs, rec):
     return angle_determinacy(b.kin, b.points, rec.q_rad, targets.present, b.protocol.weights,
                              held=b.held, locked=b.locked,
                              every=max(1, int(round(DETERMINACY_PERIOD_S / dt))), residuals_m=rec.residuals_m,
-                             thorax_assumed_still=True)
+                             thorax_assumed_still=True, marker_positions_m=targets.positions_m)
 
 
 def compare_bone_trial(run: BoneLabRun, /, *, methods: Sequence[str] = ("pf", "ls")) -> tuple[TruthComparison, dict]:

@@ -307,3 +307,56 @@ def test_the_still_thorax_cost_is_what_the_solver_does_with_an_unseen_trunk(sett
                  "GH_phadke_Z_flexion", "GH_phadke_Y_internal_rotation", "HT_X_elevation", "HT_Y_axial_rotation"):
         j = names.index(name)
         assert spread[j] == pytest.approx(np.degrees(u[j]), rel=0.2, abs=0.1), (name, spread[j], np.degrees(u[j]))
+
+
+def _turned(r: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Rodrigues: the points r (k, 3) turned by the rotation vector w about their centroid."""
+    th = np.linalg.norm(w)
+    k = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]]) / th
+    R = np.eye(3) + np.sin(th) * k + (1 - np.cos(th)) * k @ k
+    c = r.mean(axis=0)
+    return (r - c) @ R.T + c
+
+
+def test_a_turned_cluster_turns_its_frame_and_a_shifted_one_does_not(setting):
+    """The misfit term with the markers' directions (AU.misfit_angle_variance): scapula markers
+    turned by 1 deg about their centroid away from the model (a bone the model does not follow) give
+    each ST and GH angle an SD equal to the change of that angle when the ISB frame is turned so
+    (computed here with an exact rotation, not the function's first-order one), within 5 % of the
+    turn (the first-order terms: an angle that hardly changes is compared in absolute terms); the
+    same markers shifted by 20 mm give nothing (with the distances alone the shift would be taken
+    for a turn)."""
+    from exubio.model.angles import angles_of_frames
+    from exubio.synth.simulate import reference_postures
+
+    model, protocol, kin, pts = setting
+    q0 = reference_postures(model)[3][None]
+    P = kin.points(q0, pts)[0]
+    scap = np.flatnonzero(np.array([model.segments[i].name for i in pts.segment_index]) == "scapula")
+    present = np.ones((1, len(pts.segment_index)), dtype=bool)
+    expected = np.zeros((1, len(pts.segment_index)))  # no noise, no artefact: every residual is misfit
+    names, _ = anatomical_table(model, q0[0])
+    w = np.radians(1.0) * np.array([0.3, -0.8, 0.5]) / np.linalg.norm([0.3, -0.8, 0.5])
+    frames = segment_anatomical_rotations(model, q0, kinematics=kin)
+    k = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]]) / np.linalg.norm(w)
+    Rw = np.eye(3) + np.sin(np.linalg.norm(w)) * k + (1 - np.cos(np.linalg.norm(w))) * k @ k
+    bone = dict(frames, scapula=Rw @ frames["scapula"])
+    sets = list(angles_of_frames(frames))
+    truth = np.concatenate([angles_of_frames(bone)[s] for s in sets], axis=-1)[0]
+    model_angles = np.concatenate([angles_of_frames(frames)[s] for s in sets], axis=-1)[0]
+    M = P.copy()
+    M[scap] = _turned(P[scap], w)
+    res = np.linalg.norm(M - P, axis=1)[None]
+    var = AU.misfit_angle_variance(kin, pts, q0, present, res, expected, len(names), measured_m=M[None])[0]
+    for name in ("ST_Y_internal_rotation", "ST_X_upward_rotation", "ST_Z_posterior_tilt", "GH_phadke_X_elevation",
+                 "GH_phadke_Z_flexion", "GH_phadke_Y_internal_rotation"):
+        j = names.index(name)
+        err = abs(np.angle(np.exp(1j * (truth[j] - model_angles[j]))))
+        assert np.sqrt(var[j]) == pytest.approx(err, abs=0.05 * np.linalg.norm(w)), name
+    S = P.copy()
+    S[scap] += np.array([0.0, 0.02, 0.0])
+    shifted = AU.misfit_angle_variance(kin, pts, q0, present, np.linalg.norm(S - P, axis=1)[None], expected,
+                                       len(names), measured_m=S[None])[0]
+    assert np.abs(shifted).max() < 1e-12
+    iso = AU.misfit_angle_variance(kin, pts, q0, present, np.linalg.norm(S - P, axis=1)[None], expected, len(names))[0]
+    assert iso[names.index("ST_X_upward_rotation")] > np.radians(5.0) ** 2

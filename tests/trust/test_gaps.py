@@ -141,7 +141,7 @@ def test_a_one_frame_gap_is_said_in_its_frame(session):
     held = held_mask(model, protocol)
     every1 = angle_determinacy(kin, tracked_points(kin, protocol), rec.q_rad, np.isfinite(rec.residuals_m),
                                protocol.weights, held=held, locked=bind(model, protocol).locked,
-                               every=1, residuals_m=rec.residuals_m)
+                               every=1, residuals_m=rec.residuals_m, marker_positions_m=rec.measured_m)
     assert np.array_equal(det.uncertainty_rad[402], every1.uncertainty_rad[402])
     assert np.array_equal(det.status[402], every1.status[402])
     assert not np.array_equal(det.uncertainty_rad[402], det.uncertainty_rad[401])
