@@ -108,7 +108,11 @@ PATH_PLACEHOLDERS = {
 KNOWN_CHANGES: tuple = ()
 """Changes made on purpose since the base the tests compare with (tests/project/test_same_outputs.py BASE),
 each a (side, pattern, replacement, why) undone before the comparison. Empty: the base moved to
-30ce9ee (5 December 2026), after issue 38's compiled kernels (numba: LS's Gauss-Newton terms and
+b09a162 (5 December 2026, issue 33): a segment the model does not follow turns its frame in the
+angles' uncertainty (exubio.trust.angle_uncertainty.misfit_angle_variance), which moves u, and the
+status where u passes its bound, on trials whose model misfits; the demo changed only in the
+uncertainty's definition line, and no real trial's verdict changed (studies/README.md, "A misfit
+turns its segment's frame"). Before, it moved to 30ce9ee (5 December 2026), after issue 38's compiled kernels (numba: LS's Gauss-Newton terms and
 rates, forward kinematics, the decode, the inverse map, the ISB angles) moved every output by
 round-off, checked before the move (`--base da435a6`): demo, q 2.3e-9 rad (PF) and 8.8e-10 (LS),
 q-dot 1.3e-8 rad/s, q-ddot 1.1e-7 rad/s^2, model points and residuals 3e-11 m, the angles' CSV and
