@@ -262,17 +262,16 @@ def test_a_file_marked_sgi_mips_that_is_not_big_endian_is_refused_not_crashed(tm
 
 def test_a_description_longer_than_127_characters_is_read_with_a_finding(tmp_path):
     """ezc3d writes a 160-character group description with a length byte its own reader takes as
-    negative (KINARM's Dexterit-E writes such files): ezc3d cannot read the file back, exubio can."""
-    import ezc3d
-
+    negative (KINARM's Dexterit-E writes such files): ezc3d cannot read the file back (it reports a
+    format that is not standard, after some 35 s: not run here), exubio can."""
     traj = make_trajectories(["A", "B"])
 
     def long_description(c3d):
         c3d["parameters"]["POINT"]["__METADATA__"]["DESCRIPTION"] = "x" * 160
 
     path = write_custom(tmp_path / "kinarm.c3d", traj, edit=long_description)
-    with pytest.raises(OSError):
-        ezc3d.c3d(str(path))
+    data = path.read_bytes()
+    assert data[data.index(b"POINT") + len("POINT") + 2] == 160  # the group's description length byte
     got = read_c3d(path)
     np.testing.assert_allclose(got.positions_m, traj.positions_m, atol=TOL_M)
     (finding,) = got.input_findings

@@ -184,6 +184,7 @@ def test_the_command_writes_the_issue_s_json(tmp_path):
 
 
 @needs_data
+@pytest.mark.slow  # two LS reconstructions of a bone trial, about 4 s each
 @pytest.mark.parametrize("direct", [True, False])
 def test_a_girdle_the_model_cannot_follow_is_in_the_uncertainty(direct, monkeypatch):
     """ARTANIM's fluoroscopy abduction with every skin marker carried by its bone (no soft tissue):
