@@ -251,6 +251,31 @@ def expected_residual_ms(J: np.ndarray, K: np.ndarray, sigma: np.ndarray, /) -> 
     return d.sum(axis=2) / 3.0
 
 
+def frame_angle_turns(frames: dict, turned, /) -> np.ndarray:
+    """(b, n, 3): the change of the frame angles (``angles_of_frames``, its order; n = 18 with every
+    shoulder frame) per unit of a small rotation w about the thorax's axes applied to the ISB frames
+    ``frames`` (segment -> (b, 3, 3)) for which ``turned(name)`` is true, the others kept (first order,
+    a forward difference of 1e-6 rad, wrapped)."""
+    from exubio.model.angles import angles_of_frames
+
+    sets = list(angles_of_frames(frames))
+
+    def table(fr):
+        a = angles_of_frames(fr)
+        return np.concatenate([a[s] for s in sets], axis=-1)
+
+    base = table(frames)
+    G = np.zeros(base.shape + (3,))
+    eps = 1e-6
+    for i in range(3):
+        w = np.zeros(3)
+        w[i] = eps
+        Q = np.eye(3) + _skew(w)
+        moved = {s: (Q @ F if turned(s) else F) for s, F in frames.items()}
+        G[..., i] = ((table(moved) - base + np.pi) % (2 * np.pi) - np.pi) / eps
+    return G
+
+
 MISFIT_MIN_MARKERS = 3
 """A segment's misfit turns its frame (``misfit_angle_variance``) only where at least this many of
 its markers are seen: fewer define no rotation."""
@@ -281,7 +306,7 @@ def misfit_angle_variance(kin: Kinematics, points: PointSet, qf: np.ndarray, pre
     the model, ST upward rotation and GH elevation were 11-28 deg off, and the step's misfit term
     gave u of 4-11 deg). Frame angles only (the first columns, as ``angles_of_frames`` orders them);
     the distal angles, coordinates, get nothing here."""
-    from exubio.model.angles import anatomical_frames, angles_of_frames, segment_anatomical_rotations
+    from exubio.model.angles import anatomical_frames, segment_anatomical_rotations
 
     model = kin.model
     b = qf.shape[0]
@@ -289,15 +314,7 @@ def misfit_angle_variance(kin: Kinematics, points: PointSet, qf: np.ndarray, pre
     P = kin.points(qf, points)
     names = [s.name for s in model.segments]
     frames = segment_anatomical_rotations(model, qf, kinematics=kin, frames=anatomical_frames(model), rotations=R)
-    sets = list(angles_of_frames(frames))
-
-    def table(fr):
-        a = angles_of_frames(fr)
-        return np.concatenate([a[s] for s in sets], axis=-1)
-
-    base = table(frames)
     out = np.zeros((b, n_angles))
-    eps = 1e-6
     for s_idx in np.unique(points.segment_index):
         seg = names[s_idx]
         if seg not in frames:
@@ -316,13 +333,7 @@ def misfit_angle_variance(kin: Kinematics, points: PointSet, qf: np.ndarray, pre
             v = np.maximum(np.nan_to_num(np.nanmean(np.where(ok, residual_m[:, sel], np.nan) ** 2, axis=1) / 3.0 - exp,
                                          nan=0.0), 0.0)
         enough = cnt >= MISFIT_MIN_MARKERS
-        G = np.zeros((b, base.shape[1], 3))
-        for i in range(3):
-            w = np.zeros(3)
-            w[i] = eps
-            moved = dict(frames)
-            moved[seg] = (np.eye(3) + _skew(w)) @ frames[seg]  # first order: this frame alone turns by w
-            G[:, :, i] = ((table(moved) - base + np.pi) % (2 * np.pi) - np.pi) / eps
+        G = frame_angle_turns(frames, lambda name, seg=seg: name == seg)  # this frame alone turns
         if measured_m is not None:
             e = measured_m[:, sel] - P[:, sel]
             use = ok & np.isfinite(e).all(axis=2)
@@ -354,7 +365,7 @@ def trunk_angle_variance(kin: Kinematics, points: PointSet, qf: np.ndarray, DK: 
     joint and the ellipsoid are fixed in the thorax); the angles relative to the (assumed) thorax
     (SC, ST, HT) of the bones themselves turn by omega, the relative ones (AC, GH, distal) do not. The
     error is the difference: E = DK B - G, variance E C E^T."""
-    from exubio.model.angles import anatomical_frames, angles_of_frames, segment_anatomical_rotations
+    from exubio.model.angles import anatomical_frames, segment_anatomical_rotations
 
     model = kin.model
     b = qf.shape[0]
@@ -369,23 +380,9 @@ def trunk_angle_variance(kin: Kinematics, points: PointSet, qf: np.ndarray, DK: 
     T6[:, :3, :3] = T
     T6[:, 3:, 3:] = T
     frames = segment_anatomical_rotations(model, qf, kinematics=kin, frames=anatomical_frames(model), rotations=R)
-    sets = list(angles_of_frames(frames))
-
-    def table(fr):
-        a = angles_of_frames(fr)
-        return np.concatenate([a[s] for s in sets], axis=-1)
-
-    base = table(frames)
-    n_a = DK.shape[1]
-    G = np.zeros((b, n_a, 6))
-    eps = 1e-6
-    for i in range(3):
-        w = np.zeros(3)
-        w[i] = eps
-        Q = np.eye(3) + _skew(w)  # first order: the bones turn by w about the thorax's axes
-        moved = {s: (F if s == "thorax" else Q @ F) for s, F in frames.items()}
-        d = (table(moved) - base + np.pi) % (2 * np.pi) - np.pi
-        G[:, : d.shape[1], i] = d / eps
+    turns = frame_angle_turns(frames, lambda name: name != "thorax")  # the bones turn about the thorax's axes
+    G = np.zeros((b, DK.shape[1], 6))
+    G[:, : turns.shape[1], :3] = turns
     E = (DK @ B - G) @ T6  # (b, a, 6): per unit of the trunk's motion in its own axes
     names_seg = names
     hum = names_seg.index("humerus") if "humerus" in names_seg else None
