@@ -285,7 +285,7 @@ DIRECT_MISFIT = True  # benchmarks and studies only: False leaves the misfit to 
 
 def misfit_angle_variance(kin: Kinematics, points: PointSet, qf: np.ndarray, present: np.ndarray,
                           residual_m: np.ndarray, expected_ms: np.ndarray, n_angles: int, /, *,
-                          measured_m: np.ndarray | None = None) -> np.ndarray:
+                          measured_m: np.ndarray | None = None, frames: dict | None = None) -> np.ndarray:
     """(b, n_angles) rad^2: what a segment the model does not follow adds to the angles of its frame.
 
     A segment whose markers lie farther from their model points than noise and the artefact leave
@@ -305,15 +305,15 @@ def misfit_angle_variance(kin: Kinematics, points: PointSet, qf: np.ndarray, pre
     every skin marker carried by its bone: in an arm extension the scapula markers lay 18-73 mm from
     the model, ST upward rotation and GH elevation were 11-28 deg off, and the step's misfit term
     gave u of 4-11 deg). Frame angles only (the first columns, as ``angles_of_frames`` orders them);
-    the distal angles, coordinates, get nothing here."""
-    from exubio.model.angles import anatomical_frames, segment_anatomical_rotations
+    the distal angles, coordinates, get nothing here. ``frames``: the ISB frames at qf
+    (``segment_anatomical_rotations``) where the caller has them."""
+    from exubio.model.angles import segment_anatomical_rotations
 
     model = kin.model
     b = qf.shape[0]
-    R, _ = kin.poses(qf)
     P = kin.points(qf, points)
     names = [s.name for s in model.segments]
-    frames = segment_anatomical_rotations(model, qf, kinematics=kin, frames=anatomical_frames(model), rotations=R)
+    frames = segment_anatomical_rotations(model, qf, kinematics=kin) if frames is None else frames
     out = np.zeros((b, n_angles))
     for s_idx in np.unique(points.segment_index):
         seg = names[s_idx]
@@ -333,6 +333,8 @@ def misfit_angle_variance(kin: Kinematics, points: PointSet, qf: np.ndarray, pre
             v = np.maximum(np.nan_to_num(np.nanmean(np.where(ok, residual_m[:, sel], np.nan) ** 2, axis=1) / 3.0 - exp,
                                          nan=0.0), 0.0)
         enough = cnt >= MISFIT_MIN_MARKERS
+        if not (enough & (v > 0)).any():
+            continue  # no misfit in these frames: nothing turns (the usual case)
         G = frame_angle_turns(frames, lambda name, seg=seg: name == seg)  # this frame alone turns
         if measured_m is not None:
             e = measured_m[:, sel] - P[:, sel]

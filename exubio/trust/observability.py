@@ -465,8 +465,8 @@ def _angle_block(kin: Kinematics, points: PointSet, qf: np.ndarray, pres: np.nda
         direct = 0.0  # a misfit segment's frame turned (AU.misfit_angle_variance)
         if residuals is not None:
             expected = AU.expected_residual_ms(Jm, K, Sigma)
-            direct = (AU.misfit_angle_variance(kin, points, qf, pres, residuals, expected, a, measured_m=vectors)
-                      if AU.DIRECT_MISFIT else 0.0)
+            if AU.DIRECT_MISFIT:
+                direct = AU.misfit_angle_variance(kin, points, qf, pres, residuals, expected, a, measured_m=vectors, frames=frames_isb)
             Sigma = Sigma + AU.marker_covariance(kin, points, qf, pres, amplitude, noise_mm=noise_mm, anatomical=anat,
                                                  residual_m=residuals, expected_ms=expected)
         DK = D @ K
