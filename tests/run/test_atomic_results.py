@@ -47,9 +47,11 @@ def long_trial(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def ctrl_c_trials(tmp_path_factory) -> list[Path]:
-    """Two trials long enough (40 s at 100 Hz) that the Ctrl-C after a few seconds comes mid-run."""
+    """Two trials long enough (120 s at 100 Hz) that the Ctrl-C after a few seconds comes mid-run (at
+    40 s each, a Dask run of both methods finished within the 5 s before the signal once the checks
+    got faster)."""
     folder = tmp_path_factory.mktemp("ctrl_c")
-    return [_trial(folder / "long.c3d", 40.0, seed=4), _trial(folder / "other.c3d", 40.0, seed=5)]
+    return [_trial(folder / "long.c3d", 120.0, seed=4), _trial(folder / "other.c3d", 120.0, seed=5)]
 
 
 def set_state(out: Path, stem: str, method: str) -> str:
