@@ -42,6 +42,7 @@ angle near +-90 deg.
 from __future__ import annotations
 
 import warnings
+from typing import Mapping
 
 import numpy as np
 
@@ -49,7 +50,7 @@ from exubio.model.kinematics import Kinematics, PointSet
 from exubio.trust.design import constrained_design
 from exubio.trust.sta_amplitude import STAAmplitude
 
-__all__ = ["misfit_angle_variance", "BOUND_SETS", "bound_applies", "NOISE_MM", "U_BOUND_DEG", "GIMBAL_MARGIN_DEG", "marker_covariance", "sensitivity", "gimbal_mask",
+__all__ = ["ellipsoid_from_skin", "misfit_angle_variance", "skin_ellipsoid_variance", "BOUND_SETS", "bound_applies", "NOISE_MM", "U_BOUND_DEG", "GIMBAL_MARGIN_DEG", "marker_covariance", "sensitivity", "gimbal_mask",
            "expected_residual_ms", "UNCERTAINTY_DEFINITION"]
 
 NOISE_MM = 1.0
@@ -390,3 +391,53 @@ def trunk_angle_variance(kin: Kinematics, points: PointSet, qf: np.ndarray, DK: 
     hum = names_seg.index("humerus") if "humerus" in names_seg else None
     theta = _rotation_angle(R[:, hum]) if hum is not None else np.zeros(b)
     return np.einsum("bai,bij,baj->ba", E, amplitude.trunk_at(theta), E)
+
+
+def ellipsoid_from_skin(calibration, /) -> bool:
+    """Whether a calibration (its record: ``CalibrationReport.to_dict()``, which a calibrated model
+    carries as ``model.metadata["calibration"]``, or the report itself) fitted the thorax ellipsoid
+    through scapula poses the skin markers gave away from the rest posture: a scapula movement trial
+    (``--scapula-trial``) or several static postures."""
+    if not calibration:
+        return False
+    get = calibration.get if isinstance(calibration, Mapping) else (lambda key: getattr(calibration, key, None))
+    scapula = (get("functional") or {}).get("scapula") or {}
+    return bool(scapula.get("used")) or len(get("ellipsoid_poses_mm") or ()) > 1
+
+
+def skin_ellipsoid_variance(kin: Kinematics, qf: np.ndarray, amplitude: STAAmplitude, n_angles: int, /, *,
+                            frames: dict | None = None) -> np.ndarray:
+    """(b, n_angles) rad^2: what a thorax ellipsoid fitted through the scapula's skin markers
+    (``ellipsoid_from_skin``) adds to the angles at poses qf (b, m).
+
+    An ellipsoid calibrated at rest holds the model's scapula on a surface its skin markers did not
+    shape away from rest, and so takes back part of the skin's rigid sliding over the scapula (the
+    step K carries the rest). An ellipsoid fitted through the poses the skin markers gave over a
+    movement has taken that sliding into its shape: the model's scapula then turns with its marker
+    cluster. The scapula's ISB frame is therefore taken as turned by the cluster's whole rigid
+    rotation of the artefact model (rotation vector covariance C_rot theta^2 in the scapula's ISB
+    axes, theta the humerus's rotation from rest), and every angle of that frame moves with it (ST,
+    and GH, whose proximal frame it is). Measured on the bone-pin trials of one subject (ISB STA
+    data-sharing sample, S2M; ``studies/scapula_trial_bone.py``): the ellipsoid fitted on a scapula
+    trial put ST upward rotation 1-10 deg farther from the bone than the static calibration in all 9
+    pairs of calibration and trial, and within +-2u of the bone in only 40-98 % of frames without
+    this term. Frame angles only (the first columns, as ``angles_of_frames`` orders them)."""
+    from exubio.model.angles import segment_anatomical_rotations
+
+    model = kin.model
+    b = qf.shape[0]
+    out = np.zeros((b, n_angles))
+    names = [s.name for s in model.segments]
+    if "scapula" not in names or "humerus" not in names:
+        return out
+    C6, _, measured = amplitude.of("scapula")
+    if not measured:
+        return out
+    R, _ = kin.poses(qf)
+    theta = _rotation_angle(R[:, names.index("humerus")])
+    frames = segment_anatomical_rotations(model, qf, kinematics=kin) if frames is None else frames
+    axes = frames["scapula"]
+    Cw = axes @ np.asarray(C6)[None, :3, :3] @ np.swapaxes(axes, -1, -2) * (theta ** 2)[:, None, None]
+    G = frame_angle_turns(frames, lambda name: name == "scapula")  # (b, 18, 3) per turn about the thorax axes
+    out[:, : G.shape[1]] = np.einsum("bai,bij,baj->ba", G, Cw, G)
+    return out

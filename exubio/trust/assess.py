@@ -121,12 +121,12 @@ def _reference_postures(binding: Binding) -> np.ndarray:
     return q
 
 
-def _scapula_calibrated(calibration: Any) -> bool:
-    """The session's calibration fitted the thorax ellipsoid on a scapula trial (or several statics)."""
-    if calibration is None:
-        return False
-    sc = (getattr(calibration, "functional", None) or {}).get("scapula") or {}
-    return bool(sc.get("used")) or len(getattr(calibration, "ellipsoid_poses_mm", ()) or ()) > 1
+def _scapula_calibrated(calibration: Any, model: Model) -> bool:
+    """The session's calibration, or the one the model records, fitted the thorax ellipsoid on a scapula
+    trial (or several statics): exubio.trust.angle_uncertainty.ellipsoid_from_skin, the rule u follows."""
+    from exubio.trust.angle_uncertainty import ellipsoid_from_skin
+
+    return ellipsoid_from_skin(calibration) or ellipsoid_from_skin((model.metadata or {}).get("calibration"))
 
 
 def angle_determinacy_of_protocol(binding: Binding, /, *, bounded: bool = True) -> tuple[AngleDeterminacy, np.ndarray]:
@@ -247,7 +247,7 @@ def assess_trial(binding: Binding, targets: MarkerTargets, recons: Sequence[Reco
             frames={"not_converged": int((status == FrameStatus.NOT_CONVERGED).sum()),
                     "too_few_markers": int((status == FrameStatus.TOO_FEW_MARKERS).sum())},
             info=r.info, gaps=r.gaps, agreement_deg=agreement, mismatch=mismatch[r.method], protocol=protocol,
-            scapula_calibrated=_scapula_calibrated(calibration))
+            scapula_calibrated=_scapula_calibrated(calibration, model))
         quality[r.method] = judge(evidence)
     return TrialAssessment(dets, lims, quality, agreement, tuple(label_findings), not_solved, angles, structural,
                            mismatch)

@@ -10,10 +10,9 @@ where N spans the null space of G (the directions the ellipsoid constraints allo
 locked coordinates are left out. s_j in degrees per millimetre of marker noise is the
 coordinate's *noise gain*: about 0.1-0.5 deg/mm for a well-observed joint, and it grows without
 bound where the markers cannot see a rotation (a clavicle's axial rotation seen through two markers
-on its axis, a segment with no marker, or the middle angle of a Cardan sequence near +-90 deg,
-where the first and last rotations act about the same axis). A coordinate whose gain exceeds
-``UNDETERMINED_DEG_PER_MM`` is *undetermined* in that frame: its value there comes from the
-method's regularisation and dynamics, not from the markers, and it is marked so in every output.
+on its axis, a segment with no marker, or a Cardan sequence's middle angle near +-90 deg). A
+coordinate whose gain exceeds ``UNDETERMINED_DEG_PER_MM`` is *undetermined* in that frame: its value
+comes from the method's regularisation and dynamics, not the markers, and every output says so.
 """
 from __future__ import annotations
 
@@ -462,15 +461,16 @@ def _angle_block(kin: Kinematics, points: PointSet, qf: np.ndarray, pres: np.nda
         frames_isb = segment_anatomical_rotations(model, qf, kinematics=kin)
         anat = {s_: frames_isb[s_] for s_ in ("scapula", "humerus") if s_ in frames_isb}
         Sigma = AU.marker_covariance(kin, points, qf, pres, amplitude, noise_mm=noise_mm, anatomical=anat)
-        direct = 0.0  # a misfit segment's frame turned (AU.misfit_angle_variance)
+        direct = 0.0  # a misfit segment's frame turned (AU.misfit_angle_variance), in the frames with residuals
         if residuals is not None:
             expected = AU.expected_residual_ms(Jm, K, Sigma)
-            if AU.DIRECT_MISFIT:
-                direct = AU.misfit_angle_variance(kin, points, qf, pres, residuals, expected, a, measured_m=vectors, frames=frames_isb)
+            direct = (AU.misfit_angle_variance(kin, points, qf, pres, residuals, expected, a, measured_m=vectors,
+                                               frames=frames_isb) if AU.DIRECT_MISFIT else 0.0)
             Sigma = Sigma + AU.marker_covariance(kin, points, qf, pres, amplitude, noise_mm=noise_mm, anatomical=anat,
                                                  residual_m=residuals, expected_ms=expected)
-        DK = D @ K
-        var_u = AU.quadratic_forms(DK, Sigma) + direct
+        var_u = AU.quadratic_forms(DK := D @ K, Sigma) + direct
+        if AU.ellipsoid_from_skin((model.metadata or {}).get("calibration")):  # the scapula turns with its skin:
+            var_u = var_u + AU.skin_ellipsoid_variance(kin, qf, amplitude, a, frames=frames_isb)  # its frame too
         if trunk is not None:
             var_u = var_u + AU.trunk_angle_variance(kin, points, qf, DK, trunk)
         unc = np.where(unseen, np.inf, np.sqrt(np.maximum(var_u, 0.0)))

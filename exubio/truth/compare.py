@@ -125,13 +125,13 @@ def compare_bone_trial(run: BoneLabRun, /, *, methods: Sequence[str] = ("pf", "l
     """Reconstruct ``run`` with each method (its verdict as ``exubio reconstruct`` gives it) and
     compare its angles with the bone's. Returns the comparison and the reconstructions by method."""
     from ..model.load import model_from_mapping
-    from ..run.inputs import Session, generic_of
+    from ..run.inputs import Session
     from ..run.pipeline import assess_inputs, load_inputs, reconstruct
 
     model = model_from_mapping(dict(run.model_mapping), f"{run.trial.path} (subject model)",
                                name=str(run.model_mapping["name"]))
     protocol = _protocol(run, model)
-    session = Session(model, protocol, *generic_of(model, protocol))
+    session = Session(model, protocol, model, protocol)  # the subject model is its own generic (no static was fitted)
     inputs = load_inputs(run.trajectories, session)
     recs, failed = {}, {}
     for m in methods:

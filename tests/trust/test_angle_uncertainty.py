@@ -360,3 +360,80 @@ def test_a_turned_cluster_turns_its_frame_and_a_shifted_one_does_not(setting):
     assert np.abs(shifted).max() < 1e-12
     iso = AU.misfit_angle_variance(kin, pts, q0, present, np.linalg.norm(S - P, axis=1)[None], expected, len(names))[0]
     assert iso[names.index("ST_X_upward_rotation")] > np.radians(5.0) ** 2
+
+
+def test_a_skin_fitted_ellipsoid_turns_the_scapula_frame_by_the_clusters_whole_rotation(setting):
+    """AU.skin_ellipsoid_variance against exact rotations: the scapula's ISB frame turned by sampled
+    rotation vectors of the artefact model's scapula rotation covariance (in its ISB axes, times
+    theta^2, theta the humerus's rotation from rest; scaled by 1e-2 so that first order holds) moves
+    each ST and GH angle with the SD the function gives (times 1e-2), within 5 %; the thorax-relative
+    humerus (HT) does not move; at rest (theta = 0) the term is zero."""
+    from exubio.model.angles import angles_of_frames
+    from exubio.synth.simulate import reference_postures
+
+    model, protocol, kin, pts = setting
+    q0 = reference_postures(model)[3][None]
+    names, _ = anatomical_table(model, q0[0])
+    var = AU.skin_ellipsoid_variance(kin, q0, _shipped_amplitude(), len(names))[0]
+    frames = segment_anatomical_rotations(model, q0, kinematics=kin)
+    sets = list(angles_of_frames(frames))
+    base = np.concatenate([angles_of_frames(frames)[s] for s in sets], axis=-1)[0]
+    R, _ = kin.poses(q0)
+    hum = R[0, [s.name for s in model.segments].index("humerus")]
+    theta = np.arccos(np.clip((np.trace(hum) - 1) / 2, -1, 1))
+    assert theta > 0.3  # a posture away from rest
+    axes = frames["scapula"][0]
+    Cw = axes @ _shipped_amplitude().of("scapula")[0][:3, :3] @ axes.T * theta ** 2
+    eps = 1e-2
+    rng = np.random.default_rng(7)
+    ws = rng.multivariate_normal(np.zeros(3), Cw * eps ** 2, size=4000)
+    moved = []
+    for w in ws:
+        a = np.linalg.norm(w)
+        k = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]]) / a
+        Rw = np.eye(3) + np.sin(a) * k + (1 - np.cos(a)) * k @ k
+        turned = dict(frames, scapula=Rw @ frames["scapula"])
+        moved.append(np.concatenate([angles_of_frames(turned)[s] for s in sets], axis=-1)[0])
+    sd = np.std(np.angle(np.exp(1j * (np.array(moved) - base))), axis=0) / eps
+    for name in ("ST_Y_internal_rotation", "ST_X_upward_rotation", "ST_Z_posterior_tilt", "GH_phadke_X_elevation",
+                 "GH_phadke_Z_flexion", "GH_phadke_Y_internal_rotation"):
+        j = names.index(name)
+        assert np.sqrt(var[j]) == pytest.approx(sd[j], rel=0.05), name
+    assert var[names.index("HT_X_elevation")] == 0.0
+    assert np.sqrt(var[names.index("ST_X_upward_rotation")]) > np.radians(2.0)
+    assert np.abs(AU.skin_ellipsoid_variance(kin, np.zeros((1, q0.shape[1])), _shipped_amplitude(), len(names))).max() < 1e-20
+
+
+def test_a_calibration_that_fitted_the_ellipsoid_on_skin_poses_widens_st_and_gh_only(setting):
+    """angle_determinacy with a model whose calibration record says the ellipsoid was fitted on a
+    scapula trial (or several statics: AU.ellipsoid_from_skin): ST and GH angles' u grow by the skin
+    term, HT and the distal angles' u stay bit for bit; a record without such a fit changes nothing."""
+    import dataclasses
+
+    from exubio.synth.simulate import reference_postures
+
+    model, protocol, kin, pts = setting
+    q = np.stack([reference_postures(model)[3], reference_postures(model)[4]])
+    present = np.ones((2, len(pts.segment_index)), dtype=bool)
+    b = bind(model, protocol)
+
+    def u_of(metadata_calibration):
+        m = dataclasses.replace(model, metadata={**dict(model.metadata), "calibration": metadata_calibration})
+        k = Kinematics(m)
+        det = angle_determinacy(k, tracked_points(k, protocol), q, present, protocol.weights, held=b.held,
+                                locked=b.locked)
+        return det.names, det.uncertainty_rad
+
+    names, u0 = u_of(None)
+    _, u_static = u_of({"functional": {"scapula": {"used": False, "reason": "too little rotation"}},
+                        "ellipsoid_poses_mm": {"static": 0.1}})
+    _, u_trial = u_of({"functional": {"scapula": {"used": True}}})
+    _, u_statics = u_of({"ellipsoid_poses_mm": {"static": 0.1, "raised": 2.0}})
+    assert np.array_equal(u0, u_static)
+    assert np.array_equal(u_trial, u_statics)
+    for j, name in enumerate(names):
+        if name.startswith(("ST_", "GH_")):
+            assert (u_trial[:, j] > u0[:, j]).all(), name
+        elif not name.startswith(("SC_", "AC_")):
+            assert np.array_equal(u_trial[:, j], u0[:, j]), name
+    assert AU.ellipsoid_from_skin(None) is False
