@@ -70,6 +70,9 @@ def table(comps: list, title: str) -> str:
         (c.verdicts.get(m, "-")[:40] + ("..." if len(c.verdicts.get(m, "")) > 40 else "")) for c in comps
         for m in ("pf", "ls")) + " |"
     rows.append(verdict)
+    rows.append("| bone AC off the model clavicle's sphere, median / p95 (mm) | " + " | ".join(
+        ("-" if c.clavicle_gap_mm is None else f"{c.clavicle_gap_mm['median']:.0f} / {c.clavicle_gap_mm['p95']:.0f}")
+        for c in comps for m in ("pf", "ls")) + " |")
     for a in SHOWN:
         rows.append(f"| {a} | " + " | ".join(
             _cell(c.angles[a].get(m)) if not c.verdicts.get(m, "").startswith("failed") else "PF failed"

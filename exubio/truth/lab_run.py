@@ -36,7 +36,7 @@ from ..model.anatomy import isb_frame
 from ..types import Trajectories
 from .sta_format import BoneTrial
 
-__all__ = ["ThoraxAssumption", "BoneLabRun", "REST_WINDOW_S", "REST_MAX_DEG", "setup_lab_run", "truth_frames"]
+__all__ = ["ThoraxAssumption", "BoneLabRun", "REST_WINDOW_S", "REST_MAX_DEG", "clavicle_gap_m", "setup_lab_run", "truth_frames"]
 
 REST_WINDOW_S = 0.3
 """The rest window: at most the first 0.3 s of the trial ..."""
@@ -174,6 +174,22 @@ def truth_frames(trial: BoneTrial, assumption: ThoraxAssumption) -> dict[str, np
     scap = {k: assumption.to_thorax(v) for k, v in _scapula_points(trial).items()}
     hum = {k: assumption.to_thorax(v) for k, v in _humerus_points(trial).items()}
     return {"scapula": _frame_series("scapula", scap, trial.path), "humerus": _frame_series("humerus", hum, trial.path)}
+
+
+def clavicle_gap_m(run: "BoneLabRun", /) -> np.ndarray:
+    """(n,) m: how far the bone's AC, carried by the pinned scapula (the subject model's AC moved with the
+    bone's ISB frame from its rest pose), lies off the sphere about the model's SC on which the model's
+    rigid clavicle keeps it, with the thorax still as assumed (NaN where the scapula is not seen). Zero at
+    rest by construction; what it grows to is what no reconstruction under the assumption can follow (a
+    trunk that moved in the lab, a girdle that is not the model's): the comparison's error there is the
+    assumption's as much as exubio's."""
+    segs = {s["name"]: s for s in run.model_mapping["segments"]}
+    pts = {k: np.asarray(v, dtype=float) * _MM for k, v in segs["scapula"]["points_mm"].items()}
+    sc = np.asarray(segs["clavicle"]["points_mm"]["SC"], dtype=float) * _MM
+    rest = isb_frame("scapula", {k: pts[k] for k in _SCAPULA_LANDMARKS}, fail=InputError)
+    aa = run.assumption.to_thorax(_scapula_points(run.trial)["AA"])
+    ac = aa + np.einsum("nij,j->ni", run.truth["scapula"], rest.T @ (pts["AC"] - pts["AA"]))
+    return np.abs(np.linalg.norm(ac - sc, axis=1) - np.linalg.norm(pts["AC"] - sc))
 
 
 def _rigid_map(F_from: np.ndarray, o_from: np.ndarray, F_to: np.ndarray, o_to: np.ndarray):

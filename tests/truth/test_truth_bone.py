@@ -238,3 +238,33 @@ def test_a_scapula_trial_takes_st_upward_rotation_away_from_the_bone_and_u_says_
     cover = {n: rows[n][1]["ST_X_upward_rotation"]["ls"].coverage for n in rows}
     assert cover["fitted"] >= 0.9 and cover["fitted, unrecorded"] < 0.9, cover
     assert rows["fitted, unrecorded"][0] == rows["fitted"][0]  # the term moves u and the status, not the angles
+
+
+def test_the_clavicle_gap_is_zero_for_the_models_girdle_and_what_a_moving_trunk_adds():
+    """lab_run.clavicle_gap_m on the simulator's bones (the model's own rigid clavicle, the thorax still):
+    under 0.5 mm in every frame; the same bones carried 60 mm along the lab's X after frame 40 (a trunk
+    that stepped): the AC the simulator's kinematics give, moved so, off the model's clavicle sphere by
+    exactly what the function returns (to 0.5 mm), which is 0 before frame 40."""
+    import dataclasses
+
+    from exubio.truth.lab_run import clavicle_gap_m
+
+    trial, q = _bone_trial("right")
+    run = setup_lab_run(trial, read_yaml(DEFAULT_MODEL, error=ModelError), rate_hz=60.0)
+    assert np.nanmax(clavicle_gap_m(run)) < 5e-4
+    shift = np.zeros((len(q), 3))
+    shift[40:, 0] = 0.06
+    moved = dataclasses.replace(trial, segments={k: dataclasses.replace(s, origin=s.origin + shift)
+                                                 for k, s in trial.segments.items()})
+    run2 = setup_lab_run(moved, read_yaml(DEFAULT_MODEL, error=ModelError), rate_hz=60.0)
+    model = load_model()
+    kin = Kinematics(model)
+    R, p = kin.poses(q)
+    c, s = model.segment_index("clavicle"), model.segment_index("scapula")
+    sc = p[0, c] + R[0, c] @ model.segment("clavicle").points["SC"]
+    ac = p[:, s] + np.einsum("nij,j->ni", R[:, s], model.segment("scapula").points["AC"]) + shift
+    length = np.linalg.norm(p[0, s] + R[0, s] @ model.segment("scapula").points["AC"] - sc)
+    expected = np.abs(np.linalg.norm(ac - sc, axis=1) - length)
+    gap = clavicle_gap_m(run2)
+    assert np.allclose(gap, expected, atol=5e-4), np.abs(gap - expected).max()
+    assert gap[40:].max() > 0.02 and gap[:40].max() < 5e-4
