@@ -124,6 +124,12 @@ _CAVEAT = (  # exubio.trust.mismatch.SCAPULA_TRIAL_CAVEAT as of 6 December 2026 
 
 
 KNOWN_CHANGES: tuple = (
+    ("base", re.escape("onto its markers); an ST, GH or HT angle is not measured"),
+     "onto its markers), and where the calibration fitted the thorax ellipsoid through the scapula's skin poses away "
+     "from rest (a scapula trial, several statics), the scapula's frame turned by its cluster's whole rotation; an ST, "
+     "GH or HT angle is not measured",
+     "6 December 2026: the uncertainty's definition names the skin-fitted ellipsoid's term (angle_uncertainty."
+     "skin_ellipsoid_variance), which no run of the sets computes (none calibrates on a scapula trial)"),
     ("base", re.escape("<angle>_u_deg). A scapula trial (`--scapula-trial`) fits the ellipsoid to the subject; "
                        "read GH in Phadke's sequence"), "<angle>_u_deg). Read GH in Phadke's sequence",
      "6 December 2026 (studies/README.md, 'A scapula trial against bone'): the note of the mismatch no check sees no "

@@ -74,7 +74,9 @@ UNCERTAINTY_DEFINITION = (
     "correlated, growing with the motion from the reference posture; exubio.trust.sta_amplitude), carried through "
     "the reconstruction's first-order sensitivity, and where a segment's markers fit the model worse than noise and "
     "the artefact explain, that misfit as a turn of the segment's frame (the rotation carrying its model points onto "
-    f"its markers); an ST, GH or HT angle is not measured where u > {U_BOUND_DEG:g} deg, any angle within "
+    "its markers), and where the calibration fitted the thorax ellipsoid through the scapula's skin poses away from "
+    "rest (a scapula trial, several statics), the scapula's frame turned by its cluster's whole rotation"
+    f"; an ST, GH or HT angle is not measured where u > {U_BOUND_DEG:g} deg, any angle within "
     f"{GIMBAL_MARGIN_DEG:g} deg of its sequence's gimbal lock (SC, AC and distal angles: u from coefficients borrowed "
     "from the humerus, no bone data)")
 
