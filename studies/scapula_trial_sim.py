@@ -7,11 +7,11 @@ ts, ai over the scapula landmarks), 1 mm noise and the bone-pin artefact (``--st
 cluster's rigid motion regressed on the pins, plus its residual). Calibrated on a static (the
 abduction's first frame held) alone, or on the static and the abduction as scapula trial; the flexion
 and the scaption are reconstructed with LS; per ST and GH angle the RMSE against the truth over every
-frame and the share of measured frames within +-2u (the skin-fitted ellipsoid's term, 
+frame and the share of measured frames within +-2u (the skin-fitted ellipsoid's term,
 ``angle_uncertainty.skin_ellipsoid_variance``, applies to the scapula-trial model as it records the
 fit; ``--no-skin-term`` leaves it out).
 
-    python studies/scapula_trial_sim.py            # ~1 min per seed; markdown to stdout
+    python studies/scapula_trial_sim.py            # ~5 min per seed on one core; markdown to stdout
     python studies/scapula_trial_sim.py --seeds 3
 """
 from __future__ import annotations
