@@ -44,6 +44,7 @@ def format_table(comp) -> str:
     lines = [f"{comp.file}: {comp.task}, {comp.n_frames} frames at {comp.rate_hz:g} Hz",
              f"assumed: {comp.assumption}",
              "verdicts: " + ", ".join(f"{m.upper()} {v}" for m, v in comp.verdicts.items()),
+             *(f"  {m.upper()} {line}" for m, lines in comp.reasons.items() for line in lines),
              *(f"note: {n}" for n in comp.notes),
              f"{'angle (deg)':32s} {'method':6s} {'RMSE':>6s} {'max':>6s} {'cover':>6s} {'u med':>6s} {'measured':>8s}"]
     for a, per in comp.angles.items():

@@ -18,7 +18,8 @@ from ..errors import ReconstructionError
 from ..model.angles import ANATOMICAL_COLUMNS, anatomical_table, angles_of_frames
 from .lab_run import BoneLabRun, clavicle_gap_m
 
-__all__ = ["AngleError", "TruthComparison", "TRUTH_ANGLES", "truth_angles", "compare_bone_trial", "angle_errors"]
+__all__ = ["AngleError", "TruthComparison", "TRUTH_ANGLES", "truth_angles", "compare_bone_trial", "angle_errors",
+           "main_reasons"]
 
 TRUTH_SETS = ("ST", "GH", "GH_phadke", "HT")
 TRUTH_ANGLES: tuple[str, ...] = tuple(c for c in ANATOMICAL_COLUMNS if c.startswith(("ST_", "GH_", "HT_")))
@@ -49,6 +50,7 @@ class TruthComparison:
     rate_hz: float
     notes: tuple[str, ...] = field(default_factory=tuple)
     clavicle_gap_mm: Mapping[str, float] | None = None  # lab_run.clavicle_gap_m's median, p95, max (mm)
+    reasons: Mapping[str, tuple[str, ...]] = field(default_factory=dict)  # per method, main_reasons of its verdict
 
     def to_json(self) -> dict:
         num = lambda x: None if x is None or not np.isfinite(x) else round(float(x), 4)
@@ -56,6 +58,7 @@ class TruthComparison:
                 "rate_hz": self.rate_hz, "verdicts": dict(self.verdicts), "notes": list(self.notes),
                 "clavicle_gap_mm": None if self.clavicle_gap_mm is None else {k: num(v) for k, v in
                                                                              self.clavicle_gap_mm.items()},
+                "reasons": {m: list(r) for m, r in self.reasons.items()},
                 "angles": {a: {m: {"rmse_deg": num(e.rmse_deg), "max_deg": num(e.max_deg), "coverage": num(e.coverage),
                                    "measured_fraction": num(e.measured_fraction), "median_u_deg": num(e.median_u_deg)}
                                for m, e in per.items()} for a, per in self.angles.items()}}
@@ -124,6 +127,17 @@ def _still_thorax_status(inputs, rec):
                              thorax_assumed_still=True, marker_positions_m=targets.positions_m)
 
 
+def main_reasons(quality, /, *, most: int = 6) -> tuple[str, ...]:
+    """A verdict's fail and check reasons, the worst first, one line per kind (its first message and how
+    many more of that kind): what ``exubio truth`` prints beside each verdict."""
+    kinds: dict[str, list] = {}
+    for r in quality.reasons:  # worst first (Quality.of)
+        if r.level.rank > 0:
+            kinds.setdefault(r.code, []).append(r)
+    return tuple(f"{rs[0].level.value}: {rs[0].message}" + (f" (and {len(rs) - 1} more of its kind)" if len(rs) > 1 else "")
+                 for rs in list(kinds.values())[:most])
+
+
 def compare_bone_trial(run: BoneLabRun, /, *, methods: Sequence[str] = ("pf", "ls")) -> tuple[TruthComparison, dict]:
     """Reconstruct ``run`` with each method (its verdict as ``exubio reconstruct`` gives it) and
     compare its angles with the bone's. Returns the comparison and the reconstructions by method."""
@@ -150,9 +164,11 @@ def compare_bone_trial(run: BoneLabRun, /, *, methods: Sequence[str] = ("pf", "l
     truth = truth_angles(run)
     per_angle: dict[str, dict[str, AngleError]] = {a: {} for a in TRUTH_ANGLES}
     verdicts = {m: f"failed: {reason}" for m, reason in failed.items()}
+    reasons: dict[str, tuple[str, ...]] = {}
     for m, rec in recs.items():
         q = assessment.quality[m]
         verdicts[m] = q.verdict.label if hasattr(q.verdict, "label") else str(q.verdict)
+        reasons[m] = main_reasons(q)
         names, table = anatomical_table(model, rec.q_rad)
         det = still[m]
         for a in TRUTH_ANGLES:
@@ -174,5 +190,5 @@ def compare_bone_trial(run: BoneLabRun, /, *, methods: Sequence[str] = ("pf", "l
     comp = TruthComparison(str(run.trial.path), f"{run.trial.lab} {run.trial.task}",
                            run.assumption.text + "; " + STILL_THORAX_COST, per_angle,
                            {m: verdicts[m] for m in methods if m in verdicts}, run.trial.n_frames,
-                           run.trajectories.rate_hz, notes, gap_mm)
+                           run.trajectories.rate_hz, notes, gap_mm, reasons)
     return comp, recs

@@ -181,6 +181,21 @@ def test_the_command_writes_the_issue_s_json(tmp_path):
     e = data["angles"]["GH_phadke_X_elevation"]
     assert set(e) == {"pf", "ls"} and {"rmse_deg", "max_deg", "coverage"} <= set(e["pf"])
     assert "GH_phadke_X_elevation" in r.stdout
+    gap = data["clavicle_gap_mm"]  # the still thorax against the pins (lab_run.clavicle_gap_m)
+    assert 0 <= gap["median"] <= gap["p95"] <= gap["max"] < 100 and "off the sphere about SC" in data["notes"][0]
+    assert set(data["reasons"]) == {"pf", "ls"}  # the verdicts' main reasons, per method (none for an ok)
+
+
+def test_the_verdicts_main_reasons_are_one_line_per_kind_worst_first():
+    """compare.main_reasons: fail before check, notes left out, one line per code with how many more."""
+    from exubio.trust.quality import Quality, Reason
+    from exubio.truth.compare import main_reasons
+
+    q = Quality.of([Reason("limit", "check", "gh at its limit"), Reason("marker_residual", "fail", "marker A: 70 mm"),
+                    Reason("marker_residual", "check", "marker B: 35 mm"), Reason("protocol_angles", "note", "n"),
+                    Reason("marker_residual", "fail", "marker C: 65 mm")])
+    assert main_reasons(q) == ("fail: marker A: 70 mm (and 2 more of its kind)", "check: gh at its limit")
+    assert main_reasons(Quality.of([Reason("protocol_angles", "note", "n")])) == ()
 
 
 @needs_data
