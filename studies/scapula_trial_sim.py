@@ -99,8 +99,8 @@ def main(argv=None) -> int:
                         k = det.names.index(a)
                         meas = det.status[:, k] == 0
                         u = det.uncertainty_rad[:, k]
-                        cov = np.mean(np.abs(d[meas]) <= 2 * u[meas]) if meas.any() else np.nan
-                        cells.append(f"{np.degrees(np.sqrt(np.mean(d ** 2))):.1f} / {cov:.0%} ({meas.mean():.0%})")
+                        cov = f"{np.mean(np.abs(d[meas]) <= 2 * u[meas]):.0%}" if meas.any() else "-"
+                        cells.append(f"{np.degrees(np.sqrt(np.mean(d ** 2))):.1f} / {cov} ({meas.mean():.0%})")
                     print(f"| {label} | {seed} | {cal} | {m} | " + " | ".join(cells) + " |", flush=True)
     return 0
 
