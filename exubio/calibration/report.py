@@ -181,6 +181,13 @@ class CalibrationReport:
             landmark_offsets_mm=dict(d.get("landmark_offsets_mm") or {}), fit_stop=dict(d.get("fit_stop") or {}))
 
 
+
+SKIN_FIT_CAVEAT = (
+    "  the ellipsoid now follows the skin's poses of the scapula: on bone pins such a fit took ST upward rotation "
+    "1-10 deg farther from the bone than the static calibration alone (ST internal rotation closer), and each ST "
+    "and GH angle's uncertainty of the trials reconstructed with this model carries the scapula cluster's whole "
+    "sliding (studies/README.md, 'A scapula trial against bone')")
+
 def format_report(report: CalibrationReport, /) -> str:
     """A short text table of the calibration for the terminal."""
     lines = [f"calibration of {report.source or 'trial'}, frames {report.frames[0]}:{report.frames[1]}"
@@ -223,11 +230,13 @@ def format_report(report: CalibrationReport, /) -> str:
                          f"-> {a['max']:.0f} mm); centre moved {sc['centre_shift_mm']} mm, radii x {sc['radius_scale']}; "
                          f"{sc['determined_directions']} of 6 parameter directions determined by the postures "
                          f"(scapula rotation range {sc['scapula_rotation_range_deg']:.0f} deg)")
+            lines.append(SKIN_FIT_CAVEAT)
         else:
             lines.append(f"thorax ellipsoid: the scapula trial was not used: {sc['reason']}")
     if len(report.ellipsoid_poses_mm) > 1:
         lines.append("ellipsoid fitted through the contact points of " + ", ".join(
             f"{k} (off by up to {v:.1f} mm)" for k, v in report.ellipsoid_poses_mm.items()))
+        lines.append(SKIN_FIT_CAVEAT)
     pose = ", ".join(f"{n} {np.degrees(v):.0f}" for n, v in zip(report.coordinate_names, report.static_q_rad))
     lines.append(f"static pose (deg): {pose}")
     return "\n".join(lines)

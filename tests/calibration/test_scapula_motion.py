@@ -205,7 +205,8 @@ def test_real_cross_validated_surface(setup):
 
 
 def test_cli_scapula_trial(tmp_path, capsys):
-    """``exubio calibrate --scapula-trial`` writes a model whose ellipsoid is the motion fit and says so;
+    """``exubio calibrate --scapula-trial`` writes a model whose ellipsoid is the motion fit and says so,
+    with what the bone pins showed of such a fit, and the model file carries it to the angles' u;
     ``reconstruct --scapula-trial`` without ``--static`` is bad input (exit 2)."""
     from exubio.cli import main
     from exubio.model.load import load_model
@@ -215,9 +216,12 @@ def test_cli_scapula_trial(tmp_path, capsys):
     out = tmp_path / "subject.yaml"
     assert main(["-q", "calibrate", str(files["FLX01"]), "--protocol", protocol, "--scapula-trial",
                  str(files["FLX01"]), "--out", str(out)]) == 0
-    assert "scapula postures" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "scapula postures" in printed and "farther from the bone" in printed  # what the pins showed of it
     model = load_model(out)
     assert model.metadata["calibration"]["functional"]["scapula"]["used"] is True
+    from exubio.trust.angle_uncertainty import ellipsoid_from_skin
+    assert ellipsoid_from_skin(model.metadata["calibration"])  # the written model carries the fit to u
     assert main(["-q", "reconstruct", str(files["ABD01"]), "--protocol", protocol, "--scapula-trial",
                  str(files["FLX01"]), "--out", str(tmp_path / "o")]) == 2
 
