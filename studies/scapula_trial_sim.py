@@ -5,7 +5,8 @@ A subject is simulated with the shipped model (its ellipsoid as generic, or move
 changed 8 %: a surface the static fit cannot make), the thoracoscapular_9 markers (the TRC set: aa,
 ts, ai over the scapula landmarks), 1 mm noise and the bone-pin artefact (``--sta bone``: each
 cluster's rigid motion regressed on the pins, plus its residual). Calibrated on a static (the
-abduction's first frame held) alone, or on the static and the abduction as scapula trial; the flexion
+abduction's first frame held) alone, on the static and the abduction as scapula trial, or on the
+static and a raised static (the abduction's highest frame held: ``--also-static``); the flexion
 and the scaption are reconstructed with LS; per ST and GH angle the RMSE against the truth over every
 frame and the share of measured frames within +-2u (the skin-fitted ellipsoid's term,
 ``angle_uncertainty.skin_ellipsoid_variance``, applies to the scapula-trial model as it records the
@@ -26,6 +27,7 @@ import numpy as np
 
 RATE_HZ = 50.0
 SIM_POINTS = ["IJ", "C7", "PX", "T8", "AA", "TS", "AI", "GH", "EL", "EJC"]
+HT_ELEVATION = 16  # HT_X_elevation's column of the anatomical table
 SHOWN = ("ST_Y_internal_rotation", "ST_X_upward_rotation", "ST_Z_posterior_tilt", "GH_X_elevation",
          "GH_phadke_X_elevation", "GH_phadke_Y_internal_rotation")
 SUBJECTS = {"generic ellipsoid": (np.zeros(3), np.ones(3)),
@@ -79,8 +81,13 @@ def main(argv=None) -> int:
             static = dataclasses.replace(trc["abduction"], positions_m=np.repeat(trc["abduction"].positions_m[:1], 40, 0),
                                          time_s=np.arange(40) / RATE_HZ)
             abd_targets = prepare_targets(trc["abduction"], protocol)
+            top = int(np.argmax(np.abs(anatomical_table(subject, sims["abduction"].q_true)[1][:, HT_ELEVATION])))
+            raised = dataclasses.replace(trc["abduction"], positions_m=np.repeat(trc["abduction"].positions_m[top:top + 1], 40, 0),
+                                         time_s=np.arange(40) / RATE_HZ)  # the abduction's highest frame, held
             models = {"static": calibrate_model(generic, protocol, static)[0],
-                      "static + scapula trial": calibrate_model(generic, protocol, static, scapula_motion=abd_targets)[0]}
+                      "static + scapula trial": calibrate_model(generic, protocol, static, scapula_motion=abd_targets)[0],
+                      "static + raised static": calibrate_model(generic, protocol, static,
+                                                                more_statics=[prepare_targets(raised, protocol)])[0]}
             for cal, model in models.items():
                 prot = calibrated_protocol(protocol, model)
                 b = bind(model, prot)

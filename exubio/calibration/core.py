@@ -320,7 +320,8 @@ def calibrate_model(model: Model, protocol: Protocol, trajectories: Trajectories
         q_k, stop_k = _extra_static_pose(kin_c, cal_protocol, extra, prior, limits, held)
         static_poses.append(_nanmean(extra.positions_m[list(_window(extra, None)[0])], axis=0))
         pose_contacts.append(kin_c.points(q_k, kin_c.contacts))
-        pose_sources.append(extra.source or "static pose")
+        name = extra.source or "static pose"  # two statics of one name (or none) stay two poses of the report
+        pose_sources.append(name if name not in pose_sources else f"{name} ({len(pose_sources) + 1})")
         fit_stop[f"pose of {pose_sources[-1]}"] = stop_k.label
     if len(pose_contacts) == 1:
         ellipsoid, k_ell = fit_ellipsoid(calibrated.ellipsoid, contacts)

@@ -503,6 +503,12 @@ def test_a_second_static_pose_fits_the_ellipsoid_through_both(generic):
         assert len(report.ellipsoid_poses_mm) == 1 + len(extra)
     assert off["one static"]["down"] < 0.5 and off["one static"]["raised"] > 5.0, off
     assert max(off["two statics"].values()) < 0.5 * off["one static"]["raised"], off
+    # a raised static of the arm-down static's own name is still a second pose, of the report and of u
+    from exubio.trust.angle_uncertainty import ellipsoid_from_skin
+
+    cal, report = calibrate_model(wrong, protocol, still(0, "down"), more_statics=[prepare_targets(still(top, "down"), protocol)])
+    assert list(report.ellipsoid_poses_mm) == ["down", "down (2)"]
+    assert ellipsoid_from_skin(cal.metadata["calibration"]) and ellipsoid_from_skin(report)
 
 
 @pytest.mark.parametrize("what, inject", [
