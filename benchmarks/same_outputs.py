@@ -115,15 +115,14 @@ _NEW_CALIBRATED_ADVICE = ("what to do: check that the scapula markers stayed whe
 
 
 _CAVEAT = (  # exubio.trust.mismatch.SCAPULA_TRIAL_CAVEAT as of 6 December 2026 (this script never imports exubio)
-    'a scapula trial (`--scapula-trial`) fits the ellipsoid through the poses the skin markers give over '
-    'a movement, skin that slides over the scapula: on bone pins that took ST upward rotation 1-10 deg fa'
-    'rther from the bone than the static calibration alone (ST internal rotation came closer; studies/REA'
-    "DME.md, 'A scapula trial against bone'), and the angles' uncertainty then carries the skin's whole s"
-    'liding'
-)
+    "a scapula trial (`--scapula-trial`) is no remedy: it fits the ellipsoid to skin that slides over the scapula, "
+    "which on bone pins took ST upward rotation 1-10 deg farther from the bone (docs/calibration.md, step 5)")
 
 
 KNOWN_CHANGES: tuple = (
+    ("base", re.escape("a static of this session and a scapula trial reduce the misfit)"),
+     "a static of this session reduces the misfit)",
+     "6 December 2026: an angle not measured for its uncertainty no longer names a scapula trial as a remedy"),
     ("base", re.escape("onto its markers); an ST, GH or HT angle is not measured"),
      "onto its markers), and where the calibration fitted the thorax ellipsoid through the scapula's skin poses away "
      "from rest (a scapula trial, several statics), the scapula's frame turned by its cluster's whole rotation; an ST, "

@@ -194,10 +194,8 @@ CONTACT_NOTE_MM = (6.0, 9.0)
 (within what the skin's sliding gives)."""
 
 SCAPULA_TRIAL_CAVEAT = (
-    "a scapula trial (`--scapula-trial`) fits the ellipsoid through the poses the skin markers give over a movement, "
-    "skin that slides over the scapula: on bone pins that took ST upward rotation 1-10 deg farther from the bone "
-    "than the static calibration alone (ST internal rotation came closer; studies/README.md, 'A scapula trial "
-    "against bone'), and the angles' uncertainty then carries the skin's whole sliding")
+    "a scapula trial (`--scapula-trial`) is no remedy: it fits the ellipsoid to skin that slides over the scapula, "
+    "which on bone pins took ST upward rotation 1-10 deg farther from the bone (docs/calibration.md, step 5)")
 """What the bone pins showed of the functional scapula calibration (studies/scapula_trial_bone.py): the
 model follows its skin markers better, and the bone worse; said wherever exubio names it."""
 

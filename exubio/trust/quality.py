@@ -229,7 +229,7 @@ def _cause_text(causes: Mapping[str, Any] | None, name: str) -> tuple[str, str]:
     if n.get("uncertainty"):
         parts.append(f"its standard uncertainty above {U_BOUND_DEG:g} deg in {n['uncertainty']} frames (the bone-pin "
                      "artefact at high elevation, or the model's misfit where residuals are large: a static of this "
-                     "session and a scapula trial reduce the misfit)")
+                     "session reduces the misfit)")
     if n.get("markers"):
         parts.append(f"not determined by the markers present in {n['markers']} frames")
     return "; ".join(parts), main
