@@ -139,6 +139,12 @@ def _rotation_angle(R: np.ndarray) -> np.ndarray:
     return np.arccos(np.clip((np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0))
 
 
+def _driver(names: list, R: np.ndarray) -> np.ndarray:
+    """(b,) rad: the amplitude model's driver, the humerus's rotation from its reference orientation, from
+    the segments' rotations R (b, s, 3, 3) named ``names``; zero without a humerus."""
+    return _rotation_angle(R[:, names.index("humerus")]) if "humerus" in names else np.zeros(R.shape[0])
+
+
 def marker_covariance(kin: Kinematics, points: PointSet, qf: np.ndarray, present: np.ndarray,
                       amplitude: STAAmplitude, /, *, noise_mm: float = NOISE_MM,
                       anatomical: dict[str, np.ndarray] | None = None,
@@ -161,8 +167,7 @@ def marker_covariance(kin: Kinematics, points: PointSet, qf: np.ndarray, present
     if not misfit_only:
         sigma[:, idx, idx] = (noise_mm * 1e-3) ** 2
     names = [s.name for s in model.segments]
-    hum = names.index("humerus") if "humerus" in names else None
-    theta_hum = _rotation_angle(R[:, hum]) if hum is not None else np.zeros(b)
+    theta_hum = _driver(names, R)
     seen: dict[str, tuple] = {}  # measured segments: (rows, B, T, theta) for the cross terms
     for s_idx in np.unique(points.segment_index):
         sel = np.flatnonzero(points.segment_index == s_idx)
@@ -389,10 +394,7 @@ def trunk_angle_variance(kin: Kinematics, points: PointSet, qf: np.ndarray, DK: 
     G = np.zeros((b, DK.shape[1], 6))
     G[:, : turns.shape[1], :3] = turns
     E = (DK @ B - G) @ T6  # (b, a, 6): per unit of the trunk's motion in its own axes
-    names_seg = names
-    hum = names_seg.index("humerus") if "humerus" in names_seg else None
-    theta = _rotation_angle(R[:, hum]) if hum is not None else np.zeros(b)
-    return np.einsum("bai,bij,baj->ba", E, amplitude.trunk_at(theta), E)
+    return np.einsum("bai,bij,baj->ba", E, amplitude.trunk_at(_driver(names, R)), E)
 
 
 def ellipsoid_from_skin(calibration, /) -> bool:
@@ -436,7 +438,7 @@ def skin_ellipsoid_variance(kin: Kinematics, qf: np.ndarray, amplitude: STAAmpli
     if not measured:
         return out
     R, _ = kin.poses(qf)
-    theta = _rotation_angle(R[:, names.index("humerus")])
+    theta = _driver(names, R)
     frames = segment_anatomical_rotations(model, qf, kinematics=kin) if frames is None else frames
     axes = frames["scapula"]
     Cw = axes @ np.asarray(C6)[None, :3, :3] @ np.swapaxes(axes, -1, -2) * (theta ** 2)[:, None, None]
