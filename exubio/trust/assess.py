@@ -18,7 +18,8 @@ from exubio.protocol.bind import Binding
 from exubio.trust.label_expectations import expectations_of
 from exubio.trust.mismatch import MismatchAssessment, assess_mismatch
 from exubio.trust.observability import UNDETERMINED_TRIAL_FRACTION, AngleDeterminacy, AngleStatus, Determinacy, angle_determinacy, determinacy
-from exubio.model.ranges import limit_report
+from exubio.model.angles import anatomical_table
+from exubio.model.ranges import AT_LIMIT_TOLERANCE_RAD, LimitReport, limit_report
 from exubio.types import FrameStatus, MarkerTargets, Model, Reconstruction
 
 
@@ -81,18 +82,30 @@ def _same_finding(f: Any, findings: Sequence) -> bool:
     return any(Q.finding_field(g, "kind") == kind and set(Q.finding_field(g, "markers", ())) == markers for g in findings)
 
 
-def agreement_on_measured(model: Model, a: Reconstruction, da: AngleDeterminacy, b: Reconstruction,
-                          db: AngleDeterminacy, /, *, kinematics: Any = None) -> dict[str, float]:
-    """PF-LS RMSE (deg) of every anatomical angle over the frames where both measure it (NaN where
-    none does)."""
-    from exubio.model.angles import anatomical_table
-
-    _, ta = anatomical_table(model, a.q_rad, kinematics=kinematics)
-    _, tb = anatomical_table(model, b.q_rad, kinematics=kinematics)
+def agreement_on_measured(ta: np.ndarray, da: AngleDeterminacy, tb: np.ndarray, db: AngleDeterminacy, /
+                          ) -> dict[str, float]:
+    """PF-LS RMSE (deg) of every anatomical angle (``ta``, ``tb``: (n, a) rad, the methods' angle
+    tables) over the frames where both measure it (NaN where none does)."""
     d = np.degrees(np.angle(np.exp(1j * (ta - tb))))
     ok = (da.status == AngleStatus.MEASURED) & (db.status == AngleStatus.MEASURED) & np.isfinite(d)
     return {n: (float(np.sqrt(np.mean(d[ok[:, j], j] ** 2))) if ok[:, j].any() else float("nan"))
             for j, n in enumerate(da.names)}
+
+
+def gh_elevation_limit(names: Sequence[str], table: np.ndarray, /) -> list[LimitReport]:
+    """The glenohumeral bound the solver's coordinates cannot carry (exubio.trust.quality.GH_ELEVATION_MAX_DEG):
+    frames whose GH elevation (``names``, ``table``: an anatomical angle table, rad) reaches it, as a
+    limit report on the angle GH_X_elevation (signed as reported: negative is elevation)."""
+    if "GH_X_elevation" not in names:
+        return []
+    e = np.abs(table[:, list(names).index("GH_X_elevation")])
+    bound = np.radians(Q.GH_ELEVATION_MAX_DEG)
+    at = np.isfinite(e) & (e >= bound - AT_LIMIT_TOLERANCE_RAD)
+    if not at.any():
+        return []
+    beyond = float(np.degrees(np.max(e[at] - bound)))
+    return [LimitReport("GH_X_elevation", (-Q.GH_ELEVATION_MAX_DEG, Q.GH_ELEVATION_MAX_DEG), int(at.sum()),
+                        int(np.argmax(at)), max(beyond, 0.0))]
 
 
 def _held(binding: Binding, key: tuple, compute: Any, /, *args: Any, of_model: bool = False) -> Any:
@@ -214,13 +227,14 @@ def assess_trial(binding: Binding, targets: MarkerTargets, recons: Sequence[Reco
     structural = angle_status_of_protocol(binding)
     unmeasurable = coordinates_not_measured_by_protocol(binding)
     label_findings, calibration = c.label_findings, c.calibration
+    tables = {r.method: anatomical_table(model, r.q_rad, kinematics=kin) for r in recons}
     lims = {r.method: limit_report(r.q_rad, model.coordinate_ranges_rad, names, exclude=not_solved,
                                    ignore=dets[r.method].undetermined & dets[r.method].near_gimbal_lock)
+            + gh_elevation_limit(*tables[r.method])
             for r in recons}
     agreement = None
-    by = {r.method: r for r in recons}
-    if "pf" in by and "ls" in by:
-        agreement = agreement_on_measured(model, by["pf"], angles["pf"], by["ls"], angles["ls"], kinematics=kin)
+    if "pf" in tables and "ls" in tables:
+        agreement = agreement_on_measured(tables["pf"][1], angles["pf"], tables["ls"][1], angles["ls"])
     off = Q.off_segment_markers(model, protocol) if calibration is not None else {}
     repeated = [f for f in c.static_labels if _same_finding(f, label_findings)]
     static_labels = [f for f in c.static_labels if not _same_finding(f, label_findings)]

@@ -44,6 +44,16 @@ LIMIT_BEYOND_DEG = 5.0
 """A solved coordinate at its range limit is a 'check'; pushed more than this beyond it (the limit
 potential overpowered by the markers) is a 'fail': the markers describe an impossible posture."""
 
+GH_ELEVATION_MAX_DEG = 150.0
+"""The glenohumeral joint's bound, on the one angle that carries one whatever the sequence: GH elevation,
+the angle between the scapula's and the humerus's long axes (the middle angle of ISB's Y-X'-Y'').
+The solver's gh_abduction and gh_flexion have no range (models/upper_extremity.yaml, note [13]: near
+the X-Y'-Z'' sequence's gimbal lock at +-90 deg of axial rotation they take any value in physiological
+postures). Bone pins reach 120-130 deg at maximal arm elevation (Ludewig et al. 2009); the bound adds
+the model's margin for skin artefact and for the reference posture, as the coordinates' upper limit
+had it (150). Reached: a 'check'; more than LIMIT_BEYOND_DEG beyond: a 'fail' (the markers describe a
+humerus no shoulder can hold: a label, or a marker on the wrong segment)."""
+
 NOT_CONVERGED_FRACTION = (0.01, 0.10)
 """Frames not converged or with too few markers (check, fail)."""
 

@@ -33,9 +33,10 @@ def dyn():
 
 
 def states(model, n=8, seed=1, speed=4.0, acc=300.0):
-    """Random postures inside the ranges with fast rates (rad/s) and large accelerations (rad/s^2)."""
+    """Random postures inside the ranges (a half turn each way where unbounded) with fast rates (rad/s)
+    and large accelerations (rad/s^2)."""
     rng = np.random.default_rng(seed)
-    lo, hi = model.coordinate_ranges_rad.T
+    lo, hi = np.clip(model.coordinate_ranges_rad.T, -np.pi, np.pi)
     m = model.n_coordinates
     return rng.uniform(lo, hi, (n, m)), rng.normal(0, speed, (n, m)), rng.normal(0, acc, (n, m))
 

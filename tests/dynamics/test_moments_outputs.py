@@ -56,7 +56,7 @@ def quadratic_motion(model, seed=0):
     spline of degree >= 2 through the samples (OpenSim's ID tool fits a quintic GCV spline) is the
     quadratic itself, so its q' and q'' are B + 2Ct and 2C exactly. Returns t, q, q', q'' (rad)."""
     rng = np.random.default_rng(seed)
-    lo, hi = np.degrees(model.coordinate_ranges_rad.T)
+    lo, hi = np.degrees(np.clip(model.coordinate_ranges_rad.T, -np.pi, np.pi))  # a half turn each way where unbounded
     A = np.round((lo + hi) / 2)
     B = rng.integers(-20, 21, model.n_coordinates).astype(float)
     C = rng.integers(-30, 31, model.n_coordinates).astype(float)

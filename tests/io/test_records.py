@@ -94,12 +94,18 @@ def _summaries(tmp_path: Path, *args: str) -> list[Path]:
     return sorted(tmp_path.glob("*.summary.json"))
 
 
-@pytest.mark.parametrize("static", [False, True], ids=["example", "calibrated_real_trial"])
+@pytest.mark.parametrize("static", [False, True, "frames"], ids=["example", "calibrated_real_trial", "real_trial_at_a_limit"])
 def test_a_real_runs_summary_decodes_into_typed_results_and_writes_the_same_bytes(tmp_path, static):
-    """``exubio reconstruct`` (LS, no Exudyn) of the shipped example, and of a real trial with its
-    session's static (the calibration section, label findings, limits; skipped without
-    ../shared/data): summary.json -> TrialSummary -> the same text, byte for byte."""
-    if static:
+    """``exubio reconstruct`` (LS, no Exudyn) of the shipped example, of a real trial with its
+    session's static (the calibration section, label findings) and of one calibrated on its first frames
+    (with limits; both skipped without ../shared/data): summary.json -> TrialSummary -> the same text,
+    byte for byte."""
+    if static == "frames":  # calibrated on its own first frames: sc_posterior_rotation rests on its limit
+        trial = DATA / "bioptim_exo_F0_boire_05.c3d"
+        if not trial.is_file():
+            pytest.skip("the shared real data (../shared/data) is absent")
+        paths = _summaries(tmp_path, str(trial), "--static-frames", "0:20")
+    elif static:
         trial, stat = DATA / "bioptim_exo_martin_dynamique.c3d", DATA / "bioptim_exo_martin_statique.c3d"
         if not (trial.is_file() and stat.is_file()):
             pytest.skip("the shared real data (../shared/data) is absent")
@@ -114,7 +120,7 @@ def test_a_real_runs_summary_decodes_into_typed_results_and_writes_the_same_byte
     assert all(isinstance(f, LabelFinding) for f in summary.labels)
     assert summary.n_frames > 100 and summary.method == "ls"
     if static:
-        assert summary.calibration is not None and summary.limits  # this trial reaches gh_flexion's limit
+        assert summary.calibration is not None and bool(summary.limits) == (static == "frames")
         assert all(isinstance(f, LabelFinding) for f in summary.calibration.labels)
     write_json(tmp_path / "again.json", to_json(summary))
     assert (tmp_path / "again.json").read_text(encoding="utf-8") == text

@@ -81,11 +81,13 @@ def test_section_records_round_trip():
 
 
 def test_a_failed_pf_run_says_where_and_the_default_inertia_converges_there():
-    """Springs far too soft and barely damped for the motion (c = 26.8 N/m, d = 2.7 Ns/m, a corner
-    of the sensitivity grid, Fig. 2) on the real abduction, with the segments' physical inertia
-    (inertia_scale 1.0, the paper's): the run stops; its error names the time, the worst spring and
-    the coordinates beyond their range of motion at the last frame. With the default inertia
-    (PFOptions.inertia_scale 0.1) the same springs carry the motion to its end."""
+    """Springs far too soft and barely damped for the motion (c = 10 N/m, d = 0.1 Ns/m, the corner of
+    the sensitivity grid, Fig. 2) on the real abduction, with the segments' physical inertia
+    (inertia_scale 1.0, the paper's): the run stops; its error names the time, the worst spring, the
+    fastest coordinate and any coordinate beyond its range of motion at the last frame. With the
+    default inertia (PFOptions.inertia_scale 0.1) the same springs carry the motion to its end, on
+    the options asked (no fallback): they stopped there too while gh_abduction and gh_flexion had
+    ranges, whose limits near the X-Y'-Z'' sequence's lock spun the humerus (studies/README.md)."""
     from exubio.errors import ReconstructionError
     from exubio.run.pipeline import reconstruct
     from exubio.validation.sensitivity import with_springs
@@ -94,22 +96,24 @@ def test_a_failed_pf_run_says_where_and_the_default_inertia_converges_there():
     if why_no_real_trial("abduction"):
         pytest.skip(why_no_real_trial("abduction"))
     model, protocol, targets, _ = real_trial("abduction")
-    soft = with_springs(protocol, 26.8, 2.68)
+    soft = with_springs(protocol, 10.0, 0.1)
     with pytest.raises(ReconstructionError) as err:
         reconstruct(model, soft, targets, method="pf", inertia_scale=1.0, fallback=False)
     msg = str(err.value)
-    assert "stopped at t =" in msg or "diverged at t =" in msg
-    named = msg.split("beyond their range of motion there: ")[1].split("; ")[0]  # which ones: how it diverged
-    assert named and all(part.split(" ")[0] in model.coordinate_names for part in named.split(", ")), msg
-    rec = reconstruct(model, soft, targets, method="pf")
-    assert rec.n_frames == targets.n_frames and np.all(np.isfinite(rec.q_rad))
+    assert "diverged at t =" in msg and "spring '" in msg, msg
+    fastest = msg.split("fastest coordinate ")[1].split(" ")[0]
+    assert fastest in model.coordinate_names, msg
+    if "beyond their range of motion there: " in msg:
+        named = msg.split("beyond their range of motion there: ")[1].split("; ")[0]
+        assert all(part.split(" ")[0] in model.coordinate_names for part in named.split(", ")), msg
+    rec = reconstruct(model, soft, targets, method="pf", fallback=False)
+    assert rec.n_frames == targets.n_frames and np.all(np.isfinite(rec.q_rad)) and "fallback" not in rec.info
 
 
-def test_the_sensitivity_corner_finishes_on_pfs_fallback_and_says_so():
-    """The grid's softest, least damped run (c = 10 N/m, k = 0.01 s: d = 0.1 Ns/m) on the real
-    abduction: PF's run at the options asked for stops, saying where (fallback off); with the
-    fallback on (the default) PF runs it again with inertia x 0.01 and full Newton, carries the
-    whole trial (mean spring deflection about the 10 mm of every other run of the grid) and says
+def test_springs_softer_than_the_grid_finish_on_pfs_fallback_and_say_so():
+    """Springs a tenth of the grid's softest corner (c = 1 N/m, d = 0.01 Ns/m) on the real abduction:
+    PF's run at the options asked for stops, saying where (fallback off); with the fallback on (the
+    default) PF runs it again with inertia x 0.01 and full Newton, carries the whole trial and says
     so in the result, in the trial's verdict and in the sensitivity study's record."""
     import dataclasses
 
@@ -124,21 +128,21 @@ def test_the_sensitivity_corner_finishes_on_pfs_fallback_and_says_so():
     if why_no_real_trial("abduction"):
         pytest.skip(why_no_real_trial("abduction"))
     model, protocol, targets, _ = real_trial("abduction")
-    corner = with_springs(protocol, 10.0, 0.1)
+    softer = with_springs(protocol, 1.0, 0.01)
     with pytest.raises(ReconstructionError) as err:
-        reconstruct(model, corner, targets, method="pf", fallback=False)
-    assert "at t =" in str(err.value) and "beyond their range of motion there" in str(err.value), err.value
+        reconstruct(model, softer, targets, method="pf", fallback=False)
+    assert "at t =" in str(err.value) and "fastest coordinate" in str(err.value), err.value
     ticks = []
-    rec = reconstruct(model, corner, targets, method="pf", progress=ticks.append)
+    rec = reconstruct(model, softer, targets, method="pf", progress=ticks.append)
     assert rec.n_frames == targets.n_frames and np.isfinite(rec.q_rad).all()
     assert sum(ticks) == targets.n_frames and min(ticks) > 0  # the second run counted on from the first's frames
-    assert 8.0 < np.nanmean(rec.residuals_m) * 1000 < 13.0
+    assert np.nanmean(rec.residuals_m) < 0.25  # carried to the end, within the divergence check
     assert rec.info["fallback"]["first_run"] == str(err.value)
     assert rec.info["fallback"]["options"] == FALLBACK_OPTIONS == {"inertia_scale": 0.01, "modified_newton": False}
     assert rec.info["options"]["inertia_scale"] == 0.01 and rec.info["options"]["modified_newton"] is False
     (note,) = fallback_reasons(rec.info)
     assert note.level.value == "note" and "stopped" in note.message
-    settings = dataclasses.replace(ValidationSettings(), sensitivity_stiffness_n_per_m=(10.0,), sensitivity_ratio_s=(0.01,))
+    settings = dataclasses.replace(ValidationSettings(), sensitivity_stiffness_n_per_m=(1.0,), sensitivity_ratio_s=(0.01,))
     sens = sensitivity_study(Trial("abduction", model, protocol, targets, data=None), settings, lambda _: None)
     assert sens.runs == 1 and sens.failed_runs == () and len(sens.fallback_runs) == 1
     assert sens.fallback_runs[0].error == str(err.value)

@@ -13,6 +13,7 @@ import scipy.io
 
 from exubio.errors import InputError, ModelError
 from exubio.io.yaml import read_yaml
+from exubio.model.anatomy import isb_frame
 from exubio.model.angles import anatomical_frames
 from exubio.model.kinematics import Kinematics
 from exubio.model.load import DEFAULT_MODEL, load_model
@@ -283,3 +284,49 @@ def test_the_clavicle_gap_is_zero_for_the_models_girdle_and_what_a_moving_trunk_
     gap = clavicle_gap_m(run2)
     assert np.allclose(gap, expected, atol=5e-4), np.abs(gap - expected).max()
     assert gap[40:].max() > 0.02 and gap[:40].max() < 5e-4
+
+
+def _gh_sequence_deg(scapula_isb: np.ndarray, humerus_isb: np.ndarray) -> np.ndarray:
+    """(n, 3) the model's GH coordinates (gh_abduction about -X, gh_internal_rotation about Y',
+    gh_flexion about Z'') of bone ISB frames (n, 3, 3), against the generic model's reference posture:
+    the humerus's rotation from its reference orientation relative to the scapula, in its own axes."""
+    from scipy.spatial.transform import Rotation
+
+    model = load_model()
+    pts = {s.name: s.points for s in model.segments}
+    gs = isb_frame("scapula", {k: pts["scapula"][k] for k in ("AA", "TS", "AI")})
+    gh = isb_frame("humerus", {k: pts["humerus"][k] for k in ("GH", "EL", "EM")})
+    D = np.einsum("ji,jk,nlk,nlm->nim", gh, gs, scapula_isb, humerus_isb)
+    e = Rotation.from_matrix(D).as_euler("XYZ", degrees=True)
+    return e * np.array([-1.0, 1.0, 1.0])
+
+
+@needs_data
+def test_the_pinned_humerus_leaves_the_old_gh_ranges_where_the_sequence_locks():
+    """Why gh_abduction and gh_flexion have no range (models/upper_extremity.yaml, note [13]): the
+    pinned humerus of the ARTANIM abduction, with 77 deg of internal rotation, lies at gh_abduction
+    -117 and gh_flexion -83 deg, beyond the old ranges [-40, 150] and [-80, 160], while its GH
+    elevation stays far inside the bound that replaces them."""
+    from exubio.trust.quality import GH_ELEVATION_MAX_DEG
+
+    model = load_model()
+    kin = Kinematics(model)
+    A = anatomical_frames(model)
+    # the decomposition is the model's own: a posture of the model comes back as its coordinates
+    q = np.zeros((1, model.n_coordinates))
+    for name, v in (("gh_abduction", -117.0), ("gh_internal_rotation", 77.0), ("gh_flexion", -83.0)):
+        q[0, model.coordinate_names.index(name)] = np.radians(v)
+    R = kin.frames(q).R
+    back = _gh_sequence_deg(R[:, model.segment_index("scapula")] @ A["scapula"],
+                            R[:, model.segment_index("humerus")] @ A["humerus"])
+    assert back[0] == pytest.approx([-117.0, 77.0, -83.0], abs=1e-6)
+
+    run = setup_lab_run(read_sta_trial(DATA / "dataSample_ARTANIM_armAbd.mat"), read_yaml(DEFAULT_MODEL),
+                        rate_hz=30.0)
+    S, H = run.truth["scapula"], run.truth["humerus"]
+    seen = np.isfinite(S).all(axis=(1, 2)) & np.isfinite(H).all(axis=(1, 2))
+    gh = _gh_sequence_deg(S[seen], H[seen])
+    assert gh[:, 0].min() < -40.0 - 60.0 and gh[:, 2].min() < -80.0  # far beyond the old lower limits
+    assert gh[:, 1].max() > 70.0  # near the X-Y'-Z'' lock at 90 deg
+    elevation = np.degrees(np.arccos(np.clip(np.einsum("ni,ni->n", S[seen][:, :, 1], H[seen][:, :, 1]), -1, 1)))
+    assert elevation.max() < GH_ELEVATION_MAX_DEG - 60.0
