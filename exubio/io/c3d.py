@@ -14,13 +14,12 @@ first with samples is kept, named), a POINT:UNITS that spells metres another way
 a parameter section longer than it declares, a POINT:RATE of 0 under a header rate). What is
 refused names the file, the field and why: a file with no 3-D point (analog channels only, or no
 parameters to describe its points), no point with a label, and what ezc3d refuses, said in the
-file's terms where it is known (ANALOG:OFFSET stored as floats, POINT:LABELS missing for
-POINT:USED points).
+file's terms where it is known (POINT:LABELS missing for POINT:USED points).
 
 What ezc3d cannot read but exubio.io.c3d_raw can put in terms it reads is read through a copy
 (``ezc3d_copy``, in a temporary folder, with a finding): an SGI/MIPS (big-endian) file turned to
 Intel byte order, a description longer than 127 characters cut, analog channels ezc3d crashes on
-(ANALOG:SCALE or OFFSET absent) left out.
+(ANALOG:SCALE or OFFSET absent) or refuses (ANALOG:OFFSET stored as floats) left out.
 
 ezc3d silently stops at the end of a truncated file (it returns the frames it could read and
 rewrites the header to match), so the frame count declared in the raw 512-byte header is checked

@@ -18,7 +18,11 @@ processor format (byte 4 of the parameter section is 86: big-endian; ezc3d reads
 DEC files), turned into Intel byte order number by number (the header's words and floats, every
 parameter's offset and its int16 or float values, every word of the data block), and a parameter
 or group description longer than 127 characters (KINARM's Dexterit-E), whose length byte ezc3d
-reads as negative: cut to 127 characters in the copy (exubio reads no description).
+reads as negative: cut to 127 characters in the copy (exubio reads no description). Analog
+channels ezc3d cannot read are left out of the copy (exubio reads marker trajectories): ANALOG:SCALE
+or OFFSET with fewer values than channels (ezc3d crashes), or ANALOG:OFFSET stored as floats
+(PhoeniX's samples; ezc3d refuses the file): that record is written as the integers the
+standard wants, rounded, since ezc3d checks its type even with no channel left.
 
 Refused, naming the field: a parameter block or data start past the end of the file,
 a record of unknown type, more than 7 dimensions, type char with no dimension or data running into
@@ -50,6 +54,8 @@ _INDEXED = {"POINT": ("USED", "SCALE", "RATE", "DATA_START", "FRAMES"), "ANALOG"
 MAX_SECTION_BLOCKS = 2048  # 1 MB: what is read of a parameter section whatever its header says (255 blocks declarable)
 _STANDARD_NAME = re.compile(r"^[A-Z0-9_]+$")
 _BAD = "not a readable C3D file (the header contradicts the file: "
+FLOAT_OFFSETS = ("ANALOG:OFFSET is stored as floating-point numbers, where the C3D standard and ezc3d, the C3D reader "
+                 "exubio uses, want integers (ezc3d refuses the file)")
 
 
 @dataclass(frozen=True)
@@ -112,8 +118,7 @@ def check_raw_header(path: Path) -> RawCheck:
                      f"which ezc3d does not read: read through a copy in Intel byte order")
     analogs = _analogs_unreadable(section, params, byte_order)
     if analogs:
-        notes.append(f"{path.name}: {analogs}; ezc3d cannot read such analog channels (it crashes): the markers are read "
-                     f"without them")
+        notes.append(f"{path.name}: {analogs}: the markers are read without them")
     needs_copy = processor == MIPS or bool(long) or bool(analogs)
     _check_scales(path, header, section, params, processor)
     done = RawCheck(tuple(notes), None, needs_copy, analogs)
@@ -158,12 +163,15 @@ def _check_scales(path: Path, header: bytes, section: bytes, params: list[RawPar
 
 
 def _analogs_unreadable(section: bytes, params: list[RawParameter], byte_order: str) -> str:
-    """Why ezc3d cannot read the file's analog channels, or "": ANALOG:USED > 0 with fewer
+    """Why ezc3d cannot read the file's analog channels, or "": ANALOG:OFFSET stored as floats
+    (ezc3d refuses the file: "OFFSET parameter is not an INT"), or ANALOG:USED > 0 with fewer
     ANALOG:SCALE or ANALOG:OFFSET values than channels (counted over SCALE, SCALE2, ... as ezc3d
     joins them). ezc3d takes one per channel unchecked: a segmentation fault, measured by removing
     either parameter from three vendors' files (an old Motion Analysis file names its offsets
     ANALOG:OFFSETS)."""
     last = {(p.group, p.name): p for p in params}
+    if any(p.group == "ANALOG" and re.fullmatch(r"OFFSET\d*", p.name) and p.kind == 4 for p in params):
+        return FLOAT_OFFSETS
     used = last.get(("ANALOG", "USED"))
     if used is None or used.kind != 2 or used.start + 2 > len(section):
         return ""
@@ -178,7 +186,8 @@ def _analogs_unreadable(section: bytes, params: list[RawParameter], byte_order: 
             p, k = last.get(("ANALOG", f"{name}{k}")), k + 1
         if values < n:
             return (f"ANALOG:USED is {n} but ANALOG:{name} "
-                    f"{'is absent' if absent else f'holds {values} value(s)'}; expected one per channel")
+                    f"{'is absent' if absent else f'holds {values} value(s)'}; expected one per channel; ezc3d "
+                    f"cannot read such analog channels (it crashes)")
     return ""
     n = struct.unpack(byte_order + "h", section[used.start:used.start + 2])[0]
     if n <= 0:
@@ -370,7 +379,7 @@ def ezc3d_copy(path: Path, *, drop_analogs: bool = False) -> bytes:
     description longer than 127 characters cut to 127 (its length byte; the record's offset to the
     next record, which readers follow, is kept); with ``drop_analogs`` (``RawCheck.analogs_unreadable``)
     without its analog channels (ANALOG:USED and the header's analog counts 0, each frame of the
-    data block its point words only). Call it on a file ``check_raw_header`` has accepted: the
+    data block its point words only, ANALOG:OFFSET stored as floats written as int16, rounded). Call it on a file ``check_raw_header`` has accepted: the
     records are walked as it checked them."""
     data = bytearray(path.read_bytes())
     first = (data[0] - 1) * 512
@@ -383,6 +392,7 @@ def ezc3d_copy(path: Path, *, drop_analogs: bool = False) -> bytes:
         data[first + 3] = INTEL
     negative = None  # POINT:SCALE < 0: the data block holds floats
     records: list[tuple[int, int, int, int]] = []  # start, its offset word, its description's length byte, step
+    retyped: dict[int, bytes] = {}  # record index -> its type, dimensions and values as the copy writes them
     pos = first + 4
     groups: dict[int, str] = {}
     while pos + 2 <= len(data):
@@ -408,13 +418,17 @@ def ezc3d_copy(path: Path, *, drop_analogs: bool = False) -> bytes:
                 _swap_words(data, start, end, kind)
             if drop_analogs and (groups.get(ident), name, kind) == ("ANALOG", "USED", 2) and count:
                 struct.pack_into("<h", data, start, 0)
+            if drop_analogs and groups.get(ident) == "ANALOG" and re.fullmatch(r"OFFSET\d*", name) and kind == 4:
+                values = [_float(data, start + 4 * i, INTEL if swap else processor) for i in range(count)]
+                ints = np.clip(np.rint(np.nan_to_num(values)), -32768, 32767).astype("<i2").tobytes()
+                retyped[len(records)] = struct.pack("b", 2) + bytes(data[here + 3:start]) + ints
             describe = end
         records.append((pos, here, describe, step))
         if step <= 0:
             break
         pos = here + step
-    if any(data[d] > 127 for _, _, d, _ in records):
-        _cut_descriptions(data, records)
+    if retyped or any(data[d] > 127 for _, _, d, _ in records):
+        _rewrite_records(data, records, retyped)
     data_start = (struct.unpack_from("<H", data, 16)[0] - 1) * 512  # the header is in Intel order by now
     # float format when POINT:SCALE (else the header's scale) < 0, else int16: points and analogs alike
     word = 4 if (negative if negative is not None else negative_header) else 2
@@ -433,14 +447,16 @@ def ezc3d_copy(path: Path, *, drop_analogs: bool = False) -> bytes:
     return bytes(data)
 
 
-def _cut_descriptions(data: bytearray, records: list[tuple[int, int, int, int]]) -> None:
-    """Every description longer than 127 characters cut to its first 127, the records after it
-    moved up and their offsets to the next record made to match (ezc3d requires each record to end
-    where the previous one's offset points), zeros where the section got shorter."""
+def _rewrite_records(data: bytearray, records: list[tuple[int, int, int, int]], retyped: dict[int, bytes]) -> None:
+    """Every description longer than 127 characters cut to its first 127 and the records of
+    ``retyped`` (index -> type, dimensions and values) rewritten, the records after them moved up and
+    their offsets to the next record made to match (ezc3d requires each record to end where the
+    previous one's offset points), zeros where the section got shorter."""
     chunks = []
-    for pos, here, describe, step in records:
+    for i, (pos, here, describe, step) in enumerate(records):
         n = min(data[describe], 127)
-        chunk = bytearray(data[pos:describe]) + bytes([n]) + data[describe + 1:describe + 1 + n]
+        body = retyped[i] if i in retyped else data[here + 2:describe]
+        chunk = bytearray(data[pos:here + 2]) + body + bytes([n]) + data[describe + 1:describe + 1 + n]
         if step > 0:
             struct.pack_into("<h", chunk, here - pos, len(chunk) - (here - pos))  # Intel order: the copy's
         chunks.append(bytes(chunk))

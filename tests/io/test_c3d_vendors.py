@@ -31,6 +31,12 @@ READ = {
        for v in ("si", "sr")},
     "sample22_BKINtechnologies.c3d": (2, 2, 5065, 1000.0, ["description of EXPERIMENT:SESSION (163 characters)",
                                                            "cut to 127", "'TP_TABLE:(UNUSED)'"]),
+    # PhoeniX: ANALOG:OFFSET stored as floats, which ezc3d refuses; the counts and rates are the
+    # header's words 2, 4-5 and 11-12 (read here from the bytes), the positions its float data block in mm
+    "sample13_Dance.c3d": (40, 40, 499, 65.0533447265625, ["ANALOG:OFFSET is stored as floating-point numbers",
+                                                           "markers are read without them", "declares 3 block(s)"]),
+    "sample13_golfswing.c3d": (29, 29, 514, 107.5268783569336, ["ANALOG:OFFSET is stored as floating-point numbers",
+                                                                "markers are read without them", "declares 3 block(s)"]),
     **{f"sample02_{v}.{'C3D' if v == 'DEC_INT' else 'c3d'}": (36, 36, 89, 50.0, [])
        for v in ("DEC_INT", "Dec_real", "pc_int", "pc_real")},
     "sample04_sub_labels.c3d": (114, 114, 333, 60.0, []),
@@ -55,12 +61,12 @@ REFUSED = {
     "sample02_sgi_int.c3d": ["record POINT:LABELS", "offset to the next record is 16129"],
     # integer coordinates under two scales: 0.0215 (POINT:SCALE) gives a shoulder width of 158 mm
     "sample06_MACsample.c3d": ["scale factors disagree", "POINT:SCALE is 0.0215412", "0.0551136", "factor 2.56"],
-    "sample13_Dance.c3d": ["ANALOG:OFFSET is stored as floating-point numbers"],
-    "sample13_golfswing.c3d": ["ANALOG:OFFSET is stored as floating-point numbers"],
     "sample18_bad_parameter_section.c3d": ["record EVENT:LABELS", "offset to the next record"],
     "sample20_phasespace_sample.c3d": ["no 3-D point can be read", "declares 40 points", "no POINT parameters"],
 }
 ALL = sorted({**READ, **REFUSED})
+FLOAT_BLOCK = {"sample22_BKINtechnologies.c3d": 1.0, "sample13_Dance.c3d": 1e-3, "sample13_golfswing.c3d": 1e-3}
+"""Files ezc3d cannot read, checked against their float data block: POINT:UNITS in metres."""
 
 
 def _file(name: str) -> Path:
@@ -97,23 +103,26 @@ def test_vendor_file(name):
         assert w in found, (w, found)
     if not words:
         assert traj.input_findings == ()
-    if name == "sample22_BKINtechnologies.c3d":  # ezc3d cannot read it: the data block, read here
-        _same_as_float_block(path, traj)
+    if name in FLOAT_BLOCK:  # ezc3d cannot read it: the data block, read here
+        _same_as_float_block(path, traj, FLOAT_BLOCK[name])
         return
     _same_as_ezc3d(_file(TWIN.get(name, name)), traj, n_points)
 
 
-def _same_as_float_block(path: Path, traj) -> None:
+def _same_as_float_block(path: Path, traj, unit_m: float) -> None:
     """Positions are the file's float data block as this test reads it from the raw bytes (header
-    words 2, 3 and 9: points, analog words per frame, first data block; metres, as POINT:UNITS
-    says; a negative residual word is missing)."""
+    words 2, 3 and 9: points, analog words per frame, first data block; in the unit POINT:UNITS
+    says, ``unit_m`` metres; a negative residual word is missing), and the frame count and rate are
+    the header's (words 4-5, 11-12)."""
     header = path.read_bytes()[:512]
+    first, last = np.frombuffer(header, "<u2", 2, 6)
+    assert (traj.n_frames, traj.rate_hz) == (int(last) - int(first) + 1, float(np.frombuffer(header, "<f4", 1, 20)[0]))
     n_points, n_analog = np.frombuffer(header, "<u2", 2, 2)
     start = (int(np.frombuffer(header, "<u2", 1, 16)[0]) - 1) * 512
     words = 4 * int(n_points) + int(n_analog)
     block = np.fromfile(path, "<f4", traj.n_frames * words, offset=start).reshape(traj.n_frames, words)
     xyzr = block[:, : 4 * int(n_points)].reshape(traj.n_frames, int(n_points), 4).astype(float)
-    expected = np.where((xyzr[..., 3] < 0)[..., None], np.nan, xyzr[..., :3])
+    expected = np.where((xyzr[..., 3] < 0)[..., None], np.nan, xyzr[..., :3] * unit_m)
     np.testing.assert_array_equal(traj.positions_m, expected)
 
 
