@@ -31,7 +31,8 @@ defined twice, a parameter of no group, a name with control or non-ASCII charact
 SCALE, RATE, DATA_START or FRAMES (ANALOG:USED, RATE, GEN_SCALE; ROTATION:...) with no value, a
 POINT:RATE that is not a finite number. ezc3d crashes on each of the last three (a segmentation
 fault: it reads those parameters' first value or dimension unchecked; found by mutating the bytes
-of parameter sections, studies/c3d_mutations.py).
+of parameter sections, studies/c3d_mutations.py). Also refused: a negative ROTATION:USED or RATIO,
+by which ezc3d sizes its rotations block (a RATIO of -256 had it ask for 12 GB).
 """
 from __future__ import annotations
 
@@ -52,6 +53,8 @@ _TYPE_BYTES = {-1: 1, 1: 1, 2: 2, 4: 4}  # C3D parameter types: char, byte, int1
 _INDEXED = {"POINT": ("USED", "SCALE", "RATE", "DATA_START", "FRAMES"), "ANALOG": ("USED", "RATE", "GEN_SCALE"),
             "ROTATION": ("USED", "RATE", "RATIO", "DATA_START")}  # ezc3d reads their first value unchecked
 MAX_SECTION_BLOCKS = 2048  # 1 MB: what is read of a parameter section whatever its header says (255 blocks declarable)
+_COUNTS = {("ROTATION", "USED"), ("ROTATION", "RATIO")}  # ezc3d sizes the rotations block by them unchecked:
+# a negative one asked for 12 GB (a mutated ROTATION:RATIO of -256, studies/c3d_mutations.py --seed 11)
 _STANDARD_NAME = re.compile(r"^[A-Z0-9_]+$")
 _BAD = "not a readable C3D file (the header contradicts the file: "
 FLOAT_OFFSETS = ("ANALOG:OFFSET is stored as floating-point numbers, where the C3D standard and ezc3d, the C3D reader "
@@ -293,10 +296,13 @@ def parameter_records(path: Path, byte_order: str, param_block: int, size: int, 
     for ident, name, _, _, _ in raw:
         if ident not in groups:
             refuse(f"parameter {name} belongs to group {ident}, which no group record defines")
-    last = {(groups[g], name): dims for g, name, _, dims, _ in raw}  # ezc3d keeps a repeated one's last
-    for (group, name), dims in last.items():
+    last = {(groups[g], name): (kind, dims, start) for g, name, kind, dims, start in raw}  # ezc3d keeps a repeated one's last
+    for (group, name), (kind, dims, start) in last.items():
         if name in _INDEXED.get(group, ()) and int(np.prod(dims, dtype=np.int64)) == 0:
             refuse(f"parameter {group}:{name} holds no value (dimensions {list(dims)}); expected a number")
+        if (group, name) in _COUNTS and kind == 2 and struct.unpack_from(byte_order + "h", section, start)[0] < 0:
+            refuse(f"parameter {group}:{name} is {struct.unpack_from(byte_order + 'h', section, start)[0]}; expected a "
+                   f"count of 0 or more (ezc3d would ask for gigabytes of memory for it)")
     counts = Counter(f"{groups[g]}:{name}" for g, name, *_ in raw)
     repeated = sorted(name for name, n in counts.items() if n > 1)
     if long and long_descriptions is None:

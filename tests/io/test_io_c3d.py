@@ -325,3 +325,19 @@ def test_a_file_whose_points_are_all_unlabelled_is_refused(tmp_path):
     path = write_custom(tmp_path / "unlabelled.c3d", make_trajectories(["*1", "*2"]))
     with pytest.raises(InputError, match=r"unlabelled\.c3d: none of its 2 points has a label a protocol can name"):
         read_c3d(path)
+
+
+@pytest.mark.parametrize("name", ["RATIO", "USED"])
+def test_a_negative_rotation_count_is_refused_before_ezc3d_sizes_memory_by_it(tmp_path, name):
+    """ROTATION:RATIO or USED made negative (a mutated byte, studies/c3d_mutations.py --seed 11: a
+    RATIO of -256 had ezc3d ask for 12 GB): refused naming the parameter, before ezc3d reads it."""
+    path = write_c3d(tmp_path / "rot.c3d", make_trajectories(["A", "B", "C"], n_frames=30))
+    data = bytearray(path.read_bytes())
+    group = data.index(b"ROTATION")  # the group record: [length][-id][name]
+    ident = -struct.unpack_from("b", data, group - 1)[0]
+    at = data.index(bytes([len(name), ident]) + name.encode(), group)  # its record: name, offset word, type, dims
+    assert data[at + 2 + len(name) + 2] == 2 and data[at + 2 + len(name) + 3] == 0  # an int16 scalar
+    struct.pack_into("<h", data, at + 2 + len(name) + 4, -256)
+    path.write_bytes(bytes(data))
+    with pytest.raises(InputError, match=rf"rot\.c3d: .*parameter ROTATION:{name} is -256; expected a count of 0 or more"):
+        read_c3d(path)
