@@ -165,6 +165,7 @@ class LiveSession:
         if q is not None:
             R, p = self.forward(q)  # once, for the angles and the model points (Kinematics.frames' R and p)
             isb, rate = self.angles.of(q, R)
+            self.monitor.gh_elevation(g, R)
             pts = self.model_points(R, p)  # kin.points' kernel
             d = pts - measured_m
             res = np.sqrt(np.add.reduce(d * d, axis=1))  # np.linalg.norm(d, axis=1)'s operations

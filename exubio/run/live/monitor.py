@@ -5,6 +5,7 @@ the running residual and joint-limit figures, the running verdict, a diverged PF
 status summary for a display. It reports what it sees through the session's ``event``."""
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
 import numpy as np
@@ -39,6 +40,18 @@ def mean_finite(x: np.ndarray) -> float:
     if ok.all():
         return float(np.add.reduce(x) / x.size) if x.size else np.nan
     return float(np.add.reduce(x[ok]) / ok.sum()) if ok.any() else np.nan
+
+
+def _long_axes(model) -> tuple | None:
+    """(segment index, its anatomical Y axis in segment coordinates) of the scapula and the humerus, or
+    None for a model without both."""
+    from exubio.model.angles import anatomical_frames
+
+    names = [seg.name for seg in model.segments]
+    if not {"scapula", "humerus"} <= set(names):
+        return None
+    A = anatomical_frames(model)
+    return tuple((model.segment_index(n), A[n][:, 1].copy()) for n in ("scapula", "humerus"))
 
 
 class LiveMonitor:
@@ -79,6 +92,8 @@ class LiveMonitor:
         self.frame_means = np.empty(4096)  # the mean residual of each frame (mm), the first n_means
         self.n_means = 0
         self.lim_count, self.lim_first, self.lim_beyond = np.zeros(m, dtype=int), np.zeros(m, dtype=int), np.zeros(m)
+        self.gh_axes = _long_axes(model)  # the bound on GH elevation, as the offline limits (exubio.trust.assess)
+        self.gh_count, self.gh_first, self.gh_beyond = 0, 0, 0.0
         self.undetermined_frames = np.zeros(m, dtype=int)
         self.quality = Q.Quality.of([])
         self.verdict_every = max(int(round(options.verdict_every_s * rate)), 1)
@@ -183,6 +198,20 @@ class LiveMonitor:
                 self.lim_count[j] += 1
                 self.lim_beyond[j] = max(self.lim_beyond[j], beyond[j])
 
+    def gh_elevation(self, g: int, rotations: np.ndarray) -> None:
+        """Frame g's GH elevation (the angle between the scapula's and the humerus's long axes, from its
+        segment rotations (n_seg, 3, 3)) against its bound (exubio.trust.quality.GH_ELEVATION_MAX_DEG)."""
+        if self.gh_axes is None:
+            return
+        (s, ys), (h, yh) = self.gh_axes
+        e = math.acos(min(1.0, max(-1.0, float((rotations[s] @ ys) @ (rotations[h] @ yh)))))
+        bound = math.radians(Q.GH_ELEVATION_MAX_DEG)
+        if e >= bound - AT_LIMIT_TOLERANCE_RAD:
+            if self.gh_count == 0:
+                self.gh_first = g
+            self.gh_count += 1
+            self.gh_beyond = max(self.gh_beyond, e - bound)
+
     def verdict(self, g: int, counts: Mapping[str, int], events: Sequence[Event]) -> None:
         """The running verdict: the criteria of exubio.trust.quality on the frames so far, plus what the
         live loop saw (stalls, restarts, skips, label swaps). ``counts``: the session's frames
@@ -201,6 +230,10 @@ class LiveMonitor:
         lims = [{"coordinate": names[j], "range_deg": [float(np.degrees(self.ranges[j, 0])), float(np.degrees(self.ranges[j, 1]))],
                  "frames_at_limit": int(self.lim_count[j]), "first_frame": int(self.lim_first[j]),
                  "max_beyond_deg": float(np.degrees(self.lim_beyond[j]))} for j in np.flatnonzero(self.lim_count)]
+        if self.gh_count:
+            lims.append({"coordinate": "GH_X_elevation", "range_deg": [-Q.GH_ELEVATION_MAX_DEG, Q.GH_ELEVATION_MAX_DEG],
+                         "frames_at_limit": self.gh_count, "first_frame": self.gh_first,
+                         "max_beyond_deg": math.degrees(max(self.gh_beyond, 0.0))})
         open_gaps = [Gap(self.marker_names[j], int(self.gap_start[j]), n) for j in np.flatnonzero(self.in_gap)]
         names_m = self.marker_names
         live = LiveCounts(dropped=counts["dropped"], late=counts["late"], skipped=counts["skipped"],
