@@ -385,8 +385,8 @@ def ezc3d_copy(path: Path, *, drop_analogs: bool = False) -> bytes:
     description longer than 127 characters cut to 127 (its length byte; the record's offset to the
     next record, which readers follow, is kept); with ``drop_analogs`` (``RawCheck.analogs_unreadable``)
     without its analog channels (ANALOG:USED and the header's analog counts 0, each frame of the
-    data block its point words only, ANALOG:OFFSET stored as floats written as int16, rounded). Call it on a file ``check_raw_header`` has accepted: the
-    records are walked as it checked them."""
+    data block its point words only, ANALOG:OFFSET stored as floats written as int16, rounded).
+    Call it on a file ``check_raw_header`` has accepted: the records are walked as it checked them."""
     data = bytearray(path.read_bytes())
     first = (data[0] - 1) * 512
     processor = data[first + 3]
