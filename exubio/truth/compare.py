@@ -7,6 +7,8 @@ every verdict; ``measured_fraction`` says how many those are.
 """
 from __future__ import annotations
 
+import dataclasses
+
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,6 +37,7 @@ class AngleError:
     coverage: float | None
     measured_fraction: float
     median_u_deg: float | None = None
+    lab: "AngleError | None" = None  # the same reconstruction judged with the u and status a lab's run gives
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,9 +62,15 @@ class TruthComparison:
                 "clavicle_gap_mm": None if self.clavicle_gap_mm is None else {k: num(v) for k, v in
                                                                              self.clavicle_gap_mm.items()},
                 "reasons": {m: list(r) for m, r in self.reasons.items()},
-                "angles": {a: {m: {"rmse_deg": num(e.rmse_deg), "max_deg": num(e.max_deg), "coverage": num(e.coverage),
-                                   "measured_fraction": num(e.measured_fraction), "median_u_deg": num(e.median_u_deg)}
-                               for m, e in per.items()} for a, per in self.angles.items()}}
+                "angles": {a: {m: _error_json(e, num) for m, e in per.items()} for a, per in self.angles.items()}}
+
+
+def _error_json(e: AngleError, num) -> dict:
+    out = {"rmse_deg": num(e.rmse_deg), "max_deg": num(e.max_deg), "coverage": num(e.coverage),
+           "measured_fraction": num(e.measured_fraction), "median_u_deg": num(e.median_u_deg)}
+    if e.lab is not None:
+        out["lab"] = _error_json(e.lab, num)
+    return out
 
 
 def truth_angles(run: BoneLabRun) -> dict[str, np.ndarray]:
@@ -109,12 +118,13 @@ def _protocol(run: BoneLabRun, model):
 
 STILL_THORAX_COST = ("each angle's uncertainty carries the cost of that assumption: a trunk moving unseen as much as "
                      "the trunks of real arm tasks with thorax markers do (exubio.truth.trunk_amplitude), through the "
-                     "reconstruction")
+                     "reconstruction; the 'lab' figures judge the same reconstruction with the uncertainty and status "
+                     "a lab's run with thorax markers gives, without that cost")
 
 
-def _still_thorax_status(inputs, rec):
-    """The angles' status and uncertainty of ``rec`` as ``exubio reconstruct`` gives them, plus the
-    cost of the still thorax this run assumes (observability.angle_determinacy,
+def _still_thorax_status(inputs, rec, *, still: bool = True):
+    """The angles' status and uncertainty of ``rec`` as ``exubio reconstruct`` gives them, plus (``still``)
+    the cost of the still thorax this run assumes (observability.angle_determinacy,
     ``thorax_assumed_still``)."""
     from ..trust.assess import DETERMINACY_PERIOD_S
     from ..trust.observability import angle_determinacy
@@ -124,7 +134,16 @@ def _still_thorax_status(inputs, rec):
     return angle_determinacy(b.kin, b.points, rec.q_rad, targets.present, b.protocol.weights,
                              held=b.held, locked=b.locked,
                              every=max(1, int(round(DETERMINACY_PERIOD_S / dt))), residuals_m=rec.residuals_m,
-                             thorax_assumed_still=True, marker_positions_m=targets.positions_m)
+                             thorax_assumed_still=still, marker_positions_m=targets.positions_m)
+
+
+def _measured_and_u(det, angle: str, n: int) -> tuple[np.ndarray, np.ndarray | None]:
+    """An angle's measured frames (n,) and uncertainty (n,) rad under a status ``det`` (None: every frame,
+    no u)."""
+    if det is None:
+        return np.ones(n, bool), None
+    k = det.names.index(angle)
+    return det.status[:, k] == 0, None if det.uncertainty_rad is None else det.uncertainty_rad[:, k]
 
 
 def main_reasons(quality, /, *, most: int = 6) -> tuple[str, ...]:
@@ -161,6 +180,7 @@ def compare_bone_trial(run: BoneLabRun, /, *, methods: Sequence[str] = ("pf", "l
                                   + "; ".join(f"{m.upper()}: {r}" for m, r in failed.items()))
     assessment = assess_inputs(inputs, list(recs.values()))
     still = {m: _still_thorax_status(inputs, rec) for m, rec in recs.items()}
+    lab = {m: _still_thorax_status(inputs, rec, still=False) for m, rec in recs.items()}
     truth = truth_angles(run)
     per_angle: dict[str, dict[str, AngleError]] = {a: {} for a in TRUTH_ANGLES}
     verdicts = {m: f"failed: {reason}" for m, reason in failed.items()}
@@ -170,13 +190,11 @@ def compare_bone_trial(run: BoneLabRun, /, *, methods: Sequence[str] = ("pf", "l
         verdicts[m] = q.verdict.label if hasattr(q.verdict, "label") else str(q.verdict)
         reasons[m] = main_reasons(q)
         names, table = anatomical_table(model, rec.q_rad)
-        det = still[m]
         for a in TRUTH_ANGLES:
             j = names.index(a)
-            measured = (np.ones(rec.n_frames, bool) if det is None
-                        else det.status[:, det.names.index(a)] == 0)
-            u = None if det is None or det.uncertainty_rad is None else det.uncertainty_rad[:, det.names.index(a)]
-            per_angle[a][m] = angle_errors(table[:, j], truth[a], measured, u)
+            judged = [angle_errors(table[:, j], truth[a], *_measured_and_u(det, a, rec.n_frames))
+                      for det in (still[m], lab[m])]
+            per_angle[a][m] = dataclasses.replace(judged[0], lab=judged[1])
     gap = clavicle_gap_m(run) * 1000.0
     seen = gap[np.isfinite(gap)]
     gap_mm = ({"median": float(np.median(seen)), "p95": float(np.percentile(seen, 95)), "max": float(seen.max())}

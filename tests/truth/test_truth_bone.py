@@ -185,6 +185,19 @@ def test_the_command_writes_the_issue_s_json(tmp_path):
     gap = data["clavicle_gap_mm"]  # the still thorax against the pins (lab_run.clavicle_gap_m)
     assert 0 <= gap["median"] <= gap["p95"] <= gap["max"] < 100 and "off the sphere about SC" in data["notes"][0]
     assert set(data["reasons"]) == {"pf", "ls"}  # the verdicts' main reasons, per method (none for an ok)
+    # the same reconstruction judged as a lab's run judges it (no still-thorax term): each frame's u no larger, so
+    # the frames measured a superset; where they are the same frames, the same errors, no more of them covered
+    checked = 0
+    for angle, per in data["angles"].items():
+        for m, err in per.items():
+            lab = err["lab"]
+            assert lab["measured_fraction"] >= err["measured_fraction"], (angle, m)
+            if err["median_u_deg"] is not None and lab["measured_fraction"] == err["measured_fraction"]:
+                assert lab["median_u_deg"] <= err["median_u_deg"] + 1e-9, (angle, m)
+                assert lab["rmse_deg"] == err["rmse_deg"] and lab["coverage"] <= err["coverage"], (angle, m)
+                checked += 1
+    assert checked >= 4
+    assert "'lab' figures" in data["assumption"] and "| lab:" in r.stdout
 
 
 def test_the_verdicts_main_reasons_are_one_line_per_kind_worst_first():
