@@ -99,19 +99,11 @@ def main(argv=None) -> int:
         from exubio.trust import angle_uncertainty
 
         angle_uncertainty.DIRECT_MISFIT = False
-    if args.no_trunk_term:
-        from exubio.trust.assess import DETERMINACY_PERIOD_S
-        from exubio.trust.observability import angle_determinacy
+    if args.no_trunk_term:  # the table's coverage is then exubio truth's 'lab' figures
         from exubio.truth import compare
 
-        def lab_status(inputs, rec):
-            b, targets = inputs.binding, inputs.targets
-            dt = float(np.median(np.diff(targets.time_s))) if targets.n_frames > 1 else 1.0
-            return angle_determinacy(b.kin, b.points, rec.q_rad, targets.present, b.protocol.weights, held=b.held,
-                                     locked=b.locked, every=max(1, int(round(DETERMINACY_PERIOD_S / dt))), residuals_m=rec.residuals_m,
-                                     thorax_assumed_still=False, marker_positions_m=targets.positions_m)
-
-        compare._still_thorax_status = lab_status
+        status = compare.angle_status
+        compare.angle_status = lambda inputs, rec, *, still_thorax: status(inputs, rec, still_thorax=False)
     logging.disable(logging.WARNING)
     warnings.simplefilter("ignore")
     files = sorted(args.data.glob("*.mat"))

@@ -41,7 +41,7 @@ def main(argv=None) -> int:
     protocol = compare._protocol(run, model)
     inputs = load_inputs(run.trajectories, Session(model, protocol, model, protocol))
     rec = reconstruct(inputs.model, inputs.protocol, inputs.targets, method="ls")
-    det = compare._still_thorax_status(inputs, rec, still=False)  # the u and status a lab's run gives
+    det = compare.angle_status(inputs, rec, still_thorax=False)  # the u and status a lab's run gives
     names, table = anatomical_table(model, rec.q_rad)
     truth = compare.truth_angles(run)
     R, _ = inputs.binding.kin.poses(rec.q_rad)

@@ -25,7 +25,6 @@ import numpy as np
 from exubio.io.yaml import read_yaml
 from exubio.model.load import DEFAULT_MODEL
 from exubio.trust import angle_uncertainty, observability
-from exubio.trust.assess import DETERMINACY_PERIOD_S
 from exubio.trust.sta_amplitude import load_sta_amplitude
 from exubio.truth import compare
 from exubio.truth import sta_amplitude as fit
@@ -35,15 +34,6 @@ from exubio.truth.sta_format import read_sta_trial
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "data" / "truth" / "sta_opendata"
 RATE_HZ = 300.0  # S2M
-
-
-def _lab_status(inputs, rec, *, still: bool = True):  # noqa: ARG001 (the lab's u whatever is asked)
-    b, targets = inputs.binding, inputs.targets
-    dt = float(np.median(np.diff(targets.time_s))) if targets.n_frames > 1 else 1.0
-    return observability.angle_determinacy(
-        b.kin, b.points, rec.q_rad, targets.present, b.protocol.weights, held=b.held, locked=b.locked,
-        every=max(1, int(round(DETERMINACY_PERIOD_S / dt))), residuals_m=rec.residuals_m, thorax_assumed_still=False,
-        marker_positions_m=targets.positions_m)
 
 
 def main(argv=None) -> int:
@@ -58,7 +48,8 @@ def main(argv=None) -> int:
     humerus_driver, driver = fit.humerus_driver, angle_uncertainty._driver
     fit.humerus_driver = lambda trial, rest: shape(humerus_driver(trial, rest))
     angle_uncertainty._driver = lambda names, R: shape(driver(names, R))
-    compare._still_thorax_status = _lab_status
+    status = compare.angle_status  # every angle judged with the u and status a lab's run gives
+    compare.angle_status = lambda inputs, rec, *, still_thorax: status(inputs, rec, still_thorax=False)
     generic, shipped = read_yaml(DEFAULT_MODEL), load_sta_amplitude()
     shared = sorted(SHARED.glob("dataSample_S2M_*.mat"))
 

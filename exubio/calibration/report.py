@@ -181,12 +181,12 @@ class CalibrationReport:
             landmark_offsets_mm=dict(d.get("landmark_offsets_mm") or {}), fit_stop=dict(d.get("fit_stop") or {}))
 
 
-
 SKIN_FIT_CAVEAT = (
     "  the ellipsoid now follows the skin's poses of the scapula: on bone pins such a fit took ST upward rotation "
     "1-10 deg farther from the bone than the static calibration alone (ST internal rotation closer), and each ST "
     "and GH angle's uncertainty of the trials reconstructed with this model carries the scapula cluster's whole "
     "sliding (studies/README.md, 'A scapula trial against bone')")
+
 
 def format_report(report: CalibrationReport, /) -> str:
     """A short text table of the calibration for the terminal."""

@@ -192,16 +192,6 @@ def _analogs_unreadable(section: bytes, params: list[RawParameter], byte_order: 
                     f"{'is absent' if absent else f'holds {values} value(s)'}; expected one per channel; ezc3d "
                     f"cannot read such analog channels (it crashes)")
     return ""
-    n = struct.unpack(byte_order + "h", section[used.start:used.start + 2])[0]
-    if n <= 0:
-        return ""
-    for name in ("SCALE", "OFFSET"):
-        p = last.get(("ANALOG", name))
-        values = int(np.prod(p.dims, dtype=np.int64)) if p is not None else 0
-        if values < n:
-            return (f"ANALOG:USED is {n} but ANALOG:{name} "
-                    f"{'is absent' if p is None else f'holds {values} value(s)'}; expected one per channel")
-    return ""
 
 
 def raw_parameters(path: Path, byte_order: str, param_block: int, size: int

@@ -7,10 +7,8 @@ every verdict; ``measured_fraction`` says how many those are.
 """
 from __future__ import annotations
 
-import dataclasses
-
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -21,7 +19,7 @@ from ..model.angles import ANATOMICAL_COLUMNS, anatomical_table, angles_of_frame
 from .lab_run import BoneLabRun, clavicle_gap_m
 
 __all__ = ["AngleError", "TruthComparison", "TRUTH_ANGLES", "truth_angles", "compare_bone_trial", "angle_errors",
-           "main_reasons"]
+           "angle_status", "main_reasons"]
 
 TRUTH_SETS = ("ST", "GH", "GH_phadke", "HT")
 TRUTH_ANGLES: tuple[str, ...] = tuple(c for c in ANATOMICAL_COLUMNS if c.startswith(("ST_", "GH_", "HT_")))
@@ -122,10 +120,10 @@ STILL_THORAX_COST = ("each angle's uncertainty carries the cost of that assumpti
                      "a lab's run with thorax markers gives, without that cost")
 
 
-def _still_thorax_status(inputs, rec, *, still: bool = True):
-    """The angles' status and uncertainty of ``rec`` as ``exubio reconstruct`` gives them, plus (``still``)
+def angle_status(inputs, rec, /, *, still_thorax: bool):
+    """The angles' status and uncertainty of ``rec`` as ``exubio reconstruct`` gives them, plus (``still_thorax``)
     the cost of the still thorax this run assumes (observability.angle_determinacy,
-    ``thorax_assumed_still``)."""
+    ``thorax_assumed_still``); without it, what a lab's run with thorax markers gives."""
     from ..trust.assess import DETERMINACY_PERIOD_S
     from ..trust.observability import angle_determinacy
 
@@ -134,7 +132,7 @@ def _still_thorax_status(inputs, rec, *, still: bool = True):
     return angle_determinacy(b.kin, b.points, rec.q_rad, targets.present, b.protocol.weights,
                              held=b.held, locked=b.locked,
                              every=max(1, int(round(DETERMINACY_PERIOD_S / dt))), residuals_m=rec.residuals_m,
-                             thorax_assumed_still=still, marker_positions_m=targets.positions_m)
+                             thorax_assumed_still=still_thorax, marker_positions_m=targets.positions_m)
 
 
 def _measured_and_u(det, angle: str, n: int) -> tuple[np.ndarray, np.ndarray | None]:
@@ -179,8 +177,8 @@ def compare_bone_trial(run: BoneLabRun, /, *, methods: Sequence[str] = ("pf", "l
         raise ReconstructionError(f"{run.trial.path}: every method failed: "
                                   + "; ".join(f"{m.upper()}: {r}" for m, r in failed.items()))
     assessment = assess_inputs(inputs, list(recs.values()))
-    still = {m: _still_thorax_status(inputs, rec) for m, rec in recs.items()}
-    lab = {m: _still_thorax_status(inputs, rec, still=False) for m, rec in recs.items()}
+    still = {m: angle_status(inputs, rec, still_thorax=True) for m, rec in recs.items()}
+    lab = {m: angle_status(inputs, rec, still_thorax=False) for m, rec in recs.items()}
     truth = truth_angles(run)
     per_angle: dict[str, dict[str, AngleError]] = {a: {} for a in TRUTH_ANGLES}
     verdicts = {m: f"failed: {reason}" for m, reason in failed.items()}
@@ -194,7 +192,7 @@ def compare_bone_trial(run: BoneLabRun, /, *, methods: Sequence[str] = ("pf", "l
             j = names.index(a)
             judged = [angle_errors(table[:, j], truth[a], *_measured_and_u(det, a, rec.n_frames))
                       for det in (still[m], lab[m])]
-            per_angle[a][m] = dataclasses.replace(judged[0], lab=judged[1])
+            per_angle[a][m] = replace(judged[0], lab=judged[1])
     gap = clavicle_gap_m(run) * 1000.0
     seen = gap[np.isfinite(gap)]
     gap_mm = ({"median": float(np.median(seen)), "p95": float(np.percentile(seen, 95)), "max": float(seen.max())}

@@ -94,6 +94,7 @@ class LiveMonitor:
         self.lim_count, self.lim_first, self.lim_beyond = np.zeros(m, dtype=int), np.zeros(m, dtype=int), np.zeros(m)
         self.gh_axes = _long_axes(model)  # the bound on GH elevation, as the offline limits (exubio.trust.assess)
         self.gh_count, self.gh_first, self.gh_beyond = 0, 0, 0.0
+        self.gh_bound = math.radians(Q.GH_ELEVATION_MAX_DEG)
         self.undetermined_frames = np.zeros(m, dtype=int)
         self.quality = Q.Quality.of([])
         self.verdict_every = max(int(round(options.verdict_every_s * rate)), 1)
@@ -205,12 +206,11 @@ class LiveMonitor:
             return
         (s, ys), (h, yh) = self.gh_axes
         e = math.acos(min(1.0, max(-1.0, float((rotations[s] @ ys) @ (rotations[h] @ yh)))))
-        bound = math.radians(Q.GH_ELEVATION_MAX_DEG)
-        if e >= bound - AT_LIMIT_TOLERANCE_RAD:
+        if e >= self.gh_bound - AT_LIMIT_TOLERANCE_RAD:
             if self.gh_count == 0:
                 self.gh_first = g
             self.gh_count += 1
-            self.gh_beyond = max(self.gh_beyond, e - bound)
+            self.gh_beyond = max(self.gh_beyond, e - self.gh_bound)
 
     def verdict(self, g: int, counts: Mapping[str, int], events: Sequence[Event]) -> None:
         """The running verdict: the criteria of exubio.trust.quality on the frames so far, plus what the
