@@ -26,6 +26,11 @@ move by D dq (D = d angle / d q). The markers' error covariance has two parts:
   why an angle's error under real skin is far larger than its marker residual suggests. The
   scapula's and the humerus's clusters move together (both skins are dragged by the same arm): their
   cross second moment, measured on the same pins, couples the two segments' rigid parts;
+* what the model's girdle cannot follow (``girdle_angle_variance``): a rigid clavicle about a fixed
+  sternoclavicular joint, a scapula on a thorax ellipsoid and a fixed GH centre are not a real girdle,
+  and with skin that does not slide at all the model's scapula and humerus frames still miss the
+  bones' (``exubio.truth.girdle``, measured on bone pins); those two frames are taken as turned by a
+  random rotation of that size, growing with the humerus's rotation from rest like the artefact;
 * in a run that assumes the thorax still (no thorax marker: ``exubio truth``), the trunk's unseen
   motion (``trunk_angle_variance``), added by ``observability.angle_determinacy`` to the variance.
 
@@ -50,7 +55,7 @@ from exubio.model.kinematics import Kinematics, PointSet
 from exubio.trust.design import constrained_design
 from exubio.trust.sta_amplitude import STAAmplitude
 
-__all__ = ["ellipsoid_from_skin", "misfit_angle_variance", "skin_ellipsoid_variance", "BOUND_SETS", "bound_applies", "NOISE_MM", "U_BOUND_DEG", "GIMBAL_MARGIN_DEG", "marker_covariance", "sensitivity", "gimbal_mask",
+__all__ = ["girdle_angle_variance", "ellipsoid_from_skin", "misfit_angle_variance", "skin_ellipsoid_variance", "BOUND_SETS", "bound_applies", "NOISE_MM", "U_BOUND_DEG", "GIMBAL_MARGIN_DEG", "marker_covariance", "sensitivity", "gimbal_mask",
            "expected_residual_ms", "UNCERTAINTY_DEFINITION"]
 
 NOISE_MM = 1.0
@@ -74,7 +79,9 @@ UNCERTAINTY_DEFINITION = (
     "correlated, growing with the motion from the reference posture; exubio.trust.sta_amplitude), carried through "
     "the reconstruction's first-order sensitivity, and where a segment's markers fit the model worse than noise and "
     "the artefact explain, that misfit as a turn of the segment's frame (the rotation carrying its model points onto "
-    "its markers), and where the calibration fitted the thorax ellipsoid through the scapula's skin poses away from "
+    "its markers), the scapula's and humerus's frames turned by what the model's girdle (a rigid clavicle, a scapula "
+    "on a thorax ellipsoid) cannot follow of the bones even with skin that does not slide (exubio.truth.girdle, "
+    "fitted on the same pins), and where the calibration fitted the thorax ellipsoid through the scapula's skin poses away from "
     "rest (a scapula trial, several statics), the scapula's frame turned by its cluster's whole rotation"
     f"; an ST, GH or HT angle is not measured where u > {U_BOUND_DEG:g} deg, any angle within "
     f"{GIMBAL_MARGIN_DEG:g} deg of its sequence's gimbal lock (SC, AC and distal angles: u from coefficients borrowed "
@@ -395,6 +402,42 @@ def trunk_angle_variance(kin: Kinematics, points: PointSet, qf: np.ndarray, DK: 
     G[:, : turns.shape[1], :3] = turns
     E = (DK @ B - G) @ T6  # (b, a, 6): per unit of the trunk's motion in its own axes
     return np.einsum("bai,bij,baj->ba", E, amplitude.trunk_at(_driver(names, R)), E)
+
+
+def girdle_angle_variance(kin: Kinematics, qf: np.ndarray, amplitude: STAAmplitude, n_angles: int,
+                          frames: dict | None = None, /) -> np.ndarray:
+    """(b, n_angles) rad^2: what the model's girdle cannot follow of the bones adds to the angles at
+    poses qf (b, m) (zero where the amplitude model has no ``girdle``).
+
+    The model's scapula and humerus ISB frames are taken as turned off the bones by rotation vectors
+    (in their own axes) of second moment C theta^2 (``STAAmplitude.girdle``, 6 x 6, the two frames
+    together; theta the humerus's rotation from rest), and every angle of either frame moves with it
+    (e = d angle / d rotation of that frame alone, the other frames kept: ST, GH and HT): e C e^T
+    theta^2, or nothing where that is negative. C is the girdle's error with no skin plus twice its
+    covariance with what the skin adds (``exubio.truth.girdle``: the two partly cancel on the pins,
+    and the skin's part is already in u), so it is not positive definite. ``frames``: the ISB frames
+    at qf where the caller has them. On the standing S2M pin trials, with skin markers carried
+    rigidly by the bones, the model's scapula frame is 2-16 deg off the bone about its ISB axes (RMS
+    per bin of theta, growing with it); without this term a lab's u covered the bone's ST, GH and HT
+    angles within +-2u in fewer than 90 % of frames in 17 of 60 task-angle cells
+    (``studies/bone_u_girdle.py``). Frame angles only (the first columns, as ``angles_of_frames``
+    orders them)."""
+    from exubio.model.angles import segment_anatomical_rotations
+
+    model = kin.model
+    b = qf.shape[0]
+    out = np.zeros((b, n_angles))
+    names = [s.name for s in model.segments]
+    if amplitude.girdle is None or "scapula" not in names or "humerus" not in names:
+        return out
+    R, _ = kin.poses(qf)
+    theta = _driver(names, R)
+    frames = segment_anatomical_rotations(model, qf, kinematics=kin) if frames is None else frames
+    E = np.concatenate([frame_angle_turns(frames, lambda name, s=s: name == s) @ frames[s]
+                        for s in ("scapula", "humerus")], axis=2)  # (b, 18, 6) per rad of each frame's own axes
+    C = np.asarray(amplitude.girdle, dtype=float)
+    out[:, : E.shape[1]] = np.maximum(np.einsum("bai,ij,baj->ba", E, C, E), 0.0) * (theta ** 2)[:, None]
+    return out
 
 
 def ellipsoid_from_skin(calibration, /) -> bool:

