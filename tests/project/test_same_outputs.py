@@ -1,7 +1,7 @@
 """The house moves, the outputs do not: ``exubio demo``, a study of 12 simulated trials in two
 sessions, and every real trial of ../shared/data with both methods, run by the base commit (BASE:
-f053b69, after gh_abduction and gh_flexion lost their ranges; before it b09a162, 30ce9ee, 2acf5d1,
-f64e71d and 336130f) and by this checkout, write the same files (benchmarks/same_outputs.py: CSV, .mot and
+ea11f84, after every angle's u took the girdle's part; before it f053b69, after gh_abduction and
+gh_flexion lost their ranges, b09a162, 30ce9ee, 2acf5d1, f64e71d and 336130f) and by this checkout, write the same files (benchmarks/same_outputs.py: CSV, .mot and
 JSON byte for byte once the checkouts' paths and the timing fields are blanked, .npz arrays exactly,
 PNG pixel for pixel, PDF page counts). Page 1 of a study trial's report, where it prints the run's
 folder (a reason naming the static trial), differs between any two runs and is left out (PAGE_ONE). The changes made on purpose since (benchmarks/same_outputs.py,
@@ -18,7 +18,7 @@ import pytest
 pytestmark = [pytest.mark.exudyn, pytest.mark.slow]
 
 ROOT = Path(__file__).resolve().parents[2]
-BASE = "f053b69"  # after the GH sequence's first and last angles lost their ranges (benchmarks/same_outputs.py, KNOWN_CHANGES)
+BASE = "ea11f84"  # after u took the girdle's part (exubio.truth.girdle; benchmarks/README.md)
 EXPECTED: dict = {}  # demo files allowed to differ, with why
 
 
