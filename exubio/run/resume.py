@@ -4,7 +4,9 @@ complete is kept, not refused and not computed again.
 Every summary.json that ``exubio reconstruct`` writes carries ``inputs_sha256``: a fingerprint of
 what the result is made from (the trial file's bytes and the labels read from it, the model and
 protocol files (a calibrated model's file holds its calibration), the method's options, the label
-repair, exubio's version). A plain re-run (no ``--overwrite``) finds a set complete (ResultSet:
+repair, exubio's code: ``code_fingerprint``, every source and data file of the installed package, not
+its version string, which stays the same across the commits of a development install while the
+results change). A plain re-run (no ``--overwrite``) finds a set complete (ResultSet:
 summary.json is placed last) with the same fingerprint and keeps it: the results are
 deterministic, so computing them again would give the same files. A set of other inputs is still
 refused; ``--overwrite`` computes everything again.
@@ -19,6 +21,36 @@ from typing import Any, Mapping, Sequence
 
 from exubio.io.records import decode
 from exubio.io.result_names import set_paths
+
+CODE_SUFFIXES = (".py", ".pyi", ".json", ".yaml", ".yml", ".csv")
+"""The files of the package that make a result: its code and the data it ships (the STA amplitude
+model, the literature tables); not caches (``__pycache__``, numba's) or the example trial."""
+
+
+def code_fingerprint(root: str | Path | None = None, /) -> str:
+    """SHA-256 of every file of the exubio package (or of ``root``) with a suffix in ``CODE_SUFFIXES``,
+    path and bytes, in path order: what the results of a given input depend on besides the input.
+    Computed once per process for the package (about 10 ms)."""
+    if root is None:
+        return _package_fingerprint()
+    root = Path(root)
+    h = hashlib.sha256()
+    for f in sorted(p for p in root.rglob("*") if p.suffix in CODE_SUFFIXES and "__pycache__" not in p.parts
+                    and p.is_file()):
+        h.update(f.relative_to(root).as_posix().encode() + b"\0")
+        h.update(hashlib.sha256(f.read_bytes()).digest())
+    return h.hexdigest()
+
+
+_FINGERPRINT: list[str] = []
+
+
+def _package_fingerprint() -> str:
+    if not _FINGERPRINT:
+        import exubio
+
+        _FINGERPRINT.append(code_fingerprint(Path(exubio.__file__).resolve().parent))
+    return _FINGERPRINT[0]
 
 
 def run_key(trial_path: str | Path, model: Any, protocol: Any, method: str, /, *, options: Any = None,
@@ -36,7 +68,7 @@ def run_key(trial_path: str | Path, model: Any, protocol: Any, method: str, /, *
     for f in files:
         h.update(hashlib.sha256(f.read_bytes()).digest())
     opts = repr(method_spec(method).make_options(options))
-    h.update(repr((method, tuple(labels), opts, bool(repair_labels), exubio.__version__)).encode())
+    h.update(repr((method, tuple(labels), opts, bool(repair_labels), exubio.__version__, code_fingerprint())).encode())
     signs = getattr(protocol, "signs", "isb")
     if signs != "isb":  # the angles' sign convention (the protocol's key, or --signs over it): other files
         h.update(f"signs={signs}".encode())

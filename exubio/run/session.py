@@ -182,8 +182,10 @@ def calibrate_in_memory(static: str | Path | Trajectories, session: Session, spe
 def calibration_key(static: Trajectories, session: Session, spec: StaticSpec, /) -> str | None:
     """A fingerprint of what a calibration is made from: the static trial's file and labels (a
     relabel changes them), the generic model and protocol files, the static options and their
-    files, exubio's version. None when the static is not a file (nothing to find again)."""
+    files, exubio's version and code (exubio.run.resume.code_fingerprint). None when the static is not a file
+    (nothing to find again)."""
     import exubio
+    from exubio.run.resume import code_fingerprint
 
     files = [static.source, session.generic_model.source, session.generic_protocol.source,
              spec.functional, *spec.more_statics, *spec.scapula_trials]
@@ -192,7 +194,7 @@ def calibration_key(static: Trajectories, session: Session, spec: StaticSpec, /)
     h = hashlib.sha256()
     for f in files:
         h.update(hashlib.sha256(Path(f).read_bytes() if f and Path(f).is_file() else str(f).encode()).digest())
-    h.update(repr((tuple(static.labels), spec.frames, exubio.__version__)).encode())
+    h.update(repr((tuple(static.labels), spec.frames, exubio.__version__, code_fingerprint())).encode())
     return h.hexdigest()
 
 

@@ -128,3 +128,42 @@ def test_several_trials_interrupted_after_the_first_resume_with_the_second(tmp_p
     console = capsys.readouterr().out
     assert console.count("[ls] kept") == 1, console
     assert (out / "b.ls.summary.json").is_file() and (out / "b.report.pdf").is_file()
+
+
+def test_a_set_made_by_other_code_is_refused_not_kept(tmp_path, trials, capsys, monkeypatch):
+    """The same command after exubio's code changed (a development install between two commits keeps
+    its version string, and the new code can give other angles, uncertainties or verdicts): the kept set
+    is not taken as this code's (it would mix two codes' results in one study), the run stops on it as on
+    a set of other inputs, and --overwrite computes it again. Without the change the set is kept."""
+    import exubio.run.resume as resume
+
+    a, _ = trials
+    out = tmp_path / "out"
+    assert main(["-q", "reconstruct", str(a), "--method", "ls", "--no-report", "--out", str(out)]) == 0
+    assert main(["-q", "reconstruct", str(a), "--method", "ls", "--no-report", "--out", str(out)]) == 0
+    assert "[ls] kept" in capsys.readouterr().out
+    key = json.loads((out / "a.ls.summary.json").read_text())["inputs_sha256"]
+    monkeypatch.setattr(resume, "_FINGERPRINT", ["0" * 64])  # as if one source file of the package had changed
+    assert main(["-q", "reconstruct", str(a), "--method", "ls", "--no-report", "--out", str(out)]) == 2
+    assert "a.ls.csv: result file already exists" in capsys.readouterr().err
+    assert main(["-q", "reconstruct", str(a), "--method", "ls", "--no-report", "--out", str(out), "--overwrite"]) == 0
+    assert json.loads((out / "a.ls.summary.json").read_text())["inputs_sha256"] != key
+
+
+def test_the_code_fingerprint_follows_source_and_data_files_not_caches(tmp_path):
+    from exubio.run.resume import code_fingerprint
+
+    pkg = tmp_path / "pkg"
+    (pkg / "data").mkdir(parents=True)
+    (pkg / "__pycache__").mkdir()
+    (pkg / "m.py").write_text("x = 1\n")
+    (pkg / "data" / "amp.json").write_text("{}")
+    first = code_fingerprint(pkg)
+    (pkg / "__pycache__" / "m.cpython-311.pyc").write_bytes(b"\0")
+    (pkg / "m.nbi").write_bytes(b"\1")
+    assert code_fingerprint(pkg) == first
+    (pkg / "data" / "amp.json").write_text('{"girdle": 1}')
+    assert code_fingerprint(pkg) != first
+    (pkg / "data" / "amp.json").write_text("{}")
+    (pkg / "data" / "amp.json").rename(pkg / "amp.json")  # the same bytes elsewhere: another package
+    assert code_fingerprint(pkg) != first
