@@ -237,9 +237,10 @@ def _cause_text(causes: Mapping[str, Any] | None, name: str) -> tuple[str, str]:
         parts.append(f"within {GIMBAL_MARGIN_DEG:g} deg of its sequence's gimbal lock in {n['gimbal']} frames (the angle is "
                      "not defined there" + ("; read GH in Phadke's sequence)" if name.startswith("GH_") else ")"))
     if n.get("uncertainty"):
-        parts.append(f"its standard uncertainty above {U_BOUND_DEG:g} deg in {n['uncertainty']} frames (the bone-pin "
-                     "artefact at high elevation, or the model's misfit where residuals are large: a static of this "
-                     "session reduces the misfit)")
+        parts.append(f"its standard uncertainty above {U_BOUND_DEG:g} deg in {n['uncertainty']} frames (with the arm raised: "
+                     "the bone-pin artefact and what the model's girdle cannot follow of the bones, which no marker "
+                     "set removes; or the model's misfit where residuals are large: a static of this session reduces "
+                     "the misfit)")
     if n.get("markers"):
         parts.append(f"not determined by the markers present in {n['markers']} frames")
     return "; ".join(parts), main
