@@ -1,15 +1,16 @@
 """The STA amplitude model's driver, tried against the pins (benchmarks/README.md, "The uncertainty a
-lab's run gives, on the pins"): the shipped model makes each segment's artefact spread proportional to
-theta, the humerus's rotation from rest; here theta is replaced by theta_s tanh(theta / theta_s) (it
-saturates beyond theta_s) in the fit (exubio.truth.sta_amplitude) and in the uncertainty
-(exubio.trust.angle_uncertainty) alike. The S2M standing tasks of ../shared/data/truth are judged with
-the amplitude fitted on the other S2M tasks (leave one task out), the tasks of ``--data`` with the
-amplitude fitted on all four; LS, the u and status a lab's run gives (no still-thorax term). Printed:
-per task the measured angles whose coverage of +-2u is below 90 %, the worst three (coverage, frames
-measured), and over all of them how many cells are below 90 % and above 99 %.
+lab's run gives, on the pins"): each segment's artefact spread grows with d = theta_s tanh(theta /
+theta_s), theta the humerus's rotation from rest (0: d = theta, as shipped), in the fit
+(exubio.truth.sta_amplitude.fit_sta_amplitude's ``saturation_rad``) and so in the uncertainty. The
+girdle's part of u (exubio.truth.girdle) is the shipped one, per rad of theta, in every run. The S2M
+standing tasks of ../shared/data/truth are judged with the amplitude fitted on the other S2M tasks
+(leave one task out), the tasks of ``--data`` with the amplitude fitted on all four; LS, the u and
+status a lab's run gives (no still-thorax term). Printed: per task the measured angles whose coverage
+of +-2u is below 90 %, the worst three (coverage, frames measured), and over all of them how many cells
+are below 90 % and above 99 %.
 
-    python studies/bone_u_driver.py                        # theta as shipped
-    python studies/bone_u_driver.py --saturation 1.0       # theta_s = 1 rad
+    python studies/bone_u_driver.py                        # d = theta, as shipped
+    python studies/bone_u_driver.py --saturation 0.5       # theta_s = 0.5 rad
     python studies/bone_u_driver.py --data DIR             # and the held-out S2M tasks of DIR
 """
 from __future__ import annotations
@@ -24,7 +25,7 @@ import numpy as np
 
 from exubio.io.yaml import read_yaml
 from exubio.model.load import DEFAULT_MODEL
-from exubio.trust import angle_uncertainty, observability
+from exubio.trust import observability
 from exubio.trust.sta_amplitude import load_sta_amplitude
 from exubio.truth import compare
 from exubio.truth import sta_amplitude as fit
@@ -38,25 +39,22 @@ RATE_HZ = 300.0  # S2M
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--saturation", type=float, default=0.0, help="theta_s in rad (0: theta as shipped)")
+    ap.add_argument("--saturation", type=float, default=0.0, help="theta_s in rad (0: d = theta, as shipped)")
     ap.add_argument("--data", type=Path, help="a folder of held-out S2M tasks (ball throwing, where the subject steps, left out)")
     args = ap.parse_args(argv)
     logging.disable(logging.WARNING)
     warnings.simplefilter("ignore")
     ts = args.saturation
-    shape = (lambda t: t) if ts <= 0 else (lambda t: ts * np.tanh(t / ts))
-    humerus_driver, driver = fit.humerus_driver, angle_uncertainty._driver
-    fit.humerus_driver = lambda trial, rest: shape(humerus_driver(trial, rest))
-    angle_uncertainty._driver = lambda names, R: shape(driver(names, R))
     status = compare.angle_status  # every angle judged with the u and status a lab's run gives
     compare.angle_status = lambda inputs, rec, *, still_thorax: status(inputs, rec, still_thorax=False)
     generic, shipped = read_yaml(DEFAULT_MODEL), load_sta_amplitude()
     shared = sorted(SHARED.glob("dataSample_S2M_*.mat"))
 
     def amplitude(paths):
-        a = fit.fit_sta_amplitude([(read_sta_trial(p), RATE_HZ) for p in paths])
+        a = fit.fit_sta_amplitude([(read_sta_trial(p), RATE_HZ) for p in paths], saturation_rad=ts if ts > 0 else None)
         return dataclasses.replace(a, trunk=shipped.trunk, trunk_nodes=shipped.trunk_nodes,
-                                   trunk_table=shipped.trunk_table, trunk_source=shipped.trunk_source)
+                                   trunk_table=shipped.trunk_table, trunk_source=shipped.trunk_source,
+                                   girdle=shipped.girdle, girdle_source=shipped.girdle_source)
 
     def judged(path, amp) -> dict:
         observability._AMPLITUDE[:] = [amp]

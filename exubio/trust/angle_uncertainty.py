@@ -21,7 +21,8 @@ move by D dq (D = d angle / d q). The markers' error covariance has two parts:
   moves, frame by frame;
 * the soft-tissue artefact (``exubio.trust.sta_amplitude``, fitted on bone pins): each segment's
   markers move together by a rigid rotation about their centroid and a translation (standard
-  deviations per ISB axis, proportional to the motion away from the reference posture), plus
+  deviations per ISB axis, proportional to the motion away from the reference posture:
+  ``STAAmplitude.skin_driver``), plus
   independent non-rigid parts. The rigid part is what averaging over a cluster cannot remove: it is
   why an angle's error under real skin is far larger than its marker residual suggests. The
   scapula's and the humerus's clusters move together (both skins are dragged by the same arm): their
@@ -174,7 +175,7 @@ def marker_covariance(kin: Kinematics, points: PointSet, qf: np.ndarray, present
     if not misfit_only:
         sigma[:, idx, idx] = (noise_mm * 1e-3) ** 2
     names = [s.name for s in model.segments]
-    theta_hum = _driver(names, R)
+    theta_hum = amplitude.skin_driver(_driver(names, R))
     seen: dict[str, tuple] = {}  # measured segments: (rows, B, T, theta) for the cross terms
     for s_idx in np.unique(points.segment_index):
         sel = np.flatnonzero(points.segment_index == s_idx)
@@ -185,7 +186,7 @@ def marker_covariance(kin: Kinematics, points: PointSet, qf: np.ndarray, present
         else:  # no bone data: the humerus's coefficients, driven by the segment's own joint (its rotation from its parent)
             parent = model.segments[s_idx].parent
             Rp = R[:, names.index(parent)] if parent in names else np.eye(3)
-            theta = _rotation_angle(np.swapaxes(Rp, -1, -2) @ R[:, s_idx])
+            theta = amplitude.skin_driver(_rotation_angle(np.swapaxes(Rp, -1, -2) @ R[:, s_idx]))
         axes = anatomical[seg] if anatomical is not None and seg in anatomical else R[:, s_idx]
         ok = present[:, sel]
         cnt = np.maximum(ok.sum(axis=1), 1)
@@ -481,7 +482,7 @@ def skin_ellipsoid_variance(kin: Kinematics, qf: np.ndarray, amplitude: STAAmpli
     if not measured:
         return out
     R, _ = kin.poses(qf)
-    theta = _driver(names, R)
+    theta = amplitude.skin_driver(_driver(names, R))
     frames = segment_anatomical_rotations(model, qf, kinematics=kin) if frames is None else frames
     axes = frames["scapula"]
     Cw = axes @ np.asarray(C6)[None, :3, :3] @ np.swapaxes(axes, -1, -2) * (theta ** 2)[:, None, None]

@@ -2,7 +2,8 @@
 standard deviation per unit of motion of its markers' rigid cluster rotation (rad per rad, about the
 segment's ISB axes), of the cluster's translation (m per rad) and of what no rigid motion explains
 (m per rad, per coordinate of each marker), with their 6 x 6 second moment per rad^2 and the
-scapula's and humerus's cross moment. Fitted
+scapula's and humerus's cross moment, all per unit of the skin's driver (``skin_driver``: the humerus's
+rotation from rest, as shipped; saturating beyond ``saturation_rad`` where a file sets it). Fitted
 on bone-referenced trials by ``exubio.truth.sta_amplitude`` (how, and the driver of the motion,
 there); the shipped coefficients are those of the S2M intracortical-pin trials
 (``exubio/data/sta_amplitude_s2m.json``, with its citation).
@@ -34,7 +35,7 @@ import numpy as np
 from exubio.errors import InputError
 from exubio.synth.driver_table import interpolate
 
-__all__ = ["STAAmplitude", "load_sta_amplitude", "SEGMENTS_WITH_DATA", "BORROWED_FROM", "SHIPPED"]
+__all__ = ["STAAmplitude", "load_sta_amplitude", "saturating", "SEGMENTS_WITH_DATA", "BORROWED_FROM", "SHIPPED"]
 
 SEGMENTS_WITH_DATA = ("scapula", "humerus")
 BORROWED_FROM = "humerus"
@@ -60,6 +61,13 @@ class STAAmplitude:
     trunk_table: np.ndarray | None = None  # (nt, 6, 6): the unseen trunk's rotation + IJ displacement second moment
     girdle: np.ndarray | None = None  # (6, 6): var(g) + 2 cov(g, s) of the model's frames off the bones', per rad^2
     girdle_source: str = ""
+    saturation_rad: float | None = None  # the skin's driver theta_s tanh(theta / theta_s); None: theta itself
+
+    def skin_driver(self, theta: np.ndarray, /) -> np.ndarray:
+        """The driver the skin's coefficients are per unit of: theta_s tanh(theta / theta_s) (the artefact
+        grows with the humerus's rotation theta from rest and levels off beyond theta_s), or theta where
+        the model has no ``saturation_rad`` (a file from before)."""
+        return saturating(theta, self.saturation_rad)
 
     @property
     def has_trunk(self) -> bool:
@@ -102,7 +110,11 @@ class STAAmplitude:
                 "units": {"rotation": "rad per rad of driver (SD per ISB axis X, Y, Z of the segment)",
                           "translation": "m per rad of driver (SD per axis)",
                           "nonrigid": "m per rad of driver (SD per coordinate of each marker)"},
-                "driver": "the humerus's rotation angle from its rest orientation (rad)",
+                "driver": ("the humerus's rotation angle from its rest orientation (rad)" if self.saturation_rad is None
+                           else "theta_s tanh(theta / theta_s), theta the humerus's rotation angle from its rest "
+                                "orientation (rad), theta_s = driver_saturation_rad (the skin's coefficients are per "
+                                "unit of it; the girdle's and the trunk's per rad of theta itself)"),
+                **({"driver_saturation_rad": float(self.saturation_rad)} if self.saturation_rad is not None else {}),
                 "rotation": r(self.rotation), "translation": r(self.translation), "nonrigid": r(self.nonrigid),
                 "rigid_second_moment": {k: [[float(f"{x:.6g}") for x in row] for row in np.asarray(v)]
                                         for k, v in self.rigid.items()},
@@ -129,6 +141,12 @@ class STAAmplitude:
                                                   "vectors, rad, in the model frames' own axes: scapula X Y Z, humerus "
                                                   "X Y Z; exubio.truth.girdle); not positive definite",
                     "girdle_source": self.girdle_source} if self.girdle is not None else {})}
+
+
+def saturating(theta: np.ndarray, saturation_rad: float | None, /) -> np.ndarray:
+    """theta_s tanh(theta / theta_s) with theta_s = ``saturation_rad``, or theta itself where it is None."""
+    t = np.asarray(theta, dtype=float)
+    return t if saturation_rad is None else saturation_rad * np.tanh(t / saturation_rad)
 
 
 def _nested(a) -> list:
@@ -163,6 +181,11 @@ def load_sta_amplitude(path: str | Path | None = None, /) -> STAAmplitude:
             if tn.size == 0 or np.any(np.diff(tn) <= 0):
                 raise ValueError("trunk_table_nodes_rad must be one or more increasing values")
             tables.update(trunk_nodes=tn, trunk_table=np.asarray(data["trunk_table"], dtype=float).reshape(tn.size, 6, 6))
+        if "driver_saturation_rad" in data:
+            sat = float(data["driver_saturation_rad"])
+            if not (np.isfinite(sat) and sat > 0):
+                raise ValueError(f"driver_saturation_rad must be a positive number of rad, got {sat!r}")
+            tables.update(saturation_rad=sat)
         if "girdle_second_moment" in data:
             tables.update(girdle=np.asarray(data["girdle_second_moment"], dtype=float).reshape(6, 6),
                           girdle_source=str(data.get("girdle_source", "")))

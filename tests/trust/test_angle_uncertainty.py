@@ -309,7 +309,7 @@ def test_the_shipped_cross_term_is_the_pins_and_makes_one_joint_covariance(tmp_p
     for f in s2m:
         t = read_sta_trial(f)
         rest = _rest(t, 300.0)
-        th = humerus_driver(t, rest)
+        th = amp.skin_driver(humerus_driver(t, rest))  # the coefficients are per unit of the skin's driver
         x = {b: np.concatenate([v["rotation"], v["translation"]], axis=1)
              for b, v in ((b, segment_sta(t, b, rest)) for b in ("scapula", "humerus"))}
         ok = np.isfinite(x["scapula"]).all(axis=1) & np.isfinite(x["humerus"]).all(axis=1)
@@ -426,7 +426,7 @@ def test_a_turned_cluster_turns_its_frame_and_a_shifted_one_does_not(setting):
 def test_a_skin_fitted_ellipsoid_turns_the_scapula_frame_by_the_clusters_whole_rotation(setting):
     """AU.skin_ellipsoid_variance against exact rotations: the scapula's ISB frame turned by sampled
     rotation vectors of the artefact model's scapula rotation covariance (in its ISB axes, times
-    theta^2, theta the humerus's rotation from rest; scaled by 1e-2 so that first order holds) moves
+    d^2, d the skin's driver of the humerus's rotation from rest; scaled by 1e-2 so that first order holds) moves
     each ST and GH angle with the SD the function gives (times 1e-2), within 5 %; the thorax-relative
     humerus (HT) does not move; at rest (theta = 0) the term is zero."""
     from exubio.model.angles import angles_of_frames
@@ -444,7 +444,8 @@ def test_a_skin_fitted_ellipsoid_turns_the_scapula_frame_by_the_clusters_whole_r
     theta = np.arccos(np.clip((np.trace(hum) - 1) / 2, -1, 1))
     assert theta > 0.3  # a posture away from rest
     axes = frames["scapula"][0]
-    Cw = axes @ _shipped_amplitude().of("scapula")[0][:3, :3] @ axes.T * theta ** 2
+    d = _shipped_amplitude().skin_driver(theta)  # the skin's coefficients are per unit of its driver
+    Cw = axes @ _shipped_amplitude().of("scapula")[0][:3, :3] @ axes.T * d ** 2
     eps = 1e-2
     rng = np.random.default_rng(7)
     ws = rng.multivariate_normal(np.zeros(3), Cw * eps ** 2, size=4000)
