@@ -46,6 +46,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ..errors import InputError
+from .sta_amplitude import _rotvec
 from .sta_format import BoneTrial
 
 __all__ = ["GirdleMotion", "girdle_motion", "fit_girdle", "GIRDLE_SEGMENTS"]
@@ -66,16 +67,6 @@ class GirdleMotion:
     skin: np.ndarray
     theta: np.ndarray
     verdict: str
-
-
-def _rotvec(R: np.ndarray) -> np.ndarray:
-    from scipy.spatial.transform import Rotation
-
-    out = np.full((R.shape[0], 3), np.nan)
-    ok = np.isfinite(R).all(axis=(1, 2))
-    if ok.any():
-        out[ok] = Rotation.from_matrix(R[ok]).as_rotvec()
-    return out
 
 
 def _frame_errors(run, path) -> tuple[np.ndarray, np.ndarray, str]:
