@@ -85,8 +85,11 @@ IGNORED_KEYS = {
     "exudyn_cpu_times_s": "Exudyn's CPU-time breakdown of the PF solve (summary.json, info_json of the PF .npz)",
     "wall_s": "wall-clock seconds of a study trial (study.json)",
     "inputs_sha256": "the fingerprint of a run's inputs (exubio.run.resume): it hashes the calibrated model's "
-                     "file, whose text names the checkout's absolute paths (the base worktree's and the head's)",
+                     "file, whose text names the checkout's absolute paths (the base worktree's and the head's), "
+                     "and exubio's code (code_fingerprint), which any two commits differ in; blanked in the "
+                     "calibrated model's YAML too (its calibration section)",
 }
+_YAML_IGNORED = re.compile(r"^(\s*(?:%s):\s*).*$" % "|".join(re.escape(k) for k in IGNORED_KEYS), re.M)
 # .npz arrays the head adds on purpose (issue 37): left out of the head's list of arrays
 NEW_NPZ_ARRAYS = {"angle_signs": "issue 37: per angle, the sign the files apply to the ISB angle (all +1 by default)"}
 # .npz arrays not compared at all
@@ -490,6 +493,8 @@ def compare_text(pa: Path, pb: Path, base: Side, head: Side) -> str | None:
         except ValueError:
             d = None
         return d or first_line_difference(ta, tb)
+    if suffix in (".yaml", ".yml") and base.ignore:
+        ta, tb = _YAML_IGNORED.sub(r"\1<ignored>", ta), _YAML_IGNORED.sub(r"\1<ignored>", tb)
     if suffix == ".csv" and base.ignore:
         header = next(csv.reader(io.StringIO(ta)), [])
         cols = [i for i, h in enumerate(header) if h in IGNORED_CSV_COLUMNS]
