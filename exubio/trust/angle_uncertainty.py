@@ -418,9 +418,9 @@ def girdle_angle_variance(kin: Kinematics, qf: np.ndarray, amplitude: STAAmplitu
     covariance with what the skin adds (``exubio.truth.girdle``: the two partly cancel on the pins,
     and the skin's part is already in u), so it is not positive definite. ``frames``: the ISB frames
     at qf where the caller has them. On the standing S2M pin trials, with skin markers carried
-    rigidly by the bones, the model's scapula frame is 2-16 deg off the bone about its ISB axes (RMS
+    rigidly by the bones, the model's scapula frame is up to 16 deg off the bone about an ISB axis (RMS
     per bin of theta, growing with it); without this term a lab's u covered the bone's ST, GH and HT
-    angles within +-2u in fewer than 90 % of frames in 17 of 60 task-angle cells
+    angles within +-2u in fewer than 90 % of frames in 17 of the standing tasks' 60 task-angle cells
     (``studies/bone_u_girdle.py``). Frame angles only (the first columns, as ``angles_of_frames``
     orders them)."""
     from exubio.model.angles import segment_anatomical_rotations
