@@ -59,7 +59,11 @@ def lab_coverage(path: Path, amplitude) -> dict:
         e = per.get("ls")
         if e is not None and e.lab is not None and e.lab.coverage is not None:
             out[a] = (e.lab.coverage, e.lab.measured_fraction)
+    VERDICTS[path.stem] = comp.verdicts.get("ls", "")
     return out
+
+
+VERDICTS: dict = {}  # trial stem -> its LS verdict (the last lab_coverage run of it)
 
 
 def summary(title: str, cells: dict) -> None:
@@ -67,10 +71,12 @@ def summary(title: str, cells: dict) -> None:
     above = sum(c > 0.99 for per in cells.values() for c, _ in per.values())
     n = sum(len(per) for per in cells.values())
     frac = np.mean([f for per in cells.values() for _, f in per.values()])
-    print(f"{title}: {n} measured angle cells, below 90 %: {len(below)}, above 99 %: {above}, "
+    usable = {t for t in cells if VERDICTS.get(t.split(" ")[0]) != "fail"}  # a lab does not use a failed trial's angles
+    print(f"{title}: {n} measured angle cells, below 90 %: {len(below)} ({sum(t in usable for t, *_ in below)} of "
+          f"{sum(len(cells[t]) for t in usable)} on the trials whose LS verdict is not fail), above 99 %: {above}, "
           f"mean fraction of frames measured {frac:.0%}")
     for t, a, c, f in below:
-        print(f"    {t} {a}: {c:.0%} ({f:.0%} measured)")
+        print(f"    {t} {a}: {c:.0%} ({f:.0%} measured){'' if t in usable else ' [LS verdict fail]'}")
 
 
 def main(argv=None) -> int:
