@@ -17,9 +17,8 @@ import numpy as np
 
 from exubio.io.yaml import read_yaml
 from exubio.model.angles import anatomical_table
-from exubio.model.load import DEFAULT_MODEL, model_from_mapping
-from exubio.run.inputs import Session
-from exubio.run.pipeline import load_inputs, reconstruct
+from exubio.model.load import DEFAULT_MODEL
+from exubio.run.pipeline import reconstruct
 from exubio.trust.angle_uncertainty import _driver
 from exubio.truth import compare
 from exubio.truth.lab_run import setup_lab_run
@@ -37,9 +36,7 @@ def main(argv=None) -> int:
     logging.disable(logging.WARNING)
     warnings.simplefilter("ignore")
     run = setup_lab_run(read_sta_trial(args.file), read_yaml(DEFAULT_MODEL), rate_hz=args.rate)
-    model = model_from_mapping(dict(run.model_mapping), "subject model", name=str(run.model_mapping["name"]))
-    protocol = compare._protocol(run, model)
-    inputs = load_inputs(run.trajectories, Session(model, protocol, model, protocol))
+    model, inputs = compare.lab_inputs(run)
     rec = reconstruct(inputs.model, inputs.protocol, inputs.targets, method="ls")
     det = compare.angle_status(inputs, rec, still_thorax=False)  # the u and status a lab's run gives
     names, table = anatomical_table(model, rec.q_rad)

@@ -26,9 +26,8 @@ import numpy as np
 
 from exubio.io.yaml import read_yaml
 from exubio.model.angles import anatomical_table, distal_only_coordinates, segment_anatomical_rotations
-from exubio.model.load import DEFAULT_MODEL, model_from_mapping
-from exubio.run.inputs import Session
-from exubio.run.pipeline import load_inputs, reconstruct
+from exubio.model.load import DEFAULT_MODEL
+from exubio.run.pipeline import reconstruct
 from exubio.trust import angle_uncertainty as AU
 from exubio.trust.angle_uncertainty import _driver
 from exubio.trust.observability import _angle_jacobian, _shipped_amplitude
@@ -43,9 +42,7 @@ SHOWN = ("ST_Y_internal_rotation", "ST_X_upward_rotation", "ST_Z_posterior_tilt"
 
 
 def _solve(run):
-    model = model_from_mapping(dict(run.model_mapping), "subject model", name=str(run.model_mapping["name"]))
-    inputs = load_inputs(run.trajectories, Session(model, compare._protocol(run, model), model,
-                                                    compare._protocol(run, model)))
+    model, inputs = compare.lab_inputs(run)
     rec = reconstruct(inputs.model, inputs.protocol, inputs.targets, method="ls")
     return model, inputs, rec
 

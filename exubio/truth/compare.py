@@ -19,7 +19,7 @@ from ..model.angles import ANATOMICAL_COLUMNS, anatomical_table, angles_of_frame
 from .lab_run import BoneLabRun, clavicle_gap_m
 
 __all__ = ["AngleError", "TruthComparison", "TRUTH_ANGLES", "truth_angles", "compare_bone_trial", "angle_errors",
-           "angle_status", "main_reasons"]
+           "angle_status", "lab_inputs", "main_reasons"]
 
 TRUTH_SETS = ("ST", "GH", "GH_phadke", "HT")
 TRUTH_ANGLES: tuple[str, ...] = tuple(c for c in ANATOMICAL_COLUMNS if c.startswith(("ST_", "GH_", "HT_")))
@@ -155,18 +155,25 @@ def main_reasons(quality, /, *, most: int = 6) -> tuple[str, ...]:
                  for rs in list(kinds.values())[:most])
 
 
-def compare_bone_trial(run: BoneLabRun, /, *, methods: Sequence[str] = ("pf", "ls")) -> tuple[TruthComparison, dict]:
-    """Reconstruct ``run`` with each method (its verdict as ``exubio reconstruct`` gives it) and
-    compare its angles with the bone's. Returns the comparison and the reconstructions by method."""
+def lab_inputs(run: BoneLabRun, /):
+    """(the subject model, the loaded inputs) of ``run``, as ``exubio reconstruct`` loads a trial: the
+    subject model is its own generic (no static was fitted)."""
     from ..model.load import model_from_mapping
     from ..run.inputs import Session
-    from ..run.pipeline import assess_inputs, load_inputs, reconstruct
+    from ..run.pipeline import load_inputs
 
     model = model_from_mapping(dict(run.model_mapping), f"{run.trial.path} (subject model)",
                                name=str(run.model_mapping["name"]))
     protocol = _protocol(run, model)
-    session = Session(model, protocol, model, protocol)  # the subject model is its own generic (no static was fitted)
-    inputs = load_inputs(run.trajectories, session)
+    return model, load_inputs(run.trajectories, Session(model, protocol, model, protocol))
+
+
+def compare_bone_trial(run: BoneLabRun, /, *, methods: Sequence[str] = ("pf", "ls")) -> tuple[TruthComparison, dict]:
+    """Reconstruct ``run`` with each method (its verdict as ``exubio reconstruct`` gives it) and
+    compare its angles with the bone's. Returns the comparison and the reconstructions by method."""
+    from ..run.pipeline import assess_inputs, reconstruct
+
+    model, inputs = lab_inputs(run)
     recs, failed = {}, {}
     for m in methods:
         try:

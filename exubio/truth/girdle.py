@@ -38,8 +38,6 @@ fits it and judges it one task out and on held-out tasks.
 """
 from __future__ import annotations
 
-import logging
-import warnings
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
@@ -69,26 +67,16 @@ class GirdleMotion:
     verdict: str
 
 
-def _frame_errors(run, path) -> tuple[np.ndarray, np.ndarray, str]:
+def _frame_errors(run) -> tuple[np.ndarray, np.ndarray, str]:
     """(xi (n, 6), theta (n,), LS verdict) of one BoneLabRun reconstructed by LS."""
     from ..model.angles import segment_anatomical_rotations
-    from ..model.load import model_from_mapping
-    from ..run.inputs import Session
-    from ..run.pipeline import assess_inputs, load_inputs, reconstruct
+    from ..run.pipeline import assess_inputs, reconstruct
     from ..trust.angle_uncertainty import _driver
-    from .compare import _protocol
+    from .compare import lab_inputs
 
-    model = model_from_mapping(dict(run.model_mapping), f"{path} (subject model)", name=str(run.model_mapping["name"]))
-    protocol = _protocol(run, model)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        logging.disable(logging.WARNING)
-        try:
-            inputs = load_inputs(run.trajectories, Session(model, protocol, model, protocol))
-            rec = reconstruct(inputs.model, inputs.protocol, inputs.targets, method="ls")
-            quality = assess_inputs(inputs, [rec]).quality["ls"]
-        finally:
-            logging.disable(logging.NOTSET)
+    model, inputs = lab_inputs(run)
+    rec = reconstruct(inputs.model, inputs.protocol, inputs.targets, method="ls")
+    quality = assess_inputs(inputs, [rec]).quality["ls"]
     kin = inputs.binding.kin
     frames = segment_anatomical_rotations(model, rec.q_rad, kinematics=kin)
     R, _ = kin.poses(rec.q_rad)
@@ -101,9 +89,8 @@ def girdle_motion(trial: BoneTrial, generic_model: Mapping[str, Any], /, *, rate
     rigidly by the bones and of its skin markers as recorded."""
     from .lab_run import setup_lab_run
 
-    xi, theta, verdict = _frame_errors(setup_lab_run(trial, generic_model, rate_hz=rate_hz, without_sta=True),
-                                       trial.path)
-    skin, _, _ = _frame_errors(setup_lab_run(trial, generic_model, rate_hz=rate_hz), trial.path)
+    xi, theta, verdict = _frame_errors(setup_lab_run(trial, generic_model, rate_hz=rate_hz, without_sta=True))
+    skin, _, _ = _frame_errors(setup_lab_run(trial, generic_model, rate_hz=rate_hz))
     return GirdleMotion(str(trial.path), xi, skin, theta, verdict)
 
 
