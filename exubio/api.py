@@ -197,6 +197,7 @@ def angle_status(reconstruction: Reconstruction, model: Model | None = None, pro
     frames where a marker was missing are those whose residual is NaN."""
     from exubio.protocol.bind import bind
     from exubio.trust.observability import angle_determinacy
+    from exubio.trust.sta_amplitude import amplitude_of
 
     model = model if model is not None else load_model()
     protocol = protocol if protocol is not None else load_protocol(model=model)
@@ -204,7 +205,7 @@ def angle_status(reconstruction: Reconstruction, model: Model | None = None, pro
     present = np.isfinite(reconstruction.residuals_m)
     dt = float(np.median(np.diff(reconstruction.time_s))) if reconstruction.n_frames > 1 else 1.0
     return angle_determinacy(b.kin, b.points, reconstruction.q_rad, present, protocol.weights,
-                             held=b.held, locked=b.locked,
+                             held=b.held, locked=b.locked, amplitude=amplitude_of(b),
                              every=max(1, int(round(0.05 / dt))), residuals_m=reconstruction.residuals_m,
                              marker_positions_m=reconstruction.measured_m)
 

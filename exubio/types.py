@@ -321,6 +321,7 @@ class Protocol:
     analog_loads: tuple = ()  # exubio.protocol.analog_loads.AnalogLoadSpec: loads from a C3D's analog channels
     pf_inertia_scale: float | None = None  # defaults.pf_inertia_scale: PF's inertia scale (None: PF's default)
     signs: Literal["isb", "clinical"] = "isb"  # sign convention of the written angles (exubio.model.signs)
+    uncertainty_model: str | None = None  # a lab's STA amplitude model (JSON, absolute path); None: the shipped one
 
     @property
     def marker_names(self) -> tuple[str, ...]:

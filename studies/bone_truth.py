@@ -49,17 +49,11 @@ def run(path: Path, *, without_sta: bool = False, amplitude=None):
     from exubio.truth.compare import compare_bone_trial
     from exubio.truth.lab_run import setup_lab_run
     from exubio.truth.sta_format import read_sta_trial
-    from exubio.trust import observability
 
     trial = read_sta_trial(path)
     lab = setup_lab_run(trial, read_yaml(DEFAULT_MODEL, error=ModelError), rate_hz=RATES[trial.lab],
                         without_sta=without_sta)
-    if amplitude is not None:
-        observability._AMPLITUDE[:] = [amplitude]
-    try:
-        comp, _ = compare_bone_trial(lab)
-    finally:
-        observability._AMPLITUDE[:] = []
+    comp, _ = compare_bone_trial(lab, amplitude=amplitude)
     return comp
 
 

@@ -30,7 +30,8 @@ from exubio.model.load import DEFAULT_MODEL
 from exubio.run.pipeline import reconstruct
 from exubio.trust import angle_uncertainty as AU
 from exubio.trust.angle_uncertainty import _driver
-from exubio.trust.observability import _angle_jacobian, _shipped_amplitude
+from exubio.trust.observability import _angle_jacobian
+from exubio.trust.sta_amplitude import shipped_amplitude
 from exubio.truth import compare
 from exubio.truth.lab_run import setup_lab_run
 from exubio.truth.sta_format import read_sta_trial
@@ -87,7 +88,7 @@ def main(argv=None) -> int:
     pred = np.einsum("bam,bmk,bk->ba", D, K, dm)
     frames_isb = segment_anatomical_rotations(model, q, kinematics=kin)
     anat = {s: frames_isb[s] for s in ("scapula", "humerus")}
-    amp = _shipped_amplitude()
+    amp = shipped_amplitude()
     sig = AU.marker_covariance(kin, points, q, present, amp, noise_mm=0.0, anatomical=anat)
     u_art = np.sqrt(np.maximum(AU.quadratic_forms(D @ K, sig), 0.0))
     R, _ = kin.poses(q)

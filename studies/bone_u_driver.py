@@ -25,7 +25,6 @@ import numpy as np
 
 from exubio.io.yaml import read_yaml
 from exubio.model.load import DEFAULT_MODEL
-from exubio.trust import observability
 from exubio.trust.sta_amplitude import load_sta_amplitude
 from exubio.truth import compare
 from exubio.truth import sta_amplitude as fit
@@ -57,12 +56,8 @@ def main(argv=None) -> int:
                                    girdle=shipped.girdle, girdle_source=shipped.girdle_source)
 
     def judged(path, amp) -> dict:
-        observability._AMPLITUDE[:] = [amp]
-        try:
-            comp, _ = compare.compare_bone_trial(setup_lab_run(read_sta_trial(path), generic, rate_hz=RATE_HZ),
-                                                 methods=("ls",))
-        finally:
-            observability._AMPLITUDE[:] = []
+        comp, _ = compare.compare_bone_trial(setup_lab_run(read_sta_trial(path), generic, rate_hz=RATE_HZ),
+                                             methods=("ls",), amplitude=amp)
         return {a: (e.coverage, e.measured_fraction) for a, per in comp.angles.items() for m, e in per.items()
                 if e.coverage is not None and np.isfinite(e.rmse_deg)}
 

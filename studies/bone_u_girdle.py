@@ -43,17 +43,12 @@ def lab_coverage(path: Path, amplitude) -> dict:
     from exubio.errors import ModelError
     from exubio.io.yaml import read_yaml
     from exubio.model.load import DEFAULT_MODEL
-    from exubio.trust import observability
     from exubio.truth.compare import compare_bone_trial
     from exubio.truth.lab_run import setup_lab_run
     from exubio.truth.sta_format import read_sta_trial
 
     run = setup_lab_run(read_sta_trial(path), read_yaml(DEFAULT_MODEL, error=ModelError), rate_hz=RATE)
-    observability._AMPLITUDE[:] = [amplitude]
-    try:
-        comp, _ = compare_bone_trial(run, methods=("ls",))
-    finally:
-        observability._AMPLITUDE[:] = []
+    comp, _ = compare_bone_trial(run, methods=("ls",), amplitude=amplitude)
     out = {}
     for a, per in comp.angles.items():
         e = per.get("ls")

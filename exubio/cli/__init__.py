@@ -60,6 +60,8 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_parser(sub, common)
     from exubio.truth.cli_truth import add_parser as add_truth_parser
     add_truth_parser(sub, common)
+    from exubio.truth.uncertainty_fit_cli import add_parser as add_uncertainty_fit_parser
+    add_uncertainty_fit_parser(sub, common)
     return p
 
 

@@ -5,7 +5,8 @@ SCHEMA_VERSION = 1
 THORAX_SEGMENT = "thorax"  # the fixed segment: its markers only build the thorax frame
 
 _TOP_KEYS = ("schema_version", "name", "description", "thorax_frame", "filter", "defaults", "markers", "hold",
-             "relabel", "extends", "side", "other_arm", "analog_loads", "signs")
+             "relabel", "extends", "side", "other_arm", "analog_loads", "signs",
+             "uncertainty_model")
 _FRAME_KEYS = ("ij", "px", "c7", "t8")
 _MIDPOINT_FRAME_KEYS = ("ij", "ij_c7_midpoint", "px_t8_midpoint")
 _FILTER_KEYS = ("cutoff_hz", "order")

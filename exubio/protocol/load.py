@@ -114,6 +114,8 @@ def load_protocol(
         raise ProtocolError(f"{src_of('other_arm')}: other_arm must name the protocol file of the other arm, got "
                             f"{_kind(other_arm)}")
 
+    uncertainty_model = _uncertainty_model(data.get("uncertainty_model"), src_of("uncertainty_model"))
+
     tracked: list[MarkerSpec] = []
     thorax_aliases: dict[str, tuple[str, ...]] = {}  # a thorax marker's name -> its aliases
     label_owner: dict[str, str] = {}  # every name and alias -> the marker it belongs to
@@ -192,7 +194,24 @@ def load_protocol(
         other_arm=other_arm.strip() if other_arm else None,
         analog_loads=parse_analog_loads(data.get("analog_loads"), src_of("analog_loads"), seg_names),
         signs=signs,
+        uncertainty_model=uncertainty_model,
     )
+
+
+def _uncertainty_model(raw: Any, src: str) -> str | None:
+    """``uncertainty_model: <file>``: a lab's STA amplitude model (the JSON ``exubio uncertainty-fit``
+    writes), relative to the protocol file that gives the key; its absolute path. Read by the trust
+    layer (exubio.trust.sta_amplitude.amplitude_of), which says what in it is wrong."""
+    if raw is None:
+        return None
+    if not isinstance(raw, str) or not raw.strip():
+        raise ProtocolError(f"{src}: uncertainty_model must name a JSON file (an STA amplitude model written by "
+                            f"'exubio uncertainty-fit'), got {_kind(raw)}")
+    path = (Path(src).parent / Path(raw.strip()).expanduser()).absolute()
+    if not path.is_file():
+        raise ProtocolError(f"{src}: uncertainty_model: {raw.strip()!r} not found (looked for {path}); it is resolved "
+                            "against the protocol file's folder")
+    return str(path.resolve())
 
 
 def _parse_relabel(raw: Any, src: str) -> Mapping[str, str]:

@@ -3,7 +3,8 @@ complete is kept, not refused and not computed again.
 
 Every summary.json that ``exubio reconstruct`` writes carries ``inputs_sha256``: a fingerprint of
 what the result is made from (the trial file's bytes and the labels read from it, the model and
-protocol files (a calibrated model's file holds its calibration), the method's options, the label
+protocol files (a calibrated model's file holds its calibration) and the lab's uncertainty model the
+protocol names, the method's options, the label
 repair, exubio's code: ``code_fingerprint``, every source and data file of the installed package, not
 its version string, which stays the same across the commits of a development install while the
 results change). A plain re-run (no ``--overwrite``) finds a set complete (ResultSet:
@@ -62,6 +63,8 @@ def run_key(trial_path: str | Path, model: Any, protocol: Any, method: str, /, *
     from exubio.methods import method_spec
 
     files = [Path(trial_path), Path(str(model.source or "")), Path(str(protocol.source or ""))]
+    if getattr(protocol, "uncertainty_model", None):  # a lab's STA amplitude model: every angle's u comes from it
+        files.append(Path(protocol.uncertainty_model))
     if not all(f.is_file() for f in files):
         return None
     h = hashlib.sha256()

@@ -144,6 +144,8 @@ def angle_header(det, trial: str, method: str, side: str, signs: str = "isb") ->
 
         lines.append(f"<angle>_u_deg: {UNCERTAINTY_DEFINITION}; the truth lies within +-2u in about 95 % of frames "
                      "(coverage measured on bone pins and bone-pin artefact simulations: studies/README.md)")
+        if getattr(det, "uncertainty_model", ""):
+            lines.append(f"<angle>_u_deg: the STA amplitude model is the lab's, not the shipped one: {det.uncertainty_model}")
     for j, n in enumerate(det.names):
         col = np.asarray(det.status[:, j])
         rule = f" ({det.rule[n]})" if n in det.rule else ""

@@ -17,6 +17,7 @@ from exubio.trust.evaluate import per_frame_residuals_mm, residual_statistics
 from exubio.protocol.bind import Binding
 from exubio.trust.label_expectations import expectations_of
 from exubio.trust.mismatch import MismatchAssessment, assess_mismatch
+from exubio.trust.sta_amplitude import amplitude_of
 from exubio.trust.observability import UNDETERMINED_TRIAL_FRACTION, AngleDeterminacy, AngleStatus, Determinacy, angle_determinacy, determinacy
 from exubio.model.angles import anatomical_table
 from exubio.model.ranges import AT_LIMIT_TOLERANCE_RAD, LimitReport, limit_report
@@ -156,7 +157,7 @@ def _angle_determinacy_of_protocol(binding: Binding, bounded: bool) -> tuple[Ang
     q = reference_postures_of(binding)
     present = np.tile([not m.optional for m in protocol.markers], (q.shape[0], 1))
     det = angle_determinacy(kin, binding.points, q, present, protocol.weights, held=binding.held,
-                            locked=binding.locked, bounded=bounded)
+                            locked=binding.locked, bounded=bounded, amplitude=amplitude_of(binding) if bounded else None)
     return det, humerothoracic_elevation(binding.model, q, kinematics=kin)
 
 
@@ -221,7 +222,7 @@ def assess_trial(binding: Binding, targets: MarkerTargets, recons: Sequence[Reco
     dets = {r.method: determinacy(kin, points, r.q_rad, targets.present, protocol.weights, excluded=excluded,
                                   every=determinacy_every) for r in recons}
     angles = {r.method: angle_determinacy(kin, points, r.q_rad, targets.present, protocol.weights, held=held,
-                                          locked=binding.locked, every=determinacy_every,
+                                          locked=binding.locked, every=determinacy_every, amplitude=amplitude_of(binding),
                                           residuals_m=r.residuals_m, marker_positions_m=targets.positions_m)
               for r in recons}
     structural = angle_status_of_protocol(binding)

@@ -212,6 +212,7 @@ class AngleDeterminacy:
     rule: Mapping[str, str]
     uncertainty_rad: np.ndarray | None = None  # (n, a) standard uncertainty (exubio.trust.angle_uncertainty)
     near_gimbal_lock: np.ndarray | None = None  # (n, a) bool: first/third angle of a set near its gimbal lock
+    uncertainty_model: str = ""  # a lab's STA amplitude model the uncertainty used: "FILE (source)"; "": the shipped
 
     def fraction(self, status: "AngleStatus") -> dict[str, float]:
         return {n: float((self.status[:, j] == status).mean()) for j, n in enumerate(self.names)}
@@ -284,7 +285,9 @@ class AngleDeterminacy:
             if self.near_gimbal_lock[:, j].any()}
         above = {n: round(float((u[:, j] > U_BOUND_DEG).mean()), 4) for j, n in enumerate(self.names)
                  if (u[:, j] > U_BOUND_DEG).any()}
-        return {"uncertainty_definition": UNCERTAINTY_DEFINITION, "median_uncertainty_deg_measured_frames": med,
+        return {"uncertainty_definition": UNCERTAINTY_DEFINITION,
+                **({"uncertainty_model": self.uncertainty_model} if self.uncertainty_model else {}),
+                "median_uncertainty_deg_measured_frames": med,
                 "frames_near_gimbal_lock_fraction": gimbal, "frames_uncertainty_above_bound_fraction": above}
 
 
@@ -349,7 +352,8 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
     (exubio.trust.angle_uncertainty.trunk_angle_variance) is added to every angle's variance."""
     from exubio.model.angles import anatomical_table
     from exubio.trust import angle_uncertainty as AU
-    amplitude = amplitude if amplitude is not None else _shipped_amplitude()
+    from exubio.trust.sta_amplitude import shipped_amplitude
+    amplitude = amplitude if amplitude is not None else shipped_amplitude()
     noise_mm = AU.NOISE_MM if noise_mm is None else float(noise_mm)
     if thorax_assumed_still and not amplitude.has_trunk:
         raise ValueError("thorax_assumed_still needs an amplitude model with the trunk's motion")
@@ -418,8 +422,9 @@ def angle_determinacy(kin: Kinematics, points: PointSet, q: np.ndarray, present:
         if (status[:, j] == AngleStatus.MODELLED).any():
             rule_of[nm] = "; ".join(rules.get(h, f"hold: {h} fixed at its reference value") for h in held_names)
     release_freed_heap()  # the blocks' matrices, freed: back to the system before the files are written
+    lab_model = f"{amplitude.path} ({amplitude.source or 'no source given'})" if amplitude.path and bounded else ""
     return AngleDeterminacy(tuple(names), gain, share, status, rule_of, unc if bounded else None,
-                            gimbal if bounded else None)
+                            gimbal if bounded else None, lab_model)
 
 
 GAP_FLOOR = ("in a frame where a marker the trial has is missing (a gap), each angle's noise gain and "
@@ -487,14 +492,3 @@ def _angle_block(kin: Kinematics, points: PointSet, qf: np.ndarray, pres: np.nda
             share = np.where(var_r > 0, np.clip(explained / var_r, 0.0, 1.0), 0.0)
     return gain, unc, share, dep_locked
 
-
-_AMPLITUDE: list = []
-
-
-def _shipped_amplitude():
-    """The shipped STA amplitude model, read once per process."""
-    if not _AMPLITUDE:
-        from exubio.trust.sta_amplitude import load_sta_amplitude
-
-        _AMPLITUDE.append(load_sta_amplitude())
-    return _AMPLITUDE[0]

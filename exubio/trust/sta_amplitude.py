@@ -21,6 +21,10 @@ own axes; not positive definite), where the file has one.
 Segments without bone data take the humerus's coefficients: the clavicle driven like the scapula by
 the humerus's rotation, the ulna, radius and hand by their own joint's rotation (from their parent
 segment): an assumption, said in every output's definition.
+
+A protocol may name a lab's own model (``uncertainty_model:``, a JSON written by ``exubio
+uncertainty-fit``): ``amplitude_of`` gives a run's model, that file's or the shipped one, kept on the
+run's binding.
 """
 from __future__ import annotations
 
@@ -28,14 +32,16 @@ import json
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Mapping
+from functools import lru_cache
+from typing import Any, Mapping
 
 import numpy as np
 
 from exubio.errors import InputError
 from exubio.synth.driver_table import interpolate
 
-__all__ = ["STAAmplitude", "load_sta_amplitude", "saturating", "SEGMENTS_WITH_DATA", "BORROWED_FROM", "SHIPPED"]
+__all__ = ["STAAmplitude", "load_sta_amplitude", "shipped_amplitude", "amplitude_of", "saturating", "SEGMENTS_WITH_DATA",
+           "BORROWED_FROM", "SHIPPED"]
 
 SEGMENTS_WITH_DATA = ("scapula", "humerus")
 BORROWED_FROM = "humerus"
@@ -62,6 +68,7 @@ class STAAmplitude:
     girdle: np.ndarray | None = None  # (6, 6): var(g) + 2 cov(g, s) of the model's frames off the bones', per rad^2
     girdle_source: str = ""
     saturation_rad: float | None = None  # the skin's driver theta_s tanh(theta / theta_s); None: theta itself
+    path: str = ""  # the file it was read from, where it is a lab's (empty: the shipped model)
 
     def skin_driver(self, theta: np.ndarray, /) -> np.ndarray:
         """The driver the skin's coefficients are per unit of: theta_s tanh(theta / theta_s) (the artefact
@@ -132,7 +139,12 @@ class STAAmplitude:
                                                  "(exubio.truth.trunk_amplitude)",
                     "trunk_source": self.trunk_source} if self.trunk is not None else {}),
                 **({"trunk_table_nodes_rad": [float(f"{x:.6g}") for x in self.trunk_nodes],
-                    "trunk_table": _nested(self.trunk_table), "trunk_source": self.trunk_source}
+                    "trunk_table": _nested(self.trunk_table),
+                    "trunk_table_units": "the second moment of the thorax's rotation vector from its start (rad, its "
+                                         "ISB axes) and IJ's displacement (m, same axes) x same at each node of the "
+                                         "driver (rad), interpolated between them: the trunk motion a run that assumes "
+                                         "the thorax still cannot see (exubio.truth.trunk_amplitude)",
+                    "trunk_source": self.trunk_source}
                    if self.trunk_table is not None else {}),
                 **({"girdle_second_moment": _nested(self.girdle),
                     "girdle_second_moment_units": "g g^T + g s^T + s g^T per rad^2 of driver: g the model's scapula "
@@ -154,8 +166,26 @@ def _nested(a) -> list:
     return [float(f"{x:.6g}") for x in a] if a.ndim == 1 else [_nested(x) for x in a]
 
 
+@lru_cache(maxsize=1)
+def shipped_amplitude() -> STAAmplitude:
+    """The shipped model (S2M pins), read once per process."""
+    return load_sta_amplitude()
+
+
+def amplitude_of(binding: Any, /) -> STAAmplitude:
+    """The STA amplitude model of a run with ``binding`` (exubio.protocol.bind.Binding): the file its
+    protocol's ``uncertainty_model`` names, else the shipped one; read once and kept on the binding
+    (InputError naming the file where it is not a model)."""
+    amp = binding.fact("sta_amplitude")
+    if amp is None:
+        path = getattr(binding.protocol, "uncertainty_model", None)
+        amp = binding.keep("sta_amplitude", load_sta_amplitude(path) if path else shipped_amplitude())
+    return amp
+
+
 def load_sta_amplitude(path: str | Path | None = None, /) -> STAAmplitude:
-    """The shipped model (S2M pins) or a lab's JSON written by ``exubio.truth.sta_amplitude``."""
+    """The shipped model (S2M pins) or a lab's JSON written by ``exubio.truth.sta_amplitude``
+    (``exubio uncertainty-fit``)."""
     if path is None:
         text = resources.files("exubio.data").joinpath(SHIPPED).read_text()
         where = f"exubio/data/{SHIPPED}"
@@ -191,10 +221,10 @@ def load_sta_amplitude(path: str | Path | None = None, /) -> STAAmplitude:
                           girdle_source=str(data.get("girdle_source", "")))
     except (ValueError, KeyError, TypeError) as exc:
         raise InputError(f"{where}: not an STA amplitude model ({type(exc).__name__}: {exc}); expected the JSON "
-                         "that exubio.truth.sta_amplitude.write_sta_amplitude writes") from None
+                         "that 'exubio uncertainty-fit' writes") from None
     bad = [pair for pair in cross if pair.count("|") != 1]
     if bad:
         raise InputError(f"{where}: 'rigid_cross_second_moment' keys must be 'A|B' (two segments), got {bad}")
     return STAAmplitude(out["rotation"], out["translation"], out["nonrigid"], rigid, cross, trunk,
                         str(data.get("trunk_source", "")), str(data.get("source", "")), str(data.get("citation", "")),
-                        **tables)
+                        **tables, path="" if path is None else str(Path(path).resolve()))

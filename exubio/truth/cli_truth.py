@@ -32,6 +32,9 @@ def add_parser(sub, common) -> None:
                    help="use the file's gap-filled markers (default: the raw ones, gaps left as gaps)")
     t.add_argument("--json", dest="json_out", help="write the figures as JSON to this path")
     t.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
+    t.add_argument("--uncertainty-model", metavar="FILE.json", default=None,
+                   help="the STA amplitude model of every angle's uncertainty (a lab's, from 'exubio uncertainty-fit'; "
+                        "default: the shipped one, fitted on the S2M pins)")
     t.set_defaults(func=cmd_truth)
 
 
@@ -74,10 +77,20 @@ def cmd_truth(args: argparse.Namespace) -> int:
     out = Path(args.json_out) if args.json_out else None
     if out is not None and out.exists() and not args.overwrite:
         raise InputError(f"{out}: exists; give --overwrite to replace it")
+    amplitude = None
+    if args.uncertainty_model:
+        from ..trust.sta_amplitude import load_sta_amplitude
+
+        amplitude = load_sta_amplitude(args.uncertainty_model)
+        if not amplitude.has_trunk:
+            raise InputError(f"{args.uncertainty_model}: no trunk motion in the model; exubio truth takes the thorax as "
+                             "still and needs it (a model written by 'exubio uncertainty-fit' has the shipped one's)")
     trial = read_sta_trial(args.file)
     run = setup_lab_run(trial, read_yaml(DEFAULT_MODEL, error=ModelError), rate_hz=float(args.rate),
                         raw_markers=not args.filled)
-    comp, _ = compare_bone_trial(run)
+    comp, _ = compare_bone_trial(run, amplitude=amplitude)
+    if amplitude is not None:
+        print(f"uncertainty: the STA amplitude model {amplitude.path} ({amplitude.source})")
     print(format_table(comp))
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -52,6 +52,7 @@ class TruthComparison:
     notes: tuple[str, ...] = field(default_factory=tuple)
     clavicle_gap_mm: Mapping[str, float] | None = None  # lab_run.clavicle_gap_m's median, p95, max (mm)
     reasons: Mapping[str, tuple[str, ...]] = field(default_factory=dict)  # per method, main_reasons of its verdict
+    uncertainty_model: str = ""  # a lab's STA amplitude model the uncertainties used (its file); "": the shipped one
 
     def to_json(self) -> dict:
         num = lambda x: None if x is None or not np.isfinite(x) else round(float(x), 4)
@@ -60,6 +61,7 @@ class TruthComparison:
                 "clavicle_gap_mm": None if self.clavicle_gap_mm is None else {k: num(v) for k, v in
                                                                              self.clavicle_gap_mm.items()},
                 "reasons": {m: list(r) for m, r in self.reasons.items()},
+                **({"uncertainty_model": self.uncertainty_model} if self.uncertainty_model else {}),
                 "angles": {a: {m: _error_json(e, num) for m, e in per.items()} for a, per in self.angles.items()}}
 
 
@@ -126,11 +128,12 @@ def angle_status(inputs, rec, /, *, still_thorax: bool):
     ``thorax_assumed_still``); without it, what a lab's run with thorax markers gives."""
     from ..trust.assess import DETERMINACY_PERIOD_S
     from ..trust.observability import angle_determinacy
+    from ..trust.sta_amplitude import amplitude_of
 
     b, targets = inputs.binding, inputs.targets
     dt = float(np.median(np.diff(targets.time_s))) if targets.n_frames > 1 else 1.0
     return angle_determinacy(b.kin, b.points, rec.q_rad, targets.present, b.protocol.weights,
-                             held=b.held, locked=b.locked,
+                             held=b.held, locked=b.locked, amplitude=amplitude_of(b),
                              every=max(1, int(round(DETERMINACY_PERIOD_S / dt))), residuals_m=rec.residuals_m,
                              thorax_assumed_still=still_thorax, marker_positions_m=targets.positions_m)
 
@@ -168,12 +171,17 @@ def lab_inputs(run: BoneLabRun, /):
     return model, load_inputs(run.trajectories, Session(model, protocol, model, protocol))
 
 
-def compare_bone_trial(run: BoneLabRun, /, *, methods: Sequence[str] = ("pf", "ls")) -> tuple[TruthComparison, dict]:
+def compare_bone_trial(run: BoneLabRun, /, *, methods: Sequence[str] = ("pf", "ls"),
+                       amplitude: Any = None) -> tuple[TruthComparison, dict]:
     """Reconstruct ``run`` with each method (its verdict as ``exubio reconstruct`` gives it) and
-    compare its angles with the bone's. Returns the comparison and the reconstructions by method."""
+    compare its angles with the bone's. ``amplitude``: the STA amplitude model of every uncertainty
+    and verdict (exubio.trust.sta_amplitude.STAAmplitude; default the shipped one). Returns the
+    comparison and the reconstructions by method."""
     from ..run.pipeline import assess_inputs, reconstruct
 
     model, inputs = lab_inputs(run)
+    if amplitude is not None:  # the run's model (exubio.trust.sta_amplitude.amplitude_of), as a protocol's key gives it
+        inputs.binding.keep("sta_amplitude", amplitude)
     recs, failed = {}, {}
     for m in methods:
         try:
@@ -213,5 +221,6 @@ def compare_bone_trial(run: BoneLabRun, /, *, methods: Sequence[str] = ("pf", "l
     comp = TruthComparison(str(run.trial.path), f"{run.trial.lab} {run.trial.task}",
                            run.assumption.text + "; " + STILL_THORAX_COST, per_angle,
                            {m: verdicts[m] for m in methods if m in verdicts}, run.trial.n_frames,
-                           run.trajectories.rate_hz, notes, gap_mm, reasons)
+                           run.trajectories.rate_hz, notes, gap_mm, reasons,
+                           getattr(amplitude, "path", "") if amplitude is not None else "")
     return comp, recs

@@ -455,6 +455,27 @@ def test_extends_a_shipped_protocol_by_name(tmp_path):
         assert dict(prot.relabel) == {"RADIUS": "ULNA", "ULNA": "RADIUS"}
 
 
+def test_uncertainty_model_is_found_next_to_the_file_that_names_it(tmp_path):
+    """``uncertainty_model:`` is resolved against the folder of the protocol file that gives the key (a
+    base file in another folder keeps its own); absent it is None (the shipped model)."""
+    lab = tmp_path / "lab"
+    lab.mkdir()
+    (lab / "u.json").write_text("{}")
+    write(lab, ALIASES.replace("schema_version: 1\n", "schema_version: 1\nuncertainty_model: u.json\n"), name="base.yaml")
+    session = write(tmp_path, "schema_version: 1\nextends: lab/base.yaml\n", name="session.yaml")
+    assert load(session).uncertainty_model == str((lab / "u.json").resolve())
+    assert load(write(tmp_path, ALIASES, name="plain.yaml")).uncertainty_model is None
+
+
+@pytest.mark.parametrize("value, fragment", [("missing.json", "'missing.json' not found"),
+                                             ("[a, b]", "must name a JSON file")])
+def test_a_bad_uncertainty_model_names_the_file_and_the_key(tmp_path, value, fragment):
+    path = write(tmp_path, ALIASES.replace("schema_version: 1\n", f"schema_version: 1\nuncertainty_model: {value}\n"))
+    with pytest.raises(ProtocolError) as exc:
+        load(path)
+    assert fragment in str(exc.value) and str(path) in str(exc.value) and "uncertainty_model" in str(exc.value)
+
+
 def test_example_session_file():
     prot = load(SESSION_EXAMPLE)
     assert dict(prot.relabel) == {"RADIUS": "ULNA", "ULNA": "RADIUS"}

@@ -18,7 +18,8 @@ from exubio.model.kinematics import Kinematics
 from exubio.synth.simulate import simulate_trial
 from exubio.trust import angle_uncertainty as AU
 from exubio.protocol.bind import bind
-from exubio.trust.observability import AngleStatus, _shipped_amplitude, angle_determinacy
+from exubio.trust.observability import AngleStatus, angle_determinacy
+from exubio.trust.sta_amplitude import shipped_amplitude
 from exubio.types import MarkerTargets
 
 
@@ -63,9 +64,9 @@ def test_the_propagated_uncertainty_is_what_the_solver_does_with_such_errors(set
     free = np.flatnonzero(~excluded)
     present = np.ones((1, len(protocol.markers)), dtype=bool)
     frames = segment_anatomical_rotations(model, q0[None], kinematics=kin)
-    sigma = AU.marker_covariance(kin, pts, q0[None], present, _shipped_amplitude(),
+    sigma = AU.marker_covariance(kin, pts, q0[None], present, shipped_amplitude(),
                                  anatomical={s: frames[s] for s in ("scapula", "humerus")})[0]
-    skin_only = dataclasses.replace(_shipped_amplitude(), girdle=None)  # the girdle's part: its own test below
+    skin_only = dataclasses.replace(shipped_amplitude(), girdle=None)  # the girdle's part: its own test below
     det = angle_determinacy(kin, pts, q0[None], present, protocol.weights, held=held, locked=excluded & ~held,
                             amplitude=skin_only)
     rng = np.random.default_rng(7)
@@ -105,7 +106,7 @@ def test_the_girdle_term_is_the_spread_of_the_angles_of_frames_turned_by_it(sett
         sets = angles_of_frames(fr)
         return np.concatenate([sets[k] for k in sets], axis=-1)
 
-    amp = _shipped_amplitude()
+    amp = shipped_amplitude()
     assert amp.girdle is not None and np.linalg.eigvalsh(amp.girdle)[0] < 0
     q0 = reference_postures(model)[3]
     frames = segment_anatomical_rotations(model, q0[None], kinematics=kin)
@@ -435,7 +436,7 @@ def test_a_skin_fitted_ellipsoid_turns_the_scapula_frame_by_the_clusters_whole_r
     model, protocol, kin, pts = setting
     q0 = reference_postures(model)[3][None]
     names, _ = anatomical_table(model, q0[0])
-    var = AU.skin_ellipsoid_variance(kin, q0, _shipped_amplitude(), len(names))[0]
+    var = AU.skin_ellipsoid_variance(kin, q0, shipped_amplitude(), len(names))[0]
     frames = segment_anatomical_rotations(model, q0, kinematics=kin)
     sets = list(angles_of_frames(frames))
     base = np.concatenate([angles_of_frames(frames)[s] for s in sets], axis=-1)[0]
@@ -444,8 +445,8 @@ def test_a_skin_fitted_ellipsoid_turns_the_scapula_frame_by_the_clusters_whole_r
     theta = np.arccos(np.clip((np.trace(hum) - 1) / 2, -1, 1))
     assert theta > 0.3  # a posture away from rest
     axes = frames["scapula"][0]
-    d = _shipped_amplitude().skin_driver(theta)  # the skin's coefficients are per unit of its driver
-    Cw = axes @ _shipped_amplitude().of("scapula")[0][:3, :3] @ axes.T * d ** 2
+    d = shipped_amplitude().skin_driver(theta)  # the skin's coefficients are per unit of its driver
+    Cw = axes @ shipped_amplitude().of("scapula")[0][:3, :3] @ axes.T * d ** 2
     eps = 1e-2
     rng = np.random.default_rng(7)
     ws = rng.multivariate_normal(np.zeros(3), Cw * eps ** 2, size=4000)
@@ -463,7 +464,7 @@ def test_a_skin_fitted_ellipsoid_turns_the_scapula_frame_by_the_clusters_whole_r
         assert np.sqrt(var[j]) == pytest.approx(sd[j], rel=0.05), name
     assert var[names.index("HT_X_elevation")] == 0.0
     assert np.sqrt(var[names.index("ST_X_upward_rotation")]) > np.radians(2.0)
-    assert np.abs(AU.skin_ellipsoid_variance(kin, np.zeros((1, q0.shape[1])), _shipped_amplitude(), len(names))).max() < 1e-20
+    assert np.abs(AU.skin_ellipsoid_variance(kin, np.zeros((1, q0.shape[1])), shipped_amplitude(), len(names))).max() < 1e-20
 
 
 def test_a_calibration_that_fitted_the_ellipsoid_on_skin_poses_widens_st_and_gh_only(setting):

@@ -1,0 +1,84 @@
+"""A lab's own uncertainty model: the STA amplitude model behind every angle's stated uncertainty
+(exubio.trust.sta_amplitude), fitted on the lab's bone-referenced trials as the shipped one was
+fitted on the S2M pins, for a protocol's ``uncertainty_model:`` key.
+
+Two parts come from the trials (each module says how):
+- the skin's artefact: each bone's skin-marker cluster, its rigid rotation and translation and its
+  non-rigid rest, per rad of the humerus's rotation from rest (``exubio.truth.sta_amplitude``);
+- the model girdle's own error: the model's scapula and humerus frames off the bones with the markers
+  carried by the bones, with its covariance with the skin's part (``exubio.truth.girdle``; LS runs of
+  each trial, the trials whose LS verdict is ``fail`` left out).
+
+The unseen trunk's motion (what ``exubio truth`` adds where it takes the thorax as still) cannot come
+from these files, which hold no thorax: the shipped model's is kept, and the file says so.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+from ..errors import InputError
+from ..trust.sta_amplitude import STAAmplitude, shipped_amplitude
+from .girdle import GIRDLE_SEGMENTS, GirdleMotion, fit_girdle, girdle_motion
+from .sta_amplitude import fit_sta_amplitude
+from .sta_format import BoneTrial, read_sta_trial
+
+__all__ = ["UncertaintyFit", "fit_uncertainty_model"]
+
+
+@dataclass(frozen=True, eq=False)
+class UncertaintyFit:
+    """The fitted model and what it was fitted on: each trial's girdle motion (its LS verdict says
+    whether the girdle's part used it)."""
+
+    amplitude: STAAmplitude
+    girdle: tuple[GirdleMotion, ...]
+
+    @property
+    def girdle_trials(self) -> tuple[str, ...]:
+        return tuple(Path(g.file).name for g in self.girdle if g.verdict != "fail")
+
+
+def fit_uncertainty_model(paths: Sequence[str | Path], /, *, rate_hz: float, generic_model: dict | None = None,
+                          source: str = "") -> UncertaintyFit:
+    """The amplitude and girdle parts (module docstring) fitted on the bone-referenced trials ``paths``
+    (ISB STA data-sharing .mat files, all at ``rate_hz``), with the shipped model's trunk. InputError
+    naming the file where a trial lacks the scapula or the humerus, or when every trial's LS verdict is
+    ``fail``."""
+    from ..errors import ModelError
+    from ..io.yaml import read_yaml
+    from ..model.load import DEFAULT_MODEL
+
+    if not paths:
+        raise InputError("no bone-referenced trial given")
+    if not rate_hz > 0:
+        raise InputError(f"--rate {rate_hz}: expected the trials' sampling rate, a positive number of Hz")
+    trials: list[BoneTrial] = []
+    for p in paths:
+        t = read_sta_trial(p)
+        missing = [b for b in GIRDLE_SEGMENTS if b not in t.segments]
+        if missing:
+            raise InputError(f"{p}: no {' and no '.join(missing)} in the trial (has {', '.join(t.segments)}); the "
+                             "uncertainty model needs the scapula and the humerus tracked by bone")
+        trials.append(t)
+    generic = generic_model if generic_model is not None else read_yaml(DEFAULT_MODEL, error=ModelError)
+    names = ", ".join(t.path.name for t in trials)
+    amp = fit_sta_amplitude([(t, float(rate_hz)) for t in trials],
+                            source=source or f"exubio uncertainty-fit on {names} ({rate_hz:g} Hz)")
+    motions = tuple(girdle_motion(t, generic, rate_hz=float(rate_hz)) for t in trials)
+    if all(m.verdict == "fail" for m in motions):
+        raise InputError(f"{names}: the LS verdict of every trial with its markers carried by the bones is 'fail' (the "
+                         "trunk moved, or the model cannot follow the girdle); no girdle error to fit from them")
+    C = fit_girdle(list(motions))
+    used = [Path(m.file).name for m in motions if m.verdict != "fail"]
+    shipped = shipped_amplitude()
+    amp = dataclasses.replace(
+        amp, girdle=C,
+        girdle_source=("exubio.truth.girdle.fit_girdle on " + ", ".join(used) + f" ({rate_hz:g} Hz, LS; trials whose LS "
+                       "verdict is 'fail' with the markers carried by the bones left out)"),
+        trunk=shipped.trunk, trunk_nodes=shipped.trunk_nodes, trunk_table=shipped.trunk_table,
+        trunk_source=("the shipped model's (bone-referenced files hold no thorax): " + shipped.trunk_source
+                      if shipped.has_trunk else ""))
+    return UncertaintyFit(amp, motions)

@@ -1,0 +1,73 @@
+"""``exubio uncertainty-fit``: a lab's own uncertainty model (exubio.truth.uncertainty_fit) from its
+bone-referenced trials, written as JSON for a protocol's ``uncertainty_model:`` key."""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+
+__all__ = ["add_parser", "cmd_uncertainty_fit"]
+
+HELP = """\
+The trials: ISB soft-tissue-artefact data-sharing .mat files (Cereatti et al. 2017, J Biomech 62:5-13)
+with the scapula and the humerus tracked by bone pins or fluoroscopy, all at --rate. Each is also
+reconstructed by LS twice (its skin markers, and the same markers carried by the bones), about a
+second per thousand frames. Then name the file in your protocol:
+
+  exubio uncertainty-fit abd.mat flex.mat eating.mat --rate 300 --out lab_u.json
+  # in my_protocol.yaml:   uncertainty_model: lab_u.json   (relative to the protocol file)
+  exubio reconstruct trial.c3d --protocol my_protocol.yaml --out results
+
+Every angle's <angle>_u_deg then comes from this model, and the outputs name it.
+
+exit codes: 0 written; 2 bad input (the file or key is named), nothing written.
+"""
+
+
+def add_parser(sub, common) -> None:
+    p = sub.add_parser("uncertainty-fit", parents=[common], formatter_class=argparse.RawDescriptionHelpFormatter,
+                       epilog=HELP, help="fit the uncertainty's soft-tissue-artefact model on a lab's bone-referenced "
+                                         "trials (.mat), for a protocol's uncertainty_model")
+    p.add_argument("trials", nargs="+", metavar="FILE.mat", help="bone-referenced trials (all at --rate)")
+    p.add_argument("--rate", type=float, required=True, help="the trials' sampling rate, Hz (the files do not hold it)")
+    p.add_argument("--citation", default="", help="the data's citation, written into the model")
+    p.add_argument("--out", required=True, help="MODEL.json")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
+    p.set_defaults(func=cmd_uncertainty_fit)
+
+
+def cmd_uncertainty_fit(args: argparse.Namespace) -> int:
+    from ..io.result_set import atomic_write
+    from .uncertainty_fit import fit_uncertainty_model
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".json":
+        raise InputError(f"--out {out}: expected a path ending in .json")
+    if out.exists() and not args.overwrite:
+        raise InputError(f"{out}: exists; give --overwrite to replace it")
+    if not getattr(args, "verbose", False):  # the LS runs of bone trials say which frames took long: details
+        logging.getLogger("exubio.methods").setLevel(logging.ERROR)
+    fit = fit_uncertainty_model(args.trials, rate_hz=args.rate)
+    amp = fit.amplitude
+    for bone, rot in amp.rotation.items():
+        print(f"{bone}: skin cluster rotation {', '.join(f'{a} {x:.1f}' for a, x in zip('XYZ', np.degrees(rot)))} deg, "
+              f"translation {', '.join(f'{a} {x:.1f}' for a, x in zip('XYZ', 1e3 * amp.translation[bone]))} mm, "
+              "per rad of the humerus's rotation from rest (SD)")
+    d = np.diag(amp.girdle)
+    print("girdle (sign x sqrt of C's diagonal, deg per rad): " + ", ".join(
+        f"{n} {x:+.1f}" for n, x in zip(("scapula X", "Y", "Z", "humerus X", "Y", "Z"),
+                                        np.sign(d) * np.degrees(np.sqrt(np.abs(d))))))
+    for g in fit.girdle:
+        used = "left out of the girdle's part" if g.verdict == "fail" else "used"
+        print(f"  {Path(g.file).name}: LS verdict {g.verdict} with the markers carried by the bones: {used}")
+    data = amp.to_json()
+    data["citation"] = args.citation or f"the lab's own trials ({', '.join(Path(t).name for t in args.trials)})"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write(out, lambda tmp: tmp.write_text(json.dumps(data, indent=2) + "\n"))
+    print(f"wrote {out}: name it in a protocol as 'uncertainty_model: {out.name}' (relative to the protocol file)")
+    return 0

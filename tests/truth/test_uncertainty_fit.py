@@ -1,0 +1,61 @@
+"""``exubio uncertainty-fit``: a lab's uncertainty model from its bone-referenced trials. On the shared
+S2M pin trials it is the model exubio ships (fitted on the same trials by the studies that made it);
+bad input is one error naming the file, with nothing written."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from exubio.cli import main
+from exubio.trust.sta_amplitude import load_sta_amplitude
+
+DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "truth" / "sta_opendata"
+needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="../shared/data/truth/sta_opendata is absent")
+
+
+@needs_data
+@pytest.mark.slow
+@pytest.mark.exudyn
+def test_fitted_on_the_shared_pins_it_is_the_shipped_model(tmp_path, capsys):
+    """The four S2M trials at 300 Hz: every coefficient of the skin's part and the girdle's equals the
+    shipped file's to its 6 significant digits; punching's LS verdict is fail and the girdle leaves it out;
+    the trunk is the shipped one's, said so. The file then serves a protocol and ``exubio truth``."""
+    out = tmp_path / "lab_u.json"
+    files = [str(f) for f in sorted(DATA.glob("dataSample_S2M_*.mat"))]
+    assert main(["uncertainty-fit", *files, "--rate", "300", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "dataSample_S2M_punching.mat: LS verdict fail" in printed and f"wrote {out}" in printed
+    lab, shipped = load_sta_amplitude(out), load_sta_amplitude()
+    for part in ("rotation", "translation", "nonrigid", "rigid", "cross"):
+        got, want = getattr(lab, part), getattr(shipped, part)
+        assert set(got) == set(want)
+        for k in want:
+            np.testing.assert_allclose(got[k], want[k], rtol=2e-6, atol=1e-12, err_msg=f"{part} {k}")
+    np.testing.assert_allclose(lab.girdle, shipped.girdle, rtol=2e-6, atol=1e-12)
+    assert "punching" not in lab.girdle_source and "armAbd" in lab.girdle_source
+    np.testing.assert_array_equal(lab.trunk_table, shipped.trunk_table)
+    assert lab.trunk_source.startswith("the shipped model's")
+    assert main(["uncertainty-fit", *files, "--rate", "300", "--out", str(out)]) == 2  # no --overwrite
+    assert "exists; give --overwrite" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["nothere.mat", "--rate", "300", "--out", "u.json"], "nothere.mat: no such file"),
+    (["nothere.mat", "--rate", "300", "--out", "u.txt"], "expected a path ending in .json"),
+])
+def test_bad_input_is_one_error_and_nothing_written(tmp_path, monkeypatch, capsys, args, fragment):
+    monkeypatch.chdir(tmp_path)
+    assert main(["uncertainty-fit", *args]) == 2
+    err = capsys.readouterr().err
+    assert fragment in err and "Traceback" not in err
+    assert not list(tmp_path.iterdir())
+
+
+def test_an_existing_file_is_not_replaced_without_overwrite(tmp_path, capsys):
+    out = tmp_path / "u.json"
+    out.write_text(json.dumps({"mine": 1}))
+    assert main(["uncertainty-fit", str(tmp_path / "a.mat"), "--rate", "300", "--out", str(out)]) == 2
+    assert "exists; give --overwrite" in capsys.readouterr().err and json.loads(out.read_text()) == {"mine": 1}
