@@ -322,6 +322,7 @@ class Protocol:
     pf_inertia_scale: float | None = None  # defaults.pf_inertia_scale: PF's inertia scale (None: PF's default)
     signs: Literal["isb", "clinical"] = "isb"  # sign convention of the written angles (exubio.model.signs)
     uncertainty_model: str | None = None  # a lab's STA amplitude model (JSON, absolute path); None: the shipped one
+    files: tuple[str, ...] = ()  # the files it was read from: its own first, then those of its extends chain giving keys
 
     @property
     def marker_names(self) -> tuple[str, ...]:

@@ -195,6 +195,7 @@ def load_protocol(
         analog_loads=parse_analog_loads(data.get("analog_loads"), src_of("analog_loads"), seg_names),
         signs=signs,
         uncertainty_model=uncertainty_model,
+        files=tuple(dict.fromkeys([src, *origin.values()])),
     )
 
 

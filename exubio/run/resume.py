@@ -3,8 +3,8 @@ complete is kept, not refused and not computed again.
 
 Every summary.json that ``exubio reconstruct`` writes carries ``inputs_sha256``: a fingerprint of
 what the result is made from (the trial file's bytes and the labels read from it, the model and
-protocol files (a calibrated model's file holds its calibration) and the lab's uncertainty model the
-protocol names, the method's options, the label
+protocol files (a calibrated model's file holds its calibration; a protocol with each file its
+``extends`` chain reads, and the lab's uncertainty model it names), the method's options, the label
 repair, exubio's code: ``code_fingerprint``, every source and data file of the installed package, not
 its version string, which stays the same across the commits of a development install while the
 results change). A plain re-run (no ``--overwrite``) finds a set complete (ResultSet:
@@ -63,10 +63,9 @@ def run_key(trial_path: str | Path, model: Any, protocol: Any, method: str, /, *
     from exubio.methods import method_spec
 
     files = [Path(trial_path), Path(str(model.source or "")), Path(str(protocol.source or ""))]
-    if getattr(protocol, "uncertainty_model", None):  # a lab's STA amplitude model: every angle's u comes from it
-        files.append(Path(protocol.uncertainty_model))
     if not all(f.is_file() for f in files):
         return None
+    files[2:] = protocol_inputs(protocol)
     h = hashlib.sha256()
     for f in files:
         h.update(hashlib.sha256(f.read_bytes()).digest())
@@ -76,6 +75,16 @@ def run_key(trial_path: str | Path, model: Any, protocol: Any, method: str, /, *
     if signs != "isb":  # the angles' sign convention (the protocol's key, or --signs over it): other files
         h.update(f"signs={signs}".encode())
     return h.hexdigest()
+
+
+def protocol_inputs(protocol: Any, /) -> list[Path]:
+    """The files a protocol's results depend on: its file, each file of its ``extends`` chain that gives
+    it a key (a lab's base protocol edited between two runs gives other results) and the lab's uncertainty model it
+    names (every angle's u comes from it)."""
+    files = [Path(f) for f in (getattr(protocol, "files", ()) or (protocol.source,))]
+    if getattr(protocol, "uncertainty_model", None):
+        files.append(Path(protocol.uncertainty_model))
+    return files
 
 
 def kept_set(out_dir: str | Path, stem: str, key: str | None, /) -> Any:

@@ -181,16 +181,19 @@ def calibrate_in_memory(static: str | Path | Trajectories, session: Session, spe
 
 def calibration_key(static: Trajectories, session: Session, spec: StaticSpec, /) -> str | None:
     """A fingerprint of what a calibration is made from: the static trial's file and labels (a
-    relabel changes them), the generic model and protocol files, the static options and their
+    relabel changes them), the generic model and protocol files (the protocol's extends chain with it),
+    the static options and their
     files, exubio's version and code (exubio.run.resume.code_fingerprint). None when the static is not a file
     (nothing to find again)."""
     import exubio
     from exubio.run.resume import code_fingerprint
 
-    files = [static.source, session.generic_model.source, session.generic_protocol.source,
-             spec.functional, *spec.more_statics, *spec.scapula_trials]
     if not static.source or not Path(static.source).is_file():
         return None
+    proto = session.generic_protocol
+    protocol = proto.files or (proto.source,)  # with the files of its extends chain
+    files = [static.source, session.generic_model.source, *protocol, spec.functional, *spec.more_statics,
+             *spec.scapula_trials]
     h = hashlib.sha256()
     for f in files:
         h.update(hashlib.sha256(Path(f).read_bytes() if f and Path(f).is_file() else str(f).encode()).digest())

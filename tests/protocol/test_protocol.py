@@ -476,6 +476,19 @@ def test_a_bad_uncertainty_model_names_the_file_and_the_key(tmp_path, value, fra
     assert fragment in str(exc.value) and str(path) in str(exc.value) and "uncertainty_model" in str(exc.value)
 
 
+def test_a_protocol_knows_the_files_it_was_read_from(tmp_path):
+    """Its own first, then each file of its extends chain that gives it a key: what a result made with
+    it depends on (exubio.run.resume)."""
+    (tmp_path / "lab").mkdir()
+    write(tmp_path / "lab", "schema_version: 1\nextends: upper_limb_21\nfilter: {cutoff_hz: 6}\n", name="base.yaml")
+    session = write(tmp_path, "schema_version: 1\nextends: lab/base.yaml\n", name="s.yaml")
+    files = [Path(f) for f in load(session).files]
+    assert files[0] == session and len(files) == 3
+    assert {f.name: f for f in files}["base.yaml"] == tmp_path / "lab" / "base.yaml"
+    assert {f.name: f for f in files}["upper_limb_21.yaml"].read_text() == SHIPPED.read_text()
+    assert load(SHIPPED).files == (str(SHIPPED),)
+
+
 def test_example_session_file():
     prot = load(SESSION_EXAMPLE)
     assert dict(prot.relabel) == {"RADIUS": "ULNA", "ULNA": "RADIUS"}

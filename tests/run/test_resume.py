@@ -150,6 +150,25 @@ def test_a_set_made_by_other_code_is_refused_not_kept(tmp_path, trials, capsys, 
     assert json.loads((out / "a.ls.summary.json").read_text())["inputs_sha256"] != key
 
 
+def test_a_base_protocol_edited_between_two_runs_is_other_inputs(tmp_path, trials, capsys):
+    """A session protocol that extends the lab's base: the base's filter changed after the first run makes
+    the same command other inputs (refused without --overwrite, as any other input change), not a set to
+    keep; the base as it was keeps it again."""
+    a, _ = trials
+    base, session = tmp_path / "base.yaml", tmp_path / "session.yaml"
+    session.write_text("schema_version: 1\nextends: base.yaml\n")
+    run = lambda: main(["-q", "reconstruct", str(a), "--method", "ls", "--no-report", "--protocol", str(session),
+                        "--out", str(tmp_path / "out")])
+    base.write_text("schema_version: 1\nextends: upper_limb_21\nfilter: {cutoff_hz: 6}\n")
+    assert run() == 0
+    base.write_text("schema_version: 1\nextends: upper_limb_21\nfilter: {cutoff_hz: 3}\n")
+    capsys.readouterr()
+    assert run() == 2
+    assert "a.ls.csv: result file already exists" in capsys.readouterr().err
+    base.write_text("schema_version: 1\nextends: upper_limb_21\nfilter: {cutoff_hz: 6}\n")
+    assert run() == 0 and "[ls] kept" in capsys.readouterr().out
+
+
 def test_the_code_fingerprint_follows_source_and_data_files_not_caches(tmp_path):
     from exubio.run.resume import code_fingerprint
 
