@@ -11,13 +11,19 @@ Two parts come from the trials (each module says how):
 
 The unseen trunk's motion (what ``exubio truth`` adds where it takes the thorax as still) cannot come
 from these files, which hold no thorax: the shipped model's is kept, and the file says so.
+
+How far to trust it is measured on the same trials, one out (``judge``): each trial in turn is left
+out of both parts, reconstructed by LS as a lab would (``exubio.truth.compare``), and every ST, GH and
+HT angle's error against its bone is compared with the u a lab's run gives with the model of the other
+trials (thorax markers assumed: no still-thorax term), over the frames where the angle is measured. An
+honest u holds the bone within +-2u in about 95 % of those frames.
 """
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Mapping, Sequence
 
 from ..errors import InputError
 from ..trust.sta_amplitude import STAAmplitude, shipped_amplitude
@@ -25,7 +31,19 @@ from .girdle import GIRDLE_SEGMENTS, GirdleMotion, fit_girdle, girdle_motion
 from .sta_amplitude import fit_sta_amplitude
 from .sta_format import BoneTrial, read_sta_trial
 
-__all__ = ["UncertaintyFit", "fit_uncertainty_model"]
+__all__ = ["HeldOut", "UncertaintyFit", "fit_uncertainty_model"]
+
+
+@dataclass(frozen=True)
+class HeldOut:
+    """One trial judged with the model of the others: its LS verdict, and per ST, GH and HT angle the
+    fraction of its measured frames where the bone lies within +-2u and the fraction of frames measured
+    (angles measured in no frame left out). ``skipped``: why it could not be judged, or ''."""
+
+    trial: str
+    verdict: str
+    angles: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    skipped: str = ""
 
 
 @dataclass(frozen=True, eq=False)
@@ -35,6 +53,7 @@ class UncertaintyFit:
 
     amplitude: STAAmplitude
     girdle: tuple[GirdleMotion, ...]
+    held_out: tuple[HeldOut, ...] = ()
 
     @property
     def girdle_trials(self) -> tuple[str, ...]:
@@ -42,9 +61,10 @@ class UncertaintyFit:
 
 
 def fit_uncertainty_model(paths: Sequence[str | Path], /, *, rate_hz: float, generic_model: dict | None = None,
-                          source: str = "") -> UncertaintyFit:
+                          source: str = "", judge: bool = False) -> UncertaintyFit:
     """The amplitude and girdle parts (module docstring) fitted on the bone-referenced trials ``paths``
-    (ISB STA data-sharing .mat files, all at ``rate_hz``), with the shipped model's trunk. InputError
+    (ISB STA data-sharing .mat files, all at ``rate_hz``), with the shipped model's trunk; ``judge``:
+    also each trial judged with the model of the others (``held_out``; two trials at least). InputError
     naming the file where a trial lacks the scapula or the humerus, or when every trial's LS verdict is
     ``fail``."""
     from ..errors import ModelError
@@ -71,14 +91,49 @@ def fit_uncertainty_model(paths: Sequence[str | Path], /, *, rate_hz: float, gen
     if all(m.verdict == "fail" for m in motions):
         raise InputError(f"{names}: the LS verdict of every trial with its markers carried by the bones is 'fail' (the "
                          "trunk moved, or the model cannot follow the girdle); no girdle error to fit from them")
-    C = fit_girdle(list(motions))
+    amp = _with_girdle(amp, motions, rate_hz)
+    held = ()
+    if judge and len(trials) > 1:
+        held = tuple(_judged(i, trials, motions, rate_hz, generic) for i in range(len(trials)))
+    return UncertaintyFit(amp, motions, held)
+
+
+def _with_girdle(amp: STAAmplitude, motions: Sequence[GirdleMotion], rate_hz: float) -> STAAmplitude:
+    """``amp`` with the girdle part fitted on ``motions`` and the shipped model's trunk."""
     used = [Path(m.file).name for m in motions if m.verdict != "fail"]
     shipped = shipped_amplitude()
-    amp = dataclasses.replace(
-        amp, girdle=C,
+    return dataclasses.replace(
+        amp, girdle=fit_girdle(list(motions)),
         girdle_source=("exubio.truth.girdle.fit_girdle on " + ", ".join(used) + f" ({rate_hz:g} Hz, LS; trials whose LS "
                        "verdict is 'fail' with the markers carried by the bones left out)"),
         trunk=shipped.trunk, trunk_nodes=shipped.trunk_nodes, trunk_table=shipped.trunk_table,
         trunk_source=("the shipped model's (bone-referenced files hold no thorax): " + shipped.trunk_source
                       if shipped.has_trunk else ""))
-    return UncertaintyFit(amp, motions)
+
+
+def _judged(i: int, trials: Sequence[BoneTrial], motions: Sequence[GirdleMotion], rate_hz: float, generic: Any) -> HeldOut:
+    """Trial i judged with the model of the others (module docstring)."""
+    import numpy as np
+
+    from .compare import compare_bone_trial
+    from .lab_run import setup_lab_run
+
+    name = trials[i].path.name
+    others = [j for j in range(len(trials)) if j != i]
+    try:
+        amp = _with_girdle(fit_sta_amplitude([(trials[j], float(rate_hz)) for j in others]),
+                           [motions[j] for j in others], rate_hz)
+    except InputError as exc:
+        return HeldOut(name, "", skipped=f"no model from the other trials: {exc}")
+    comp, _ = compare_bone_trial(setup_lab_run(trials[i], generic, rate_hz=float(rate_hz)), methods=("ls",),
+                                 amplitude=amp)
+    verdict = comp.verdicts.get("ls", "")
+    if "ls" not in comp.verdicts or verdict.startswith("failed"):
+        return HeldOut(name, verdict, skipped="LS failed")
+    cells = {}
+    for a, per in comp.angles.items():
+        e = per.get("ls")
+        lab = None if e is None else e.lab
+        if lab is not None and lab.coverage is not None and np.isfinite(lab.rmse_deg):
+            cells[a] = (float(lab.coverage), float(lab.measured_fraction))
+    return HeldOut(name, verdict, cells)

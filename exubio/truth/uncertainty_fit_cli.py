@@ -38,6 +38,8 @@ def add_parser(sub, common) -> None:
     p.add_argument("--citation", default="", help="the data's citation, written into the model")
     p.add_argument("--out", required=True, help="MODEL.json")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
+    p.add_argument("--no-judge", action="store_true",
+                   help="skip judging each trial with the model of the others (one trial out; about as long again)")
     p.set_defaults(func=cmd_uncertainty_fit)
 
 
@@ -52,7 +54,7 @@ def cmd_uncertainty_fit(args: argparse.Namespace) -> int:
         raise InputError(f"{out}: exists; give --overwrite to replace it")
     if not getattr(args, "verbose", False):  # the LS runs of bone trials say which frames took long: details
         logging.getLogger("exubio.methods").setLevel(logging.ERROR)
-    fit = fit_uncertainty_model(args.trials, rate_hz=args.rate)
+    fit = fit_uncertainty_model(args.trials, rate_hz=args.rate, judge=not args.no_judge)
     amp = fit.amplitude
     for bone, rot in amp.rotation.items():
         print(f"{bone}: skin cluster rotation {', '.join(f'{a} {x:.1f}' for a, x in zip('XYZ', np.degrees(rot)))} deg, "
@@ -65,9 +67,45 @@ def cmd_uncertainty_fit(args: argparse.Namespace) -> int:
     for g in fit.girdle:
         used = "left out of the girdle's part" if g.verdict == "fail" else "used"
         print(f"  {Path(g.file).name}: LS verdict {g.verdict} with the markers carried by the bones: {used}")
+    if fit.held_out:
+        print(format_held_out(fit.held_out))
     data = amp.to_json()
     data["citation"] = args.citation or f"the lab's own trials ({', '.join(Path(t).name for t in args.trials)})"
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(out, lambda tmp: tmp.write_text(json.dumps(data, indent=2) + "\n"))
     print(f"wrote {out}: name it in a protocol as 'uncertainty_model: {out.name}' (relative to the protocol file)")
     return 0
+
+
+def format_held_out(held) -> str:
+    """The one-trial-out judgement as a table: per angle and trial, the % of measured frames where the
+    bone lies within +-2u (the % of frames measured), then the cells below 90 % and above 99 %."""
+    from .compare import TRUTH_ANGLES
+
+    names = [Path(h.trial).stem.removeprefix("dataSample_") for h in held]
+    width = max(12, *(len(n) for n in names))
+    lines = ["each trial judged with the model of the others (LS, the u of a lab's run with thorax markers): % of its "
+             "measured frames where the bone lies within +-2u (% of frames measured)",
+             f"{'angle':32s}" + "".join(f"{n:>{width + 2}s}" for n in names)]
+    below, above, cells = [], 0, 0
+    for a in TRUTH_ANGLES:
+        row = []
+        for n, h in zip(names, held):
+            c = h.angles.get(a)
+            if c is None:
+                row.append("-")
+                continue
+            cells += 1
+            above += c[0] > 0.99
+            if c[0] < 0.90:
+                below.append(f"{n} {a}: {c[0]:.0%}" + (" (LS verdict fail)" if h.verdict == "fail" else ""))
+            row.append(f"{100 * c[0]:.0f} ({100 * c[1]:.0f})")
+        if any(x != "-" for x in row):
+            lines.append(f"{a:32s}" + "".join(f"{x:>{width + 2}s}" for x in row))
+    lines.append("LS verdicts: " + ", ".join(f"{n} {h.verdict or '-'}" + (f" (not judged: {h.skipped})" if h.skipped else "")
+                                             for n, h in zip(names, held)))
+    lines.append(f"{cells} cells; below 90 %: {len(below)}" + (": " + "; ".join(below) if below else "")
+                 + f"; above 99 % (u wider than needed): {above}")
+    lines.append("(the files hold no thorax: it is taken as still in the lab, so the HT angles here also carry the "
+                 "trunk's motion, which the u of a run with thorax markers does not; exubio truth adds it)")
+    return "\n".join(lines)
