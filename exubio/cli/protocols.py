@@ -49,6 +49,8 @@ def _print_protocol_check(model, prot, args: argparse.Namespace) -> int:
     static = read_trial(args.static) if args.static else None
     check = check_protocol(model, prot, trial=trial, static=static)
     print("what it can measure, before any trial (over elevations of 10-120 deg in three planes):")
+    if prot.uncertainty_model:  # the protocol's uncertainty_model key: the bone-pin artefact below is the lab's
+        print(f"  (the soft-tissue artefact and girdle error of the uncertainty: the lab's model {prot.uncertainty_model})")
     for name, st in check.status.items():
         why = check.why.get(name)
         print(f"  {name:30s} {st}" + (f": {why}" if why else ""))
