@@ -25,6 +25,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+import numpy as np
+
 from ..errors import InputError
 from ..trust.sta_amplitude import STAAmplitude, shipped_amplitude
 from .girdle import GIRDLE_SEGMENTS, GirdleMotion, fit_girdle, girdle_motion
@@ -73,7 +75,7 @@ def fit_uncertainty_model(paths: Sequence[str | Path], /, *, rate_hz: float, gen
 
     if not paths:
         raise InputError("no bone-referenced trial given")
-    if not rate_hz > 0:
+    if not (np.isfinite(rate_hz) and rate_hz > 0):
         raise InputError(f"--rate {rate_hz}: expected the trials' sampling rate, a positive number of Hz")
     trials: list[BoneTrial] = []
     for p in paths:
@@ -113,8 +115,6 @@ def _with_girdle(amp: STAAmplitude, motions: Sequence[GirdleMotion], rate_hz: fl
 
 def _judged(i: int, trials: Sequence[BoneTrial], motions: Sequence[GirdleMotion], rate_hz: float, generic: Any) -> HeldOut:
     """Trial i judged with the model of the others (module docstring)."""
-    import numpy as np
-
     from .compare import compare_bone_trial
     from .lab_run import setup_lab_run
 
