@@ -70,8 +70,8 @@ def inputs(tmp_path_factory) -> Path:
     (folder / "study.yaml").write_text(study_file(), encoding="utf-8")
     if SHARED_TRC.is_file():
         shutil.copy(SHARED_TRC, folder / "trial.trc")
-    if SHARED_MAT.is_file():
-        shutil.copy(SHARED_MAT, folder / SHARED_MAT.name)
+    for mat in sorted(SHARED_MAT.parent.glob("dataSample_S2M_*.mat")):  # the bone trials the examples name
+        shutil.copy(mat, folder / mat.name)
     return folder
 
 
