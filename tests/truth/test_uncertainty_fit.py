@@ -79,3 +79,32 @@ def test_an_existing_file_is_not_replaced_without_overwrite(tmp_path, capsys):
     out.write_text(json.dumps({"mine": 1}))
     assert main(["uncertainty-fit", str(tmp_path / "a.mat"), "--rate", "300", "--out", str(out)]) == 2
     assert "exists; give --overwrite" in capsys.readouterr().err and json.loads(out.read_text()) == {"mine": 1}
+
+
+@needs_data
+@pytest.mark.slow
+@pytest.mark.exudyn
+def test_exubio_truth_judges_a_labs_model_and_names_it(tmp_path, capsys):
+    """``exubio truth --uncertainty-model``: the shipped numbers from a lab's file give the shipped
+    figures, and the JSON names the file; a model without the trunk's motion (which exubio truth's still
+    thorax needs) is one error naming it."""
+    import dataclasses
+
+    from exubio.trust.sta_amplitude import shipped_amplitude
+
+    mat = str(DATA / "dataSample_S2M_armAbd.mat")
+    lab = tmp_path / "lab_u.json"
+    lab.write_text(json.dumps(shipped_amplitude().to_json()))
+    assert main(["truth", mat, "--rate", "300", "--json", str(tmp_path / "lab.json"), "--uncertainty-model", str(lab)]) == 0
+    assert f"the STA amplitude model {lab.resolve()}" in capsys.readouterr().out
+    assert main(["truth", mat, "--rate", "300", "--json", str(tmp_path / "shipped.json")]) == 0
+    got, want = (json.loads((tmp_path / f"{k}.json").read_text()) for k in ("lab", "shipped"))
+    assert got.pop("uncertainty_model") == str(lab.resolve()) and "uncertainty_model" not in want
+    cov = lambda d: {a: m["ls"]["coverage"] for a, m in d["angles"].items() if "ls" in m}
+    assert cov(got) == cov(want) and len(cov(want)) >= 10
+    bare = tmp_path / "no_trunk.json"
+    bare.write_text(json.dumps(dataclasses.replace(shipped_amplitude(), trunk=None, trunk_table=None,
+                                                   trunk_nodes=None).to_json()))
+    capsys.readouterr()
+    assert main(["truth", mat, "--rate", "300", "--uncertainty-model", str(bare)]) == 2
+    assert f"{bare}: no trunk motion" in capsys.readouterr().err
