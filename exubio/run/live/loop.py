@@ -16,8 +16,9 @@ Falling behind. Frames are processed in order as they come; when the solver is s
 stream, samples queue up and are all processed as fast as possible (the backlog is reported, in
 frames, on every frame's output). A backlog beyond ``max_behind_s`` is not carried on: the queued
 frames are skipped (recorded as missing, an Event says how many) and a new PF run starts at the
-newest frame. The session's first ``catch_up_s`` seconds (2 s) are exempt: the start-up backlog is
-worked off at the solver's full speed. With the defaults the angles are never more than about
+newest frame. The first ``catch_up_s`` seconds (2 s) after the session's first frame is solved are
+exempt: the start-up backlog (the set-up, the first step, kernels compiled on a first run after
+installing) is worked off at the solver's full speed. With the defaults the angles are never more than about
 0.5 s late after that (a run that starts after a skip starts at the newest frame: no backlog).
 
 Labels. A label swap in the stream shows as two markers far from their model points but each
@@ -342,6 +343,8 @@ class LiveSession:
             self.deferred.append((g, q, part, frame, rates))
             if len(self.deferred) >= DEFER_FRAMES:
                 self._flush(frames)
+            if i == 0 and self.run_id == 0:  # the session's first frame solved: the catch-up grace starts now, so
+                self.run_started = self.clock()  # its one-off costs (first step, kernels compiled) do not eat it
 
         projected = self.options.pf.project_constraints
         from exubio.backend.exudyn_system import IntegratorOptions

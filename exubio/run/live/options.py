@@ -23,8 +23,9 @@ class LiveOptions:
     stall_s: no sample for this long is reported as a stall.
     end_after_s: no sample for this long ends the stream (None: wait for ever, end with Ctrl-C).
     max_behind_s: a backlog longer than this is skipped (see exubio.run.live.loop's docstring), except
-        during the first ``catch_up_s`` seconds of the session's first PF run, in which the start's
-        backlog (the stream opened, the LS pose, the system built, the first solves) is worked off.
+        during the first ``catch_up_s`` seconds after the session's first frame is solved, in which the
+        start's backlog (the stream opened, the LS pose, the system built, the first solve with its
+        kernels compiled on a first run) is worked off.
     verdict_every_s: the running verdict is re-evaluated this often.
     open_timeout_s: how long to wait for the stream to appear.
     """
