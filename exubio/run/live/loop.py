@@ -16,9 +16,9 @@ Falling behind. Frames are processed in order as they come; when the solver is s
 stream, samples queue up and are all processed as fast as possible (the backlog is reported, in
 frames, on every frame's output). A backlog beyond ``max_behind_s`` is not carried on: the queued
 frames are skipped (recorded as missing, an Event says how many) and a new PF run starts at the
-newest frame. The first ``catch_up_s`` seconds (2 s) after the session's first frame is solved are
-exempt: the start-up backlog (its set-up and first solve) is worked off at the solver's full speed. With the defaults the angles are never more than about
-0.5 s late after that (a run that starts after a skip starts at the newest frame: no backlog).
+newest frame. The first ``catch_up_s`` seconds (2 s) after the session's first frame is solved are exempt:
+the start-up backlog (set-up, first solve) is worked off at full speed. With the defaults the angles are
+never more than about 0.5 s late after that (a run that starts after a skip starts at the newest frame).
 
 Labels. A label swap in the stream shows as two markers far from their model points but each
 close to the other's: where that holds for LABEL_SWAP_FRAMES frames in a row, both springs are
