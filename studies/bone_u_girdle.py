@@ -49,13 +49,8 @@ def lab_coverage(path: Path, amplitude) -> dict:
 
     run = setup_lab_run(read_sta_trial(path), read_yaml(DEFAULT_MODEL, error=ModelError), rate_hz=RATE)
     comp, _ = compare_bone_trial(run, methods=("ls",), amplitude=amplitude)
-    out = {}
-    for a, per in comp.angles.items():
-        e = per.get("ls")
-        if e is not None and e.lab is not None and e.lab.coverage is not None:
-            out[a] = (e.lab.coverage, e.lab.measured_fraction)
     VERDICTS[path.stem] = comp.verdicts.get("ls", "")
-    return out
+    return comp.lab_coverage("ls")
 
 
 VERDICTS: dict = {}  # trial stem -> its LS verdict (the last lab_coverage run of it)

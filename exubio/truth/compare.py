@@ -54,6 +54,16 @@ class TruthComparison:
     reasons: Mapping[str, tuple[str, ...]] = field(default_factory=dict)  # per method, main_reasons of its verdict
     uncertainty_model: str = ""  # a lab's STA amplitude model the uncertainties used (its file); "": the shipped one
 
+    def lab_coverage(self, method: str = "ls", /) -> dict[str, tuple[float, float]]:
+        """Per angle measured in some frame, (coverage of +-2u, fraction of frames measured) with the u and
+        status a lab's run gives (``AngleError.lab``), for ``method``."""
+        out = {}
+        for a, per in self.angles.items():
+            lab = getattr(per.get(method), "lab", None)
+            if lab is not None and lab.coverage is not None:
+                out[a] = (float(lab.coverage), float(lab.measured_fraction))
+        return out
+
     def to_json(self) -> dict:
         num = lambda x: None if x is None or not np.isfinite(x) else round(float(x), 4)
         return {"file": self.file, "task": self.task, "assumption": self.assumption, "n_frames": self.n_frames,

@@ -130,10 +130,4 @@ def _judged(i: int, trials: Sequence[BoneTrial], motions: Sequence[GirdleMotion]
     verdict = comp.verdicts.get("ls", "")
     if "ls" not in comp.verdicts or verdict.startswith("failed"):
         return HeldOut(name, verdict, skipped="LS failed")
-    cells = {}
-    for a, per in comp.angles.items():
-        e = per.get("ls")
-        lab = None if e is None else e.lab
-        if lab is not None and lab.coverage is not None and np.isfinite(lab.rmse_deg):
-            cells[a] = (float(lab.coverage), float(lab.measured_fraction))
-    return HeldOut(name, verdict, cells)
+    return HeldOut(name, verdict, comp.lab_coverage("ls"))
