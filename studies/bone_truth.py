@@ -120,7 +120,8 @@ def main(argv=None) -> int:
             amp = fit_sta_amplitude([(read_sta_trial(f), RATES["S2M"]) for f in s2m if f != held])
             amp = dataclasses.replace(amp, trunk=shipped.trunk, trunk_nodes=shipped.trunk_nodes, trunk_table=shipped.trunk_table,
                                       trunk_source=shipped.trunk_source,  # not from these files
-                                      girdle=shipped.girdle, girdle_source=shipped.girdle_source)
+                                      girdle=shipped.girdle, girdle_source=shipped.girdle_source,
+                                      girdle_offset_rad=shipped.girdle_offset_rad)
             loto.append(run(held, amplitude=amp))
         print()
         print(table(loto, "STA amplitude fitted on the other three S2M tasks (leave one task out)"))

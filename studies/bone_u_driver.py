@@ -53,7 +53,8 @@ def main(argv=None) -> int:
         a = fit.fit_sta_amplitude([(read_sta_trial(p), RATE_HZ) for p in paths], saturation_rad=ts if ts > 0 else None)
         return dataclasses.replace(a, trunk=shipped.trunk, trunk_nodes=shipped.trunk_nodes,
                                    trunk_table=shipped.trunk_table, trunk_source=shipped.trunk_source,
-                                   girdle=shipped.girdle, girdle_source=shipped.girdle_source)
+                                   girdle=shipped.girdle, girdle_source=shipped.girdle_source,
+                                      girdle_offset_rad=shipped.girdle_offset_rad)
 
     def judged(path, amp) -> dict:
         comp, _ = compare.compare_bone_trial(setup_lab_run(read_sta_trial(path), generic, rate_hz=RATE_HZ),

@@ -51,6 +51,10 @@ def _print_protocol_check(model, prot, args: argparse.Namespace) -> int:
     print("what it can measure, before any trial (over elevations of 10-120 deg in three planes):")
     if prot.uncertainty_model:  # the protocol's uncertainty_model key: the bone-pin artefact below is the lab's
         print(f"  (the soft-tissue artefact and girdle error of the uncertainty: the lab's model {prot.uncertainty_model})")
+        from exubio.trust.sta_amplitude import load_sta_amplitude
+
+        line = load_sta_amplitude(prot.uncertainty_model).judgement_line()
+        print(f"  ({line or 'the model records no judgement: exubio uncertainty-fit without --no-judge makes one'})")
     for name, st in check.status.items():
         why = check.why.get(name)
         print(f"  {name:30s} {st}" + (f": {why}" if why else ""))

@@ -411,10 +411,11 @@ def girdle_angle_variance(kin: Kinematics, qf: np.ndarray, amplitude: STAAmplitu
     poses qf (b, m) (zero where the amplitude model has no ``girdle``).
 
     The model's scapula and humerus ISB frames are taken as turned off the bones by rotation vectors
-    (in their own axes) of second moment C theta^2 (``STAAmplitude.girdle``, 6 x 6, the two frames
-    together; theta the humerus's rotation from rest), and every angle of either frame moves with it
-    (e = d angle / d rotation of that frame alone, the other frames kept: ST, GH and HT): e C e^T
-    theta^2, or nothing where that is negative. C is the girdle's error with no skin plus twice its
+    (in their own axes) of second moment C (theta + theta_0)^2 (``STAAmplitude.girdle``, 6 x 6, the two
+    frames together; theta the humerus's rotation from rest, theta_0 ``girdle_offset_rad``: the scapula
+    is off the model's near rest too), and every angle of either frame moves with it (e = d angle / d
+    rotation of that frame alone, the other frames kept: ST, GH and HT): e C e^T (theta + theta_0)^2, or
+    nothing where that is negative. C is the girdle's error with no skin plus twice its
     covariance with what the skin adds (``exubio.truth.girdle``: the two partly cancel on the pins,
     and the skin's part is already in u), so it is not positive definite. ``frames``: the ISB frames
     at qf where the caller has them. On the standing S2M pin trials, with skin markers carried
@@ -437,7 +438,7 @@ def girdle_angle_variance(kin: Kinematics, qf: np.ndarray, amplitude: STAAmplitu
     E = np.concatenate([frame_angle_turns(frames, lambda name, s=s: name == s) @ frames[s]
                         for s in ("scapula", "humerus")], axis=2)  # (b, 18, 6) per rad of each frame's own axes
     C = np.asarray(amplitude.girdle, dtype=float)
-    out[:, : E.shape[1]] = np.maximum(np.einsum("bai,ij,baj->ba", E, C, E), 0.0) * (theta ** 2)[:, None]
+    out[:, : E.shape[1]] = np.maximum(np.einsum("bai,ij,baj->ba", E, C, E), 0.0) * (amplitude.girdle_driver(theta) ** 2)[:, None]
     return out
 
 

@@ -15,8 +15,9 @@ before carries a second moment per rad^2 (``trunk``), used where no table is.
 
 What the model's girdle cannot follow of the bones (``exubio.truth.girdle``: the scapula's and the
 humerus's ISB frames off the bones' with no skin at all, with its covariance with what the skin adds)
-is a symmetric 6 x 6 per rad^2 of the driver (``girdle``: the two frames' rotation vectors in their
-own axes; not positive definite), where the file has one.
+is a symmetric 6 x 6 per rad^2 of the driver plus an offset (``girdle``, ``girdle_offset_rad``: the
+two frames' rotation vectors in their own axes, not positive definite; the error's spread grows with
+theta + theta_0, theta_0 = 0 in a file from before), where the file has one.
 
 Segments without bone data take the humerus's coefficients: the clavicle driven like the scapula by
 the humerus's rotation, the ulna, radius and hand by their own joint's rotation (from their parent
@@ -67,14 +68,29 @@ class STAAmplitude:
     trunk_table: np.ndarray | None = None  # (nt, 6, 6): the unseen trunk's rotation + IJ displacement second moment
     girdle: np.ndarray | None = None  # (6, 6): var(g) + 2 cov(g, s) of the model's frames off the bones', per rad^2
     girdle_source: str = ""
+    girdle_offset_rad: float = 0.0  # theta_0: the girdle's second moment is per rad^2 of theta + theta_0
     saturation_rad: float | None = None  # the skin's driver theta_s tanh(theta / theta_s); None: theta itself
     path: str = ""  # the file it was read from, where it is a lab's (empty: the shipped model)
+    judgement: Mapping[str, Any] = field(default_factory=dict)  # exubio uncertainty-fit's one-trial-out judgement
+
+    def judgement_line(self) -> str:
+        """The one-trial-out judgement a lab's fit recorded, in one line ('' where none was)."""
+        j = self.judgement
+        if not j:
+            return ""
+        return (f"judged one trial out on {len(j.get('trials', {}))} trials: of {j.get('cells', 0)} angle cells "
+                f"(trial x ST, GH, HT angle), {j.get('below_90', 0)} held the bone within +-2u in under 90 % of "
+                f"their measured frames, {j.get('above_99', 0)} in over 99 %")
 
     def skin_driver(self, theta: np.ndarray, /) -> np.ndarray:
         """The driver the skin's coefficients are per unit of: theta_s tanh(theta / theta_s) (the artefact
         grows with the humerus's rotation theta from rest and levels off beyond theta_s), or theta where
         the model has no ``saturation_rad`` (a file from before)."""
         return saturating(theta, self.saturation_rad)
+
+    def girdle_driver(self, theta: np.ndarray, /) -> np.ndarray:
+        """theta + theta_0 (rad): what ``girdle`` is per rad^2 of (exubio.truth.girdle)."""
+        return np.asarray(theta, dtype=float) + self.girdle_offset_rad
 
     @property
     def has_trunk(self) -> bool:
@@ -151,8 +167,11 @@ class STAAmplitude:
                                                   "and humerus ISB frames turned onto the bones' with skin markers "
                                                   "carried rigidly by the bones, s what the skin markers add (rotation "
                                                   "vectors, rad, in the model frames' own axes: scapula X Y Z, humerus "
-                                                  "X Y Z; exubio.truth.girdle); not positive definite",
-                    "girdle_source": self.girdle_source} if self.girdle is not None else {})}
+                                                  "X Y Z; exubio.truth.girdle); not positive definite; the driver "
+                                                  "here is theta + girdle_driver_offset_rad",
+                    "girdle_driver_offset_rad": float(f"{self.girdle_offset_rad:.6g}"),
+                    "girdle_source": self.girdle_source} if self.girdle is not None else {}),
+                **({"judged_one_trial_out": dict(self.judgement)} if self.judgement else {})}
 
 
 def saturating(theta: np.ndarray, saturation_rad: float | None, /) -> np.ndarray:
@@ -217,8 +236,15 @@ def load_sta_amplitude(path: str | Path | None = None, /) -> STAAmplitude:
                 raise ValueError(f"driver_saturation_rad must be a positive number of rad, got {sat!r}")
             tables.update(saturation_rad=sat)
         if "girdle_second_moment" in data:
+            offset = float(data.get("girdle_driver_offset_rad", 0.0))  # absent: a file from before, no offset
+            if not (np.isfinite(offset) and offset >= 0):
+                raise ValueError(f"girdle_driver_offset_rad must be a number of rad >= 0, got {offset!r}")
             tables.update(girdle=np.asarray(data["girdle_second_moment"], dtype=float).reshape(6, 6),
-                          girdle_source=str(data.get("girdle_source", "")))
+                          girdle_source=str(data.get("girdle_source", "")), girdle_offset_rad=offset)
+        judgement = data.get("judged_one_trial_out", {})
+        if not isinstance(judgement, dict):
+            raise ValueError("judged_one_trial_out must be a mapping")
+        tables.update(judgement=judgement)
     except (ValueError, KeyError, TypeError) as exc:
         raise InputError(f"{where}: not an STA amplitude model ({type(exc).__name__}: {exc}); expected the JSON "
                          "that 'exubio uncertainty-fit' writes") from None

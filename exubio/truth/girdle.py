@@ -14,7 +14,16 @@ thorax taken as still), but with each skin marker carried rigidly by its bone fr
 rest (``setup_lab_run(without_sta=True)``), and reconstructed by LS. In every frame the error of the
 model's scapula and humerus ISB frames against the bones' is a rotation vector in the model frame's
 own axes, g (n, 6: scapula, humerus). Like the artefact's amplitude (``exubio.truth.sta_amplitude``)
-it grows with the humerus's rotation from rest, theta (rad; no error at rest by construction).
+it grows with the humerus's rotation from rest, theta (rad), but not from zero: the calibration's
+frames are the bones' by construction, yet wherever else the arm hangs near rest the scapula is
+already off the model's by a few degrees (it protracts in an adduction or a reach, shrugs in eating,
+while the humerus has barely turned: on the pins 1-2.5 deg RMS about the scapula's Y axis with theta
+under 10 deg, 2.5-6 deg at 10-20 deg). Its spread is taken as growing with theta + theta_0: theta_0
+(``girdle_offset``) is the offset under which the error's own spread is best predicted on a trial
+left out, each trial in turn (the mean Gaussian log-likelihood per frame of g per axis, over a grid
+of 5 deg steps); on the three standing S2M pin trials 45 deg (with no offset, every trial's
+held-out likelihood is far lower: the frames near rest are off the model by far more than theta^2
+allows; ``studies/bone_u_girdle.py`` prints the table).
 
 The girdle's error and the skin's are not independent. The same trial reconstructed from its skin
 markers misses the bones by g + s, s the part the skin's sliding adds; on the pins the two partly
@@ -26,7 +35,7 @@ is var(g) + 2 cov(g, s) along that angle. Pooled per rad^2 of theta,
 
     C = sum_t (g g^T + g s^T + s g^T) / sum_t theta^2   (6 x 6, symmetric, not positive definite)
 
-is the model; an angle whose direction e gets e C e^T < 0 (the skin takes back part of the girdle's
+with theta + theta_0 in place of theta, is the model; an angle whose direction e gets e C e^T < 0 (the skin takes back part of the girdle's
 error) gets nothing, so u never falls below its skin's and noise's part. C is a lower bound of what a
 lab's model misses (the calibration here is perfect) and holds whatever the still thorax cost the
 trial; a trial whose LS verdict with the markers carried by the bones is ``fail`` is left out of a
@@ -47,9 +56,12 @@ from ..errors import InputError
 from .sta_amplitude import _rotvec
 from .sta_format import BoneTrial
 
-__all__ = ["GirdleMotion", "girdle_motion", "fit_girdle", "GIRDLE_SEGMENTS"]
+__all__ = ["GirdleMotion", "girdle_motion", "fit_girdle", "girdle_offset", "offset_likelihoods", "GIRDLE_SEGMENTS",
+           "OFFSET_GRID_DEG"]
 
 GIRDLE_SEGMENTS = ("scapula", "humerus")
+OFFSET_GRID_DEG = tuple(range(0, 95, 5))
+"""The offsets theta_0 (deg) ``girdle_offset`` chooses from."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,19 +106,58 @@ def girdle_motion(trial: BoneTrial, generic_model: Mapping[str, Any], /, *, rate
     return GirdleMotion(str(trial.path), xi, skin, theta, verdict)
 
 
-def fit_girdle(motions: Sequence[GirdleMotion], /) -> np.ndarray:
-    """C (6, 6) rad^2 per rad^2 of theta: var(g) + 2 cov(g, s), pooled over the ``motions`` whose LS
-    verdict is not ``fail`` (module docstring)."""
+def _usable(motions: Sequence[GirdleMotion], what: str) -> list[GirdleMotion]:
     use = [m for m in motions if m.verdict != "fail"]
     if not use:
-        raise InputError("fit_girdle: every trial's LS verdict is 'fail' (its trunk moved); no girdle error to fit")
+        raise InputError(f"{what}: every trial's LS verdict is 'fail' (its trunk moved); no girdle error to fit")
+    return use
+
+
+def _finite(m: GirdleMotion) -> np.ndarray:
+    return np.isfinite(m.xi).all(axis=1) & np.isfinite(m.skin).all(axis=1) & np.isfinite(m.theta)
+
+
+def fit_girdle(motions: Sequence[GirdleMotion], /, *, offset_rad: float = 0.0) -> np.ndarray:
+    """C (6, 6) rad^2 per rad^2 of theta + ``offset_rad``: var(g) + 2 cov(g, s), pooled over the
+    ``motions`` whose LS verdict is not ``fail`` (module docstring)."""
     num, den = np.zeros((6, 6)), 0.0
-    for m in use:
-        g, s = m.xi, m.skin - m.xi
-        ok = np.isfinite(g).all(axis=1) & np.isfinite(s).all(axis=1) & np.isfinite(m.theta)
-        gs = g[ok].T @ s[ok]
-        num += g[ok].T @ g[ok] + gs + gs.T
-        den += float(np.sum(m.theta[ok] ** 2))
+    for m in _usable(motions, "fit_girdle"):
+        ok = _finite(m)
+        g, s = m.xi[ok], m.skin[ok] - m.xi[ok]
+        gs = g.T @ s
+        num += g.T @ g + gs + gs.T
+        den += float(np.sum((m.theta[ok] + offset_rad) ** 2))
     if den <= 0:
         raise InputError("fit_girdle: the humerus never moves from rest in these trials; no girdle error to fit")
     return num / den
+
+
+def offset_likelihoods(motions: Sequence[GirdleMotion], /) -> dict[float, float]:
+    """Offset theta_0 (deg, ``OFFSET_GRID_DEG``) -> the mean over the usable ``motions`` (LS verdict not
+    ``fail``; two at least) of the mean Gaussian log-likelihood per frame of each one's girdle error g,
+    per axis, under the spread var_axis (theta + theta_0)^2 fitted on the others (module docstring)."""
+    use = _usable(motions, "girdle_offset")
+    if len(use) < 2:
+        raise InputError("girdle_offset: one usable trial; the offset is judged on a trial left out (two at least)")
+    data = [(m.xi[_finite(m)], m.theta[_finite(m)]) for m in use]
+    out = {}
+    for deg in OFFSET_GRID_DEG:
+        t0 = np.radians(deg)
+        lik = []
+        for i, (g, th) in enumerate(data):
+            others = [d for j, d in enumerate(data) if j != i]
+            var = sum(np.sum(x ** 2, axis=0) for x, _ in others) / sum(np.sum((t + t0) ** 2) for _, t in others)
+            spread = th + t0 > 1e-9  # (a frame of no spread, theta at rest with no offset, is no Gaussian)
+            v = np.outer((th[spread] + t0) ** 2, var)
+            g = g[spread]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                lik.append(float(np.mean(np.sum(-0.5 * (g ** 2 / v + np.log(2 * np.pi * v)), axis=1))))
+        out[float(deg)] = float(np.mean(lik)) if np.all(np.isfinite(lik)) else -np.inf
+    return out
+
+
+def girdle_offset(motions: Sequence[GirdleMotion], /) -> float:
+    """theta_0 (rad): the offset of ``OFFSET_GRID_DEG`` whose held-out likelihood (``offset_likelihoods``)
+    is highest (the smaller one on a tie)."""
+    lik = offset_likelihoods(motions)
+    return float(np.radians(max(lik, key=lambda d: (lik[d], -d))))

@@ -6,8 +6,9 @@ Two parts come from the trials (each module says how):
 - the skin's artefact: each bone's skin-marker cluster, its rigid rotation and translation and its
   non-rigid rest, per rad of the humerus's rotation from rest (``exubio.truth.sta_amplitude``);
 - the model girdle's own error: the model's scapula and humerus frames off the bones with the markers
-  carried by the bones, with its covariance with the skin's part (``exubio.truth.girdle``; LS runs of
-  each trial, the trials whose LS verdict is ``fail`` left out).
+  carried by the bones, with its covariance with the skin's part, and the offset at rest its spread
+  grows from (``exubio.truth.girdle``; LS runs of each trial, the trials whose LS verdict is ``fail``
+  left out; the offset needs two usable trials, else the shipped one is kept).
 
 The unseen trunk's motion (what ``exubio truth`` adds where it takes the thorax as still) cannot come
 from these files, which hold no thorax: the shipped model's is kept, and the file says so.
@@ -29,7 +30,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..trust.sta_amplitude import STAAmplitude, shipped_amplitude
-from .girdle import GIRDLE_SEGMENTS, GirdleMotion, fit_girdle, girdle_motion
+from .girdle import GIRDLE_SEGMENTS, GirdleMotion, fit_girdle, girdle_motion, girdle_offset
 from .sta_amplitude import fit_sta_amplitude
 from .sta_format import BoneTrial, read_sta_trial
 
@@ -60,6 +61,21 @@ class UncertaintyFit:
     @property
     def girdle_trials(self) -> tuple[str, ...]:
         return tuple(Path(g.file).name for g in self.girdle if g.verdict != "fail")
+
+    def judgement(self) -> dict:
+        """``held_out`` as the model file records it (``STAAmplitude.judgement``): per trial its LS verdict,
+        why it was not judged, and per angle the coverage of +-2u and the fraction of frames measured; the
+        cells counted, below 90 % and above 99 % (empty without a judgement)."""
+        if not self.held_out:
+            return {}
+        cov = [c for h in self.held_out for c, _ in h.angles.values()]
+        return {"method": "each trial left out of both parts, reconstructed by LS with the model of the others; the "
+                          "u of a lab's run with thorax markers; over each angle's measured frames",
+                "cells": len(cov), "below_90": sum(c < 0.90 for c in cov), "above_99": sum(c > 0.99 for c in cov),
+                "trials": {h.trial: {"ls_verdict": h.verdict, **({"skipped": h.skipped} if h.skipped else {}),
+                                     "angles": {a: {"coverage": round(float(c), 4), "measured_fraction": round(float(f), 4)}
+                                                for a, (c, f) in h.angles.items()}}
+                           for h in self.held_out}}
 
 
 def fit_uncertainty_model(paths: Sequence[str | Path], /, *, rate_hz: float, generic_model: dict | None = None,
@@ -101,13 +117,20 @@ def fit_uncertainty_model(paths: Sequence[str | Path], /, *, rate_hz: float, gen
 
 
 def _with_girdle(amp: STAAmplitude, motions: Sequence[GirdleMotion], rate_hz: float) -> STAAmplitude:
-    """``amp`` with the girdle part fitted on ``motions`` and the shipped model's trunk."""
+    """``amp`` with the girdle part fitted on ``motions`` (its offset chosen on them where two are usable,
+    else the shipped model's) and the shipped model's trunk."""
     used = [Path(m.file).name for m in motions if m.verdict != "fail"]
     shipped = shipped_amplitude()
+    if len(used) >= 2:
+        offset = girdle_offset(list(motions))
+        how = f"offset {np.degrees(offset):.0f} deg chosen on them, one trial out"
+    else:
+        offset = shipped.girdle_offset_rad
+        how = f"offset {np.degrees(offset):.0f} deg the shipped model's: one usable trial cannot choose it"
     return dataclasses.replace(
-        amp, girdle=fit_girdle(list(motions)),
+        amp, girdle=fit_girdle(list(motions), offset_rad=offset), girdle_offset_rad=offset,
         girdle_source=("exubio.truth.girdle.fit_girdle on " + ", ".join(used) + f" ({rate_hz:g} Hz, LS; trials whose LS "
-                       "verdict is 'fail' with the markers carried by the bones left out)"),
+                       f"verdict is 'fail' with the markers carried by the bones left out; {how})"),
         trunk=shipped.trunk, trunk_nodes=shipped.trunk_nodes, trunk_table=shipped.trunk_table,
         trunk_source=("the shipped model's (bone-referenced files hold no thorax): " + shipped.trunk_source
                       if shipped.has_trunk else ""))

@@ -3,6 +3,7 @@ bone-referenced trials, written as JSON for a protocol's ``uncertainty_model:`` 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import logging
 from pathlib import Path
@@ -61,7 +62,7 @@ def cmd_uncertainty_fit(args: argparse.Namespace) -> int:
               f"translation {', '.join(f'{a} {x:.1f}' for a, x in zip('XYZ', 1e3 * amp.translation[bone]))} mm, "
               "per rad of the humerus's rotation from rest (SD)")
     d = np.diag(amp.girdle)
-    print("girdle (sign x sqrt of C's diagonal, deg per rad): " + ", ".join(
+    print(f"girdle (sign x sqrt of C's diagonal, deg per rad of theta + {np.degrees(amp.girdle_offset_rad):.0f} deg): " + ", ".join(
         f"{n} {x:+.1f}" for n, x in zip(("scapula X", "Y", "Z", "humerus X", "Y", "Z"),
                                         np.sign(d) * np.degrees(np.sqrt(np.abs(d))))))
     for g in fit.girdle:
@@ -69,7 +70,7 @@ def cmd_uncertainty_fit(args: argparse.Namespace) -> int:
         print(f"  {Path(g.file).name}: LS verdict {g.verdict} with the markers carried by the bones: {used}")
     if fit.held_out:
         print(format_held_out(fit.held_out))
-    data = amp.to_json()
+    data = dataclasses.replace(amp, judgement=fit.judgement()).to_json()
     data["citation"] = args.citation or f"the lab's own trials ({', '.join(Path(t).name for t in args.trials)})"
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(out, lambda tmp: tmp.write_text(json.dumps(data, indent=2) + "\n"))

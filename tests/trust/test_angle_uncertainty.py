@@ -94,8 +94,9 @@ def test_the_girdle_term_is_the_spread_of_the_angles_of_frames_turned_by_it(sett
     girdle_angle_variance within the Monte-Carlo error (2000 draws: +-3 % at 95 %) and the
     linearisation's; the SC angles, whose frames do not turn, get nothing. (2) The shipped matrix,
     not positive definite (the skin takes back part of the girdle's error): each angle gets e C e^T
-    theta^2 with e from the frames turned by small rotations (scipy), or zero where that is negative,
-    and both cases occur. (3) A model without a girdle gives zero."""
+    (theta + theta_0)^2 with e from the frames turned by small rotations (scipy), or zero where that is
+    negative, and both cases occur; with no offset, (theta / (theta + theta_0))^2 of that. (3) A model
+    without a girdle gives zero."""
     model, protocol, kin, pts = setting
     from scipy.spatial.transform import Rotation
 
@@ -113,12 +114,14 @@ def test_the_girdle_term_is_the_spread_of_the_angles_of_frames_turned_by_it(sett
     R, _ = kin.poses(q0[None])
     theta = AU._driver([s.name for s in model.segments], R)[0]
     assert np.degrees(theta) > 30
+    assert np.degrees(amp.girdle_offset_rad) >= 5  # the shipped offset (exubio.truth.girdle)
+    drv = theta + amp.girdle_offset_rad
     base = table(frames)[0]
     w, V = np.linalg.eigh(amp.girdle)
     positive = dataclasses.replace(amp, girdle=(V * np.maximum(w, 0.0)) @ V.T)
     var = AU.girdle_angle_variance(kin, q0[None], positive, 22)[0]
     n = 2000
-    xi = np.random.default_rng(3).multivariate_normal(np.zeros(6), positive.girdle * theta ** 2, size=n)
+    xi = np.random.default_rng(3).multivariate_normal(np.zeros(6), positive.girdle * drv ** 2, size=n)
     turned = {s: np.repeat(F, n, axis=0) for s, F in frames.items()}
     turned["scapula"] = turned["scapula"] @ Rotation.from_rotvec(xi[:, :3]).as_matrix()
     turned["humerus"] = turned["humerus"] @ Rotation.from_rotvec(xi[:, 3:]).as_matrix()
@@ -136,9 +139,11 @@ def test_the_girdle_term_is_the_spread_of_the_angles_of_frames_turned_by_it(sett
         moved = dict(frames)
         moved[seg] = frames[seg] @ Rotation.from_rotvec(v).as_matrix()
         E[:, i] = np.angle(np.exp(1j * (table(moved)[0] - base))) / 1e-6
-    quad = np.einsum("ai,ij,aj->a", E, amp.girdle, E) * theta ** 2
+    quad = np.einsum("ai,ij,aj->a", E, amp.girdle, E) * drv ** 2
     shipped = AU.girdle_angle_variance(kin, q0[None], amp, 22)[0][:18]
     np.testing.assert_allclose(shipped, np.maximum(quad, 0.0), rtol=1e-3, atol=1e-9)
+    no_offset = AU.girdle_angle_variance(kin, q0[None], dataclasses.replace(amp, girdle_offset_rad=0.0), 22)[0][:18]
+    np.testing.assert_allclose(no_offset, shipped * (theta / drv) ** 2, rtol=1e-12, atol=1e-15)
     assert (quad < -1e-6).any() and (quad > 1e-6).any()
     none = dataclasses.replace(amp, girdle=None)
     assert not AU.girdle_angle_variance(kin, q0[None], none, 22).any()

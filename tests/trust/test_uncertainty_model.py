@@ -80,3 +80,32 @@ def test_a_file_that_is_not_a_model_is_one_error_naming_it(tmp_path):
     model = load_model()
     with pytest.raises(InputError, match="not an STA amplitude model"):
         amplitude_of(bind(model, load_protocol(path, model=model)))
+
+
+def test_the_girdle_offset_and_a_labs_judgement_travel_with_the_file(tmp_path, capsys):
+    """The girdle's offset theta_0 and the one-trial-out judgement ``exubio uncertainty-fit`` records come
+    back from the file as written; a file from before the offset has none (theta_0 = 0, its u unchanged);
+    an offset below zero is one error naming the file; ``exubio protocols`` says the lab's judgement."""
+    from exubio.cli import main
+
+    judged = {"method": "one trial out", "cells": 12, "below_90": 2, "above_99": 7,
+              "trials": {"a.mat": {"ls_verdict": "ok", "angles": {"ST_X_upward_rotation": {"coverage": 0.8125,
+                                                                                             "measured_fraction": 0.5}}}}}
+    amp = dataclasses.replace(shipped_amplitude(), judgement=judged)
+    path = tmp_path / "lab_u.json"
+    path.write_text(json.dumps(amp.to_json()))
+    back = load_sta_amplitude(path)
+    assert back.judgement == judged and back.girdle_offset_rad == pytest.approx(shipped_amplitude().girdle_offset_rad)
+    assert "on 1 trials: of 12 angle cells" in back.judgement_line() and "2 held the bone" in back.judgement_line()
+    data = amp.to_json()
+    del data["girdle_driver_offset_rad"]
+    path.write_text(json.dumps(data))
+    assert load_sta_amplitude(path).girdle_offset_rad == 0.0
+    data["girdle_driver_offset_rad"] = -0.1
+    path.write_text(json.dumps(data))
+    with pytest.raises(InputError, match=f"{path}.*girdle_driver_offset_rad"):
+        load_sta_amplitude(path)
+    path.write_text(json.dumps(amp.to_json()))
+    (tmp_path / "p.yaml").write_text("schema_version: 1\nextends: upper_limb_21\nuncertainty_model: lab_u.json\n")
+    assert main(["protocols", str(tmp_path / "p.yaml")]) == 0
+    assert "judged one trial out on 1 trials: of 12 angle cells" in capsys.readouterr().out
