@@ -38,7 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "truth" / "sta_opendata"
 SHIPPED = ROOT / "exubio" / "data" / "sta_amplitude_s2m.json"
 RATE = 300.0
-BINS = ((0, 20), (20, 40), (40, 60), (60, 90), (90, 180))
+BINS = ((0, 10), (10, 20), (20, 40), (40, 60), (60, 90), (90, 180))
 
 
 def lab_coverage(path: Path, amplitude) -> dict:
@@ -94,8 +94,10 @@ def main(argv=None) -> int:
     generic = read_yaml(DEFAULT_MODEL, error=ModelError)
     files = sorted(args.data.glob("*S2M*.mat"))
     motions = {f: girdle_motion(read_sta_trial(f), generic, rate_hz=RATE) for f in files}
+    held = {} if args.held is None else {f: girdle_motion(read_sta_trial(f), generic, rate_hz=RATE)
+                                         for f in sorted(args.held.glob("*S2M*.mat"))}
     print("girdle error with the markers carried by the bones (LS; RMS deg about the model frames' X, Y, Z)")
-    for f, g in motions.items():
+    for f, g in {**motions, **held}.items():
         th = np.degrees(g.theta)
         ok = np.isfinite(g.xi).all(axis=1)
         cells = []
@@ -104,7 +106,7 @@ def main(argv=None) -> int:
             if s.sum() >= 10:
                 r = np.degrees(np.sqrt(np.mean(g.xi[s] ** 2, axis=0)))
                 cells.append(f"{lo}-{hi}: scapula {r[0]:.1f} {r[1]:.1f} {r[2]:.1f}, humerus {r[3]:.1f} {r[4]:.1f} {r[5]:.1f}")
-        used = "left out of the fit" if g.verdict == "fail" else "fitted"
+        used = "held out" if f in held else "left out of the fit" if g.verdict == "fail" else "fitted"
         print(f"  {f.name} (verdict {g.verdict}: {used})")
         for c in cells:
             print(f"     theta {c}")

@@ -1,6 +1,7 @@
 """The house moves, the outputs do not: ``exubio demo``, a study of 12 simulated trials in two
 sessions, and every real trial of ../shared/data with both methods, run by the base commit (BASE:
-320d83e, after every angle's u took the girdle's part (ea11f84) and the verdict's notes said so; before it f053b69, after gh_abduction and
+67845a0, after the girdle's part of u grew from an offset at rest (exubio.truth.girdle); before it 320d83e, after
+every angle's u took the girdle's part (ea11f84) and the verdict's notes said so; f053b69, after gh_abduction and
 gh_flexion lost their ranges, b09a162, 30ce9ee, 2acf5d1, f64e71d and 336130f) and by this checkout, write the same files (benchmarks/same_outputs.py: CSV, .mot and
 JSON byte for byte once the checkouts' paths and the timing fields are blanked, .npz arrays exactly,
 PNG pixel for pixel, PDF page counts). Page 1 of a study trial's report, where it prints the run's
@@ -18,7 +19,7 @@ import pytest
 pytestmark = [pytest.mark.exudyn, pytest.mark.slow]
 
 ROOT = Path(__file__).resolve().parents[2]
-BASE = "320d83e"  # after u took the girdle's part (ea11f84, exubio.truth.girdle; benchmarks/README.md) and the notes said it
+BASE = "67845a0"  # after the girdle's part of u grew from an offset at rest (exubio.truth.girdle; studies/README.md)
 EXPECTED: dict = {}  # demo files allowed to differ, with why
 
 
