@@ -438,7 +438,8 @@ def girdle_angle_variance(kin: Kinematics, qf: np.ndarray, amplitude: STAAmplitu
     E = np.concatenate([frame_angle_turns(frames, lambda name, s=s: name == s) @ frames[s]
                         for s in ("scapula", "humerus")], axis=2)  # (b, 18, 6) per rad of each frame's own axes
     C = np.asarray(amplitude.girdle, dtype=float)
-    out[:, : E.shape[1]] = np.maximum(np.einsum("bai,ij,baj->ba", E, C, E), 0.0) * (amplitude.girdle_driver(theta) ** 2)[:, None]
+    drive = amplitude.girdle_driver(theta)
+    out[:, : E.shape[1]] = np.maximum(np.einsum("bai,ij,baj->ba", E, C, E), 0.0) * (drive ** 2)[:, None]
     return out
 
 

@@ -21,7 +21,7 @@ while the humerus has barely turned: on the pins 1-2.5 deg RMS about the scapula
 under 10 deg, 2.5-6 deg at 10-20 deg). Its spread is taken as growing with theta + theta_0: theta_0
 (``girdle_offset``) is the offset under which the error's own spread is best predicted on a trial
 left out, each trial in turn (the mean Gaussian log-likelihood per frame of g per axis, over a grid
-of 5 deg steps); on the three standing S2M pin trials 45 deg (with no offset, every trial's
+of 5 deg steps); on the three standing S2M pin trials 35 deg (with no offset, every trial's
 held-out likelihood is far lower: the frames near rest are off the model by far more than theta^2
 allows; ``studies/bone_u_girdle.py`` prints the table).
 
@@ -35,14 +35,14 @@ is var(g) + 2 cov(g, s) along that angle. Pooled per rad^2 of theta,
 
     C = sum_t (g g^T + g s^T + s g^T) / sum_t theta^2   (6 x 6, symmetric, not positive definite)
 
-with theta + theta_0 in place of theta, is the model; an angle whose direction e gets e C e^T < 0 (the skin takes back part of the girdle's
-error) gets nothing, so u never falls below its skin's and noise's part. C is a lower bound of what a
-lab's model misses (the calibration here is perfect) and holds whatever the still thorax cost the
-trial; a trial whose LS verdict with the markers carried by the bones is ``fail`` is left out of a
-fit (its trunk moved: its errors are not the girdle's).
+with theta + theta_0 in place of theta, is the model; an angle whose direction e gets e C e^T < 0 (the
+skin takes back part of the girdle's error) gets nothing, so u never falls below its skin's and
+noise's part. C is a lower bound of what a lab's model misses (the calibration here is perfect) and
+holds whatever the still thorax cost the trial; a trial whose LS verdict with the markers carried by
+the bones is ``fail`` is left out of a fit (its trunk moved: its errors are not the girdle's).
 
 Fitted on the three standing S2M pin trials of the ISB STA data-sharing sample, it ships in
-``exubio/data/sta_amplitude_s2m.json`` (``girdle_second_moment``); ``studies/bone_u_girdle.py``
+``exubio/data/sta_amplitude_s2m.json`` (``girdle_second_moment``, ``girdle_driver_offset_rad``); ``studies/bone_u_girdle.py``
 fits it and judges it one task out and on held-out tasks.
 """
 from __future__ import annotations

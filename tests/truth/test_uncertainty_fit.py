@@ -115,3 +115,24 @@ def test_exubio_truth_judges_a_labs_model_and_names_it(tmp_path, capsys):
     capsys.readouterr()
     assert main(["truth", mat, "--rate", "300", "--uncertainty-model", str(bare)]) == 2
     assert f"{bare}: no trunk motion" in capsys.readouterr().err
+
+
+def test_one_usable_trial_keeps_the_shipped_offset_two_choose_their_own():
+    """The girdle's offset is chosen one trial out: with one usable trial (the other's LS verdict fail) the
+    shipped offset is kept and the model says so; with two, the offset their made-up error grows from."""
+    from exubio.trust.sta_amplitude import shipped_amplitude
+    from exubio.truth.girdle import GirdleMotion
+    from exubio.truth.uncertainty_fit import _with_girdle
+
+    rng = np.random.default_rng(1)
+
+    def motion(name, verdict):
+        theta = np.abs(np.sin(np.linspace(0, 3 * np.pi, 2000))) * 1.8
+        g = rng.normal(size=(2000, 6)) * np.radians(4.0) * (theta + np.radians(60))[:, None]
+        return GirdleMotion(name, g, g.copy(), theta, verdict)
+
+    shipped = shipped_amplitude()
+    one = _with_girdle(shipped, [motion("a.mat", "ok"), motion("b.mat", "fail")], 300.0)
+    assert one.girdle_offset_rad == shipped.girdle_offset_rad and "the shipped model's" in one.girdle_source
+    two = _with_girdle(shipped, [motion("a.mat", "ok"), motion("b.mat", "check")], 300.0)
+    assert np.degrees(two.girdle_offset_rad) == pytest.approx(60) and "60 deg chosen on them" in two.girdle_source
