@@ -80,7 +80,9 @@ class STAAmplitude:
             return ""
         return (f"judged one trial out on {len(j.get('trials', {}))} trials: of {j.get('cells', 0)} angle cells "
                 f"(trial x ST, GH, HT angle), {j.get('below_90', 0)} held the bone within +-2u in under 90 % of "
-                f"their measured frames, {j.get('above_99', 0)} in over 99 %")
+                f"their measured frames, {j.get('above_99', 0)} in over 99 %"
+                + (f"; the RMS of error / u, median over the cells, {j['median_rms_error_over_u']:.2f} (about 1 where u "
+                   "is the error's size)" if "median_rms_error_over_u" in j else ""))
 
     def skin_driver(self, theta: np.ndarray, /) -> np.ndarray:
         """The driver the skin's coefficients are per unit of: theta_s tanh(theta / theta_s) (the artefact

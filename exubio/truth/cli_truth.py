@@ -49,17 +49,21 @@ def format_table(comp) -> str:
              "verdicts: " + ", ".join(f"{m.upper()} {v}" for m, v in comp.verdicts.items()),
              *(f"  {m.upper()} {line}" for m, lines in comp.reasons.items() for line in lines),
              *(f"note: {n}" for n in comp.notes),
-             f"{'angle (deg)':32s} {'method':6s} {'RMSE':>6s} {'max':>6s} {'cover':>6s} {'u med':>6s} {'measured':>8s}"
-             f" | lab: {'RMSE':>6s} {'cover':>6s} {'u med':>6s} {'measured':>8s}"]
+             f"{'angle (deg)':32s} {'method':6s} {'RMSE':>6s} {'max':>6s} {'cover':>6s} {'e/u':>5s} {'u med':>6s} "
+             f"{'measured':>8s} | lab: {'RMSE':>6s} {'cover':>6s} {'e/u':>5s} {'u med':>6s} {'measured':>8s}"]
     for a, per in comp.angles.items():
         for m, e in per.items():
             if m not in comp.verdicts or comp.verdicts[m].startswith("failed"):
                 continue
             lab = e.lab
             lines.append(f"{a:32s} {m.upper():6s} {_fmt(e.rmse_deg):>6s} {_fmt(e.max_deg):>6s} "
-                         f"{_fmt(e.coverage, '.0%'):>6s} {_fmt(e.median_u_deg):>6s} {e.measured_fraction:>8.0%}"
+                         f"{_fmt(e.coverage, '.0%'):>6s} {_fmt(e.rms_error_over_u, '.2f'):>5s} {_fmt(e.median_u_deg):>6s} "
+                         f"{e.measured_fraction:>8.0%}"
                          + ("" if lab is None else f" |      {_fmt(lab.rmse_deg):>6s} {_fmt(lab.coverage, '.0%'):>6s} "
-                                                   f"{_fmt(lab.median_u_deg):>6s} {lab.measured_fraction:>8.0%}"))
+                                                   f"{_fmt(lab.rms_error_over_u, '.2f'):>5s} {_fmt(lab.median_u_deg):>6s} "
+                                                   f"{lab.measured_fraction:>8.0%}"))
+    lines.append("e/u: the RMS of error / u over the measured frames (about 1 where u is the error's size; below 1, u "
+                 "is wider than the error; an error systematic over a task covers 100 % once u is its RMS)")
     return "\n".join(lines)
 
 

@@ -36,6 +36,7 @@ class AngleError:
     measured_fraction: float
     median_u_deg: float | None = None
     lab: "AngleError | None" = None  # the same reconstruction judged with the u and status a lab's run gives
+    rms_error_over_u: float | None = None  # about 1 where u is the error's size, below where u is wider
 
 
 @dataclass(frozen=True, eq=False)
@@ -64,6 +65,15 @@ class TruthComparison:
                 out[a] = (float(lab.coverage), float(lab.measured_fraction))
         return out
 
+    def lab_error_over_u(self, method: str = "ls", /) -> dict[str, float]:
+        """Per angle of ``lab_coverage``, the RMS of error / u over its measured frames (lab's u and status)."""
+        out = {}
+        for a, per in self.angles.items():
+            lab = getattr(per.get(method), "lab", None)
+            if lab is not None and lab.coverage is not None and lab.rms_error_over_u is not None:
+                out[a] = float(lab.rms_error_over_u)
+        return out
+
     def to_json(self) -> dict:
         num = lambda x: None if x is None or not np.isfinite(x) else round(float(x), 4)
         return {"file": self.file, "task": self.task, "assumption": self.assumption, "n_frames": self.n_frames,
@@ -77,7 +87,8 @@ class TruthComparison:
 
 def _error_json(e: AngleError, num) -> dict:
     out = {"rmse_deg": num(e.rmse_deg), "max_deg": num(e.max_deg), "coverage": num(e.coverage),
-           "measured_fraction": num(e.measured_fraction), "median_u_deg": num(e.median_u_deg)}
+           "measured_fraction": num(e.measured_fraction), "median_u_deg": num(e.median_u_deg),
+           "rms_error_over_u": num(e.rms_error_over_u)}
     if e.lab is not None:
         out["lab"] = _error_json(e.lab, num)
     return out
@@ -100,19 +111,22 @@ def _wrap(d: np.ndarray) -> np.ndarray:
 
 
 def angle_errors(estimate: np.ndarray, truth: np.ndarray, measured: np.ndarray, u: np.ndarray | None) -> AngleError:
-    """RMSE, max, coverage of +-2u over the measured frames where both are finite."""
+    """RMSE, max, coverage of +-2u and the RMS of error / u over the measured frames where both are finite."""
     err = np.abs(_wrap(np.asarray(estimate) - np.asarray(truth)))
     ok = measured & np.isfinite(err)
     frac = float(ok.mean()) if ok.size else 0.0
     if not ok.any():
         return AngleError(float("nan"), float("nan"), None, frac, None)
     e = err[ok]
-    cov = med_u = None
+    cov = med_u = z = None
     if u is not None:
         uu = np.asarray(u)[ok]
         cov = float(np.mean(e <= 2 * uu))
         med_u = float(np.degrees(np.median(uu)))
-    return AngleError(float(np.degrees(np.sqrt(np.mean(e ** 2)))), float(np.degrees(e.max())), cov, frac, med_u)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = float(np.sqrt(np.mean((e / uu) ** 2)))
+    return AngleError(float(np.degrees(np.sqrt(np.mean(e ** 2)))), float(np.degrees(e.max())), cov, frac, med_u,
+                      rms_error_over_u=z)
 
 
 def _protocol(run: BoneLabRun, model):

@@ -47,6 +47,7 @@ class HeldOut:
     verdict: str
     angles: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     skipped: str = ""
+    error_over_u: Mapping[str, float] = field(default_factory=dict)  # per angle, the RMS of error / u
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,12 +70,21 @@ class UncertaintyFit:
         if not self.held_out:
             return {}
         cov = [c for h in self.held_out for c, _ in h.angles.values()]
+        z = [h.error_over_u[a] for h in self.held_out for a in h.angles if a in h.error_over_u]
+
+        def cell(h, a, c, f):
+            out = {"coverage": round(float(c), 4), "measured_fraction": round(float(f), 4)}
+            if a in h.error_over_u and np.isfinite(h.error_over_u[a]):
+                out["rms_error_over_u"] = round(float(h.error_over_u[a]), 4)
+            return out
+
         return {"method": "each trial left out of both parts, reconstructed by LS with the model of the others; the "
-                          "u of a lab's run with thorax markers; over each angle's measured frames",
+                          "u of a lab's run with thorax markers; over each angle's measured frames (rms_error_over_u: "
+                          "about 1 where u is the error's size, below 1 where u is wider)",
                 "cells": len(cov), "below_90": sum(c < 0.90 for c in cov), "above_99": sum(c > 0.99 for c in cov),
+                **({"median_rms_error_over_u": round(float(np.nanmedian(z)), 4)} if z else {}),
                 "trials": {h.trial: {"ls_verdict": h.verdict, **({"skipped": h.skipped} if h.skipped else {}),
-                                     "angles": {a: {"coverage": round(float(c), 4), "measured_fraction": round(float(f), 4)}
-                                                for a, (c, f) in h.angles.items()}}
+                                     "angles": {a: cell(h, a, c, f) for a, (c, f) in h.angles.items()}}
                            for h in self.held_out}}
 
 
@@ -153,4 +163,4 @@ def _judged(i: int, trials: Sequence[BoneTrial], motions: Sequence[GirdleMotion]
     verdict = comp.verdicts.get("ls", "")
     if "ls" not in comp.verdicts or verdict.startswith("failed"):
         return HeldOut(name, verdict, skipped="LS failed")
-    return HeldOut(name, verdict, comp.lab_coverage("ls"))
+    return HeldOut(name, verdict, comp.lab_coverage("ls"), error_over_u=comp.lab_error_over_u("ls"))

@@ -105,8 +105,11 @@ def format_held_out(held) -> str:
             lines.append(f"{a:32s}" + "".join(f"{x:>{width + 2}s}" for x in row))
     lines.append("LS verdicts: " + ", ".join(f"{n} {h.verdict or '-'}" + (f" (not judged: {h.skipped})" if h.skipped else "")
                                              for n, h in zip(names, held)))
+    z = [h.error_over_u[a] for h in held for a in h.angles if a in h.error_over_u]
     lines.append(f"{cells} cells; below 90 %: {len(below)}" + (": " + "; ".join(below) if below else "")
-                 + f"; above 99 % (u wider than needed): {above}")
+                 + f"; above 99 % (u wider than needed): {above}"
+                 + (f"; the RMS of error / u, median over the cells: {np.nanmedian(z):.2f} (about 1 where u is the "
+                    "error's size)" if z else ""))
     lines.append("(the files hold no thorax: it is taken as still in the lab, so the HT angles here also carry the "
                  "trunk's motion, which the u of a run with thorax markers does not; exubio truth adds it)")
     return "\n".join(lines)

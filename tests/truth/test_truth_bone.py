@@ -195,9 +195,26 @@ def test_the_command_writes_the_issue_s_json(tmp_path):
             if err["median_u_deg"] is not None and lab["measured_fraction"] == err["measured_fraction"]:
                 assert lab["median_u_deg"] <= err["median_u_deg"] + 1e-9, (angle, m)
                 assert lab["rmse_deg"] == err["rmse_deg"] and lab["coverage"] <= err["coverage"], (angle, m)
+                assert lab["rms_error_over_u"] >= err["rms_error_over_u"] - 1e-9, (angle, m)
                 checked += 1
     assert checked >= 2  # angles measured in the same frames both ways
     assert "'lab' figures" in data["assumption"] and "| lab:" in r.stdout
+
+
+def test_an_angles_error_against_bone_over_its_measured_frames():
+    """RMSE, max, coverage of +-2u and the RMS of error / u over the measured frames with a finite error,
+    the error wrapped to +-180 deg: by hand on five frames."""
+    from exubio.truth.compare import angle_errors
+
+    r = np.radians
+    est = r(np.array([10.0, 12.0, 181.0, 50.0, np.nan]))
+    truth = r(np.array([9.0, 10.0, -177.0, 0.0, 0.0]))  # errors 1, 2, -2 (wrapped), 50 (not measured), NaN
+    u = r(np.array([1.0, 0.5, 2.0, 1.0, 1.0]))
+    e = angle_errors(est, truth, np.array([True, True, True, False, True]), u)
+    assert e.rmse_deg == pytest.approx(np.sqrt((1 + 4 + 4) / 3)) and e.max_deg == pytest.approx(2.0)
+    assert e.coverage == pytest.approx(2 / 3)  # 2 > 2 x 0.5
+    assert e.rms_error_over_u == pytest.approx(np.sqrt((1 + 16 + 1) / 3))
+    assert e.measured_fraction == pytest.approx(3 / 5) and e.median_u_deg == pytest.approx(1.0)
 
 
 def test_the_verdicts_main_reasons_are_one_line_per_kind_worst_first():

@@ -66,6 +66,9 @@ def test_each_trial_judged_with_the_model_of_the_others_is_covered_against_its_b
     assert len(cells) >= 20 and min(cells) >= 0.85 and np.median(cells) >= 0.95, sorted(cells)
     assert all(set(t["angles"]) <= set(TRUTH_ANGLES) and "skipped" not in t for t in trials.values())
     every = [c["coverage"] for t in trials.values() for c in t["angles"].values()]
+    full = [c["rms_error_over_u"] for t in trials.values() for c in t["angles"].values() if c["coverage"] == 1.0]
+    assert full and max(full) <= 2.0  # every frame within +-2u: the RMS of error / u is 2 at most
+    assert 0 < judged["median_rms_error_over_u"] < 2 and "the RMS of error / u, median over the cells" in printed
     assert judged["cells"] == len(every) and f"{len(every)} cells; below 90 %: {judged['below_90']}" in printed
 
 
