@@ -247,7 +247,7 @@ def load_sta_amplitude(path: str | Path | None = None, /) -> STAAmplitude:
         if not isinstance(judgement, dict):
             raise ValueError("judged_one_trial_out must be a mapping")
         tables.update(judgement=judgement)
-    except (ValueError, KeyError, TypeError) as exc:
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
         raise InputError(f"{where}: not an STA amplitude model ({type(exc).__name__}: {exc}); expected the JSON "
                          "that 'exubio uncertainty-fit' writes") from None
     bad = [pair for pair in cross if pair.count("|") != 1]

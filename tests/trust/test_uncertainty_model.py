@@ -72,9 +72,11 @@ def test_the_uncertainty_follows_the_labs_model(tmp_path):
 
 def test_a_file_that_is_not_a_model_is_one_error_naming_it(tmp_path):
     bad = tmp_path / "u.json"
+    for wrong in ({"rotation": {"scapula": [1, 2]}}, {"rotation": 3}, [1, 2], "text"):
+        bad.write_text(json.dumps(wrong))
+        with pytest.raises(InputError, match=str(bad)):
+            load_sta_amplitude(bad)
     bad.write_text(json.dumps({"rotation": {"scapula": [1, 2]}}))
-    with pytest.raises(InputError, match=str(bad)):
-        load_sta_amplitude(bad)
     path = tmp_path / "p.yaml"
     path.write_text("schema_version: 1\nextends: upper_limb_21\nuncertainty_model: u.json\n")
     model = load_model()
