@@ -139,7 +139,7 @@ def offset_likelihoods(motions: Sequence[GirdleMotion], /) -> dict[float, float]
     use = _usable(motions, "girdle_offset")
     if len(use) < 2:
         raise InputError("girdle_offset: one usable trial; the offset is judged on a trial left out (two at least)")
-    data = [(m.xi[_finite(m)], m.theta[_finite(m)]) for m in use]
+    data = [(m.xi[ok], m.theta[ok]) for m in use for ok in (_finite(m),)]
     out = {}
     for deg in OFFSET_GRID_DEG:
         t0 = np.radians(deg)

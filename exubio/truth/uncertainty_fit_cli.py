@@ -68,9 +68,10 @@ def cmd_uncertainty_fit(args: argparse.Namespace) -> int:
     for g in fit.girdle:
         used = "left out of the girdle's part" if g.verdict == "fail" else "used"
         print(f"  {Path(g.file).name}: LS verdict {g.verdict} with the markers carried by the bones: {used}")
-    if fit.held_out:
-        print(format_held_out(fit.held_out))
-    data = dataclasses.replace(amp, judgement=fit.judgement()).to_json()
+    judged = fit.judgement()
+    if judged:
+        print(format_held_out(fit.held_out, judged))
+    data = dataclasses.replace(amp, judgement=judged).to_json()
     data["citation"] = args.citation or f"the lab's own trials ({', '.join(Path(t).name for t in args.trials)})"
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(out, lambda tmp: tmp.write_text(json.dumps(data, indent=2) + "\n"))
@@ -78,9 +79,10 @@ def cmd_uncertainty_fit(args: argparse.Namespace) -> int:
     return 0
 
 
-def format_held_out(held) -> str:
+def format_held_out(held, judged: dict) -> str:
     """The one-trial-out judgement as a table: per angle and trial, the % of measured frames where the
-    bone lies within +-2u (the % of frames measured), then the cells below 90 % and above 99 %."""
+    bone lies within +-2u (the % of frames measured), then the cells below 90 % and above 99 % and the
+    median RMS of error / u (their counts: ``judged``, ``UncertaintyFit.judgement``)."""
     from .compare import TRUTH_ANGLES
 
     names = [Path(h.trial).stem.removeprefix("dataSample_") for h in held]
@@ -88,7 +90,7 @@ def format_held_out(held) -> str:
     lines = ["each trial judged with the model of the others (LS, the u of a lab's run with thorax markers): % of its "
              "measured frames where the bone lies within +-2u (% of frames measured)",
              f"{'angle':32s}" + "".join(f"{n:>{width + 2}s}" for n in names)]
-    below, above, cells = [], 0, 0
+    below = []
     for a in TRUTH_ANGLES:
         row = []
         for n, h in zip(names, held):
@@ -96,8 +98,6 @@ def format_held_out(held) -> str:
             if c is None:
                 row.append("-")
                 continue
-            cells += 1
-            above += c[0] > 0.99
             if c[0] < 0.90:
                 below.append(f"{n} {a}: {c[0]:.0%}" + (" (LS verdict fail)" if h.verdict == "fail" else ""))
             row.append(f"{100 * c[0]:.0f} ({100 * c[1]:.0f})")
@@ -105,11 +105,11 @@ def format_held_out(held) -> str:
             lines.append(f"{a:32s}" + "".join(f"{x:>{width + 2}s}" for x in row))
     lines.append("LS verdicts: " + ", ".join(f"{n} {h.verdict or '-'}" + (f" (not judged: {h.skipped})" if h.skipped else "")
                                              for n, h in zip(names, held)))
-    z = [h.error_over_u[a] for h in held for a in h.angles if a in h.error_over_u]
-    lines.append(f"{cells} cells; below 90 %: {len(below)}" + (": " + "; ".join(below) if below else "")
-                 + f"; above 99 % (u wider than needed): {above}"
-                 + (f"; the RMS of error / u, median over the cells: {np.nanmedian(z):.2f} (about 1 where u is the "
-                    "error's size)" if z else ""))
+    z = judged.get("median_rms_error_over_u")
+    lines.append(f"{judged['cells']} cells; below 90 %: {judged['below_90']}" + (": " + "; ".join(below) if below else "")
+                 + f"; above 99 % (u wider than needed): {judged['above_99']}"
+                 + (f"; the RMS of error / u, median over the cells: {z:.2f} (about 1 where u is the error's size)"
+                    if z is not None else ""))
     lines.append("(the files hold no thorax: it is taken as still in the lab, so the HT angles here also carry the "
                  "trunk's motion, which the u of a run with thorax markers does not; exubio truth adds it)")
     return "\n".join(lines)
