@@ -77,8 +77,8 @@ def stream_ls(binding: Binding, targets: MarkerTargets, sink: ChunkSink, /, *,
         sink(chunk)
         t_sink += time.perf_counter() - tc
     if not_converged:
-        log.warning("LS: %d of %d frames did not converge (%s)", not_converged, targets.n_frames,
-                    ", ".join(f"{k} {v}" for k, v in stops.items() if v and not StopReason[k.upper()].converged))
+        log.warning("LS: %d of %d frames did not converge (stopped by %s)", not_converged, targets.n_frames,
+                    ", ".join(f"{k} in {v}" for k, v in stops.items() if v and not StopReason[k.upper()].converged))
     total = time.perf_counter() - t0 - t_sink  # the method's own time: what the sink does with the chunks is not
     timings = {"setup": t1 - t0, "positions": t_pos, "rates": t_rates, "total": total}
     info = {"iterations_mean": iters_sum / max(targets.n_frames, 1), "iterations_max": iters_max,

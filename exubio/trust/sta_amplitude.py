@@ -82,7 +82,9 @@ class STAAmplitude:
                 f"(trial x ST, GH, HT angle), {j.get('below_90', 0)} held the bone within +-2u in under 90 % of "
                 f"their measured frames, {j.get('above_99', 0)} in over 99 %"
                 + (f"; the RMS of error / u, median over the cells, {j['median_rms_error_over_u']:.2f} (about 1 where u "
-                   "is the error's size)" if "median_rms_error_over_u" in j else ""))
+                   "is the error's size)" if "median_rms_error_over_u" in j else "")
+                + (f"; pooled over the trials not failed, {j.get('pooled_below_90', 0)} of {len(j['pooled'])} angles "
+                   f"under 90 %, {j.get('pooled_above_99', 0)} over 99 %" if j.get("pooled") else ""))
 
     def skin_driver(self, theta: np.ndarray, /) -> np.ndarray:
         """The driver the skin's coefficients are per unit of: theta_s tanh(theta / theta_s) (the artefact

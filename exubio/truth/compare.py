@@ -37,6 +37,17 @@ class AngleError:
     median_u_deg: float | None = None
     lab: "AngleError | None" = None  # the same reconstruction judged with the u and status a lab's run gives
     rms_error_over_u: float | None = None  # about 1 where u is the error's size, below where u is wider
+    # over the judged frames (measured, error finite), in order: the signed error and u (rad); for pooling
+    # the frames of several trials (UncertaintyFit.judgement) and for studies of u's size
+    error_rad: np.ndarray | None = field(default=None, compare=False, repr=False)
+    u_rad: np.ndarray | None = field(default=None, compare=False, repr=False)
+
+    @property
+    def frames_within(self) -> tuple[int, int]:
+        """(frames where the bone lies within +-2u, frames judged), 0, 0 without u."""
+        if self.error_rad is None or self.u_rad is None:
+            return 0, 0
+        return int(np.sum(np.abs(self.error_rad) <= 2 * self.u_rad)), int(self.error_rad.size)
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,6 +83,15 @@ class TruthComparison:
             lab = getattr(per.get(method), "lab", None)
             if lab is not None and lab.coverage is not None and lab.rms_error_over_u is not None:
                 out[a] = float(lab.rms_error_over_u)
+        return out
+
+    def lab_frames_within(self, method: str = "ls", /) -> dict[str, tuple[int, int]]:
+        """Per angle of ``lab_coverage``, (frames where the bone lies within +-2u, frames judged)."""
+        out = {}
+        for a, per in self.angles.items():
+            lab = getattr(per.get(method), "lab", None)
+            if lab is not None and lab.coverage is not None:
+                out[a] = lab.frames_within
         return out
 
     def to_json(self) -> dict:
@@ -112,21 +132,22 @@ def _wrap(d: np.ndarray) -> np.ndarray:
 
 def angle_errors(estimate: np.ndarray, truth: np.ndarray, measured: np.ndarray, u: np.ndarray | None) -> AngleError:
     """RMSE, max, coverage of +-2u and the RMS of error / u over the measured frames where both are finite."""
-    err = np.abs(_wrap(np.asarray(estimate) - np.asarray(truth)))
+    signed = _wrap(np.asarray(estimate) - np.asarray(truth))
+    err = np.abs(signed)
     ok = measured & np.isfinite(err)
     frac = float(ok.mean()) if ok.size else 0.0
     if not ok.any():
         return AngleError(float("nan"), float("nan"), None, frac, None)
     e = err[ok]
-    cov = med_u = z = None
+    cov = med_u = z = uu = None
     if u is not None:
-        uu = np.asarray(u)[ok]
+        uu = np.asarray(u, dtype=float)[ok]
         cov = float(np.mean(e <= 2 * uu))
         med_u = float(np.degrees(np.median(uu)))
         with np.errstate(divide="ignore", invalid="ignore"):
             z = float(np.sqrt(np.mean((e / uu) ** 2)))
     return AngleError(float(np.degrees(np.sqrt(np.mean(e ** 2)))), float(np.degrees(e.max())), cov, frac, med_u,
-                      rms_error_over_u=z)
+                      rms_error_over_u=z, error_rad=signed[ok], u_rad=uu)
 
 
 def _protocol(run: BoneLabRun, model):

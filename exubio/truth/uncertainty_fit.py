@@ -48,6 +48,7 @@ class HeldOut:
     angles: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     skipped: str = ""
     error_over_u: Mapping[str, float] = field(default_factory=dict)  # per angle, the RMS of error / u
+    frames: Mapping[str, tuple[int, int]] = field(default_factory=dict)  # per angle, (within +-2u, judged) frames
 
 
 @dataclass(frozen=True, eq=False)
@@ -63,6 +64,23 @@ class UncertaintyFit:
     def girdle_trials(self) -> tuple[str, ...]:
         return tuple(Path(g.file).name for g in self.girdle if g.verdict != "fail")
 
+    def pooled(self) -> dict[str, tuple[int, int, int]]:
+        """Per angle, over the judged trials whose LS verdict is not ``fail``: (frames where the bone lies
+        within +-2u, frames judged, trials), where any frame was judged: the coverage a 95 % band promises
+        over a lab's trials. A trial's frames are not independent draws (the same skin over the same
+        motion), so one trial's coverage scatters far more than the pooled frames'."""
+        out: dict[str, list[int]] = {}
+        for h in self.held_out:
+            if h.skipped or h.verdict == "fail":
+                continue
+            for a, (w, n) in h.frames.items():
+                if n:
+                    acc = out.setdefault(a, [0, 0, 0])
+                    acc[0] += w
+                    acc[1] += n
+                    acc[2] += 1
+        return {a: (w, n, t) for a, (w, n, t) in out.items()}
+
     def judgement(self) -> dict:
         """``held_out`` as the model file records it (``STAAmplitude.judgement``): per trial its LS verdict,
         why it was not judged, and per angle the coverage of +-2u and the fraction of frames measured; the
@@ -74,15 +92,23 @@ class UncertaintyFit:
 
         def cell(h, a, c, f):
             out = {"coverage": round(float(c), 4), "measured_fraction": round(float(f), 4)}
+            if h.frames.get(a, (0, 0))[1]:
+                out["frames"] = int(h.frames[a][1])  # judged: measured, the error finite
             if a in h.error_over_u and np.isfinite(h.error_over_u[a]):
                 out["rms_error_over_u"] = round(float(h.error_over_u[a]), 4)
             return out
 
+        pooled = self.pooled()
         return {"method": "each trial left out of both parts, reconstructed by LS with the model of the others; the "
                           "u of a lab's run with thorax markers; over each angle's measured frames (rms_error_over_u: "
-                          "about 1 where u is the error's size, below 1 where u is wider)",
+                          "about 1 where u is the error's size, below 1 where u is wider); pooled: per angle, the "
+                          "measured frames of every trial whose LS verdict is not fail together",
                 "cells": len(cov), "below_90": sum(c < 0.90 for c in cov), "above_99": sum(c > 0.99 for c in cov),
                 **({"median_rms_error_over_u": round(float(np.nanmedian(z)), 4)} if z else {}),
+                **({"pooled": {a: {"coverage": round(w / n, 4), "frames": n, "trials": t}
+                               for a, (w, n, t) in pooled.items()},
+                    "pooled_below_90": sum(w / n < 0.90 for w, n, _ in pooled.values()),
+                    "pooled_above_99": sum(w / n > 0.99 for w, n, _ in pooled.values())} if pooled else {}),
                 "trials": {h.trial: {"ls_verdict": h.verdict, **({"skipped": h.skipped} if h.skipped else {}),
                                      "angles": {a: cell(h, a, c, f) for a, (c, f) in h.angles.items()}}
                            for h in self.held_out}}
@@ -163,4 +189,5 @@ def _judged(i: int, trials: Sequence[BoneTrial], motions: Sequence[GirdleMotion]
     verdict = comp.verdicts.get("ls", "")
     if "ls" not in comp.verdicts or verdict.startswith("failed"):
         return HeldOut(name, verdict, skipped="LS failed")
-    return HeldOut(name, verdict, comp.lab_coverage("ls"), error_over_u=comp.lab_error_over_u("ls"))
+    return HeldOut(name, verdict, comp.lab_coverage("ls"), error_over_u=comp.lab_error_over_u("ls"),
+                   frames=comp.lab_frames_within("ls"))

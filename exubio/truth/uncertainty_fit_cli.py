@@ -110,6 +110,12 @@ def format_held_out(held, judged: dict) -> str:
                  + f"; above 99 % (u wider than needed): {judged['above_99']}"
                  + (f"; the RMS of error / u, median over the cells: {z:.2f} (about 1 where u is the error's size)"
                     if z is not None else ""))
+    pooled = judged.get("pooled", {})
+    if pooled:
+        lines.append("pooled over the trials whose LS verdict is not fail (per angle, all their measured frames "
+                     "together: what a 95 % band promises over a lab's trials): "
+                     + ", ".join(f"{a} {100 * p['coverage']:.0f} %" for a, p in pooled.items())
+                     + f"; below 90 %: {judged['pooled_below_90']}, above 99 %: {judged['pooled_above_99']} of {len(pooled)}")
     lines.append("(the files hold no thorax: it is taken as still in the lab, so the HT angles here also carry the "
                  "trunk's motion, which the u of a run with thorax markers does not; exubio truth adds it)")
     return "\n".join(lines)

@@ -215,6 +215,8 @@ def test_an_angles_error_against_bone_over_its_measured_frames():
     assert e.coverage == pytest.approx(2 / 3)  # 2 > 2 x 0.5
     assert e.rms_error_over_u == pytest.approx(np.sqrt((1 + 16 + 1) / 3))
     assert e.measured_fraction == pytest.approx(3 / 5) and e.median_u_deg == pytest.approx(1.0)
+    assert e.frames_within == (2, 3)  # the frames a lab's trials are pooled by
+    np.testing.assert_allclose(np.degrees(e.error_rad), [1.0, 2.0, -2.0], atol=1e-9)  # signed, wrapped
 
 
 def test_the_verdicts_main_reasons_are_one_line_per_kind_worst_first():

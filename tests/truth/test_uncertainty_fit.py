@@ -3,6 +3,7 @@ S2M pin trials it is the model exubio ships (fitted on the same trials by the st
 bad input is one error naming the file, with nothing written."""
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -70,6 +71,14 @@ def test_each_trial_judged_with_the_model_of_the_others_is_covered_against_its_b
     assert full and max(full) <= 2.0  # every frame within +-2u: the RMS of error / u is 2 at most
     assert 0 < judged["median_rms_error_over_u"] < 2 and "the RMS of error / u, median over the cells" in printed
     assert judged["cells"] == len(every) and f"{len(every)} cells; below 90 %: {judged['below_90']}" in printed
+    usable = [t for t in trials.values() if t["ls_verdict"] != "fail"]
+    for a, p in judged["pooled"].items():  # every measured frame of the usable trials, together
+        cells_a = [t["angles"][a] for t in usable if a in t["angles"]]
+        assert p["frames"] == sum(c["frames"] for c in cells_a) and p["trials"] == len(cells_a)
+        assert p["coverage"] == pytest.approx(sum(c["coverage"] * c["frames"] for c in cells_a) / p["frames"], abs=1e-3)
+    assert {a for a, p in judged["pooled"].items()} >= {a for t in usable for a in t["angles"]}
+    assert min(p["coverage"] for a, p in judged["pooled"].items() if a.startswith(("ST", "GH"))) >= 0.90
+    assert f"above 99 %: {judged['pooled_above_99']} of {len(judged['pooled'])}" in printed
 
 
 @pytest.mark.parametrize("args, fragment", [
@@ -139,3 +148,28 @@ def test_one_usable_trial_keeps_the_shipped_offset_two_choose_their_own():
     assert one.girdle_offset_rad == shipped.girdle_offset_rad and "the shipped model's" in one.girdle_source
     two = _with_girdle(shipped, [motion("a.mat", "ok"), motion("b.mat", "check")], 300.0)
     assert np.degrees(two.girdle_offset_rad) == pytest.approx(60) and "60 deg chosen on them" in two.girdle_source
+
+
+def test_the_pooled_coverage_counts_the_frames_of_the_trials_not_failed(capsys):
+    """Pooled per angle: the frames within +-2u over the frames judged, summed over the trials whose LS
+    verdict is not fail and that were judged, by hand; the table and the model file's line say it."""
+    from exubio.truth.uncertainty_fit import HeldOut, UncertaintyFit
+    from exubio.truth.uncertainty_fit_cli import format_held_out
+    from exubio.trust.sta_amplitude import shipped_amplitude
+
+    held = (HeldOut("a.mat", "ok", {"ST_X_upward_rotation": (0.5, 1.0)}, frames={"ST_X_upward_rotation": (50, 100)}),
+            HeldOut("b.mat", "check", {"ST_X_upward_rotation": (1.0, 0.5), "HT_X_elevation": (1.0, 1.0)},
+                    frames={"ST_X_upward_rotation": (300, 300), "HT_X_elevation": (10, 10)}),
+            HeldOut("c.mat", "fail", {"ST_X_upward_rotation": (0.0, 1.0)}, frames={"ST_X_upward_rotation": (0, 900)}),
+            HeldOut("d.mat", "", skipped="LS failed"))
+    fit = UncertaintyFit(shipped_amplitude(), (), held)
+    assert fit.pooled() == {"ST_X_upward_rotation": (350, 400, 2), "HT_X_elevation": (10, 10, 1)}
+    judged = fit.judgement()
+    assert judged["pooled"]["ST_X_upward_rotation"] == {"coverage": 0.875, "frames": 400, "trials": 2}
+    assert judged["pooled_below_90"] == 1 and judged["pooled_above_99"] == 1
+    assert judged["below_90"] == 2 and judged["cells"] == 4  # the cells still count every judged trial
+    assert judged["trials"]["a.mat"]["angles"]["ST_X_upward_rotation"]["frames"] == 100
+    text = format_held_out(held, judged)
+    assert "ST_X_upward_rotation 88 %" in text and "below 90 %: 1, above 99 %: 1 of 2" in text
+    line = dataclasses.replace(shipped_amplitude(), judgement=judged).judgement_line()
+    assert "pooled over the trials not failed, 1 of 2 angles under 90 %, 1 over 99 %" in line
