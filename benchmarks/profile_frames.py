@@ -13,6 +13,12 @@ collection, the deferred checks), without LSL or another process.
     python benchmarks/profile_frames.py                  # PF, LS and live on 25 s / 10 s at 200 Hz
     python benchmarks/profile_frames.py --modes live --rate 1000 --duration 5
     python benchmarks/profile_frames.py --json out.json
+    python benchmarks/profile_frames.py --modes pf live --solver-timers   # + Exudyn's own timers per frame
+
+``--solver-timers``: one more run of PF and of the live loop with Exudyn's timers on (its
+``computationTime``): per frame, the steps, the Newton iterations and Jacobian updates per step, the
+native time (the solver's total less its Python step functions) and the time in the step functions
+(the pre- and post-step: in the live loop that is the whole frame's Python but the intake's wait).
 
 The process pins itself to one core and sets BLAS threads to 1 (as bench_reconstruction.py).
 """
@@ -201,6 +207,56 @@ def profile(mode: str, args) -> dict:
                        for s, f in sorted(rows.items(), key=lambda kv: -kv[1])}}
 
 
+def solver_timers(mode: str, args) -> dict:
+    """One run of ``mode`` (pf or live) with Exudyn's timers on: per frame (us) its native solver time
+    and its step functions' (Exudyn's 'python' timer), and the steps, Newton iterations and Jacobian
+    updates."""
+    import numpy as np
+
+    from exubio.backend import exudyn_integrate as integrate
+    from exubio.backend import exudyn_live as live
+
+    solvers = []
+    settings_of, solve = integrate.solver_settings, integrate.Integration.solve
+
+    def timed_settings(*a, **k):
+        s = settings_of(*a, **k)
+        s.show.computationTime = True
+        return s
+
+    def capturing_solve(self, settings, step_s):
+        out = solve(self, settings, step_s)
+        solvers.append(out[0])
+        return out
+
+    integrate.solver_settings = live.solver_settings = timed_settings
+    integrate.Integration.solve = capturing_solve
+    try:
+        if mode == "live":
+            from exubio.run.live.offline import reconstruct_causal
+
+            model, protocol, trial = live_inputs(args.live_duration, args.rate)
+            n = trial.n_frames
+            reconstruct_causal(trial, model, protocol)
+        else:
+            from exubio.run.pipeline import reconstruct
+
+            model, protocol, targets = batch_inputs(args.duration, args.rate, args.noise_mm)
+            n = targets.n_frames
+            reconstruct(model, protocol, targets, method="pf")
+    finally:
+        integrate.solver_settings = live.solver_settings = settings_of
+        integrate.Integration.solve = solve
+    total = sum(float(s.timer.total) for s in solvers)
+    python = sum(float(s.timer.python) for s in solvers)
+    steps = sum(int(s.it.currentStepIndex) for s in solvers)
+    newton = sum(int(s.it.newtonStepsCount) for s in solvers)
+    jac = sum(int(s.it.newtonJacobiCount) for s in solvers)
+    return {"steps_per_frame": steps / n, "newton_per_step": newton / max(steps, 1), "jacobians_per_step": jac / max(steps, 1),
+            "native_us_per_frame": 1e6 * (total - python) / n, "step_functions_us_per_frame": 1e6 * python / n,
+            "native_us_per_step": 1e6 * (total - python) / max(steps, 1), "frames": int(n), "load": float(np.round(os.getloadavg()[0], 2))}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--modes", nargs="+", default=["pf", "ls", "live"], choices=["pf", "ls", "live"])
@@ -210,6 +266,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--noise-mm", type=float, default=1.5)
     ap.add_argument("--runs", type=int, default=3, help="untimed runs for the CPU per frame (median)")
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--solver-timers", action="store_true", help="also a run of pf and live with Exudyn's timers on")
     args = ap.parse_args(argv)
     try:
         cpu = min(os.sched_getaffinity(0))
@@ -232,6 +289,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  {'stage':<52} {'us/frame':>9} {'share':>7} {'calls/frame':>12}")
         for stage, row in res["stages"].items():
             print(f"  {stage:<52} {row['us_per_frame']:9.1f} {100 * row['share']:6.1f}% {row['calls_per_frame']:12.2f}")
+        if args.solver_timers and mode in ("pf", "live"):
+            t = res["solver_timers"] = solver_timers(mode, args)
+            print(f"  Exudyn's timers (one more run, load {t['load']:.2f}): {t['steps_per_frame']:.2f} steps per frame, "
+                  f"{t['newton_per_step']:.2f} Newton iterations and {t['jacobians_per_step']:.2f} Jacobian updates per step; "
+                  f"native {t['native_us_per_frame']:.1f} us/frame ({t['native_us_per_step']:.1f} per step), "
+                  f"in the step functions {t['step_functions_us_per_frame']:.1f} us/frame")
     if args.json:
         args.json.write_text(json.dumps(out, indent=1))
     return 0
