@@ -17,6 +17,8 @@ cubic splines through the whole trial; both look into the future. Here, frame by
    a gap has no velocity: its spring stays off for the step into it (``PFSystem.run_live`` uses a
    spring in a step only if its marker is active at both ends) and comes on from the next one.
 
+Without a filter, steps 2 to 4 are one compiled call per frame (exubio.run.live.causal_kernel: the
+same formulas), but in a frame with a thorax landmark missing, which this module's Python holds.
 What each choice costs in lag is measured in studies/README.md ("Live: causal processing").
 """
 from __future__ import annotations
@@ -101,6 +103,18 @@ class CausalTargets:
             self.z = np.zeros((self.k, self.sos.shape[0], 2, 3))
         else:
             self.sos = None
+        self._kernel = None  # without a filter: one compiled call per frame (exubio.run.live.causal_kernel)
+        if self.sos is None:
+            from exubio.run.live.causal_kernel import causal_frame
+
+            self._kernel = causal_frame
+            keys = (("ij", "px", "c7", "t8") if "c7" in self.thorax else
+                    ("ij", "ij_c7_midpoint", "px_t8_midpoint") if self.thorax else ())
+            self._kernel_keys = keys
+            self._kernel_columns = np.array([self.thorax[key] for key in keys], dtype=np.int64)
+            self._kernel_midpoints = bool(self.thorax) and "c7" not in self.thorax
+            self._columns64 = self.columns.astype(np.int64)
+            self._warm_kernel(len(self.labels))
         self.prev_p = np.full((self.k, 3), np.nan)
         self.prev_v = np.zeros((self.k, 3))
         self.prev_present = np.zeros(self.k, dtype=bool)
@@ -154,6 +168,10 @@ class CausalTargets:
 
     def push(self, raw: np.ndarray, /) -> CausalFrame:
         """The targets of the next frame from its raw lab positions (n_labels, 3) m."""
+        if self._kernel is not None:
+            frame = self._push_compiled(raw)
+            if frame is not None:
+                return frame
         p = self.thorax_positions(raw)
         present = np.isfinite(p).all(axis=1)
         if self.sos is not None:
@@ -170,6 +188,34 @@ class CausalTargets:
         self.prev_v = v
         self.prev_present = present
         self.prev_has_v = cont
+        return CausalFrame(p, v, a, present)
+
+    def _warm_kernel(self, n_labels: int) -> None:
+        """Compile (or load from numba's cache) the kernel now, on scratch arrays, not in the first frame."""
+        k, nt = self.k, len(self._kernel_keys)
+        self._kernel(np.zeros((n_labels, 3)), self._columns64, self._kernel_columns, self._kernel_midpoints,
+                     self.mirror, self.dt, np.zeros((k, 3)), np.zeros((k, 3)), np.zeros(k, dtype=bool),
+                     np.zeros(k, dtype=bool), np.empty((k, 3)), np.empty((k, 3)), np.empty((k, 3)),
+                     np.empty(k, dtype=bool), np.empty(k, dtype=bool), np.empty((nt, 3)))
+
+    def _push_compiled(self, raw: np.ndarray) -> CausalFrame | None:
+        """``push`` without a filter in one compiled call (the same formulas); None where a thorax
+        landmark is missing (the Python path holds it)."""
+        from exubio.run.live.causal_kernel import FRAME_LANDMARK_MISSING
+
+        raw = np.ascontiguousarray(raw, dtype=float)
+        k = self.k
+        p, v, a = np.empty((k, 3)), np.empty((k, 3)), np.empty((k, 3))
+        present, cont = np.empty(k, dtype=bool), np.empty(k, dtype=bool)
+        found = np.empty((len(self._kernel_keys), 3))
+        if self._kernel(raw, self._columns64, self._kernel_columns, self._kernel_midpoints, self.mirror, self.dt,
+                        self.prev_p, self.prev_v, self.prev_present, self.prev_has_v,
+                        p, v, a, present, cont, found) == FRAME_LANDMARK_MISSING:
+            return None
+        held = self._held
+        for key, row in zip(self._kernel_keys, found):
+            held[key] = (row, 0)
+        self.prev_p, self.prev_v, self.prev_present, self.prev_has_v = p, v, present, cont
         return CausalFrame(p, v, a, present)
 
     def _filter(self, p: np.ndarray, present: np.ndarray) -> np.ndarray:
