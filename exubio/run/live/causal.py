@@ -242,25 +242,17 @@ class CausalTargets:
 
 def thorax_frame_one(ij: np.ndarray, px: np.ndarray, c7: np.ndarray, t8: np.ndarray, /
                      ) -> tuple[np.ndarray, np.ndarray] | None:
-    """exubio.prep.thorax.thorax_frame of one frame's four landmarks (3,) in plain floats (a frame
-    at a time, numpy's per-call cost would be most of it): (R (3, 3), origin (3,)), or None where the
-    landmarks are coincident or collinear (thorax_frame's test). The same formulas; the norms are
-    summed in Python's order, so R may differ from thorax_frame's in the last bit
-    (tests/model/test_frame_angles.py)."""
-    (a0, a1, a2), (p0, p1, p2), (c0, c1, c2), (t0, t1, t2) = ij.tolist(), px.tolist(), c7.tolist(), t8.tolist()
-    u0, u1, u2 = 0.5 * (a0 + c0), 0.5 * (a1 + c1), 0.5 * (a2 + c2)  # IJ-C7 midpoint
-    y0, y1, y2 = u0 - 0.5 * (p0 + t0), u1 - 0.5 * (p1 + t1), u2 - 0.5 * (p2 + t2)  # up, from the PX-T8 midpoint
-    d0, d1, d2 = a0 - c0, a1 - c1, a2 - c2
-    z0, z1, z2 = d1 * y2 - d2 * y1, d2 * y0 - d0 * y2, d0 * y1 - d1 * y0
-    ny = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
-    nz = math.sqrt(z0 * z0 + z1 * z1 + z2 * z2)
-    scale = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) * ny
-    if ny <= 1e-12 or nz <= 1e-9 * max(scale, 1e-300):
+    """exubio.prep.thorax.thorax_frame of one frame's four landmarks (3,): (R (3, 3), origin (3,)), or
+    None where the landmarks are coincident or collinear (thorax_frame's test). The compiled kernel's
+    (exubio.run.live.causal_kernel.thorax_frame_into: a frame at a time, numpy's per-call cost would be
+    most of it), the one the compiled causal frame uses; R may differ from thorax_frame's in the last
+    bit (tests/model/test_frame_angles.py)."""
+    from exubio.run.live.causal_kernel import thorax_frame_into
+
+    R, o = np.empty((3, 3)), np.empty(3)
+    if not thorax_frame_into(np.array([ij, px, c7, t8], dtype=float), R, o):
         return None
-    y0, y1, y2, z0, z1, z2 = y0 / ny, y1 / ny, y2 / ny, z0 / nz, z1 / nz, z2 / nz
-    x0, x1, x2 = y1 * z2 - y2 * z1, y2 * z0 - y0 * z2, y0 * z1 - y1 * z0
-    z0, z1, z2 = x1 * y2 - x2 * y1, x2 * y0 - x0 * y2, x0 * y1 - x1 * y0  # exactly orthonormal despite rounding
-    return np.array([[x0, y0, z0], [x1, y1, z1], [x2, y2, z2]]), np.array([a0, a1, a2])
+    return R, o
 
 
 def frame_index(timestamp_s: float, first_timestamp_s: float, rate_hz: float, /) -> int:
