@@ -17,8 +17,8 @@ cubic splines through the whole trial; both look into the future. Here, frame by
    a gap has no velocity: its spring stays off for the step into it (``PFSystem.run_live`` uses a
    spring in a step only if its marker is active at both ends) and comes on from the next one.
 
-Without a filter, steps 2 to 4 are one compiled call per frame (exubio.run.live.causal_kernel: the
-same formulas), but in a frame with a thorax landmark missing, which this module's Python holds.
+Without a filter, steps 2 to 4 are one compiled call per frame (exubio.model.batch_kernels.causal_frame:
+the same arithmetic in the same order, bit for bit), but in a frame with a thorax landmark missing, which this module's Python holds.
 What each choice costs in lag is measured in studies/README.md ("Live: causal processing").
 """
 from __future__ import annotations
@@ -103,9 +103,9 @@ class CausalTargets:
             self.z = np.zeros((self.k, self.sos.shape[0], 2, 3))
         else:
             self.sos = None
-        self._kernel = None  # without a filter: one compiled call per frame (exubio.run.live.causal_kernel)
+        self._kernel = None  # without a filter: one compiled call per frame (exubio.model.batch_kernels.causal_frame)
         if self.sos is None:
-            from exubio.run.live.causal_kernel import causal_frame
+            from exubio.model.batch_kernels import causal_frame
 
             self._kernel = causal_frame
             keys = (("ij", "px", "c7", "t8") if "c7" in self.thorax else
@@ -161,7 +161,8 @@ class CausalTargets:
             if frame is None:  # landmarks collinear in this frame: no frame, no markers
                 return np.full((self.k, 3), np.nan)
             rot, origin = frame
-            pos = (pos - origin) @ rot
+            d = pos - origin  # R^T (p - origin), term by term: the compiled frame's order of operations
+            pos = d[:, 0:1] * rot[0] + d[:, 1:2] * rot[1] + d[:, 2:3] * rot[2]
         if self.mirror:
             pos = pos * np.array([1.0, 1.0, -1.0])
         return pos
@@ -201,7 +202,7 @@ class CausalTargets:
     def _push_compiled(self, raw: np.ndarray) -> CausalFrame | None:
         """``push`` without a filter in one compiled call (the same formulas); None where a thorax
         landmark is missing (the Python path holds it)."""
-        from exubio.run.live.causal_kernel import FRAME_LANDMARK_MISSING
+        from exubio.model.batch_kernels import FRAME_LANDMARK_MISSING
 
         raw = np.ascontiguousarray(raw, dtype=float)
         k = self.k
@@ -244,10 +245,10 @@ def thorax_frame_one(ij: np.ndarray, px: np.ndarray, c7: np.ndarray, t8: np.ndar
                      ) -> tuple[np.ndarray, np.ndarray] | None:
     """exubio.prep.thorax.thorax_frame of one frame's four landmarks (3,): (R (3, 3), origin (3,)), or
     None where the landmarks are coincident or collinear (thorax_frame's test). The compiled kernel's
-    (exubio.run.live.causal_kernel.thorax_frame_into: a frame at a time, numpy's per-call cost would be
+    (exubio.model.batch_kernels.thorax_frame_into: a frame at a time, numpy's per-call cost would be
     most of it), the one the compiled causal frame uses; R may differ from thorax_frame's in the last
     bit (tests/model/test_frame_angles.py)."""
-    from exubio.run.live.causal_kernel import thorax_frame_into
+    from exubio.model.batch_kernels import thorax_frame_into
 
     R, o = np.empty((3, 3)), np.empty(3)
     if not thorax_frame_into(np.array([ij, px, c7, t8], dtype=float), R, o):
