@@ -22,17 +22,10 @@ folder, not copied into the project.
 """
 from __future__ import annotations
 
-import argparse
-import logging
-import sys
-import warnings
 from pathlib import Path
 
 import numpy as np
-
-ROOT = Path(__file__).resolve().parents[1]
-DATA = ROOT.parent / "shared" / "data" / "truth" / "sta_opendata"
-RATE = 300.0
+from bone_common import RATE, bone_parser, quiet_generic_model
 ANGLES = ("ST_Y_internal_rotation", "ST_X_upward_rotation", "ST_Z_posterior_tilt", "GH_phadke_X_elevation",
           "GH_phadke_Y_internal_rotation")
 BINS = ((0, 10), (10, 20), (20, 40), (40, 180))
@@ -112,20 +105,10 @@ def domain(fitted: list[Path], judged: list[Path], generic) -> None:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--data", type=Path, default=DATA)
-    ap.add_argument("--held", type=Path, help="a folder of S2M trials never fitted")
-    args = ap.parse_args(argv)
-    if not args.data.is_dir():
-        print(f"no data at {args.data}", file=sys.stderr)
+    args = bone_parser(__doc__).parse_args(argv)
+    generic = quiet_generic_model(args.data)
+    if generic is None:
         return 2
-    from exubio.errors import ModelError
-    from exubio.io.yaml import read_yaml
-    from exubio.model.load import DEFAULT_MODEL
-
-    logging.disable(logging.WARNING)
-    warnings.simplefilter("ignore")
-    generic = read_yaml(DEFAULT_MODEL, error=ModelError)
     shared = sorted(args.data.glob("dataSample_S2M_*.mat"))
     held = sorted(args.held.glob("dataSample_S2M_*.mat")) if args.held else []
     drivers(shared + held, generic)

@@ -24,20 +24,14 @@ documents_and_data/dataSample/Matlab/, read from a local folder, not copied into
 """
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
-import logging
-import sys
-import warnings
 from pathlib import Path
 
 import numpy as np
+from bone_common import RATE, ROOT, bone_parser, quiet_generic_model
 
-ROOT = Path(__file__).resolve().parents[1]
-DATA = ROOT.parent / "shared" / "data" / "truth" / "sta_opendata"
 SHIPPED = ROOT / "exubio" / "data" / "sta_amplitude_s2m.json"
-RATE = 300.0
 BINS = ((0, 10), (10, 20), (20, 40), (40, 60), (60, 90), (90, 180))
 
 
@@ -73,25 +67,17 @@ def summary(title: str, cells: dict) -> None:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--data", type=Path, default=DATA)
-    ap.add_argument("--held", type=Path, help="a folder of S2M trials never fitted")
+    ap = bone_parser(__doc__)
     ap.add_argument("--write", action="store_true", help=f"write the fit into {SHIPPED.relative_to(ROOT)}")
     ap.add_argument("--no-coverage", action="store_true", help="the fit only")
     args = ap.parse_args(argv)
-    if not args.data.is_dir():
-        print(f"no data at {args.data}", file=sys.stderr)
+    generic = quiet_generic_model(args.data)
+    if generic is None:
         return 2
-    from exubio.errors import ModelError
-    from exubio.io.yaml import read_yaml
-    from exubio.model.load import DEFAULT_MODEL
     from exubio.trust.sta_amplitude import load_sta_amplitude
     from exubio.truth.girdle import fit_girdle, girdle_motion, girdle_offset, offset_likelihoods
     from exubio.truth.sta_format import read_sta_trial
 
-    logging.disable(logging.WARNING)
-    warnings.simplefilter("ignore")
-    generic = read_yaml(DEFAULT_MODEL, error=ModelError)
     files = sorted(args.data.glob("*S2M*.mat"))
     motions = {f: girdle_motion(read_sta_trial(f), generic, rate_hz=RATE) for f in files}
     held = {} if args.held is None else {f: girdle_motion(read_sta_trial(f), generic, rate_hz=RATE)

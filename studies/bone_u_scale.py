@@ -24,17 +24,11 @@ The held-out tasks: STAOpenData/Data @ 33dd5a4, documents_and_data/dataSample/Ma
 """
 from __future__ import annotations
 
-import argparse
-import logging
 import sys
-import warnings
 from pathlib import Path
 
 import numpy as np
-
-ROOT = Path(__file__).resolve().parents[1]
-DATA = ROOT.parent / "shared" / "data" / "truth" / "sta_opendata"
-RATE = 300.0
+from bone_common import RATE, bone_parser, quiet_generic_model
 FACTORS = (0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.2)
 
 
@@ -60,21 +54,12 @@ def band(cov) -> tuple[int, int, int]:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--data", type=Path, default=DATA)
-    ap.add_argument("--held", type=Path, help="a folder of S2M trials never fitted")
-    args = ap.parse_args(argv)
-    if not args.data.is_dir():
-        print(f"no data at {args.data}", file=sys.stderr)
+    args = bone_parser(__doc__).parse_args(argv)
+    generic = quiet_generic_model(args.data)
+    if generic is None:
         return 2
-    from exubio.errors import ModelError
-    from exubio.io.yaml import read_yaml
-    from exubio.model.load import DEFAULT_MODEL
     from exubio.truth.uncertainty_fit import fit_uncertainty_model
 
-    logging.disable(logging.WARNING)
-    warnings.simplefilter("ignore")
-    generic = read_yaml(DEFAULT_MODEL, error=ModelError)
     fitted = sorted(args.data.glob("*S2M*.mat"))
     trials = {}  # name -> (verdict, cells)
     for f in fitted:

@@ -66,33 +66,24 @@ class TruthComparison:
     reasons: Mapping[str, tuple[str, ...]] = field(default_factory=dict)  # per method, main_reasons of its verdict
     uncertainty_model: str = ""  # a lab's STA amplitude model the uncertainties used (its file); "": the shipped one
 
+    def _labs(self, method: str, /) -> dict[str, AngleError]:
+        """Per angle measured in some frame with a u, its ``AngleError.lab`` for ``method``."""
+        labs = {a: getattr(per.get(method), "lab", None) for a, per in self.angles.items()}
+        return {a: lab for a, lab in labs.items() if lab is not None and lab.coverage is not None}
+
     def lab_coverage(self, method: str = "ls", /) -> dict[str, tuple[float, float]]:
         """Per angle measured in some frame, (coverage of +-2u, fraction of frames measured) with the u and
         status a lab's run gives (``AngleError.lab``), for ``method``."""
-        out = {}
-        for a, per in self.angles.items():
-            lab = getattr(per.get(method), "lab", None)
-            if lab is not None and lab.coverage is not None:
-                out[a] = (float(lab.coverage), float(lab.measured_fraction))
-        return out
+        return {a: (float(lab.coverage), float(lab.measured_fraction)) for a, lab in self._labs(method).items()}
 
     def lab_error_over_u(self, method: str = "ls", /) -> dict[str, float]:
         """Per angle of ``lab_coverage``, the RMS of error / u over its measured frames (lab's u and status)."""
-        out = {}
-        for a, per in self.angles.items():
-            lab = getattr(per.get(method), "lab", None)
-            if lab is not None and lab.coverage is not None and lab.rms_error_over_u is not None:
-                out[a] = float(lab.rms_error_over_u)
-        return out
+        return {a: float(lab.rms_error_over_u) for a, lab in self._labs(method).items()
+                if lab.rms_error_over_u is not None}
 
     def lab_frames_within(self, method: str = "ls", /) -> dict[str, tuple[int, int]]:
         """Per angle of ``lab_coverage``, (frames where the bone lies within +-2u, frames judged)."""
-        out = {}
-        for a, per in self.angles.items():
-            lab = getattr(per.get(method), "lab", None)
-            if lab is not None and lab.coverage is not None:
-                out[a] = lab.frames_within
-        return out
+        return {a: lab.frames_within for a, lab in self._labs(method).items()}
 
     def to_json(self) -> dict:
         num = lambda x: None if x is None or not np.isfinite(x) else round(float(x), 4)

@@ -105,9 +105,9 @@ class CausalTargets:
             self.sos = None
         self._kernel = None  # without a filter: one compiled call per frame (exubio.model.batch_kernels.causal_frame)
         if self.sos is None:
-            from exubio.model.batch_kernels import causal_frame
+            from exubio.model.batch_kernels import FRAME_LANDMARK_MISSING, causal_frame
 
-            self._kernel = causal_frame
+            self._kernel, self._landmark_missing = causal_frame, FRAME_LANDMARK_MISSING
             keys = (("ij", "px", "c7", "t8") if "c7" in self.thorax else
                     ("ij", "ij_c7_midpoint", "px_t8_midpoint") if self.thorax else ())
             self._kernel_keys = keys
@@ -202,8 +202,6 @@ class CausalTargets:
     def _push_compiled(self, raw: np.ndarray) -> CausalFrame | None:
         """``push`` without a filter in one compiled call (the same formulas); None where a thorax
         landmark is missing (the Python path holds it)."""
-        from exubio.model.batch_kernels import FRAME_LANDMARK_MISSING
-
         raw = np.ascontiguousarray(raw, dtype=float)
         k = self.k
         p, v, a = np.empty((k, 3)), np.empty((k, 3)), np.empty((k, 3))
@@ -211,7 +209,7 @@ class CausalTargets:
         found = np.empty((len(self._kernel_keys), 3))
         if self._kernel(raw, self._columns64, self._kernel_columns, self._kernel_midpoints, self.mirror, self.dt,
                         self.prev_p, self.prev_v, self.prev_present, self.prev_has_v,
-                        p, v, a, present, cont, found) == FRAME_LANDMARK_MISSING:
+                        p, v, a, present, cont, found) == self._landmark_missing:
             return None
         held = self._held
         for key, row in zip(self._kernel_keys, found):
