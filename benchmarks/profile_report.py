@@ -12,6 +12,12 @@ functions by own time and by cumulative time. ``--pages OUT``: writes OUT (JSON)
 the SHA-256 of every PDF page rendered to RGBA pixels by Agg at 100 dpi just after the PDF saved it,
 of the PNG of page 1, and of the PDF (written with a fixed creation date). Two such files (before
 and after a change, same inputs) are compared with ``--compare A.json B.json``.
+
+``--against CHECKOUT --rounds N``: the reports drawn by two processes, one importing exubio from
+CHECKOUT (a worktree of the commit before a change) and one from this checkout, alternately (the
+order swapped every round), N rounds over the DIRs after a warm-up of each; prints each side's
+median and the median of the paired ratios (this checkout / CHECKOUT), the figure a noisy machine
+disturbs least. Run it from outside the checkouts (``cd /tmp``) so that PYTHONPATH decides.
 """
 from __future__ import annotations
 
@@ -24,6 +30,7 @@ import json
 import os
 import pstats
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -34,13 +41,14 @@ _MODELS: dict[str, object] = {}
 
 
 def _report(folder: Path, out: Path, pages: list[str] | None) -> float:
-    from exubio.report import trial_report
+    from exubio.report import page_figures, trial_report
     from exubio.scapulohumeral.files import model_of
 
     npz = sorted(folder.glob("*.npz"))
     if not npz:
         raise SystemExit(f"{folder}: no <trial>.<method>.npz")
-    original = trial_report.PdfPages
+    owner = page_figures if hasattr(page_figures, "pdf_pages") else trial_report  # (before 2026-12-06: trial_report's)
+    original = owner.PdfPages
 
     class Recording(original):  # every page as pixels, right after the PDF saved it
         def savefig(self, figure=None, **kw):
@@ -57,13 +65,56 @@ def _report(folder: Path, out: Path, pages: list[str] | None) -> float:
         if key not in _MODELS:
             _MODELS[key] = model_of(r.metadata)[0]
         results.append(dataclasses.replace(r, model=_MODELS[key]))
-    trial_report.PdfPages = Recording
+    owner.PdfPages = Recording
     try:
         t0 = time.process_time()
         trial_report.draw_trial_report(results, out / f"{folder.name}.report.pdf")
         return time.process_time() - t0
     finally:
-        trial_report.PdfPages = original
+        owner.PdfPages = original
+
+
+def _serve(dirs: list[Path]) -> None:
+    """--serve: draw the report of the DIR index read from stdin, print its CPU seconds."""
+    with tempfile.TemporaryDirectory() as tmp:
+        for line in sys.stdin:
+            print(_report(dirs[int(line)], Path(tmp), None), flush=True)
+
+
+def _against(base: Path, dirs: list[Path], rounds: int) -> None:
+    here = Path(__file__).resolve()
+    sides = {}
+    for label, checkout in (("base", base.resolve()), ("this", here.parents[1])):
+        env = dict(os.environ, PYTHONPATH=str(checkout))
+        sides[label] = subprocess.Popen([sys.executable, str(here), "--serve", *map(str, dirs)], stdin=subprocess.PIPE,
+                                        stdout=subprocess.PIPE, text=True, env=env, cwd=tempfile.gettempdir())
+
+    def draw(label: str, k: int) -> float:
+        p = sides[label]
+        p.stdin.write(f"{k}\n")
+        p.stdin.flush()
+        line = p.stdout.readline()
+        if not line:
+            raise SystemExit(f"the {label} process stopped (exit code {p.wait()})")
+        return float(line)
+
+    for label in sides:  # warm-up
+        draw(label, 0)
+    cpu: dict[str, list[float]] = {"base": [], "this": []}
+    ratios = []
+    for r in range(rounds):
+        k = r % len(dirs)
+        got = {label: draw(label, k) for label in (("base", "this") if r % 2 == 0 else ("this", "base"))}
+        for label, v in got.items():
+            cpu[label].append(v)
+        ratios.append(got["this"] / got["base"])
+    for p in sides.values():
+        p.stdin.close()
+        p.wait()
+    q = statistics.quantiles(ratios, n=4) if len(ratios) > 1 else [ratios[0]] * 3
+    print(f"CPU per report, median of {rounds}: {base} {statistics.median(cpu['base']):.3f} s, this checkout "
+          f"{statistics.median(cpu['this']):.3f} s; paired ratio (this / base) median {q[1]:.3f}, quartiles "
+          f"{q[0]:.3f}-{q[2]:.3f}")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -72,6 +123,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--profile", type=int, metavar="N")
     ap.add_argument("--pages", type=Path, metavar="OUT")
     ap.add_argument("--compare", nargs=2, type=Path, metavar=("A", "B"))
+    ap.add_argument("--against", type=Path, metavar="CHECKOUT")
+    ap.add_argument("--rounds", type=int, default=24)
+    ap.add_argument("--serve", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.compare:
         a, b = (json.loads(p.read_text()) for p in args.compare)
@@ -83,6 +137,12 @@ def main(argv: list[str] | None = None) -> int:
         return 1 if bad else 0
     if not args.dirs:
         ap.error("give at least one DIR")
+    if args.serve:
+        _serve(args.dirs)
+        return 0
+    if args.against:
+        _against(args.against, args.dirs, args.rounds)
+        return 0
     os.environ.setdefault("SOURCE_DATE_EPOCH", "0")  # the PDF's creation date fixed: its bytes comparable
     record: dict[str, dict] = {}
     with tempfile.TemporaryDirectory() as tmp:

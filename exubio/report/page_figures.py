@@ -4,14 +4,31 @@ text that wraps by bisection inside its box. exubio.report.trial_report draws th
 from __future__ import annotations
 
 import threading
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Iterator
 
 import matplotlib as mpl
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure
 from matplotlib.text import Text
 from matplotlib.ticker import NullLocator
 from matplotlib.transforms import Bbox
+
+
+PDF_COMPRESSION = 1
+"""zlib level of the reports' PDF streams. matplotlib's default (6) took a seventh of a trial
+report's time for files 13 % smaller (benchmarks/README.md, "The report's time"); the content
+drawn is the same."""
+
+
+@contextmanager
+def pdf_pages(path: Path) -> Iterator[PdfPages]:
+    """matplotlib's PdfPages at ``path``, its pages compressed at ``PDF_COMPRESSION``."""
+    with mpl.rc_context({"pdf.compression": PDF_COMPRESSION}), PdfPages(path) as pdf:
+        yield pdf
 
 
 def _figure(size=(11.69, 8.27)) -> Figure:
@@ -134,20 +151,26 @@ PLOT_POINTS = 800
 wide, so 400 bins of min and max): each bin keeps its minimum and maximum, so spikes stay visible."""
 
 
-def _envelope(t: np.ndarray, *ys: np.ndarray) -> tuple[np.ndarray, ...]:
-    """(t, y...) reduced to the samples holding each bin's minimum and maximum of the first y."""
+def _envelope(t: np.ndarray, *ys: np.ndarray, keep: int = 1, points: int = PLOT_POINTS) -> tuple[np.ndarray, ...]:
+    """(t, y...) reduced to the samples holding each bin's minimum and maximum of each of the first
+    ``keep`` ys (``points`` // 2 bins of consecutive samples), and the samples on both sides of each
+    of their gaps (NaN), so that a gap is drawn where it is, however short."""
     n = len(t)
-    if n <= PLOT_POINTS:
+    if n <= points:
         return (t, *ys)
-    k = int(np.ceil(n / (PLOT_POINTS // 2)))
+    k = int(np.ceil(n / max(points // 2, 1)))
     m = (n // k) * k
-    y0 = np.asarray(ys[0], dtype=float)
-    blocks = np.where(np.isfinite(y0[:m]), y0[:m], np.nan).reshape(-1, k)
-    finite = np.isfinite(blocks).any(axis=1)
-    lo = np.where(finite, np.nanargmin(np.where(np.isfinite(blocks), blocks, np.inf), axis=1), 0)
-    hi = np.where(finite, np.nanargmax(np.where(np.isfinite(blocks), blocks, -np.inf), axis=1), 0)
-    base = np.arange(blocks.shape[0]) * k
-    idx = np.unique(np.concatenate([base + lo, base + hi, np.arange(m, n)]))
+    base = np.arange(m // k) * k
+    parts = [np.arange(m, n)]
+    for y in ys[:keep]:
+        y = np.asarray(y, dtype=float)
+        finite = np.isfinite(y)
+        blocks, inside = y[:m].reshape(-1, k), finite[:m].reshape(-1, k)
+        parts += [base + np.argmin(np.where(inside, blocks, np.inf), axis=1),  # 0 in a block with no value
+                  base + np.argmax(np.where(inside, blocks, -np.inf), axis=1)]
+        edges = np.flatnonzero(finite[1:] != finite[:-1])
+        parts += [edges, edges + 1]
+    idx = np.unique(np.concatenate(parts))
     return (t[idx], *(np.asarray(y)[idx] for y in ys))
 
 

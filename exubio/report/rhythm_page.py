@@ -16,7 +16,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
-from exubio.report.page_figures import _bisect_wrap, _page_figure, _pin_titles
+from exubio.report.page_figures import _bisect_wrap, _envelope, _page_figure, _pin_titles
 from exubio.model.signs import factors, meaning
 from exubio.scapulohumeral.files import StudyRhythm, shown_band
 from exubio.scapulohumeral.reference import Reference
@@ -26,6 +26,17 @@ __all__ = ["trial_rhythm_page", "study_rhythm_pages", "angle_label"]
 
 _PHASE_STYLE = {1: ("tab:blue", "-"), 2: ("tab:orange", (0, (5, 2)))}
 _CORRIDOR = "0.55"
+CYCLE_BIN_DEG = 1.0
+"""A trial page's cycle is drawn thinned to its envelope (exubio.report.page_figures._envelope) in
+bins of about this much HT elevation: a panel is 180 deg over about 2.3 inches, so 1 deg is finer
+than the angles page's time bins (400 over about 7.7 inches)."""
+
+
+def _cycle_points(ht_deg: np.ndarray) -> int:
+    """The points a cycle's curve keeps: two per ``CYCLE_BIN_DEG`` of the HT elevation it spans."""
+    finite = ht_deg[np.isfinite(ht_deg)]
+    span = float(finite.max() - finite.min()) if finite.size else 0.0
+    return 2 * max(2, int(np.ceil(span / CYCLE_BIN_DEG)))
 
 
 def angle_label(name: str, labels: dict | None = None, signs: str = "isb") -> str:
@@ -102,12 +113,13 @@ def trial_rhythm_page(r: TrialRhythm, ref: Reference | None, title: str, /, *, m
             p = int(r.phase[sel][0])
             colour, ls = _PHASE_STYLE[p]
             ht, y, ok = r.ht_deg[sel], r.values_deg[sel, k] * f, r.measured[sel, k]
-            ax.plot(ht, np.where(ok, np.nan, y), color="silver", lw=1.0, ls=ls)
-            ax.plot(ht, np.where(ok, y, np.nan), color=colour, lw=1.3, ls=ls)
+            points = _cycle_points(ht)
+            ax.plot(*_envelope(ht, np.where(ok, np.nan, y), points=points), color="silver", lw=1.0, ls=ls)
+            ax.plot(*_envelope(ht, np.where(ok, y, np.nan), points=points), color=colour, lw=1.3, ls=ls)
             if has_u:
                 band = 2.0 * r.u_deg[sel, k]
-                ax.fill_between(ht, np.where(ok, y - band, np.nan), np.where(ok, y + band, np.nan), color=colour,
-                                alpha=0.15, lw=0)
+                ax.fill_between(*_envelope(ht, np.where(ok, y - band, np.nan), np.where(ok, y + band, np.nan), keep=2,
+                                           points=points), color=colour, alpha=0.15, lw=0)
         _axes_style(ax, name, r.labels, k >= 4, r.signs)
     extra = [Line2D([], [], color="silver", label="not a measurement")]
     if has_u:

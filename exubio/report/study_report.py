@@ -14,12 +14,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 
 from exubio.io.results import atomic_write
 from exubio.report.calibration_page import short_paths
+from exubio.report.page_figures import pdf_pages
 from exubio.method_registry import method_names, method_style
 
 __all__ = ["build_study_report"]
@@ -234,7 +234,7 @@ def build_study_report(study_json: str | Path, pdf_path: str | Path, /) -> Path:
     figs = study_pages(data) + rhythm_pages(Path(study_json).parent, data)
 
     def write(tmp: Path) -> None:
-        with PdfPages(tmp) as pdf:
+        with pdf_pages(tmp) as pdf:
             for f in figs:
                 pdf.savefig(f)
 

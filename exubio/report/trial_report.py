@@ -22,7 +22,6 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
-from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.text import Text
@@ -35,7 +34,7 @@ from exubio.model.signs import CLINICAL_FLIPPED, convert, factors, signs_of_file
 from exubio.types import FrameStatus, Reconstruction
 from exubio.report.calibration_page import calibration_page, short_paths
 from exubio.report.page_figures import (PLOT_POINTS, _bisect_wrap, _empty, _envelope, _figure, _figure_with_axes, _page_figure,  # noqa: F401
-                                        _pin_titles, _release, _x_labels_at_top)
+                                        _pin_titles, _release, _x_labels_at_top, pdf_pages)
 from exubio.method_registry import REGISTRY, method_style
 
 _JOINTS = (("SC (ISB Y-X'-Z'')", "SC_"), ("AC (ISB Y-X'-Z'')", "AC_"), ("ST (ISB Y-X'-Z'')", "ST_"),
@@ -247,7 +246,8 @@ KEY_ANGLES = (("HT_X_elevation", "HT elevation"), ("GH_phadke_X_elevation", "GH 
 def _key_angles(fig: Figure, recons: Sequence[Reconstruction], angles: dict[str, Angles], summaries: dict, *,
                 top: float = FOOTER_BOTTOM - 0.045) -> None:
     """Page 1's picture: the key anatomical angles of the first method over time, in colour where
-    measured, grey where modelled or not measured (legend says which); its axes end at ``top``."""
+    measured, grey where modelled or not measured (legend says which), thinned to their envelope as
+    page 2's curves are; its axes end at ``top``."""
     method = recons[0].method if recons[0].method in angles else next(iter(angles))
     a = angles[method]
     ax = fig.axes[0]  # made with the page (verdict_page), placed here below its texts
@@ -260,13 +260,13 @@ def _key_angles(fig: Figure, recons: Sequence[Reconstruction], angles: dict[str,
         deg = a.shown_deg(j)  # as the CSV has it, in its convention; the label says the sign
         ok = a.measured(j)
         label += " (-)" if name in CLINICAL_FLIPPED and a.signs == "isb" else " (+)"  # the named motion's sign
-        ax.plot(a.time_s, np.where(ok, deg, np.nan), color=colour, lw=1.4, label=label)
+        ax.plot(*_envelope(a.time_s, np.where(ok, deg, np.nan)), color=colour, lw=1.4, label=label)
         if a.uncertainty_rad is not None:  # the +-2u band (about 95 %) where the angle is measured
             band = 2.0 * np.degrees(a.uncertainty_rad[:, j])
-            ax.fill_between(a.time_s, np.where(ok, deg - band, np.nan), np.where(ok, deg + band, np.nan),
-                            color=colour, alpha=0.15, lw=0)
+            ax.fill_between(*_envelope(a.time_s, np.where(ok, deg - band, np.nan), np.where(ok, deg + band, np.nan),
+                                       keep=2), color=colour, alpha=0.15, lw=0)
         if (~ok).any():
-            ax.plot(a.time_s, np.where(ok, np.nan, deg), color="silver", lw=1.4)
+            ax.plot(*_envelope(a.time_s, np.where(ok, np.nan, deg)), color="silver", lw=1.4)
     if any((~a.measured(a.names.index(n))).any() for n, _ in KEY_ANGLES if n in a.names):
         ax.plot([], [], color="silver", lw=1.4, label="not a measurement")
     if a.uncertainty_rad is not None:
@@ -484,7 +484,7 @@ def draw_trial_report(results: Sequence[ReportedResult], pdf_path: str | Path, /
     pdf_path = Path(pdf_path)
 
     def write_pdf(tmp: Path) -> None:
-        with PdfPages(tmp) as pdf:
+        with pdf_pages(tmp) as pdf:
             for page in pages:
                 pdf.savefig(page)
 

@@ -14,8 +14,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from matplotlib.backends.backend_pdf import PdfPages
 
+from exubio.report.page_figures import pdf_pages
 from exubio.report.validation_exubio_figures import fig_agreement, fig_mismatch, fig_rates
 from exubio.report.validation_paper_figures import fig_invivo, fig_residuals, fig_sensitivity, fig_sier
 from exubio.report.validation_summary import summary_pages
@@ -61,7 +61,7 @@ def build_report(folder: str | Path, /, *, dpi: int | None = None) -> dict[str, 
         written[name] = path
     pdf_path = folder / "validation.pdf"
     tmp_pdf = folder / "validation.tmp.pdf"
-    with PdfPages(tmp_pdf) as pdf:
+    with pdf_pages(tmp_pdf) as pdf:
         for name in REPORT_PAGES:
             for page in (pages[name] if isinstance(pages[name], list) else [pages[name]]):
                 pdf.savefig(page)
