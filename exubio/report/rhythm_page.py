@@ -8,7 +8,7 @@ and one page per subject (its trials thin, their mean ± SD). Draws from exubio.
 """
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Iterator, Sequence
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -16,13 +16,13 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
-from exubio.report.page_figures import _bisect_wrap, _envelope, _page_figure, _pin_titles
+from exubio.report.page_figures import _bisect_wrap, _envelope, _page_figure, _pin_titles, _release
 from exubio.model.signs import factors, meaning
 from exubio.scapulohumeral.files import StudyRhythm, shown_band
 from exubio.scapulohumeral.reference import Reference
 from exubio.scapulohumeral.table import HT_GRID_DEG, PHASES, RHYTHM_ANGLES, Average, TrialRhythm
 
-__all__ = ["trial_rhythm_page", "study_rhythm_pages", "angle_label"]
+__all__ = ["trial_rhythm_page", "study_rhythm_pages", "each_study_rhythm_page", "angle_label"]
 
 _PHASE_STYLE = {1: ("tab:blue", "-"), 2: ("tab:orange", (0, (5, 2)))}
 _CORRIDOR = "0.55"
@@ -146,8 +146,9 @@ def _average_curves(ax, a: Average, k: int, *, thick: bool, band: bool, f: float
 
 
 def _study_page(g: StudyRhythm, title: str, main: Average, thin: Sequence[Average | np.ndarray], what: str,
-                labels: dict | None) -> Figure:
-    fig, axes = _figure()
+                labels: dict | None, reuse: bool) -> Figure:
+    fig = _page_figure(("study rhythm",), lambda: _figure()[0])[0] if reuse else _figure()[0]
+    axes = np.asarray(fig.axes)
     for k, (ax, name) in enumerate(zip(axes, (a for a, _ in RHYTHM_ANGLES))):
         _corridor(ax, g.reference, name, g.signs)
         f = factors([name], g.signs)[0]  # averaged as ISB, drawn in the study's convention
@@ -174,16 +175,28 @@ def _study_page(g: StudyRhythm, title: str, main: Average, thin: Sequence[Averag
 
 def study_rhythm_pages(groups: Sequence[StudyRhythm], study: str, /, *, labels: dict | None = None) -> list[Figure]:
     """The group page and one page per subject of every method and plane (module docstring)."""
-    figs = []
+    return list(each_study_rhythm_page(groups, study, labels=labels))
+
+
+def each_study_rhythm_page(groups: Sequence[StudyRhythm], study: str, /, *, labels: dict | None = None,
+                           reuse: bool = False) -> Iterator[Figure]:
+    """``study_rhythm_pages`` one page at a time. ``reuse``: every page is drawn into the same
+    figure (a free study rhythm page of this process, exubio.report.page_figures), handed back to
+    be drawn into again when the next page is asked for: a study's 20-odd pages cost one figure's
+    axes and ticks instead of one each (write each page before asking for the next)."""
     for g in groups:
         head = f"exubio study: {study} — {g.method.upper()}, arm raised in the {g.plane} plane"
-        figs.append(_study_page(g, head, g.group, list(g.subjects.values()),
-                                f"group scapulohumeral rhythm: {len(g.subjects)} subjects, {len(g.trials)} trials; mean ± "
-                                f"SD over the subjects' means (each subject counts once)", labels))
+        pages = [(g.group, list(g.subjects.values()),
+                  f"group scapulohumeral rhythm: {len(g.subjects)} subjects, {len(g.trials)} trials; mean ± "
+                  f"SD over the subjects' means (each subject counts once)")]
         for s, a in g.subjects.items():
             mine = [rs.values_deg for st, rs in g.trials if st.subject == s]
-            figs.append(_study_page(g, head, a, mine, f"subject {s}: {len(mine)} trial(s); mean +- SD over its trials",
-                                    labels))
+            pages.append((a, mine, f"subject {s}: {len(mine)} trial(s); mean +- SD over its trials"))
+        for main, thin, what in pages:
+            fig = _study_page(g, head, main, thin, what, labels, reuse)
+            yield fig
+            if reuse:
+                _release(fig)
     if groups and groups[0].left_out:
         fig = Figure(figsize=(11.69, 8.27))
         FigureCanvasAgg(fig)
@@ -192,8 +205,7 @@ def study_rhythm_pages(groups: Sequence[StudyRhythm], study: str, /, *, labels: 
         fig.text(0.04, 0.9, "\n".join(f"{t.subject}/{t.session}/{t.trial} ({t.method.upper()}): {why}"
                                       for t, why in groups[0].left_out[:60]), fontsize=7, va="top", family="monospace",
                  wrap=True)
-        figs.append(fig)
-    return figs
+        yield fig
 
 
 def trial_rhythm_figure(npz_path, title: str, method: str, /, *, angles=None, model=None,

@@ -12,6 +12,7 @@ import json
 import textwrap
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterator
 
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
@@ -215,27 +216,30 @@ def study_pages(data: dict) -> list[Figure]:
     return figs
 
 
-def rhythm_pages(study_dir: Path, data: dict) -> list[Figure]:
-    """The study's rhythm pages (exubio.report.rhythm_page) from its trials' result files; none
-    when no trial raises the arm."""
+def rhythm_pages(study_dir: Path, data: dict) -> Iterator[Figure]:
+    """The study's rhythm pages (exubio.report.rhythm_page) from its trials' result files, one at a
+    time, each drawn into the figure of the one before (write each before asking for the next);
+    none when no trial raises the arm."""
     from exubio.errors import InputError
-    from exubio.report.rhythm_page import study_rhythm_pages
+    from exubio.report.rhythm_page import each_study_rhythm_page
     from exubio.scapulohumeral.files import study_rhythm
 
     try:
         groups = study_rhythm(study_dir)
     except InputError:
-        return []
-    return study_rhythm_pages(groups, data.get("study", ""))
+        return iter(())
+    return each_study_rhythm_page(groups, data.get("study", ""), reuse=True)
 
 
 def build_study_report(study_json: str | Path, pdf_path: str | Path, /) -> Path:
     data = json.loads(Path(study_json).read_text(encoding="utf-8"))
-    figs = study_pages(data) + rhythm_pages(Path(study_json).parent, data)
+    table = study_pages(data)
 
     def write(tmp: Path) -> None:
         with pdf_pages(tmp) as pdf:
-            for f in figs:
+            for f in table:
+                pdf.savefig(f)
+            for f in rhythm_pages(Path(study_json).parent, data):
                 pdf.savefig(f)
 
     return atomic_write(pdf_path, write)

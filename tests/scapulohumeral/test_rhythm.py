@@ -223,3 +223,32 @@ def test_rhythm_page_drawn_into_a_reused_figure_is_that_of_a_new_figure(model, t
         assert pdf(seed) == fresh[seed], seed
     assert len(page_figures._FREE_PAGES[("rhythm",)]) == 1  # one figure drawn into again, not one per page
     assert fresh[0] != fresh[1]  # the pages differ: the comparison can fail
+
+
+def test_study_pages_drawn_into_one_reused_figure_are_those_of_new_figures(model, tmp_path):
+    """The study report draws its rhythm pages one at a time into one figure (each_study_rhythm_page
+    with reuse): every page is byte for byte the page a new figure gives, whatever page came before."""
+    import io
+    import re
+
+    from exubio.report import page_figures
+    from exubio.report.rhythm_page import each_study_rhythm_page, study_rhythm_pages
+
+    _study(tmp_path, model, {"A": [0, 1], "B": [2]})
+    groups = study_rhythm(tmp_path)
+
+    def pdf(fig) -> bytes:
+        buf = io.BytesIO()
+        fig.savefig(buf, format="pdf")
+        return re.sub(rb"/CreationDate \(D:[0-9Z'+-]+\)", b"", buf.getvalue())
+
+    fresh = [pdf(f) for f in study_rhythm_pages(groups, "x")]
+    assert len(fresh) == 3 and len(set(fresh)) == 3  # the group and two subjects: the pages differ
+    page_figures._FREE_PAGES.clear()
+    for _ in range(2):  # the second time, the first page too is drawn into a used figure
+        figs, pages = [], []
+        for f in each_study_rhythm_page(groups, "x", reuse=True):
+            figs.append(f)
+            pages.append(pdf(f))
+        assert pages == fresh
+        assert len({id(f) for f in figs}) == 1  # one figure for every page
