@@ -19,9 +19,9 @@ from matplotlib.transforms import Bbox
 
 
 PDF_COMPRESSION = 1
-"""zlib level of the reports' PDF streams. matplotlib's default (6) took a seventh of a trial
-report's time for files 13 % smaller (benchmarks/README.md, "The report's time"); the content
-drawn is the same."""
+"""zlib level of the reports' PDF streams. matplotlib's default (6) cost about 6 % more of a trial
+report's CPU for files 12-21 % smaller (benchmarks/README.md, "The curves thinned, the PDFs at zlib
+level 1, ..."); the content drawn is the same."""
 
 
 @contextmanager
