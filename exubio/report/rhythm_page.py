@@ -99,27 +99,42 @@ def _notes(ref: Reference | None, lines: Sequence[str]) -> str:
     return "\n".join(out)
 
 
+def _phase_curves(r: TrialRhythm, k: int, f: float, cycles) -> tuple[np.ndarray, ...]:
+    """Angle k's cycles of one phase as one curve each of HT elevation, not-measured values (grey),
+    measured values and the +-2u band's edges (measured frames): every cycle thinned to its
+    envelope (``_cycle_points``), a NaN between cycles (a break in the line and the band)."""
+    parts = []
+    for c in cycles:
+        sel = r.cycle == c
+        ht, y, ok = r.ht_deg[sel], r.values_deg[sel, k] * f, r.measured[sel, k]
+        band = 2.0 * r.u_deg[sel, k]
+        parts.append(np.column_stack(_envelope(ht, np.where(ok, np.nan, y), np.where(ok, y, np.nan),
+                                               np.where(ok, y - band, np.nan), np.where(ok, y + band, np.nan),
+                                               keep=4, points=_cycle_points(ht))))
+        parts.append(np.full((1, 5), np.nan))
+    return tuple(np.concatenate(parts[:-1]).T) if parts else tuple(np.empty(0) for _ in range(5))
+
+
 def trial_rhythm_page(r: TrialRhythm, ref: Reference | None, title: str, /, *, model_note: str = "",
                       method: str = "") -> Figure:
     """The trial's rhythm page (module docstring)."""
     fig, _ = _page_figure(("rhythm",), lambda: _figure()[0])  # a free rhythm page of this process, else a new one
     axes = np.asarray(fig.axes)
     has_u = np.isfinite(r.u_deg).any()
+    cycles = np.unique(r.cycle[r.cycle >= 0])
     for k, (ax, name) in enumerate(zip(axes, r.names)):
         _corridor(ax, ref, name, r.signs)
         f = factors([name], r.signs)[0]  # ISB inside, drawn in the trial's convention
-        for c in np.unique(r.cycle[r.cycle >= 0]):
-            sel = r.cycle == c
-            p = int(r.phase[sel][0])
-            colour, ls = _PHASE_STYLE[p]
-            ht, y, ok = r.ht_deg[sel], r.values_deg[sel, k] * f, r.measured[sel, k]
-            points = _cycle_points(ht)
-            ax.plot(*_envelope(ht, np.where(ok, np.nan, y), points=points), color="silver", lw=1.0, ls=ls)
-            ax.plot(*_envelope(ht, np.where(ok, y, np.nan), points=points), color=colour, lw=1.3, ls=ls)
-            if has_u:
-                band = 2.0 * r.u_deg[sel, k]
-                ax.fill_between(*_envelope(ht, np.where(ok, y - band, np.nan), np.where(ok, y + band, np.nan), keep=2,
-                                           points=points), color=colour, alpha=0.15, lw=0)
+        phases = {p: _phase_curves(r, k, f, [c for c in cycles if r.phase[r.cycle == c][0] == p]) for p in (1, 2)}
+        if has_u:  # the bands first, every line above them
+            for p, (ht, _, _, lo, hi) in phases.items():
+                if ht.size:
+                    ax.fill_between(ht, lo, hi, color=_PHASE_STYLE[p][0], alpha=0.15, lw=0)
+        for p, (ht, grey, shown, _, _) in phases.items():
+            if ht.size:
+                colour, ls = _PHASE_STYLE[p]
+                ax.plot(ht, grey, color="silver", lw=1.0, ls=ls)
+                ax.plot(ht, shown, color=colour, lw=1.3, ls=ls)
         _axes_style(ax, name, r.labels, k >= 4, r.signs)
     extra = [Line2D([], [], color="silver", label="not a measurement")]
     if has_u:

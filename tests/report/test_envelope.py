@@ -12,7 +12,8 @@ from scipy.ndimage import distance_transform_edt
 from scipy.signal import butter, filtfilt
 
 from exubio.report.page_figures import PLOT_POINTS, _envelope
-from exubio.report.rhythm_page import CYCLE_BIN_DEG, _cycle_points
+from exubio.report.rhythm_page import CYCLE_BIN_DEG, _cycle_points, _phase_curves
+from exubio.scapulohumeral.table import TrialRhythm
 
 
 def _signal(n: int, seed: int) -> np.ndarray:
@@ -92,26 +93,43 @@ def test_page_ones_thinned_curve_and_band_draw_what_every_sample_draws():
             assert _apart_px(*inked) <= apart, dpi
 
 
-def test_a_rhythm_cycle_thinned_by_elevation_draws_what_every_sample_draws():
-    """A raising cycle of 600 frames over 110 deg of HT elevation in a rhythm panel's place."""
+def test_a_phases_cycles_thinned_by_elevation_draw_what_every_sample_draws():
+    """Two raising cycles of 600 frames over 110 deg of HT elevation (one with frames not
+    measured), as the rhythm page draws a phase (_phase_curves: each cycle thinned, a break between
+    cycles), in a rhythm panel's place, against each cycle drawn from every sample."""
     n = 600
     rng = np.random.default_rng(4)
     low_pass = butter(2, 6.0 / 100.0)
-    ht = np.linspace(10.0, 120.0, n) + filtfilt(*low_pass, rng.normal(0, 0.5, n))
-    y = -0.4 * ht + filtfilt(*low_pass, rng.normal(0, 1.0, n))
-    ok = np.ones(n, dtype=bool)
+    ht = np.concatenate([np.linspace(10.0, 120.0, n) + filtfilt(*low_pass, rng.normal(0, 0.5, n)) for _ in range(2)])
+    y = -0.4 * ht + filtfilt(*low_pass, rng.normal(0, 1.0, 2 * n))
+    ok = np.ones(2 * n, dtype=bool)
     ok[400:430] = False
     u = 1.0 + 0.02 * ht
-    points = _cycle_points(ht)
-    assert points == 2 * int(np.ceil(np.ptp(ht) / CYCLE_BIN_DEG)) and points < n / 2
+    cycle = np.repeat([0, 1], n)
+    r = TrialRhythm(time_s=np.arange(2 * n) / 200.0, ht_deg=ht, plane_deg=np.zeros(2 * n), phase=np.ones(2 * n, int),
+                    cycle=cycle, names=("ST_X_upward_rotation",), values_deg=y[:, None], u_deg=u[:, None],
+                    measured=ok[:, None])
+    h, grey, shown, lo, hi = _phase_curves(r, 0, 1.0, [0, 1])
+    assert np.isnan(h).sum() == 1 and len(h) < n  # one break between the cycles; thinned
+    assert _cycle_points(ht[:n]) == 2 * int(np.ceil(np.ptp(ht[:n]) / CYCLE_BIN_DEG))
 
-    thin = (lambda *a, **k: _envelope(*a, **k, points=points))
-    artists = (lambda ax, f: ax.plot(*f(ht, np.where(ok, y, np.nan)), color="tab:blue", lw=1.3),
-               lambda ax, f: ax.plot(*f(ht, np.where(ok, np.nan, y)), color="silver", lw=1.0),
-               lambda ax, f: ax.fill_between(*f(ht, np.where(ok, y - 2 * u, np.nan), np.where(ok, y + 2 * u, np.nan),
-                                                keep=2), color="tab:blue", alpha=0.15, lw=0))
-    for artist in artists:
+    def every(ax, which):
+        for c in (0, 1):
+            sel = cycle == c
+            ys = {"shown": np.where(ok, y, np.nan), "grey": np.where(ok, np.nan, y)}
+            if which == "band":
+                ax.fill_between(ht[sel], np.where(ok, y - 2 * u, np.nan)[sel], np.where(ok, y + 2 * u, np.nan)[sel],
+                                color="tab:blue", alpha=0.15, lw=0)
+            else:
+                ax.plot(ht[sel], ys[which][sel], color="tab:blue", lw=1.3)
+
+    def thin(ax, which):
+        if which == "band":
+            ax.fill_between(h, lo, hi, color="tab:blue", alpha=0.15, lw=0)
+        else:
+            ax.plot(h, {"shown": shown, "grey": grey}[which], color="tab:blue", lw=1.3)
+
+    for which in ("shown", "grey", "band"):
         for dpi, apart in ((110, 1.0), (330, 2.5)):
-            inked = [_inked(artist, f, ((0, 180), (-60, 5)), (0.06, 0.55, 0.2, 0.3), dpi)
-                     for f in ((lambda *a, **k: a), thin)]
-            assert _apart_px(*inked) <= apart, dpi
+            inked = [_inked(draw, which, ((0, 180), (-60, 5)), (0.06, 0.55, 0.2, 0.3), dpi) for draw in (every, thin)]
+            assert _apart_px(*inked) <= apart, (which, dpi)
