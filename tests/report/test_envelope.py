@@ -1,8 +1,8 @@
 """The report's curves are drawn thinned to their envelope (exubio.report.page_figures._envelope):
 every bin keeps its minimum and maximum, every gap (NaN) keeps its edges, and what is drawn from the
 thinned curves lies within one pixel of what every sample draws at the resolution of the report's
-PNG, and within 2.5 pixels (less than one of those) at three times it. The curves are the filtered angles a trial gives (a
-Butterworth low pass of a noisy motion with spikes), with gaps."""
+PNG, and within 2.5 pixels (less than one of those) at three times it. The curves are the filtered
+angles a trial gives (a Butterworth low pass of a noisy motion with spikes), with gaps."""
 from __future__ import annotations
 
 import numpy as np
@@ -52,14 +52,14 @@ def test_every_bins_extremes_and_every_gap_edge_are_kept():
     assert _envelope(short, lo[:PLOT_POINTS])[0] is short  # short curves are drawn whole
 
 
-def _inked(artist, thin, limits, rect, dpi) -> np.ndarray:
-    """The pixels ``artist(ax, thin)`` inks (darker than 95 % white) in axes of limits ``limits``
+def _inked(artist, how, limits, rect, dpi) -> np.ndarray:
+    """The pixels ``artist(ax, how)`` inks (darker than 95 % white) in axes of limits ``limits``
     and of the size of ``rect`` on an A4 page (figure fractions; only the axes are drawn)."""
     fig = Figure(figsize=(11.69 * rect[2], 8.27 * rect[3]), dpi=dpi)
     FigureCanvasAgg(fig)
     ax = fig.add_axes((0.0, 0.0, 1.0, 1.0))
     ax.set_axis_off()
-    artist(ax, thin)
+    artist(ax, how)
     ax.set_xlim(*limits[0])
     ax.set_ylim(*limits[1])
     fig.canvas.draw()
