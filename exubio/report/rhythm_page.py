@@ -99,13 +99,13 @@ def _notes(ref: Reference | None, lines: Sequence[str]) -> str:
     return "\n".join(out)
 
 
-def _phase_curves(r: TrialRhythm, k: int, f: float, cycles) -> tuple[np.ndarray, ...]:
-    """Angle k's cycles of one phase as one curve each of HT elevation, not-measured values (grey),
-    measured values and the +-2u band's edges (measured frames): every cycle thinned to its
-    envelope (``_cycle_points``), a NaN between cycles (a break in the line and the band)."""
+def _phase_curves(r: TrialRhythm, k: int, f: float, cycles: Sequence[np.ndarray]) -> tuple[np.ndarray, ...]:
+    """Angle k's cycles of one phase (each its frames' indices) as one curve each of HT elevation,
+    not-measured values (grey), measured values and the +-2u band's edges (measured frames): every
+    cycle thinned to its envelope (``_cycle_points``), a NaN between cycles (a break in the line
+    and the band)."""
     parts = []
-    for c in cycles:
-        sel = r.cycle == c
+    for sel in cycles:
         ht, y, ok = r.ht_deg[sel], r.values_deg[sel, k] * f, r.measured[sel, k]
         band = 2.0 * r.u_deg[sel, k]
         parts.append(np.column_stack(_envelope(ht, np.where(ok, np.nan, y), np.where(ok, y, np.nan),
@@ -121,11 +121,12 @@ def trial_rhythm_page(r: TrialRhythm, ref: Reference | None, title: str, /, *, m
     fig, _ = _page_figure(("rhythm",), lambda: _figure()[0])  # a free rhythm page of this process, else a new one
     axes = np.asarray(fig.axes)
     has_u = np.isfinite(r.u_deg).any()
-    cycles = np.unique(r.cycle[r.cycle >= 0])
+    frames = [np.flatnonzero(r.cycle == c) for c in np.unique(r.cycle[r.cycle >= 0])]  # each cycle's, in time order
+    by_phase = {p: [sel for sel in frames if r.phase[sel[0]] == p] for p in (1, 2)}
     for k, (ax, name) in enumerate(zip(axes, r.names)):
         _corridor(ax, ref, name, r.signs)
         f = factors([name], r.signs)[0]  # ISB inside, drawn in the trial's convention
-        phases = {p: _phase_curves(r, k, f, [c for c in cycles if r.phase[r.cycle == c][0] == p]) for p in (1, 2)}
+        phases = {p: _phase_curves(r, k, f, cycles) for p, cycles in by_phase.items()}
         if has_u:  # the bands first, every line above them
             for p, (ht, _, _, lo, hi) in phases.items():
                 if ht.size:

@@ -109,7 +109,7 @@ def test_a_phases_cycles_thinned_by_elevation_draw_what_every_sample_draws():
     r = TrialRhythm(time_s=np.arange(2 * n) / 200.0, ht_deg=ht, plane_deg=np.zeros(2 * n), phase=np.ones(2 * n, int),
                     cycle=cycle, names=("ST_X_upward_rotation",), values_deg=y[:, None], u_deg=u[:, None],
                     measured=ok[:, None])
-    h, grey, shown, lo, hi = _phase_curves(r, 0, 1.0, [0, 1])
+    h, grey, shown, lo, hi = _phase_curves(r, 0, 1.0, [np.flatnonzero(cycle == c) for c in (0, 1)])
     assert np.isnan(h).sum() == 1 and len(h) < n  # one break between the cycles; thinned
     assert _cycle_points(ht[:n]) == 2 * int(np.ceil(np.ptp(ht[:n]) / CYCLE_BIN_DEG))
 
