@@ -52,7 +52,6 @@ from exubio.errors import InputError, ReconstructionError
 from exubio.model.kinematics import Kinematics
 from exubio.methods.common import CHUNK_FRAMES, ChunkSink, Collector, assemble, target_chunk
 from exubio.methods.constraints import project_on_constraints
-from exubio.model.frame_kinematics import FrameInverse
 from exubio.methods.pf_time import integration_step, lead_in_frames, lead_in_run
 from exubio.types import StopReason
 from exubio.methods.poses import RATES_REGULARISATION, Limits, LSOptions, solve_positions, solve_rates
@@ -324,7 +323,6 @@ class _Frames:
         self.raw_g = self.raw_gqd = float("nan")
         self.sum_res, self.n_res = 0.0, 0
         self.sink_s = self.recovery_s = self.residuals_s = 0.0
-        self.frame_inverse: FrameInverse | None = None
 
     @property
     def busy_s(self) -> float:
@@ -356,19 +354,13 @@ class _Frames:
 
     def coordinates(self, run) -> np.ndarray:
         """Joint coordinates (n, m) of the frames of ``run`` on the start posture's branch (unwrapped
-        across chunks), before the projection on the constraints (the live loop's step 1)."""
+        across chunks), before the projection on the constraints (the live loop does the same a frame at a
+        time: exubio.run.live.frame)."""
         ta = time.perf_counter()
-        if run.rotations.shape[0] == 1:  # one frame (live): the same map in fewer array operations
-            if self.frame_inverse is None:
-                self.frame_inverse = FrameInverse(self.kin)
-            raw = self.frame_inverse(run.rotations[0])[None]
-        else:
-            raw = self.kin.coordinates_from_rotations(run.rotations)
+        raw = self.kin.coordinates_from_rotations(run.rotations)
         if self.last_raw is None:
             q = np.unwrap(raw, axis=0)
             self.shift = 2.0 * np.pi * np.round((q[0] - self.q0) / (2.0 * np.pi))  # same branch as the start posture
-        elif raw.shape[0] == 1:  # one frame (live): np.unwrap's arithmetic on the one difference, without its set-up
-            q = (raw + _unwrap_correction(raw - self.last_raw)) + (self.last_unwrapped - self.last_raw)
         else:  # continue the unwrapping of the frames before
             q = np.unwrap(np.vstack([self.last_raw[None], raw]), axis=0)[1:] + (self.last_unwrapped - self.last_raw)
         self.last_raw, self.last_unwrapped = raw[-1], q[-1]
@@ -400,18 +392,6 @@ class _Frames:
 
     def mean_deflection_m(self) -> float:
         return self.sum_res / self.n_res if self.n_res else float("nan")
-
-
-def _unwrap_correction(dd: np.ndarray) -> np.ndarray:
-    """What np.unwrap (period 2 pi) adds to a sample whose difference from the one before is ``dd``
-    (the same operations, so the same bits)."""
-    if (np.abs(dd) < np.pi).all():  # (every step: nothing to add)
-        return np.zeros_like(dd)
-    ddmod = np.mod(dd + np.pi, 2.0 * np.pi) - np.pi
-    ddmod[(ddmod == -np.pi) & (dd > 0)] = np.pi
-    correction = ddmod - dd
-    correction[np.abs(dd) < np.pi] = 0.0
-    return correction
 
 
 def _nanmax(a: float, b: float) -> float:

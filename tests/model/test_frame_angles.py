@@ -1,7 +1,6 @@
 """The live loop's one-frame kernels against the batch functions they stand in for: FrameAngles
 (exubio.model.frame_angles) gives exubio.model.angles.isb_table's angles (its numpy reference bitwise,
-its compiled kernel to round-off), FrameForward (exubio.model.frame_kinematics) bitwise
-Kinematics.frames' R and p (the same kernel), FrameInverse
+its compiled kernel to round-off), FrameInverse (exubio.model.frame_kinematics)
 coordinates_from_rotations' coordinates to round-off, the causal thorax frame of one frame
 exubio.prep.thorax.thorax_frame's to round-off: random postures over and beyond every range, at the
 range limits and at the gimbal locks."""
@@ -68,19 +67,6 @@ def test_frame_inverse_is_coordinates_from_rotations():
             got = inverse(R, prev)
             assert np.array_equal(kin.coordinates_from_rotations(R, q_previous=prev), got)  # the same kernel
             assert np.abs(got - want).max() <= tol, (np.degrees(q), got - want)
-
-
-def test_frame_forward_is_kinematics_frames_bitwise():
-    from exubio.model.frame_kinematics import FrameForward
-
-    model = load_model()
-    kin = Kinematics(model)
-    forward = FrameForward(kin)
-    lo, hi = np.clip(model.coordinate_ranges_rad.T, -np.pi, np.pi)  # a half turn each way where unbounded
-    for q in np.random.default_rng(5).uniform(lo - 1, hi + 1, size=(200, len(lo))):
-        R, p = forward(q)
-        fr = kin.frames(q)
-        assert np.array_equal(R, fr.R) and np.array_equal(p, fr.p)
 
 
 def test_thorax_frame_of_one_frame_is_thorax_frame():

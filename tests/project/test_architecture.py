@@ -27,7 +27,8 @@ OWNERS = {
     "isal": {"run/csv_gz.py"},  # the study tables' gzip
     "pylsl": {"run/live/transport.py"},
     "numba": {"model/kernels.py",  # the compiled kernels, imported where used (0.2 s to import)
-              "model/batch_kernels.py"},  # those of the preparation and the checks (filter, chain fits), bit-identical
+              "model/batch_kernels.py",  # those of the preparation and the checks (filter, chain fits), bit-identical
+              "model/live_kernels.py"},  # one live frame's outputs in one call, bit-identical
 }
 VALIDATION_STUDY = tuple(f"exubio.validation.{m}" for m in ("run", "trials", "determinacy", "sensitivity", "residuals",
                                                               "sier", "invivo", "c3d_tasks", "agreement", "mismatch"))

@@ -8,6 +8,7 @@ from exubio.model.angles import anatomical_table
 from exubio.model.load import load_model
 from exubio.protocol.bind import bind
 from exubio.run.inputs import protocol_for_model
+from exubio.run.live.frame import LiveFrame
 from exubio.run.live.monitor import LiveMonitor
 from exubio.run.live.options import LiveOptions
 from exubio.trust.assess import gh_elevation_limit
@@ -24,9 +25,10 @@ def test_the_live_verdict_names_a_humerus_past_the_gh_bound_as_the_offline_one_d
                           lambda *args: None)
     q = np.zeros((6, model.n_coordinates))
     q[3:, model.coordinate_names.index("gh_abduction")] = np.radians([120.0, 178.0, 178.0])  # 120: inside
-    R = binding.kin.frames(q).R
+    frame = LiveFrame(model, binding.kin, binding.points, 100.0, monitor.gh_axes)  # the live loop's, from q
+    measured = np.zeros((len(binding.protocol.marker_names), 3))
     for g in range(len(q)):
-        monitor.gh_elevation(g, R[g])
+        monitor.gh_elevation(g, frame.outputs(q[g], measured).gh_elevation)
     monitor.verdict(len(q) - 1, COUNTS, [])
     (offline,) = gh_elevation_limit(*anatomical_table(model, q))
     (reason,) = [r for r in monitor.quality.reasons if r.code == "limit"]

@@ -44,9 +44,10 @@ from exubio.trust import quality as Q
 from exubio.errors import InputError, ReconstructionError
 from exubio.run.live.causal import CausalFrame, CausalTargets
 from exubio.run.live.intake import EndRun, Sample, SampleIntake
-from exubio.run.live.monitor import LiveMonitor, mean_finite
+from exubio.run.live.frame import LiveFrame
+from exubio.run.live.monitor import LiveMonitor
 from exubio.run.live.options import LiveOptions
-from exubio.run.live.outputs import ISB_NAMES, VERDICT_CODES, Event, FrameRecord, LiveRecording, PublishedAngles
+from exubio.run.live.outputs import ISB_NAMES, VERDICT_CODES, Event, FrameRecord, LiveRecording
 from exubio.run.live.sources import MarkerSource
 from exubio.methods.pf import _Frames, pf_setup
 from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Trajectories
@@ -161,23 +162,17 @@ class LiveSession:
     def _publish(self, g: int, q: np.ndarray | None, measured_m: np.ndarray | None) -> tuple:
         """The frame's output row: the ISB angles of q, their rates (backward differences of the
         published angles), the measured flags, the residuals, the running verdict."""
-        k = len(self.marker_names)
         if q is not None:
-            R, p = self.forward(q)  # once, for the angles and the model points (Kinematics.frames' R and p)
-            isb, rate = self.angles.of(q, R)
-            self.monitor.gh_elevation(g, R)
-            pts = self.model_points(R, p)  # kin.points' kernel
-            d = pts - measured_m
-            res = np.sqrt(np.add.reduce(d * d, axis=1))  # np.linalg.norm(d, axis=1)'s operations
+            out = self.frame_out.outputs(q, measured_m)  # one compiled call (exubio.run.live.frame)
+            isb, rate, res, pts, mean_res = out.isb, out.rate, out.residuals, out.points, out.mean_residual_mm
+            self.monitor.gh_elevation(g, out.gh_elevation)
         else:
-            isb, rate = self.angles.none()
-            res = np.full(k, np.nan)
-            pts = None
+            isb, rate = self.frame_out.none()
+            res, pts, mean_res = np.full(len(self.marker_names), np.nan), None, np.nan
         self.out_isb = isb
         behind = self.intake.backlog(g)
         sample = self.current_sample
         ts = np.nan if sample is None else sample.timestamp
-        mean_res = mean_finite(res) * 1e3
         self.out_mean_res, self.out_behind = mean_res, behind
         if self.publish is not None:
             row = np.concatenate([np.degrees(isb) * self.angle_signs, np.degrees(rate) * self.angle_signs,
@@ -288,6 +283,7 @@ class LiveSession:
         b = setup.binding
         frames = _Frames(b.kin, b.points, None, setup.q0, b.held, self.options.pf, None, 1.0 / self.rate)
         self.run_id += 1
+        self.frame_out.start_run(setup.q0)
         _settle_heap(freeze=self.own_gc)  # the new run's system is built: frozen with the rest
         self.run_started = self.clock()
         self.tracking = True
@@ -325,7 +321,7 @@ class LiveSession:
             frame, self.current_sample = self.pending.pop(g)  # (a reduced step may have fetched the next)
             # the angles first (published at once); what does not steer the next steps (rates,
             # constraint residuals, noise gains, running figures) a batch of frames at a time
-            q = frames.coordinates(part)
+            q = self.frame_out.coordinates(part.rotations[0])[None]
             rates = frames.rates(q, part) if projected else None  # the published angles are the projected ones
             if rates is not None:
                 q = rates[0]
@@ -390,7 +386,6 @@ class LiveSession:
         self.n_failed = self.n_no_state = self.n_stepped = 0
 
     def _bind(self) -> None:
-        from exubio.model.frame_kinematics import FrameForward, FramePoints
         from exubio.protocol.bind import bind
 
         self.causal = CausalTargets(self.protocol, self.labels, self.rate, options=self.options.causal,
@@ -400,7 +395,6 @@ class LiveSession:
         self.marker_names = self.protocol.marker_names
         self.binding = bind(self.model, self.protocol)  # once per session (and again after a calibration)
         self.kin, self.points = self.binding.kin, self.binding.points
-        self.forward, self.model_points = FrameForward(self.kin), FramePoints(self.kin, self.points)
         self.monitor = LiveMonitor(self.binding, self.rate, self.options,
                                    self.causal.columns >= 0,  # optional markers the stream does not carry: no gap events
                                    self._event)
@@ -409,7 +403,7 @@ class LiveSession:
         self.pending: dict[int, tuple] = {}  # frame -> (CausalFrame, its sample) taken, not yet solved
         self.deferred: list = []
         self.run_id, self.run_started, self.n_frames, self.tracking = -1, self.clock(), 0, False
-        self.angles = PublishedAngles(self.model, self.kin, self.rate)
+        self.frame_out = LiveFrame(self.model, self.kin, self.points, self.rate, self.monitor.gh_axes)
         from exubio.model.signs import factors
 
         self.angle_signs = factors(ISB_NAMES, self.protocol.signs)  # the stream's convention (ISB inside)

@@ -199,13 +199,9 @@ class LiveMonitor:
                 self.lim_count[j] += 1
                 self.lim_beyond[j] = max(self.lim_beyond[j], beyond[j])
 
-    def gh_elevation(self, g: int, rotations: np.ndarray) -> None:
-        """Frame g's GH elevation (the angle between the scapula's and the humerus's long axes, from its
-        segment rotations (n_seg, 3, 3)) against its bound (exubio.trust.quality.GH_ELEVATION_MAX_DEG)."""
-        if self.gh_axes is None:
-            return
-        (s, ys), (h, yh) = self.gh_axes
-        e = math.acos(min(1.0, max(-1.0, float((rotations[s] @ ys) @ (rotations[h] @ yh)))))
+    def gh_elevation(self, g: int, e: float) -> None:
+        """Frame g's GH elevation e (rad: the angle between the scapula's and the humerus's long axes,
+        ``gh_axes``; NaN without them) against its bound (exubio.trust.quality.GH_ELEVATION_MAX_DEG)."""
         if e >= self.gh_bound - AT_LIMIT_TOLERANCE_RAD:
             if self.gh_count == 0:
                 self.gh_first = g

@@ -21,7 +21,7 @@ if TYPE_CHECKING:
     from exubio.run.live.options import LiveOptions
 
 __all__ = ["OUTPUT_CHANNELS", "VERDICT_CODES", "ISB_NAMES", "angles_measured", "Event", "LiveRecording",
-           "FrameRecord", "PublishedAngles"]
+           "FrameRecord"]
 
 VERDICT_CODES = {"ok": 0, "check": 1, "fail": 2}
 
@@ -205,45 +205,6 @@ class FrameRecord:
                 "p99": float(np.percentile(lat, 99)) if lat.size else None,
                 "max": float(lat.max()) if lat.size else None,
                 "definition": "from taking a sample off the source to publishing its angles"}
-
-
-class PublishedAngles:
-    """The ISB angles a session publishes, frame after frame: those of q (15,), unwrapped against the
-    previous frame, and their rates (backward differences of the published angles)."""
-
-    def __init__(self, model: Model, kin, rate: float):
-        from exubio.model.angles import anatomical_frames
-        from exubio.model.frame_angles import FrameAngles
-
-        self.model, self.kin, self.rate = model, kin, rate
-        self.anatomical = anatomical_frames(model)
-        self.frame_angles = FrameAngles(model, self.anatomical)
-        self.last_isb = None
-        self.last_isb_row = None
-
-    def of(self, q: np.ndarray, rotations: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """The angles of q (with its segment rotations where the caller has them) and their rates
-        (zero after a frame without angles)."""
-        isb = self._isb(q, rotations)
-        rate = (isb - self.last_isb_row) * self.rate if self.last_isb_row is not None else np.zeros_like(isb)
-        self.last_isb_row = isb
-        return isb, rate
-
-    def none(self) -> tuple[np.ndarray, np.ndarray]:
-        """A frame without angles (NaN, and the next frame's rates start again at zero)."""
-        isb = rate = np.full(len(ISB_NAMES), np.nan)
-        self.last_isb_row = None
-        return isb, rate
-
-    def _isb(self, q: np.ndarray, rotations: np.ndarray | None = None) -> np.ndarray:
-        """The ISB angles of q (15,), unwrapped against the previous frame."""
-        if rotations is None:
-            rotations = self.kin.frames(q).R
-        ang = self.frame_angles(rotations)  # isb_table's angles of one frame (compiled kernel, to round-off)
-        if self.last_isb is not None:
-            ang = self.last_isb + (ang - self.last_isb + np.pi) % (2 * np.pi) - np.pi
-        self.last_isb = ang
-        return ang
 
 
 @dataclass
