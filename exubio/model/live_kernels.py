@@ -160,3 +160,93 @@ def frame_outputs(q, parent, centre, first, count, axes, sk, sk2, segments, A, p
             n_ok += 1
     mean = _numpy_sum(finite, n_ok) / n_ok * 1e3 if n_ok else np.nan
     return mean, gh
+
+
+@numba.njit(cache=True, nogil=True)
+def _point_jacobian(R, p, ax, piv, wc, affects, seg, local, r, J):
+    """The point ``local`` of segment ``seg`` at r (3,) and its Jacobian J (3, m) (Kinematics.point_jacobian:
+    column j = a_j x r - a_j x c_j where coordinate j moves the segment)."""
+    _point(R, p, seg, local, r)
+    for j in range(ax.shape[0]):
+        f = affects[seg, j]
+        J[0, j] = ((ax[j, 1] * r[2] - ax[j, 2] * r[1]) - wc[j, 0]) * f
+        J[1, j] = ((ax[j, 2] * r[0] - ax[j, 0] * r[2]) - wc[j, 1]) * f
+        J[2, j] = ((ax[j, 0] * r[1] - ax[j, 1] * r[0]) - wc[j, 2]) * f
+
+
+@numba.njit(cache=True, nogil=True)
+def frame_noise_gains(q, parent, centre, first, count, axes, sk, sk2, affects, pt_seg, pt_local, ct_seg, ct_local,
+                      ell_centre, a_diag, weights, present, free, gain):
+    """exubio.trust.observability's noise gains (deg per mm of marker noise) of one frame q (m,) into gain
+    (m,): NaN where q is not finite and for the coordinates not in ``free`` (f,), inf for those a direction
+    no present marker sees moves. The markers: pt_seg, pt_local (k,), weighted by weights (k,) where present;
+    the ellipsoid's contact points ct_seg, ct_local, its centre and a_diag; parent ... sk2 the forward
+    kinematics' tables and affects (n_seg, m) which coordinates move which segment. The same formulas as
+    observability._gains (the constrained design's null space by an SVD, the information's pseudo-inverse
+    and rank by its eigen-decomposition, as numpy's hermitian pinv and matrix_rank take them), to round-off:
+    the flags a threshold draws on them are the trial function's (tests/trust/test_frame_determinacy.py)."""
+    m, k, nf = q.shape[0], pt_seg.shape[0], free.shape[0]
+    for j in range(m):
+        gain[j] = np.nan
+    for j in range(m):
+        if not np.isfinite(q[j]):
+            return
+    n_seg = parent.shape[0]
+    R, p = np.empty((n_seg, 3, 3)), np.empty((n_seg, 3))
+    ax, piv, wc = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3))
+    Rc, T, E = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3))
+    _forward_one(q, parent, centre, first, count, axes, sk, sk2, R, p, ax, piv, Rc, T, E)
+    for j in range(m):
+        wc[j, 0] = ax[j, 1] * piv[j, 2] - ax[j, 2] * piv[j, 1]
+        wc[j, 1] = ax[j, 2] * piv[j, 0] - ax[j, 0] * piv[j, 2]
+        wc[j, 2] = ax[j, 0] * piv[j, 1] - ax[j, 1] * piv[j, 0]
+    r, Jp = np.empty(3), np.empty((3, m))
+    G = np.zeros((ct_seg.shape[0], nf))
+    for c in range(ct_seg.shape[0]):
+        _point_jacobian(R, p, ax, piv, wc, affects, ct_seg[c], ct_local[c], r, Jp)
+        for a in range(nf):
+            s = 0.0
+            for i in range(3):
+                s += (r[i] - ell_centre[i]) * a_diag[i] * Jp[i, free[a]]
+            G[c, a] = 2.0 * s
+    _, _, Vt = np.linalg.svd(G)
+    nn = nf - G.shape[0]
+    N = np.ascontiguousarray(Vt[G.shape[0]:, :].T)  # (f, f - 2): the directions the constraints allow
+    M, S = np.zeros((nn, nn)), np.zeros((nn, nn))
+    A = np.empty((3, nn))
+    for n in range(k):
+        if not present[n] or weights[n] == 0.0:
+            continue
+        _point_jacobian(R, p, ax, piv, wc, affects, pt_seg[n], pt_local[n], r, Jp)
+        for i in range(3):
+            for b in range(nn):
+                s = 0.0
+                for a in range(nf):
+                    s += Jp[i, free[a]] * N[a, b]
+                A[i, b] = s
+        w = weights[n]
+        for b in range(nn):
+            for c in range(nn):
+                s = A[0, b] * A[0, c] + A[1, b] * A[1, c] + A[2, b] * A[2, c]
+                M[b, c] += w * s
+                S[b, c] += w * w * s
+    lam, U = np.linalg.eigh(M)
+    top = np.abs(lam).max()
+    Minv = np.zeros((nn, nn))
+    rank = 0
+    for i in range(nn):
+        if abs(lam[i]) > 1e-12 * top:  # numpy's pinv and matrix_rank (hermitian, rcond = rtol = 1e-12)
+            rank += 1
+            for b in range(nn):
+                for c in range(nn):
+                    Minv[b, c] += U[b, i] * U[c, i] / lam[i]
+    P = N @ Minv  # (f, nn)
+    cov_diag = np.sum((P @ S) * P, axis=1)
+    for a in range(nf):
+        gain[free[a]] = np.degrees(np.sqrt(max(cov_diag[a], 0.0))) / 1000.0
+    if rank < nn:  # the coordinates a direction no marker sees moves: undetermined
+        NU = N @ U
+        for a in range(nf):
+            for i in range(nn):
+                if lam[i] <= 1e-12 * lam[nn - 1] and abs(NU[a, i]) > 1e-6:
+                    gain[free[a]] = np.inf
