@@ -141,7 +141,7 @@ model and its exports 2.8e-9; accuracy against the truth the same to every print
 38) were compared with the commits before them: identical (demo and study), and the merge of the
 three with the kernels' branch alone: identical. The earlier entries are in this file's history."""
 HEAD_BEHAVIOUR: tuple = (
-    ("""
+    ("b37a63e", """
 def _page_one_every_sample():
     import exubio.report.trial_report as tr
     tr._envelope = lambda t, *ys, **kw: (t, *ys)
@@ -154,7 +154,8 @@ _page_one_every_sample()
      "the head draws every sample, as the base does, for its PNG to be compared pixel for pixel"),
 )
 """Changes of behaviour since the base, undone in the head's runs (code its sitecustomize runs
-before the command), each (code, why)."""
+before the command), each (the commit that made the change, code, why): undone only where the base
+predates that commit (a base that has it draws as the head does)."""
 PDF_REASON = ("PDF reports print wall times and ms per frame (trial report, study table), and matplotlib "
               "writes the creation date: their bytes differ run to run. Compared: the page count. The "
               "numbers they plot are the CSV/NPZ files compared exactly, and a trial report's first page "
@@ -364,12 +365,20 @@ def fill(arg: str, out: Path, checkout: Path, data: Path) -> str:
     return arg.replace("{out}", str(out)).replace("{checkout}", str(checkout)).replace("{data}", str(data))
 
 
-def run_side(label: str, checkout: Path, run_root: Path, sets: list[str], data: Path, commit: str | None) -> dict:
+def undone_for(repo: Path, base_commit: str | None) -> list[tuple]:
+    """The HEAD_BEHAVIOUR entries a base needs undone: those whose commit the base does not contain
+    (all of them when the base's commit is not known)."""
+    return [e for e in HEAD_BEHAVIOUR if base_commit is None
+            or git(repo, "merge-base", "--is-ancestor", e[0], base_commit, check=False).returncode != 0]
+
+
+def run_side(label: str, checkout: Path, run_root: Path, sets: list[str], data: Path, commit: str | None,
+             undo_entries: list[tuple] = ()) -> dict:
     """Run every step of the sets with one checkout; the outputs in run_root/outputs/<set>/, the
     logs in run_root/logs/<set>/, what was run in run_root/manifest.json."""
     shim = run_root / "shim"
     shim.mkdir(parents=True, exist_ok=True)
-    undo = "".join(code for code, _ in HEAD_BEHAVIOUR) if label == "head" else ""
+    undo = "".join(code for _, code, _ in undo_entries) if label == "head" else ""
     (shim / "sitecustomize.py").write_text(SHIM + undo, encoding="utf-8")
     cwd = run_root / "cwd"
     cwd.mkdir(exist_ok=True)
@@ -657,7 +666,7 @@ def print_table(rows: list[dict]) -> None:
             print(f"  {r['set']}: {rel}: {d}")
 
 
-def print_ignored() -> None:
+def print_ignored(undone: list[tuple]) -> None:
     print("not compared (values blanked; the keys, columns and arrays must still be there):")
     for title, table in (("JSON key", IGNORED_KEYS), (".npz array", IGNORED_NPZ_ARRAYS),
                          ("CSV column", IGNORED_CSV_COLUMNS), ("path", PATH_PLACEHOLDERS)):
@@ -667,7 +676,7 @@ def print_ignored() -> None:
     print("undone before the comparison (changes made on purpose):")
     for side, pattern, _, why in KNOWN_CHANGES:
         print(textwrap.fill(f"{side} {pattern}: {why}", 110, initial_indent="  ", subsequent_indent="      "))
-    for _, why in HEAD_BEHAVIOUR:
+    for _, _, why in undone:
         print(textwrap.fill(f"head runs with the old behaviour: {why}", 110, initial_indent="  ",
                             subsequent_indent="      "))
 
@@ -780,7 +789,8 @@ def main(argv: list[str] | None = None) -> int:
         head_dir = head_dir.resolve()
         if head_commit is None and (head_dir / ".git").exists():
             head_commit = git(head_dir, "rev-parse", "HEAD", check=False).stdout.strip() or None
-        head_manifest = run_side("head", head_dir, tmp / "run-head", sets, data, head_commit)
+        undone = undone_for(args.repo, base_commit)
+        head_manifest = run_side("head", head_dir, tmp / "run-head", sets, data, head_commit, undone)
 
         base = Side(base_root, base_manifest, ignore=not args.no_ignore)
         head = Side(tmp / "run-head", head_manifest, ignore=not args.no_ignore, side="head")
@@ -794,7 +804,7 @@ def main(argv: list[str] | None = None) -> int:
               f"vs head {head_dir}" + (f" ({head_commit}{' + uncommitted changes' if dirty else ''})" if head_commit else ""))
         print_table(rows)
         if not args.no_ignore:
-            print_ignored()
+            print_ignored(undone)
         if skipped:
             print(f"skipped (no real data): {', '.join(skipped)}")
         n = sum(len(r["diffs"]) for r in rows)

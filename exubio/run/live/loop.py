@@ -154,10 +154,14 @@ class LiveSession:
         return frame, active
 
     # ------------------------------------------------------------------ outputs
-    def _empty(self, g: int, status: FrameStatus = FrameStatus.TOO_FEW_MARKERS) -> None:
+    def _empty(self, g: int, status: FrameStatus = FrameStatus.TOO_FEW_MARKERS, *, publish: bool = True) -> None:
         """A frame no PF run holds (before a run starts, a failed frame): published and recorded empty."""
-        self._publish(g, None, None)
-        self._record_output(g, None, status)
+        if publish:
+            self._publish(g, None, None)
+        self.record.output(g, status)
+        failed = status == FrameStatus.NOT_CONVERGED
+        self.n_failed, self.n_no_state = self.n_failed + int(failed), self.n_no_state + int(not failed)
+        self._frames_done(g, g)
 
     def _publish(self, g: int, q: np.ndarray | None, measured_m: np.ndarray | None) -> tuple:
         """The frame's output row: the ISB angles of q, their rates (backward differences of the
@@ -203,26 +207,32 @@ class LiveSession:
                                 velocities_m_s=np.stack([b[3].velocities_m_s for b in batch]),
                                 accelerations_m_s2=np.stack([b[3].accelerations_m_s2 for b in batch]))
         recon = frames.finish(q, qd, qdd, targets)  # diverged frames never get here (checked at publishing)
-        for i, g in enumerate(gs):
-            self._record_output(g, (recon.q_rad[i], recon.qd_rad_s[i], recon.qdd_rad_s2[i], recon.model_points_m[i],
-                                    recon.residuals_m[i], recon.constraint[i], recon.constraint_velocity[i]))
+        self._record_outputs(gs[0], recon)  # (a PF run's frames, one after the other)
 
-    def _record_output(self, g: int, out: tuple | None,
-                       status: FrameStatus = FrameStatus.TOO_FEW_MARKERS) -> None:
-        self.record.output(g, out, status, self.run_id)
-        if out is not None:
-            q, res = out[0], out[4]
-            self.monitor.determinacy(g, q, self.record.rows["active"].get(g))
-            self.monitor.running(g, q, res)
-        else:
-            if status == FrameStatus.NOT_CONVERGED:
-                self.n_failed += 1
-            else:
-                self.n_no_state += 1
+    def _record_outputs(self, g0: int, recon) -> None:
+        """The PF results (a Reconstruction of n frames) of frames g0 ... g0 + n - 1 recorded a block at a time,
+        with the running checks and the verdicts where they fall due, as a frame at a time gives them."""
+        n, q, res, mon = recon.n_frames, recon.q_rad, recon.residuals_m, self.monitor
+        self.record.outputs(g0, recon, self.run_id)
+        active, start = self.record.rows["active"], 0
+        while start < n:  # up to the frame the next verdict falls due on
+            stop = n if mon.verdict_due > g0 + n - 1 else max(mon.verdict_due - g0, start) + 1
+            for i in range(start, stop):
+                if g0 + i >= mon.det_due:
+                    mon.determinacy(g0 + i, q[i], active.get(g0 + i))
+            mon.running(g0 + start, q[start:stop], res[start:stop])
+            self._frames_done(g0 + start, g0 + stop - 1)
+            start = stop
+
+    def _frames_done(self, first: int, g: int) -> None:
+        """Frames first ... g recorded: the verdict if due at g, the verdict's code of each frame, the status."""
         self.n_frames = g + 1
+        verdict = self.record.rows["verdict"]
+        if g > first:
+            verdict.set_rows(first, np.full(g - first, VERDICT_CODES[self.monitor.quality.verdict]))
         if self.monitor.verdict_due <= g:
-            self._verdict(g)
-        self.record.rows["verdict"].set(g, VERDICT_CODES[self.monitor.quality.verdict])
+            self.monitor.verdict(g, self._counts(), self.events)
+        verdict.set(g, VERDICT_CODES[self.monitor.quality.verdict])
         now = self.clock()
         if self.on_status is not None and now >= self.status_due:
             self.status_due = now + self.status_every_s
@@ -235,10 +245,6 @@ class LiveSession:
         intake = self.intake
         return {"dropped": intake.n_dropped, "late": intake.n_late, "skipped": intake.n_skipped,
                 "failed": self.n_failed, "no_state": self.n_no_state}
-
-    def _verdict(self, g: int) -> None:
-        """The running verdict at frame g (LiveMonitor.verdict)."""
-        self.monitor.verdict(g, self._counts(), self.events)
 
     # ------------------------------------------------------------------ PF runs
     def _start_run(self, g: int) -> int | None:
@@ -331,7 +337,7 @@ class LiveSession:
                 self._flush(frames)
                 self._event("diverged", g, f"{why}; the PF run restarts from the LS pose")
                 state["end"] = "diverged"
-                self._record_output(g, None, FrameStatus.NOT_CONVERGED)
+                self._empty(g, FrameStatus.NOT_CONVERGED, publish=False)  # (published with its angles)
                 return
             self.monitor.label_check(g, res, pts, frame.positions_m)
             state["last"] = g
@@ -474,7 +480,7 @@ class LiveSession:
         if dropped_run:
             self._event("dropped", self.n_frames - dropped_run, f"{dropped_run} frame(s) never came")
         if self.n_frames:
-            self._verdict(self.n_frames - 1)
+            self.monitor.verdict(self.n_frames - 1, self._counts(), self.events)
         self._event("end", self.n_frames,
                     f"{self.ended_by}: {self.n_frames} frames, verdict {self.monitor.quality.verdict}")
         return self._recording(report)

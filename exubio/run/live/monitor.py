@@ -179,25 +179,33 @@ class LiveMonitor:
                 self._event("label_swap_end", g, f"markers {names[a]} and {names[b]} fit their model points again "
                             f"(swapped for {(g - since) / self.rate:.2f} s): springs on", (names[a], names[b]))
 
-    def running(self, g: int, q: np.ndarray, res: np.ndarray) -> None:
-        """The running residual figures and the frames at a joint limit, with frame g's q and residuals."""
+    def running(self, g0: int, q: np.ndarray, res: np.ndarray) -> None:
+        """The running residual figures and the frames at a joint limit, with the q (n, m) and residuals
+        (n, k) of frames g0 ... g0 + n - 1: the sums added frame after frame and each frame's mean summed
+        as numpy sums one frame's (bit for bit a frame at a time; tests/run/test_live_costs.py)."""
         ok = np.isfinite(res)
-        self.res_sum += np.where(ok, res, 0.0)
-        self.res_sq += np.where(ok, res * res, 0.0)
-        self.res_n += ok
-        if self.n_means == self.frame_means.size:  # an array, not a list: the verdict reads it without a copy
+        vals = np.where(ok, res, 0.0)
+        self.res_sum = np.add.reduce(np.concatenate([self.res_sum[None], vals]), axis=0)  # row after row
+        self.res_sq = np.add.reduce(np.concatenate([self.res_sq[None], vals * vals]), axis=0)
+        self.res_n += ok.sum(axis=0)
+        n = res.shape[0]
+        while self.n_means + n > self.frame_means.size:  # an array, not a list: the verdict reads it without a copy
             self.frame_means = np.concatenate([self.frame_means, np.empty(self.frame_means.size)])
-        self.frame_means[self.n_means] = mean_finite(res) * 1e3
-        self.n_means += 1
+        means = self.frame_means[self.n_means:self.n_means + n]
+        full = ok.all(axis=1)
+        means[full] = np.add.reduce(res[full], axis=1) / res.shape[1] * 1e3  # each row summed as a 1-D sum
+        for i in np.flatnonzero(~full):
+            means[i] = mean_finite(res[i]) * 1e3
+        self.n_means += n
         lo, hi = self.ranges[:, 0], self.ranges[:, 1]
         at = ((q >= hi - AT_LIMIT_TOLERANCE_RAD) | (q <= lo + AT_LIMIT_TOLERANCE_RAD)) & ~self.excluded
         if at.any():
             beyond = np.maximum(np.maximum(q - hi, lo - q), 0.0)
-            for j in np.flatnonzero(at):
+            for i, j in zip(*np.nonzero(at)):  # frame by frame, in order
                 if self.lim_count[j] == 0:
-                    self.lim_first[j] = g
+                    self.lim_first[j] = g0 + i
                 self.lim_count[j] += 1
-                self.lim_beyond[j] = max(self.lim_beyond[j], beyond[j])
+                self.lim_beyond[j] = max(self.lim_beyond[j], beyond[i, j])
 
     def gh_elevation(self, g: int, e: float) -> None:
         """Frame g's GH elevation e (rad: the angle between the scapula's and the humerus's long axes,

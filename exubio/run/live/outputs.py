@@ -122,6 +122,17 @@ class _Growing:
         if i >= self.n:
             self.n = i + 1
 
+    def set_rows(self, i: int, rows: np.ndarray) -> None:
+        """Rows i ... i + n - 1 set to ``rows`` (n, ...), a block's slice at a time."""
+        n, done, B = len(rows), 0, self.BLOCK_ROWS
+        while done < n:
+            b, r = divmod(i + done, B)
+            take = min(B - r, n - done)
+            self._row_block(i + done)[r:r + take] = rows[done:done + take]
+            done += take
+        if i + n > self.n:
+            self.n = i + n
+
     def get(self, i: int) -> np.ndarray:
         """Row i (a view)."""
         return self.blocks[i // self.BLOCK_ROWS][i % self.BLOCK_ROWS]
@@ -178,19 +189,20 @@ class FrameRecord:
         self.rows["isb_rate_rad_s"].set(g, rate)
         self.rows["measured"].set(g, measured)
 
-    def output(self, g: int, out: tuple | None, status: FrameStatus, run: int) -> None:
-        """Frame g's PF result ``out`` (q, qd, qdd, model points, residuals, constraint and its
-        velocity) of PF run ``run``, or none (None: ``status`` says why)."""
+    def output(self, g: int, status: FrameStatus) -> None:
+        """Frame g without a PF result (``status`` says why)."""
+        self.rows["status"].set(g, int(status))
+        self.rows["run"].set(g, -1)
+
+    def outputs(self, g0: int, recon: Reconstruction, run: int) -> None:
+        """The PF results of frames g0 ... g0 + n - 1 (``recon``, n frames) of PF run ``run``: ``output``'s
+        arrays a block at a time."""
         r = self.rows
-        if out is not None:
-            for key, value in zip(("q_rad", "qd_rad_s", "qdd_rad_s2", "model_points_m", "residuals_m", "constraint",
-                                   "constraint_velocity"), out):
-                r[key].set(g, value)
-            r["status"].set(g, int(FrameStatus.CONVERGED))
-            r["run"].set(g, run)
-        else:
-            r["status"].set(g, int(status))
-            r["run"].set(g, -1)
+        for key in ("q_rad", "qd_rad_s", "qdd_rad_s2", "model_points_m", "residuals_m", "constraint",
+                    "constraint_velocity"):
+            r[key].set_rows(g0, getattr(recon, key))
+        r["status"].set_rows(g0, np.full(recon.n_frames, int(FrameStatus.CONVERGED)))
+        r["run"].set_rows(g0, np.full(recon.n_frames, run))
 
     def arrays(self, n: int) -> dict[str, np.ndarray]:
         """The n frames' arrays (copies), by LiveRecording field name."""
