@@ -30,7 +30,7 @@ import exudyn as exu
 
 from exubio.backend.exudyn_limits import LimitSwitching
 from exubio.backend.pf_numerics import JoinedRows, LimitElement, StateRecord, finite_rows, frames_from_steps, hermite
-from exubio.backend.pf_types import IntegratorOptions, PFRun, SpringSet
+from exubio.backend.pf_types import FrameMotion, IntegratorOptions, PFRun, SpringSet
 
 __all__ = ["BuiltSystem", "Integration", "SpringTargets", "integrate_trial", "solver_settings"]
 
@@ -104,6 +104,7 @@ class BuiltSystem:
                 ``limit_max_rate_rad_s``, the joint rate their switching allows for.
     n_ode2, n_segments: the system's coordinates and the model's segments.
     decode:     (X, Xt, Xtt, frame_dt_s, *, first) -> PFRun: the segment motion of system states.
+    decode_frame: (X, Xt, Xtt) -> FrameMotion: the same of one state (a live run's frame).
     """
 
     mbs: Any
@@ -113,6 +114,7 @@ class BuiltSystem:
     n_ode2: int
     n_segments: int
     decode: Callable[..., PFRun]
+    decode_frame: Callable[..., FrameMotion]
 
 
 # --------------------------------------------------------------------------------------------

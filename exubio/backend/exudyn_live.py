@@ -108,7 +108,7 @@ class _LiveRun(Integration):
                     t0_, X0, V0, A0 = self.previous
                     h = t - t0_
                     X, Xt, Xtt = quintic(X0, V0, A0, cur[1], cur[2], cur[3], (ti - t0_) / h, h)
-                self.on_frame(i, self.system.decode(X[None], Xt[None], Xtt[None], dt, first=i))
+                self.on_frame(i, self.system.decode_frame(X, Xt, Xtt))
                 self.done = i + 1
         except BaseException as exc:
             self.failure = exc

@@ -46,7 +46,7 @@ from exubio.backend.exudyn_integrate import BuiltSystem, SpringTargets, integrat
 from exubio.backend.exudyn_live import integrate_live
 from exubio.backend.exudyn_limits import DEFAULT_LIMIT_MAX_RATE_RAD_S, add_limit_elements
 from exubio.backend.pf_numerics import LimitElement, ep_G, frame_with_z
-from exubio.backend.pf_types import IntegratorOptions, PFRun, SpringSet
+from exubio.backend.pf_types import FrameMotion, IntegratorOptions, PFRun, SpringSet
 from exubio.errors import ModelError
 from exubio.model.kinematics import axis_rotation, PointSet
 from exubio.protocol.bind import Binding
@@ -256,7 +256,8 @@ class PFSystem:
         self._n_ode2 = sd.ODE2Size()
         self._eye = np.eye(3)
         self._built = BuiltSystem(mbs, SpringTargets(mbs, self._spring_objects, self._targets, self._native, springs),
-                                  self._limits, self.limit_max_rate_rad_s, self._n_ode2, n_seg, self._decode)
+                                  self._limits, self.limit_max_rate_rad_s, self._n_ode2, n_seg, self._decode,
+                                  self._decode_frame)
         self.build_time_s = time.perf_counter() - t_build
 
     # ---------------------------------------------------------------- building blocks
@@ -389,7 +390,7 @@ class PFSystem:
                                progress=progress, on_frames=on_frames, chunk_frames=chunk_frames,
                                first_chunk_extra=first_chunk_extra, lead_in=lead_in)
 
-    def run_live(self, next_frame: Callable[[int], tuple | None], on_frame: Callable[[int, PFRun], None], /, *,
+    def run_live(self, next_frame: Callable[[int], tuple | None], on_frame: Callable[[int, FrameMotion], None], /, *,
                  frame_dt_s: float, options: IntegratorOptions = IntegratorOptions(),
                  interrupt: Callable[[], None] | None = None) -> PFRun:
         """Integrate the PF system through marker frames as they come (live, causal): one step per
@@ -400,8 +401,7 @@ class PFSystem:
             in order, when the step that ends on frame i is about to be solved (so it may block until
             the frame arrives); frame 0 before the start. A spring is used in a step only if its marker
             is active at both frames the step joins (as ``run``).
-        on_frame(i, state): the segment motion of frame i (a PFRun of one frame, ``time_s`` = [i dt]) as
-            soon as the solver has accepted the step that ends on it; frame 0 once the initial
+        on_frame(i, motion): the segment motion of frame i (a FrameMotion) as soon as the solver has accepted the step that ends on it; frame 0 once the initial
             accelerations are computed.
 
         The steps are those of ``run`` with step_s = frame_dt_s (the same pre-step, limit switching
@@ -416,6 +416,19 @@ class PFSystem:
         """
         return integrate_live(self._built, next_frame, on_frame, frame_dt_s=frame_dt_s, options=options,
                               interrupt=interrupt)
+
+    def _decode_frame(self, X, Xt, Xtt) -> FrameMotion:
+        """The segment motion of one system state (X, Xt, Xtt (N,)): ``_decode``'s kernel without the
+        PFRun (a live run's frame)."""
+        from exubio.model import kernels  # numba: imported where used
+
+        n_seg = len(self.model.segments)
+        R = np.empty((1, n_seg, 3, 3))
+        p, v, a, w, al = (np.empty((1, n_seg, 3)) for _ in range(5))
+        kernels.euler_parameter_motion(np.ascontiguousarray(X, dtype=float)[None], np.ascontiguousarray(Xt, dtype=float)[None],
+                                       np.ascontiguousarray(Xtt, dtype=float)[None], self._ltg_all, self._ep_ref_moving,
+                                       self._p_ref_moving, R, p, v, a, w, al)
+        return FrameMotion(R[0], p[0], v[0], a[0], w[0], al[0])
 
     def _decode(self, X, Xt, Xtt, frame_dt_s, *, first: int = 0) -> PFRun:
         """The segment motion of frames first ... first + len(X) - 1 from the system coordinates

@@ -1,16 +1,16 @@
 """The data of the potential-field backend (exubio.backend.exudyn_system): what goes in (the marker
 springs, the integrator's settings) and what comes out (the segment motion at the frame times).
-Plain numpy and frozen dataclasses; no exudyn."""
+Plain numpy, frozen dataclasses and a named tuple; no exudyn."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import Mapping, NamedTuple, Sequence
 
 import numpy as np
 
 from exubio.model.kinematics import PointSet
 
-__all__ = ["IntegratorOptions", "PFRun", "SpringSet"]
+__all__ = ["FrameMotion", "IntegratorOptions", "PFRun", "SpringSet", "stack_motions"]
 
 
 @dataclass(frozen=True)
@@ -82,6 +82,23 @@ class IntegratorOptions:
     adaptive_step: bool = True
     sparse_solver: bool = True
     timing_breakdown: bool = True
+
+
+class FrameMotion(NamedTuple):
+    """The segment motion of one frame (a live run's, PFSystem.run_live): PFRun's arrays without the
+    frame axis, rotations (n_seg, 3, 3), the others (n_seg, 3), thorax frame."""
+
+    rotations: np.ndarray
+    origins_m: np.ndarray
+    velocities_m_s: np.ndarray
+    accelerations_m_s2: np.ndarray
+    angular_velocities_rad_s: np.ndarray
+    angular_accelerations_rad_s2: np.ndarray
+
+
+def stack_motions(motions: Sequence[FrameMotion]) -> FrameMotion:
+    """Frames' motions as one FrameMotion whose arrays have a first axis of frames, as a PFRun's."""
+    return FrameMotion(*(np.stack(a) for a in zip(*motions)))
 
 
 @dataclass(frozen=True)

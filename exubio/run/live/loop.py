@@ -35,7 +35,6 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
-from types import SimpleNamespace
 from typing import Any, Callable, Sequence
 
 import numpy as np
@@ -49,6 +48,7 @@ from exubio.run.live.monitor import LiveMonitor
 from exubio.run.live.options import LiveOptions
 from exubio.run.live.outputs import ISB_NAMES, VERDICT_CODES, Event, FrameRecord, LiveRecording
 from exubio.run.live.sources import MarkerSource
+from exubio.backend.pf_types import stack_motions
 from exubio.methods.pf import _Frames, pf_setup
 from exubio.types import FrameStatus, MarkerTargets, Model, Protocol, Trajectories
 
@@ -198,10 +198,7 @@ class LiveSession:
             q, qd, qdd = (np.vstack([b[4][k] for b in batch]) for k in range(3))
         else:
             q = np.vstack([b[1] for b in batch])
-            motion = SimpleNamespace(  # the segment rates of the batch, as _Frames.rates reads them from a PFRun
-                angular_velocities_rad_s=np.concatenate([b[2].angular_velocities_rad_s for b in batch]),
-                angular_accelerations_rad_s2=np.concatenate([b[2].angular_accelerations_rad_s2 for b in batch]))
-            q, qd, qdd = frames.rates(q, motion)
+            q, qd, qdd = frames.rates(q, stack_motions([b[2] for b in batch]))
         targets = MarkerTargets(time_s=np.array(gs) / self.rate, marker_names=self.marker_names,
                                 positions_m=np.stack([b[3].positions_m for b in batch]),
                                 velocities_m_s=np.stack([b[3].velocities_m_s for b in batch]),
@@ -233,8 +230,7 @@ class LiveSession:
         if self.monitor.verdict_due <= g:
             self.monitor.verdict(g, self._counts(), self.events)
         verdict.set(g, VERDICT_CODES[self.monitor.quality.verdict])
-        now = self.clock()
-        if self.on_status is not None and now >= self.status_due:
+        if self.on_status is not None and (now := self.clock()) >= self.status_due:
             self.status_due = now + self.status_every_s
             self.on_status(self.monitor.status(g, self.out_isb, self.out_mean_res, self.out_behind,
                                                latency=self.record.latency, counts=self._counts(),
@@ -327,8 +323,8 @@ class LiveSession:
             frame, self.current_sample = self.pending.pop(g)  # (a reduced step may have fetched the next)
             # the angles first (published at once); what does not steer the next steps (rates,
             # constraint residuals, noise gains, running figures) a batch of frames at a time
-            q = self.frame_out.coordinates(part.rotations[0])[None]
-            rates = frames.rates(q, part) if projected else None  # the published angles are the projected ones
+            q = self.frame_out.coordinates(part.rotations)[None]
+            rates = frames.rates(q, stack_motions([part])) if projected else None  # published: the projected ones
             if rates is not None:
                 q = rates[0]
             res, pts = self._publish(g, q[0], frame.positions_m)
@@ -354,7 +350,6 @@ class LiveSession:
         integ = IntegratorOptions(step_s=None, spectral_radius=pf.spectral_radius,
                                   newton_relative_tolerance=pf.newton_relative_tolerance,
                                   modified_newton=pf.modified_newton, timing_breakdown=False)
-        self.frames_state = frames
         try:
             run = setup.system.run_live(next_frame, on_frame, frame_dt_s=1.0 / self.rate, options=integ,
                                         interrupt=self.stop)
