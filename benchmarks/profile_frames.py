@@ -70,6 +70,7 @@ STAGES = {
         ("exubio.backend.exudyn_live", "_LiveRun.fetch", "prestep (spring targets, limits)"),
         ("exubio.backend.exudyn_live", "_LiveRun.post_step", "post-step (state, interpolation)"),
         ("exubio.backend.exudyn_system", "PFSystem._decode", "decode the segment motion"),
+        ("exubio.backend.exudyn_system", "PFSystem._decode_frame", "decode the segment motion"),
         ("exubio.methods.pf", "_Frames.coordinates", "inverse map to q"),
         ("exubio.run.live.frame", "LiveFrame.coordinates", "inverse map to q"),
         ("exubio.run.live.frame", "LiveFrame.outputs", "angles, model points, residuals (compiled)"),
