@@ -34,6 +34,8 @@ class FrameDeterminacy:
                        np.asarray(kin.centre, dtype=float), np.asarray(kin.a_diag, dtype=float),
                        np.ascontiguousarray(self.weights))
         self.free64 = self.free.astype(np.int64)
+        self.kernel(np.zeros(m), *self.tables, np.ones(len(self.weights), dtype=np.bool_), self.free64, np.empty(m))
+        # (compiled, or loaded from numba's cache, now: compiling takes seconds on a machine's first run)
 
     def __call__(self, q: np.ndarray, present: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         q = np.ascontiguousarray(q, dtype=float)

@@ -63,6 +63,20 @@ class LiveFrame:
         self.has_angles = np.zeros(2, dtype=np.bool_)
         self.run_state = np.zeros((3, self.m))  # the run's last raw and unwrapped coordinates, its 2 pi shift
         self.has_last, self.q0 = False, np.zeros(self.m)
+        self._warm()
+
+    def _warm(self) -> None:
+        """Compile the kernels (or load them from numba's cache) now, on scratch state, not in the first
+        frame: compiling them takes seconds on a machine's first run."""
+        state, has = self.angle_state.copy(), self.has_angles.copy()
+        run = self.run_state.copy()
+        R = np.broadcast_to(np.eye(3), (self.n_seg, 3, 3)).copy()
+        q = np.empty(self.m)
+        self.k_coords(R, self.mid, self.q0, *self.inverse_tables, run, False, q)
+        self.k_outputs(q, *self.forward_tables, *self.angle_tables, self.pt_seg, self.pt_local, self.gh_seg,
+                       self.gh_axes, np.zeros((self.k, 3)), state, has, self.rate, np.empty((self.n_seg, 3, 3)),
+                       np.empty((self.n_seg, 3)), np.empty(self.n_angles), np.empty(self.n_angles),
+                       np.empty((self.k, 3)), np.empty(self.k))
 
     def start_run(self, q0: np.ndarray) -> None:
         self.q0 = np.ascontiguousarray(q0, dtype=float)

@@ -155,7 +155,8 @@ class LiveSession:
 
     # ------------------------------------------------------------------ outputs
     def _empty(self, g: int, status: FrameStatus = FrameStatus.TOO_FEW_MARKERS, *, publish: bool = True) -> None:
-        """A frame no PF run holds (before a run starts, a failed frame): published and recorded empty."""
+        """A frame no PF run holds (before a run starts, a failed frame): published (unless it already was,
+        with its angles: a diverged frame) and recorded empty."""
         if publish:
             self._publish(g, None, None)
         self.record.output(g, status)
