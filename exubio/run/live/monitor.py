@@ -192,9 +192,13 @@ class LiveMonitor:
         while self.n_means + n > self.frame_means.size:  # an array, not a list: the verdict reads it without a copy
             self.frame_means = np.concatenate([self.frame_means, np.empty(self.frame_means.size)])
         means = self.frame_means[self.n_means:self.n_means + n]
-        full = ok.all(axis=1)
-        means[full] = np.add.reduce(res[full], axis=1) / res.shape[1] * 1e3  # each row summed as a 1-D sum
-        for i in np.flatnonzero(~full):
+        same = (ok == ok[0]).all(axis=1)  # the frames missing the first one's markers (usually all): at once,
+        if ok[0].any():  # each row's finite values summed as a 1-D sum of them (x[ok].mean()'s operations)
+            rows = np.ascontiguousarray(res[same][:, ok[0]])  # (the indexing gives columns in Fortran order)
+            means[same] = np.add.reduce(rows, axis=1) / ok[0].sum() * 1e3
+        else:
+            means[same] = np.nan
+        for i in np.flatnonzero(~same):
             means[i] = mean_finite(res[i]) * 1e3
         self.n_means += n
         lo, hi = self.ranges[:, 0], self.ranges[:, 1]

@@ -151,6 +151,12 @@ class _Growing:
         return np.concatenate(self.blocks[:(n - 1) // self.BLOCK_ROWS + 1])[:n]
 
 
+STAGED_FRAMES = 16
+"""A frame's inputs and published outputs are written this many frames at a time (FrameRecord)."""
+INPUT_ROWS = ("raw_m", "timestamps_s", "received_s", "positions_m", "velocities_m_s", "accelerations_m_s2")
+PUBLISHED_ROWS = ("published_s", "isb_rad", "isb_rate_rad_s", "measured")
+
+
 class FrameRecord:
     """A session's LiveRecording as it fills, frame by frame (each array in a _Growing, under its
     LiveRecording field name, for ``n_labels`` stream labels, ``k`` markers, ``m`` coordinates), and
@@ -168,26 +174,41 @@ class FrameRecord:
                      "isb_rad": _Growing((a,)), "isb_rate_rad_s": _Growing((a,)), "measured": _Growing((a,), False, bool),
                      "verdict": _Growing((), 0, int)}
         self.latency: list[float] = []
+        self.staged: dict[tuple[str, ...], list] = {INPUT_ROWS: [], PUBLISHED_ROWS: []}  # rows not yet written
 
     def input(self, g: int, raw: np.ndarray, sample, frame) -> None:
         """Frame g's raw samples, its ``sample`` (timestamp, time received; None: never came) and
-        its causal targets (``frame``, a CausalFrame)."""
-        r = self.rows
-        r["raw_m"].set(g, raw)
-        r["timestamps_s"].set(g, np.nan if sample is None else sample.timestamp)
-        r["received_s"].set(g, np.nan if sample is None else sample.received)
-        r["positions_m"].set(g, frame.positions_m)
-        r["velocities_m_s"].set(g, frame.velocities_m_s)
-        r["accelerations_m_s2"].set(g, frame.accelerations_m_s2)
+        its causal targets (``frame``, a CausalFrame). Written STAGED_FRAMES at a time: the arrays must
+        not change afterwards (each frame's are new)."""
+        self._stage(INPUT_ROWS, (g, raw, np.nan if sample is None else sample.timestamp,
+                                 np.nan if sample is None else sample.received, frame.positions_m,
+                                 frame.velocities_m_s, frame.accelerations_m_s2))
 
     def published(self, g: int, now: float, sample, isb: np.ndarray, rate: np.ndarray, measured: np.ndarray) -> None:
-        """Frame g's output went out at ``now``: its angles, their rates, the measured flags."""
-        self.rows["published_s"].set(g, now)
+        """Frame g's output went out at ``now``: its angles, their rates, the measured flags (written as
+        ``input``'s)."""
         if sample is not None:
             self.latency.append(now - sample.received)
-        self.rows["isb_rad"].set(g, isb)
-        self.rows["isb_rate_rad_s"].set(g, rate)
-        self.rows["measured"].set(g, measured)
+        self._stage(PUBLISHED_ROWS, (g, now, isb, rate, measured))
+
+    def _stage(self, keys: tuple[str, ...], row: tuple) -> None:
+        staged = self.staged[keys]
+        staged.append(row)
+        if len(staged) >= STAGED_FRAMES:
+            self._write(keys)
+
+    def _write(self, keys: tuple[str, ...]) -> None:
+        """The staged rows of ``keys`` written, each run of consecutive frames a block at a time."""
+        staged, self.staged[keys] = self.staged[keys], []
+        start = 0
+        while start < len(staged):
+            stop = start + 1
+            while stop < len(staged) and staged[stop][0] == staged[stop - 1][0] + 1:
+                stop += 1
+            part = staged[start:stop]
+            for c, key in enumerate(keys, start=1):
+                self.rows[key].set_rows(part[0][0], np.array([row[c] for row in part]))
+            start = stop
 
     def output(self, g: int, status: FrameStatus) -> None:
         """Frame g without a PF result (``status`` says why)."""
@@ -206,6 +227,8 @@ class FrameRecord:
 
     def arrays(self, n: int) -> dict[str, np.ndarray]:
         """The n frames' arrays (copies), by LiveRecording field name."""
+        for keys in self.staged:
+            self._write(keys)
         for arr in self.rows.values():
             arr.grow_to(n)
         return {key: arr.view(n) for key, arr in self.rows.items()}
