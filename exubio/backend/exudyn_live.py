@@ -47,13 +47,14 @@ class _LiveRun(Integration):
         if got is None:
             return False
         k = self.targets.k
-        p, v, a = (np.asarray(x) for x in got)
-        a = a.astype(bool)
+        p, v, a = np.asarray(got[0]), np.asarray(got[1]), np.asarray(got[2])
+        a = a if a.dtype == np.bool_ else a.astype(bool)
         if p.shape != (k, 3) or v.shape != (k, 3) or a.shape != (k,):
             raise ValueError(f"run_live: frame {i} must be positions ({k}, 3), velocities ({k}, 3), active ({k},); "
                              f"got {p.shape}, {v.shape}, {a.shape}")
         if not a.all():  # the inactive markers' rows zero (NaN where missing)
-            p, v = np.where(a[:, None], p, 0.0), np.where(a[:, None], v, 0.0)
+            on = a[:, None]
+            p, v = np.where(on, p, 0.0), np.where(on, v, 0.0)
         if not (np.isfinite(p).all() and np.isfinite(v).all()):
             raise ValueError(f"run_live: a marker is active but not finite at frame {i}")
         self.frames[i] = (p, v, a)

@@ -423,8 +423,7 @@ class PFSystem:
         from exubio.model import kernels  # numba: imported where used
 
         n_seg = len(self.model.segments)
-        R = np.empty((1, n_seg, 3, 3))
-        p, v, a, w, al = (np.empty((1, n_seg, 3)) for _ in range(5))
+        R, p, v, a, w, al = np.empty((1, n_seg, 3, 3)), *np.empty((5, 1, n_seg, 3))  # (views of one block)
         kernels.euler_parameter_motion(np.ascontiguousarray(X, dtype=float)[None], np.ascontiguousarray(Xt, dtype=float)[None],
                                        np.ascontiguousarray(Xtt, dtype=float)[None], self._ltg_all, self._ep_ref_moving,
                                        self._p_ref_moving, R, p, v, a, w, al)
