@@ -378,10 +378,15 @@ def _host(addr: str) -> str:
 
 
 def _env(tmp_path):
+    """The loopback LSL configuration, and the exubio this test imported (with its numba cache) for the
+    commands: they run from tmp_path, so that the checkout they are started in does not stand first."""
+    import exubio
     from exubio.run.live.transport import use_config
 
     cfg = use_config("loopback")
-    return dict(os.environ, LSLAPICFG=str(cfg), PYTHONUNBUFFERED="1")
+    here = str(Path(exubio.__file__).resolve().parents[1])
+    path = os.pathsep.join([here] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p])
+    return dict(os.environ, LSLAPICFG=str(cfg), PYTHONUNBUFFERED="1", PYTHONPATH=path)
 
 
 def test_stream_and_live_over_lsl_on_loopback_equal_the_offline_causal_run(tmp_path, short_trial, model_protocol,
@@ -402,9 +407,9 @@ def test_stream_and_live_over_lsl_on_loopback_equal_the_offline_causal_run(tmp_p
     name = f"exubio_test_{os.getpid()}"
     live = subprocess.Popen(exe + ["live", "--stream", name, "--out", str(tmp_path), "--name", "rec", "--no-report",
                                    "--end-after", "1.5", "--timeout", "20", "--publish", f"{name}_out", "-q"],
-                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
     stream = subprocess.Popen(exe + ["stream", str(trial_file), "--units", "m", "--name", name, "--wait", "20", "-q"],
-                              env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                              env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
     seen = []
     try:
         deadline = time.time() + 60
@@ -441,9 +446,9 @@ def test_ctrl_c_leaves_a_complete_recording(tmp_path, clean_run):
     name = f"exubio_sigint_{os.getpid()}"
     live = subprocess.Popen(exe + ["live", "--stream", name, "--out", str(tmp_path), "--name", "cc", "--no-report",
                                    "--end-after", "0", "--timeout", "20", "--publish", "", "-q"],
-                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
     stream = subprocess.Popen(exe + ["stream", str(EXAMPLE), "--name", name, "--wait", "20", "-q"],
-                              env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                              env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
     try:
         time.sleep(8.0)  # start-up, then a few seconds of frames
         live.send_signal(signal.SIGINT)
