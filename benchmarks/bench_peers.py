@@ -2,7 +2,7 @@
 
 The trial is bench_reconstruction.py's (25 s of abduction at 200 Hz, 5000 frames, 1.5 mm marker
 noise, the shipped model and protocol, prepared by ``prepare_targets``). The peers get the same
-chain: the model exported by exubio.export (``biomod_text``, ``osim_text``) with the protocol's
+chain: the model exported by exubio.export (``biomod_text``, ``osim_text`` with the thorax welded to the ground, as exubio holds it) with the protocol's
 markers as the model's markers (the other model points left out), and the same prepared marker
 positions (thorax frame, low-pass filtered, m). Timed per method: the solve over every frame,
 median of ``--runs`` runs, CPU time of this process pinned to one core (BLAS threads 1); model
@@ -66,7 +66,7 @@ def write_peer_files(model, protocol, folder: Path) -> tuple[Path, Path]:
 
     pm = peer_model(model, protocol)
     bio = re.sub(r"marker (?!%s)\S+\n.*?endmarker\n" % PREFIX, "", biomod_text(pm), flags=re.S)
-    osim = re.sub(r'\t*<Marker name="(?!%s)[^"]*">.*?</Marker>\n' % PREFIX, "", osim_text(pm, coordinates="model"),
+    osim = re.sub(r'\t*<Marker name="(?!%s)[^"]*">.*?</Marker>\n' % PREFIX, "", osim_text(pm, coordinates="model", thorax="weld"),
                   flags=re.S)
     (folder / "peer.bioMod").write_text(bio)
     (folder / "peer.osim").write_text(osim)

@@ -83,7 +83,7 @@ STAGES = {
         ("exubio.run.live.monitor", "LiveMonitor.determinacy", "checks (deferred: determinacy, running)"),
         ("exubio.run.live.monitor", "LiveMonitor.running", "checks (deferred: determinacy, running)"),
         ("exubio.run.live.monitor", "LiveMonitor.verdict", "checks (deferred: determinacy, running)"),
-        ("exubio.run.live.loop", "LiveSession._flush", "deferred: rates, g, model points (16 frames)"),
+        ("exubio.run.live.loop", "LiveSession._flush", "deferred: rates, g, model points (a batch of frames)"),
         ("exubio.run.live.loop", "LiveSession._record_outputs", "record"),
         ("exubio.run.live.loop", "LiveSession._frames_done", "record"),
         ("exubio.run.live.loop", "LiveSession._record_input", "record"),
