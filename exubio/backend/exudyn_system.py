@@ -417,34 +417,28 @@ class PFSystem:
         return integrate_live(self._built, next_frame, on_frame, frame_dt_s=frame_dt_s, options=options,
                               interrupt=interrupt)
 
-    def _decode_frame(self, X, Xt, Xtt) -> FrameMotion:
-        """The segment motion of one system state (X, Xt, Xtt (N,)): ``_decode``'s kernel without the
-        PFRun (a live run's frame)."""
-        from exubio.model import kernels  # numba: imported where used
-
-        n_seg = len(self.model.segments)
-        R, p, v, a, w, al = np.empty((1, n_seg, 3, 3)), *np.empty((5, 1, n_seg, 3))  # (views of one block)
-        kernels.euler_parameter_motion(np.ascontiguousarray(X, dtype=float)[None], np.ascontiguousarray(Xt, dtype=float)[None],
-                                       np.ascontiguousarray(Xtt, dtype=float)[None], self._ltg_all, self._ep_ref_moving,
-                                       self._p_ref_moving, R, p, v, a, w, al)
-        return FrameMotion(R[0], p[0], v[0], a[0], w[0], al[0])
-
-    def _decode(self, X, Xt, Xtt, frame_dt_s, *, first: int = 0) -> PFRun:
-        """The segment motion of frames first ... first + len(X) - 1 from the system coordinates
-        (vectorised over the segments: a live run decodes one frame at a time)."""
+    def _motion(self, X, Xt, Xtt) -> FrameMotion:
+        """The segment motion of system states X, Xt, Xtt (n, N): a FrameMotion whose arrays have a first
+        axis of n frames (the five (n, n_seg, 3) arrays views of one block), vectorised over the segments."""
         from exubio.model import kernels  # numba: imported where used
 
         X, Xt, Xtt = (np.ascontiguousarray(a, dtype=float) for a in (X, Xt, Xtt))
-        n = X.shape[0]
-        n_seg = len(self.model.segments)
-        R = np.empty((n, n_seg, 3, 3))
-        p, v, a, w, al = (np.empty((n, n_seg, 3)) for _ in range(5))
+        n, n_seg = X.shape[0], len(self.model.segments)
+        R, (p, v, a, w, al) = np.empty((n, n_seg, 3, 3)), np.empty((5, n, n_seg, 3))
         kernels.euler_parameter_motion(X, Xt, Xtt, self._ltg_all, self._ep_ref_moving, self._p_ref_moving,
                                        R, p, v, a, w, al)
-        return PFRun(
-            time_s=(first + np.arange(n)) * frame_dt_s, rotations=R, origins_m=p, velocities_m_s=v,
-            accelerations_m_s2=a, angular_velocities_rad_s=w, angular_accelerations_rad_s2=al, completed_frames=n,
-            success=True, message="", wall_time_s=0.0)
+        return FrameMotion(R, p, v, a, w, al)
+
+    def _decode_frame(self, X, Xt, Xtt) -> FrameMotion:
+        """The segment motion of one system state (X, Xt, Xtt (N,)): a live run's frame."""
+        return FrameMotion(*(arr[0] for arr in self._motion(X[None], Xt[None], Xtt[None])))
+
+    def _decode(self, X, Xt, Xtt, frame_dt_s, *, first: int = 0) -> PFRun:
+        """The segment motion of frames first ... first + len(X) - 1 from the system coordinates."""
+        motion = self._motion(X, Xt, Xtt)
+        n = motion.rotations.shape[0]
+        return PFRun(time_s=(first + np.arange(n)) * frame_dt_s, **motion._asdict(), completed_frames=n,
+                     success=True, message="", wall_time_s=0.0)
 
 
 def _spring_force(target):
